@@ -1,0 +1,37 @@
+# PersonFollow: every target sets itself up from nothing.
+PYTHON ?= python3
+VENV   := .venv
+BIN    := $(VENV)/bin
+STAMP  := $(VENV)/.installed-$(shell cat pyproject.toml | sha1sum | cut -c1-12)
+
+.PHONY: setup test bench lint eval clean
+
+setup: $(STAMP)
+
+# Torch first and pinned: an unpinned torch (directly or through stable-baselines3) pulls a
+# multi-GB CUDA build. The stamp is keyed on pyproject.toml, so a re-run with nothing changed
+# skips the install.
+$(STAMP): pyproject.toml
+	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+	$(BIN)/python -m pip install --quiet torch==2.13.0
+	$(BIN)/python -m pip install --quiet -e '.[dev]'
+	rm -f $(VENV)/.installed-*
+	touch $@
+
+test: $(STAMP)
+	$(BIN)/python -m pytest
+
+bench: $(STAMP)
+	$(BIN)/python -m bench
+
+lint: $(STAMP)
+	$(BIN)/ruff check .
+	$(BIN)/ruff format --check .
+
+eval: $(STAMP)
+	@echo "make eval: the evaluation CLI arrives with the guidance-law/evaluation issue; not yet available." >&2
+	@exit 2
+
+clean:
+	rm -rf $(VENV) .pytest_cache .ruff_cache

@@ -1,0 +1,764 @@
+"""The batched simulation core: N lanes of robot, drive, camera, perception and people.
+
+One implementation of every physical model, compiled with numba and looping over lanes, serves
+the single environment (N = 1) and the vector environment (N lanes) alike. All state lives in a
+few arrays with one row per lane (column names in :mod:`follow_env.layout`); one call of
+:func:`step_kernel` advances every lane by one control step:
+
+1. the action ``(v, w)`` goes through inverse kinematics to wheel speed targets (SPEC §1.1);
+2. ``sub_steps`` ticks of 10 ms (SPEC §1.1, §1.2): PID on the encoder's speed estimate ->
+   duty (clamped to +-99 %) -> motor -> wheel angle -> quantised encoder count and speed, and
+   forward kinematics with an Euler pose step;
+3. every person walks ``dt`` along their path;
+4. the camera takes a frame: body boxes (pinhole, extrinsics), the detector model (visibility,
+   bursts, misses, jitter), the first detection, depth at its centre pixel (ray cast, D435i
+   noise, invalid pixels), a delay line of ``latency_frames``, and the distance filter
+   (SPEC §1.4); nothing published leaves the observation as it was;
+5. ground truth, contacts, reward and episode end.
+
+Random draws come from :mod:`follow_env.rng` keyed by the episode's streams and counted by the
+step index, so they never depend on the actions.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from follow_env.camera import Camera, body_box, world_to_camera
+from follow_env.config import EnvConfig
+from follow_env.drive import encoder_count, encoder_speed, motor_step, pid_step
+from follow_env.kinematics import diff_drive_fk, diff_drive_ik, euler_pose_step
+from follow_env.layout import (
+    DL_FIELDS,
+    HIST_MAX,
+    I_BURST0,
+    I_DETECTED_ID,
+    I_DL_HEAD,
+    I_ENC_R,
+    I_HIST_HEAD,
+    I_HIST_N,
+    I_N_PEOPLE,
+    I_N_WALLS,
+    I_REASON,
+    I_STEP,
+    N_FSTATE,
+    N_ISTATE,
+    N_PARAMS,
+    N_PSTATE,
+    N_PW,
+    P_ANTI_WINDUP,
+    P_BURST_END,
+    P_BURST_START,
+    P_CLEARANCE,
+    P_COUNTS_PER_REV,
+    P_CX,
+    P_CY,
+    P_DEPTH_K,
+    P_DEPTH_MAX,
+    P_DEPTH_MIN,
+    P_DEPTH_UNIT,
+    P_DT,
+    P_DT_IN,
+    P_FOOT_L,
+    P_FOOT_W,
+    P_FRIC_DUTY,
+    P_FX,
+    P_FY,
+    P_GAIN_L,
+    P_GAIN_R,
+    P_HIST_LEN,
+    P_IMG_H,
+    P_IMG_W,
+    P_INVALID_P,
+    P_JIT_C,
+    P_JIT_S,
+    P_KD,
+    P_KI,
+    P_KP,
+    P_LATENCY,
+    P_LOST_TIMEOUT,
+    P_MAX_DUTY,
+    P_MAX_STEPS,
+    P_MIN_BOX_H,
+    P_MIN_VIS,
+    P_MISS_P,
+    P_MOTOR_TAU,
+    P_MOTOR_WMAX,
+    P_PERSON_ACC,
+    P_PERSON_D,
+    P_PERSON_DEC,
+    P_PERSON_H,
+    P_PERSON_W,
+    P_R00,
+    P_R01,
+    P_R02,
+    P_R10,
+    P_R11,
+    P_R12,
+    P_R20,
+    P_R21,
+    P_R22,
+    P_R_ACC,
+    P_R_ALIVE,
+    P_R_COLL,
+    P_R_DIST,
+    P_R_LOST,
+    P_R_OFF,
+    P_SETTLE,
+    P_SPEED_Q,
+    P_STALL_DUTY,
+    P_SUBSTEPS,
+    P_TARGET_D,
+    P_TAU_D,
+    P_TRACK,
+    P_TX,
+    P_TY,
+    P_TZ,
+    P_V_MAX,
+    P_W_MAX,
+    P_WALL_R,
+    P_WHEEL_R,
+    PEOPLE_MAX,
+    PS_DONE,
+    PS_TH,
+    PS_X,
+    PS_Y,
+    REASON_COLLISION_PERSON,
+    REASON_COLLISION_WALL,
+    REASON_LOST,
+    REASON_NONE,
+    REASON_STEP_LIMIT,
+    REASON_WALK_OVER,
+    S_ACCEL,
+    S_ANG_R,
+    S_BOX_X1,
+    S_BOX_X2,
+    S_BOX_Y1,
+    S_BOX_Y2,
+    S_CLEAR_PERSON,
+    S_CLEAR_WALL,
+    S_D_R,
+    S_DETECTED,
+    S_DL0,
+    S_DUTY_R,
+    S_EPREV_R,
+    S_HIST0,
+    S_IN_FRAME,
+    S_INT_R,
+    S_LOST_T,
+    S_OBS_D,
+    S_OBS_O,
+    S_OMEGA_L,
+    S_OMEGA_R,
+    S_RAW_DEPTH,
+    S_REWARD,
+    S_T,
+    S_TERM,
+    S_TH,
+    S_TRUE_D,
+    S_TRUE_O,
+    S_TRUNC,
+    S_V,
+    S_VMEAS_L,
+    S_VMEAS_R,
+    S_VROBOT_MEAS,
+    S_VROBOT_PREV,
+    S_VTGT_L,
+    S_VTGT_R,
+    S_W,
+    S_WALK_END_T,
+    S_X,
+    S_Y,
+)
+from follow_env.perception import (
+    clip_box,
+    depth_noise_std,
+    distance_filter,
+    first_detection,
+    jitter_box,
+)
+from follow_env.person import person_reset, person_step
+from follow_env.rng import (
+    N_STREAMS,
+    STREAM_DEPTH,
+    STREAM_DETECTOR,
+    STREAM_MOTOR,
+    STREAM_PERSON,
+    LaneRandom,
+    episode_keys,
+    normal_at,
+    uniform_at,
+)
+from follow_env.scenarios import SCENARIOS, ScenarioSpec
+from follow_env.world import WALL_RADIUS_M, rect_rect_distance, rect_segment_distance
+
+__all__ = ["BatchedSim", "params_from_config", "reset_kernel", "step_kernel"]
+
+# Counter slots per control step (detector draws of person p at p * 8 + 0..5; depth at 240+).
+_SLOTS_PER_STEP = 256
+_SLOTS_PER_PERSON = 8
+_SLOT_DEPTH = 240
+# Walls are modelled this tall for depth rays that pass over them (m).
+_WALL_HEIGHT_M = 3.0
+
+
+def params_from_config(cfg: EnvConfig) -> np.ndarray:
+    """The per-lane parameter vector (``P_*`` columns) of a configuration, in SI units."""
+    p = np.zeros(N_PARAMS)
+    r, m, e, k, c, d = cfg.robot, cfg.motor, cfg.encoder, cfg.pid, cfg.camera, cfg.perception
+    cam = Camera.from_config(c)
+    p[P_WHEEL_R], p[P_TRACK] = r.wheel_radius_m, r.track_width_m
+    p[P_FOOT_L], p[P_FOOT_W] = r.footprint_length_m, r.footprint_width_m
+    p[P_MOTOR_WMAX], p[P_MOTOR_TAU] = m.no_load_speed_radps, m.time_constant_s
+    p[P_FRIC_DUTY], p[P_STALL_DUTY], p[P_MAX_DUTY] = (
+        m.friction_duty_pct,
+        m.stall_duty_pct,
+        m.max_duty_pct,
+    )
+    p[P_GAIN_R] = p[P_GAIN_L] = 1.0
+    p[P_COUNTS_PER_REV], p[P_DT_IN] = e.counts_per_rev, e.sample_period_s
+    p[P_SPEED_Q], p[P_SUBSTEPS] = e.speed_quantum_mps, cfg.sub_steps
+    p[P_KP], p[P_KI], p[P_KD], p[P_TAU_D] = k.kp, k.ki, k.kd, k.tau_s
+    p[P_ANTI_WINDUP] = 1.0 if k.anti_windup == "clamp" else 0.0
+    p[P_IMG_W], p[P_IMG_H] = c.width_px, c.height_px
+    p[P_FX], p[P_FY], p[P_CX], p[P_CY] = cam.fx, cam.fy, cam.cx, cam.cy
+    p[P_R00 : P_R22 + 1] = cam.R.ravel()
+    p[P_TX : P_TZ + 1] = cam.T
+    p[P_DEPTH_MIN], p[P_DEPTH_MAX] = c.depth_min_m, c.depth_max_m
+    p[P_DEPTH_K] = depth_noise_std(1.0, c.depth_subpixel, c.depth_focal_px, c.depth_baseline_m)
+    p[P_DEPTH_UNIT], p[P_INVALID_P] = c.depth_unit_m, c.depth_invalid_prob
+    p[P_LATENCY], p[P_MISS_P] = d.latency_frames, d.miss_prob
+    p[P_BURST_START], p[P_BURST_END] = d.burst_start_prob, 1.0 / d.burst_mean_frames
+    p[P_JIT_C], p[P_JIT_S] = d.center_jitter_frac, d.size_jitter_frac
+    p[P_MIN_VIS], p[P_MIN_BOX_H], p[P_HIST_LEN] = (
+        d.min_visible_fraction,
+        d.min_box_height_px,
+        d.filter_history,
+    )
+    pe = cfg.person
+    p[P_PERSON_H], p[P_PERSON_W], p[P_PERSON_D] = pe.height_m, pe.width_m, pe.depth_m
+    p[P_PERSON_ACC], p[P_PERSON_DEC] = pe.accel_mps2, pe.decel_mps2
+    w = cfg.reward
+    p[P_TARGET_D], p[P_R_ALIVE], p[P_R_DIST] = (
+        w.target_distance_m,
+        w.alive_bonus,
+        w.distance_weight,
+    )
+    p[P_R_OFF], p[P_R_ACC], p[P_R_LOST], p[P_R_COLL] = (
+        w.offset_weight,
+        w.accel_weight,
+        w.lost_penalty,
+        w.collision_penalty,
+    )
+    ep = cfg.episode
+    p[P_DT], p[P_MAX_STEPS], p[P_LOST_TIMEOUT] = ep.control_dt_s, ep.max_steps, ep.lost_timeout_s
+    p[P_CLEARANCE], p[P_SETTLE] = ep.person_clearance_m, cfg.scenario.settle_s
+    p[P_WALL_R] = WALL_RADIUS_M
+    p[P_V_MAX], p[P_W_MAX] = cfg.max_speed_mps, cfg.max_turn_rate_radps
+    return p
+
+
+# ----------------------------------------------------------------------------------------------
+# Camera frame: depth ray cast, detection, ground truth
+# ----------------------------------------------------------------------------------------------
+
+
+@njit(cache=True)
+def _depth_ray(
+    cu: int,
+    cv: int,
+    prm: np.ndarray,
+    fs: np.ndarray,
+    ps: np.ndarray,
+    n_people: int,
+    walls: np.ndarray,
+    n_walls: int,
+) -> float:
+    """True depth Zc (m) seen at pixel (cu, cv): the nearest of people, walls and floor along
+    the pixel's ray (SPEC §1.3 back-projection); ``inf`` if the ray hits nothing."""
+    dcx = (cu - prm[P_CX]) / prm[P_FX]
+    dcy = (cv - prm[P_CY]) / prm[P_FY]
+    # Direction in the robot frame (R d_c with d_c = (dcx, dcy, 1)), so the ray parameter t
+    # is the camera-frame depth Zc.
+    drx = prm[P_R00] * dcx + prm[P_R01] * dcy + prm[P_R02]
+    dry = prm[P_R10] * dcx + prm[P_R11] * dcy + prm[P_R12]
+    drz = prm[P_R20] * dcx + prm[P_R21] * dcy + prm[P_R22]
+    c, s = np.cos(fs[S_TH]), np.sin(fs[S_TH])
+    dwx, dwy, dwz = c * drx - s * dry, s * drx + c * dry, drz
+    ox = fs[S_X] + c * prm[P_TX] - s * prm[P_TY]
+    oy = fs[S_Y] + s * prm[P_TX] + c * prm[P_TY]
+    oz = prm[P_TZ]
+    best = np.inf
+    if dwz < -1e-12:  # the floor
+        best = -oz / dwz
+    for k in range(n_walls):
+        ax, ay, bx, by = walls[k, 0], walls[k, 1], walls[k, 2], walls[k, 3]
+        ex, ey = bx - ax, by - ay
+        den = dwx * ey - dwy * ex
+        if abs(den) < 1e-12:
+            continue
+        t = ((ax - ox) * ey - (ay - oy) * ex) / den
+        u = ((ax - ox) * dwy - (ay - oy) * dwx) / den
+        if 0.0 < t < best and 0.0 <= u <= 1.0 and oz + t * dwz <= _WALL_HEIGHT_M:
+            best = t
+    hd, hw, hh = 0.5 * prm[P_PERSON_D], 0.5 * prm[P_PERSON_W], prm[P_PERSON_H]
+    for p in range(n_people):
+        pc, pss = np.cos(ps[p, PS_TH]), np.sin(ps[p, PS_TH])
+        qx = pc * (ox - ps[p, PS_X]) + pss * (oy - ps[p, PS_Y])
+        qy = -pss * (ox - ps[p, PS_X]) + pc * (oy - ps[p, PS_Y])
+        ex = pc * dwx + pss * dwy
+        ey = -pss * dwx + pc * dwy
+        # Slab test against the upright box |x| <= hd, |y| <= hw, 0 <= z <= hh.
+        tmin, tmax = 0.0, best
+        hit = True
+        for axis in range(3):
+            if axis == 0:
+                o, dd, lo, hi = qx, ex, -hd, hd
+            elif axis == 1:
+                o, dd, lo, hi = qy, ey, -hw, hw
+            else:
+                o, dd, lo, hi = oz, dwz, 0.0, hh
+            if abs(dd) < 1e-12:
+                if o < lo or o > hi:
+                    hit = False
+                    break
+            else:
+                t1, t2 = (lo - o) / dd, (hi - o) / dd
+                if t1 > t2:
+                    t1, t2 = t2, t1
+                tmin, tmax = max(tmin, t1), min(tmax, t2)
+                if tmin > tmax:
+                    hit = False
+                    break
+        if hit and tmin > 0.0 and tmin < best:
+            best = tmin
+    return best
+
+
+@njit(cache=True)
+def _frame(
+    i: int,
+    prm: np.ndarray,
+    fs: np.ndarray,
+    ist: np.ndarray,
+    ps: np.ndarray,
+    walls: np.ndarray,
+    keys: np.ndarray,
+    step: int,
+    boxes: np.ndarray,
+    det: np.ndarray,
+) -> None:
+    """Take a camera frame: detect, pick the first detection, read depth, push it through the
+    delay line and the distance filter, and publish (SPEC §1.4). Also fills the ground truth."""
+    W, H = prm[P_IMG_W], prm[P_IMG_H]
+    fx, fy, cx, cy = prm[P_FX], prm[P_FY], prm[P_CX], prm[P_CY]
+    n_people = ist[I_N_PEOPLE]
+    rx, ry, rth = fs[S_X], fs[S_Y], fs[S_TH]
+    kdet = keys[STREAM_DETECTOR]
+    base = step * _SLOTS_PER_STEP
+    for p in range(n_people):
+        u1, v1, u2, v2, found = body_box(
+            ps[p, PS_X],
+            ps[p, PS_Y],
+            ps[p, PS_TH],
+            prm[P_PERSON_W],
+            prm[P_PERSON_D],
+            prm[P_PERSON_H],
+            rx,
+            ry,
+            rth,
+            prm,
+            P_R00,
+            fx,
+            fy,
+            cx,
+            cy,
+        )
+        visible = False
+        c1, c2, c3, c4 = clip_box(u1, v1, u2, v2, W, H)
+        if found and c3 > c1 and c4 > c2:
+            frac = (c3 - c1) * (c4 - c2) / ((u2 - u1) * (v2 - v1))
+            visible = frac >= prm[P_MIN_VIS] and (c4 - c2) >= prm[P_MIN_BOX_H]
+        if p == 0:
+            fs[S_IN_FRAME] = 1.0 if visible else 0.0
+        # Bursts of occlusion: a two-state Markov chain per person, stepped every frame.
+        slot = base + p * _SLOTS_PER_PERSON
+        u_burst = uniform_at(kdet, slot)
+        if ist[I_BURST0 + p] != 0:
+            if u_burst < prm[P_BURST_END]:
+                ist[I_BURST0 + p] = 0
+        elif u_burst < prm[P_BURST_START]:
+            ist[I_BURST0 + p] = 1
+        det[p] = False
+        if visible and ist[I_BURST0 + p] == 0 and uniform_at(kdet, slot + 1) >= prm[P_MISS_P]:
+            j1, j2, j3, j4 = jitter_box(
+                c1,
+                c2,
+                c3,
+                c4,
+                normal_at(kdet, slot + 2),
+                normal_at(kdet, slot + 3),
+                normal_at(kdet, slot + 4),
+                normal_at(kdet, slot + 5),
+                prm[P_JIT_C],
+                prm[P_JIT_S],
+            )
+            j1, j2, j3, j4 = clip_box(j1, j2, j3, j4, W, H)
+            if j3 > j1 and j4 > j2:
+                boxes[p, 0], boxes[p, 1], boxes[p, 2], boxes[p, 3] = j1, j2, j3, j4
+                det[p] = True
+    first = first_detection(boxes[:n_people], det[:n_people])
+
+    # Measurement of this frame: box centre pixel and the depth there (SPEC §1.4 step 3).
+    m_det, m_cu, m_cv, m_raw = 0.0, 0.0, 0.0, 0.0
+    if first >= 0:
+        m_det = 1.0
+        cu = min(max(int((boxes[first, 0] + boxes[first, 2]) / 2.0), 0), int(W) - 1)
+        cv = min(max(int((boxes[first, 1] + boxes[first, 3]) / 2.0), 0), int(H) - 1)
+        m_cu, m_cv = float(cu), float(cv)
+        z = _depth_ray(cu, cv, prm, fs, ps, n_people, walls, ist[I_N_WALLS])
+        kd = keys[STREAM_DEPTH]
+        dslot = base + _SLOT_DEPTH
+        if z < prm[P_DEPTH_MIN] or z > prm[P_DEPTH_MAX]:
+            z = 0.0
+        else:
+            z += normal_at(kd, dslot) * prm[P_DEPTH_K] * z * z  # RMS ~ Z^2 (SPEC §1.3)
+            if prm[P_DEPTH_UNIT] > 0.0:
+                z = np.round(z / prm[P_DEPTH_UNIT]) * prm[P_DEPTH_UNIT]
+            if uniform_at(kd, dslot + 1) < prm[P_INVALID_P] or z < prm[P_DEPTH_MIN]:
+                z = 0.0
+        m_raw = z
+        ist[I_DETECTED_ID] = first
+    else:
+        ist[I_DETECTED_ID] = -1
+
+    # Delay line of latency_frames: write this frame, publish the one latency frames old.
+    size = int(prm[P_LATENCY]) + 1
+    head = (ist[I_DL_HEAD] + 1) % size
+    if step == 0:  # reset: as if the robot had stood still for the whole delay
+        for k in range(size):
+            _write_slot(fs, k, m_det, m_cu, m_cv, m_raw, boxes, first)
+        head = 0
+    else:
+        _write_slot(fs, head, m_det, m_cu, m_cv, m_raw, boxes, first)
+    ist[I_DL_HEAD] = head
+    out = S_DL0 + ((head + 1) % size) * DL_FIELDS
+    fs[S_DETECTED] = fs[out]
+    if fs[out] > 0.0:
+        d, n, h = distance_filter(
+            fs[out + 3],
+            fs[S_OBS_D],
+            fs[S_HIST0 : S_HIST0 + HIST_MAX],
+            ist[I_HIST_N],
+            ist[I_HIST_HEAD],
+            int(prm[P_HIST_LEN]),
+        )
+        ist[I_HIST_N], ist[I_HIST_HEAD] = n, h
+        fs[S_OBS_D] = d
+        fs[S_OBS_O] = fs[out + 1] - float(int(W) // 2)  # offset_x = cu - width // 2
+        fs[S_RAW_DEPTH] = fs[out + 3]
+        fs[S_BOX_X1], fs[S_BOX_Y1] = fs[out + 4], fs[out + 5]
+        fs[S_BOX_X2], fs[S_BOX_Y2] = fs[out + 6], fs[out + 7]
+        fs[S_LOST_T] = 0.0
+    elif step > 0:
+        fs[S_LOST_T] += prm[P_DT]
+
+    # Ground truth of the target (person 0): distance from the camera to the body's front,
+    # and the pixel column of the body's axis at camera height.
+    c, s = np.cos(rth), np.sin(rth)
+    camx = rx + c * prm[P_TX] - s * prm[P_TY]
+    camy = ry + s * prm[P_TX] + c * prm[P_TY]
+    fs[S_TRUE_D] = np.hypot(ps[0, PS_X] - camx, ps[0, PS_Y] - camy) - 0.5 * prm[P_PERSON_D]
+    xc, _, zc = world_to_camera(ps[0, PS_X], ps[0, PS_Y], prm[P_TZ], rx, ry, rth, prm, P_R00)
+    # Beside or behind the camera the offset is capped at one image width, on its side.
+    side = W if xc >= 0.0 else -W
+    fs[S_TRUE_O] = side
+    if zc > 1e-3:
+        o = fx * xc / zc + cx - float(int(W) // 2)
+        fs[S_TRUE_O] = o if abs(o) < W else side
+
+
+@njit(cache=True, inline="always")
+def _write_slot(
+    fs: np.ndarray,
+    k: int,
+    det: float,
+    cu: float,
+    cv: float,
+    raw: float,
+    boxes: np.ndarray,
+    first: int,
+) -> None:
+    o = S_DL0 + k * DL_FIELDS
+    fs[o], fs[o + 1], fs[o + 2], fs[o + 3] = det, cu, cv, raw
+    if first >= 0:
+        fs[o + 4], fs[o + 5] = boxes[first, 0], boxes[first, 1]
+        fs[o + 6], fs[o + 7] = boxes[first, 2], boxes[first, 3]
+
+
+@njit(cache=True)
+def _contacts(
+    prm: np.ndarray, fs: np.ndarray, ist: np.ndarray, ps: np.ndarray, walls: np.ndarray
+) -> int:
+    """Clearances to walls and people; the collision reason (0 for none)."""
+    x, y, th = fs[S_X], fs[S_Y], fs[S_TH]
+    fl, fw = prm[P_FOOT_L], prm[P_FOOT_W]
+    wall = np.inf
+    for k in range(ist[I_N_WALLS]):
+        wall = min(
+            wall,
+            rect_segment_distance(
+                x, y, th, fl, fw, walls[k, 0], walls[k, 1], walls[k, 2], walls[k, 3]
+            ),
+        )
+    person = np.inf
+    for p in range(ist[I_N_PEOPLE]):
+        person = min(
+            person,
+            rect_rect_distance(
+                x,
+                y,
+                th,
+                fl,
+                fw,
+                ps[p, PS_X],
+                ps[p, PS_Y],
+                ps[p, PS_TH],
+                prm[P_PERSON_D],
+                prm[P_PERSON_W],
+            ),
+        )
+    fs[S_CLEAR_WALL] = wall - prm[P_WALL_R]
+    fs[S_CLEAR_PERSON] = person
+    if fs[S_CLEAR_WALL] <= 0.0:
+        return REASON_COLLISION_WALL
+    if person < prm[P_CLEARANCE]:
+        return REASON_COLLISION_PERSON
+    return REASON_NONE
+
+
+# ----------------------------------------------------------------------------------------------
+# Kernels
+# ----------------------------------------------------------------------------------------------
+
+
+@njit(cache=True)
+def reset_kernel(
+    lanes: np.ndarray,
+    pose: np.ndarray,
+    n_points: np.ndarray,
+    n_people: np.ndarray,
+    n_walls: np.ndarray,
+    params: np.ndarray,
+    fstate: np.ndarray,
+    istate: np.ndarray,
+    pstate: np.ndarray,
+    paths: np.ndarray,
+    walls: np.ndarray,
+    keys: np.ndarray,
+) -> None:
+    """Start a new episode on ``lanes`` (paths, walls, keys and params already written)."""
+    boxes = np.zeros((PEOPLE_MAX, 4))
+    det = np.zeros(PEOPLE_MAX, dtype=np.bool_)
+    for j in range(lanes.shape[0]):
+        i = lanes[j]
+        fs, ist = fstate[i], istate[i]
+        fs[:] = 0.0
+        ist[:] = 0
+        fs[S_X], fs[S_Y], fs[S_TH] = pose[j, 0], pose[j, 1], pose[j, 2]
+        fs[S_WALK_END_T] = -1.0
+        ist[I_N_PEOPLE], ist[I_N_WALLS] = n_people[j], n_walls[j]
+        for p in range(n_people[j]):
+            person_reset(pstate[i, p], paths[i, p], n_points[j, p])
+        _frame(i, params[i], fs, ist, pstate[i], walls[i], keys[i], 0, boxes, det)
+        _contacts(params[i], fs, ist, pstate[i], walls[i])
+
+
+@njit(cache=True)
+def step_kernel(
+    params: np.ndarray,
+    fstate: np.ndarray,
+    istate: np.ndarray,
+    pstate: np.ndarray,
+    paths: np.ndarray,
+    walls: np.ndarray,
+    keys: np.ndarray,
+    actions: np.ndarray,
+) -> None:
+    """Advance every lane by one control step under ``actions`` (N, 2): ``v`` m/s, ``w`` rad/s.
+
+    Results land in the state arrays: observation ``S_OBS_D``/``S_OBS_O``, ``S_REWARD``,
+    ``S_TERM``/``S_TRUNC`` and ``I_REASON``, plus the ground truth for ``info``.
+    """
+    boxes = np.zeros((PEOPLE_MAX, 4))
+    det = np.zeros(PEOPLE_MAX, dtype=np.bool_)
+    for i in range(fstate.shape[0]):
+        prm, fs, ist, ps = params[i], fstate[i], istate[i], pstate[i]
+        dt = prm[P_DT]
+        ist[I_STEP] += 1
+        fs[S_T] += dt
+        # 1. Action -> wheel targets by inverse kinematics (SPEC §1.1), as linear wheel speeds.
+        v_cmd = min(max(actions[i, 0], -prm[P_V_MAX]), prm[P_V_MAX])
+        w_cmd = min(max(actions[i, 1], -prm[P_W_MAX]), prm[P_W_MAX])
+        r, L = prm[P_WHEEL_R], prm[P_TRACK]
+        w_r, w_l = diff_drive_ik(v_cmd, w_cmd, r, L)
+        fs[S_VTGT_R], fs[S_VTGT_L] = w_r * r, w_l * r
+        # 2. Inner drive loop (SPEC §1.1, §1.2).
+        dt_in = prm[P_DT_IN]
+        cpr = prm[P_COUNTS_PER_REV]
+        aw = prm[P_ANTI_WINDUP] > 0.0
+        for _ in range(int(prm[P_SUBSTEPS])):
+            for wheel in range(2):
+                o = 0 if wheel == 0 else 1  # right = 0, left = 1 in every pair of columns
+                duty, integ, dfilt = pid_step(
+                    fs[S_VTGT_R + o] - fs[S_VMEAS_R + o],
+                    fs[S_EPREV_R + o],
+                    fs[S_INT_R + o],
+                    fs[S_D_R + o],
+                    prm[P_KP],
+                    prm[P_KI],
+                    prm[P_KD],
+                    prm[P_TAU_D],
+                    dt_in,
+                    prm[P_MAX_DUTY],
+                    aw,
+                )
+                fs[S_EPREV_R + o] = fs[S_VTGT_R + o] - fs[S_VMEAS_R + o]
+                fs[S_INT_R + o], fs[S_D_R + o], fs[S_DUTY_R + o] = integ, dfilt, duty
+                fs[S_OMEGA_R + o] = motor_step(
+                    fs[S_OMEGA_R + o],
+                    duty,
+                    prm[P_GAIN_R + o],
+                    prm[P_MOTOR_WMAX],
+                    prm[P_MOTOR_TAU],
+                    prm[P_FRIC_DUTY],
+                    prm[P_STALL_DUTY],
+                    dt_in,
+                )
+                fs[S_ANG_R + o] += fs[S_OMEGA_R + o] * dt_in
+                count = encoder_count(fs[S_ANG_R + o], cpr)
+                fs[S_VMEAS_R + o] = encoder_speed(
+                    count, ist[I_ENC_R + o], cpr, dt_in, 2.0 * r, prm[P_SPEED_Q]
+                )
+                ist[I_ENC_R + o] = count
+            v, w = diff_drive_fk(fs[S_OMEGA_R], fs[S_OMEGA_L], r, L)
+            fs[S_X], fs[S_Y], fs[S_TH] = euler_pose_step(fs[S_X], fs[S_Y], fs[S_TH], v, w, dt_in)
+            fs[S_V], fs[S_W] = v, w
+        # Robot acceleration as the robot computes it: finite difference of encoder speed.
+        fs[S_VROBOT_PREV] = fs[S_VROBOT_MEAS]
+        fs[S_VROBOT_MEAS] = 0.5 * (fs[S_VMEAS_R] + fs[S_VMEAS_L])
+        fs[S_ACCEL] = (fs[S_VROBOT_MEAS] - fs[S_VROBOT_PREV]) / dt
+        # 3. People walk.
+        for p in range(ist[I_N_PEOPLE]):
+            person_step(ps[p], paths[i, p], prm[P_PERSON_ACC], prm[P_PERSON_DEC], dt)
+        if fs[S_WALK_END_T] < 0.0 and ps[0, PS_DONE] > 0.0:
+            fs[S_WALK_END_T] = fs[S_T]
+        # 4. Camera frame and perception (SPEC §1.4).
+        _frame(i, prm, fs, ist, ps, walls[i], keys[i], ist[I_STEP], boxes, det)
+        # 5. Contacts, reward, episode end.
+        reason = _contacts(prm, fs, ist, ps, walls[i])
+        half_w = 0.5 * prm[P_IMG_W]
+        reward = (
+            prm[P_R_ALIVE]
+            - prm[P_R_DIST] * abs(fs[S_TRUE_D] - prm[P_TARGET_D])
+            - prm[P_R_OFF] * min(abs(fs[S_TRUE_O]) / half_w, 1.0)
+            - prm[P_R_ACC] * abs(fs[S_ACCEL])
+            - prm[P_R_LOST] * (1.0 - fs[S_IN_FRAME])
+        )
+        term, trunc = 0.0, 0.0
+        if reason != REASON_NONE:
+            reward -= prm[P_R_COLL]
+            term = 1.0
+        elif fs[S_LOST_T] > prm[P_LOST_TIMEOUT] + 1e-9:
+            reason, term = REASON_LOST, 1.0
+        elif fs[S_WALK_END_T] >= 0.0 and fs[S_T] >= fs[S_WALK_END_T] + prm[P_SETTLE] - 1e-9:
+            reason, trunc = REASON_WALK_OVER, 1.0
+        elif ist[I_STEP] >= prm[P_MAX_STEPS]:
+            reason, trunc = REASON_STEP_LIMIT, 1.0
+        fs[S_REWARD], fs[S_TERM], fs[S_TRUNC] = reward, term, trunc
+        ist[I_REASON] = reason
+
+
+class BatchedSim:
+    """N lanes of the simulation, each running its own episode.
+
+    :param cfg: the configuration shared by all lanes.
+    :param num_lanes: N.
+    """
+
+    def __init__(self, cfg: EnvConfig, num_lanes: int) -> None:
+        if not isinstance(num_lanes, int) or num_lanes < 1:
+            raise ValueError(f"num_lanes={num_lanes!r} is out of range: must be an integer >= 1")
+        self.cfg = cfg
+        self.n = num_lanes
+        self.spec: ScenarioSpec = SCENARIOS[cfg.scenario.name]
+        if self.spec.max_people > PEOPLE_MAX:
+            raise ValueError(
+                f"scenario {self.spec.name!r} declares {self.spec.max_people} people; the core "
+                f"holds at most {PEOPLE_MAX}"
+            )
+        self.base_params = params_from_config(cfg)
+        self.params = np.tile(self.base_params, (num_lanes, 1))
+        self.fstate = np.zeros((num_lanes, N_FSTATE))
+        self.istate = np.zeros((num_lanes, N_ISTATE), dtype=np.int64)
+        self.pstate = np.zeros((num_lanes, self.spec.max_people, N_PSTATE))
+        self.paths = np.zeros((num_lanes, self.spec.max_people, self.spec.max_points, N_PW))
+        self.walls = np.zeros((num_lanes, self.spec.max_walls, 4))
+        self.keys = np.zeros((num_lanes, N_STREAMS), dtype=np.uint64)
+
+    def reset_lanes(self, lanes: np.ndarray, seed_seqs: list[np.random.SeedSequence]) -> None:
+        """Start a new episode on each of ``lanes``, seeded by the matching ``SeedSequence``."""
+        lanes = np.asarray(lanes, dtype=np.int64)
+        keys = np.stack([episode_keys(ss) for ss in seed_seqs])
+        self.keys[lanes] = keys
+        batch = self.spec.fn(LaneRandom(keys[:, STREAM_PERSON]), self.cfg)
+        n_people_max = batch.paths.shape[1]
+        n_pts = batch.paths.shape[2]
+        n_w = batch.walls.shape[1]
+        if (
+            n_people_max > self.spec.max_people
+            or n_pts > self.spec.max_points
+            or (n_w > self.spec.max_walls)
+        ):
+            raise ValueError(
+                f"scenario {self.spec.name!r} returned {n_people_max} people x {n_pts} points "
+                f"and {n_w} walls, more than it registered"
+            )
+        self.paths[lanes] = 0.0
+        self.paths[lanes, :n_people_max, :n_pts] = batch.paths
+        self.walls[lanes] = 0.0
+        self.walls[lanes, :n_w] = batch.walls
+        self.params[lanes] = self.base_params
+        spread = self.cfg.motor.gain_spread
+        if spread > 0.0:
+            gains = 1.0 + LaneRandom(keys[:, STREAM_MOTOR]).normal(2, scale=spread)
+            self.params[lanes, P_GAIN_R] = np.clip(gains[:, 0], 0.5, 1.5)
+            self.params[lanes, P_GAIN_L] = np.clip(gains[:, 1], 0.5, 1.5)
+        reset_kernel(
+            lanes,
+            np.ascontiguousarray(batch.robot_pose, dtype=np.float64),
+            np.ascontiguousarray(batch.n_points, dtype=np.int64),
+            np.ascontiguousarray(batch.n_people, dtype=np.int64),
+            np.ascontiguousarray(batch.n_walls, dtype=np.int64),
+            self.params,
+            self.fstate,
+            self.istate,
+            self.pstate,
+            self.paths,
+            self.walls,
+            self.keys,
+        )
+
+    def step(self, actions: np.ndarray) -> None:
+        """Advance all lanes by one control step; ``actions`` is (N, 2) float64 ``v, w``."""
+        step_kernel(
+            self.params,
+            self.fstate,
+            self.istate,
+            self.pstate,
+            self.paths,
+            self.walls,
+            self.keys,
+            actions,
+        )
