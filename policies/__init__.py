@@ -1,0 +1,53 @@
+"""Everything that maps an observation ``[distance_m, offset_px]`` to an action ``[v, w]``.
+
+The classical guidance laws of SPEC.md §1.5 (PN, MPN, GS-MPN and its variants) and, later,
+learned agents, all behind one :class:`Policy` protocol and reachable by name::
+
+    >>> import numpy as np
+    >>> from policies import make_policy
+    >>> law = make_policy("pn:thesis")
+    >>> law.reset()
+    >>> law.act(np.array([2.0, 100.0], dtype=np.float32))  # 2 m away, 100 px right of centre
+    array([ 5.  , -0.25], dtype=float32)
+
+Actions are SI with w counter-clockwise positive: a person right of centre gives w < 0.
+"""
+
+from policies.base import GuidanceLaw, LawParams, Policy, validate_obs
+from policies.gsmpn import GSMPN, GSMPN_THESIS, GSMPN_TUNED, GSMPN_VARIANTS, GSMPNParams
+from policies.mpn import MPN, MPN_THESIS, MPN_TUNED, MPNParams
+from policies.pn import PN, PN_THESIS, PN_TUNED, PNParams
+from policies.registry import (
+    PolicyRegistry,
+    available_policies,
+    make_policy,
+    register_law,
+    register_policy,
+    register_resolver,
+)
+
+__all__ = [
+    "GSMPN",
+    "GSMPN_THESIS",
+    "GSMPN_TUNED",
+    "GSMPN_VARIANTS",
+    "MPN",
+    "MPN_THESIS",
+    "MPN_TUNED",
+    "PN",
+    "PN_THESIS",
+    "PN_TUNED",
+    "GSMPNParams",
+    "GuidanceLaw",
+    "LawParams",
+    "MPNParams",
+    "PNParams",
+    "Policy",
+    "PolicyRegistry",
+    "available_policies",
+    "make_policy",
+    "register_law",
+    "register_policy",
+    "register_resolver",
+    "validate_obs",
+]

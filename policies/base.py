@@ -1,0 +1,166 @@
+"""The contract every policy keeps, and the shared parts of the guidance laws.
+
+## Observation
+float32 array, shape (2,) (SPEC.md §1.4, step 5):
+
+| index | name       | unit | meaning                                                      |
+|-------|------------|------|--------------------------------------------------------------|
+| 0     | distance_m | m    | filtered distance to the person; 0 means no valid reading yet |
+| 1     | offset_px  | px   | box centre minus image centre; > 0 means right of centre     |
+
+## Action
+float32 array, shape (2,), SI:
+
+| index | name    | unit  | meaning                                |
+|-------|---------|-------|----------------------------------------|
+| 0     | v_mps   | m/s   | forward speed                          |
+| 1     | w_radps | rad/s | yaw rate, counter-clockwise positive   |
+
+## Sign convention (SPEC.md §1.5 "Sign")
+Image u grows to the right and w is counter-clockwise positive, so a person right of centre
+(offset_px > 0) needs a clockwise turn: w < 0. The thesis hid this sign in its motor wiring; each
+law here applies it with one commented minus sign.
+"""
+
+from __future__ import annotations
+
+import math
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+from numbers import Real
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+
+@runtime_checkable
+class Policy(Protocol):
+    """Anything that maps an observation to an action: a guidance law or a learned agent.
+
+    :param name: the name the policy is known by in tables and logs (e.g. ``"pn:tuned"``).
+    """
+
+    name: str
+
+    def reset(self) -> None:
+        """Forget everything remembered from earlier steps; call at the start of an episode."""
+        ...
+
+    def act(self, obs: np.ndarray) -> np.ndarray:
+        """Map ``[distance_m, offset_px]`` to ``[v_mps, w_radps]`` (see the module docstring).
+
+        ``offset_px > 0`` (person right of centre) must give ``w_radps < 0``.
+        """
+        ...
+
+
+def validate_obs(obs: ArrayLike) -> tuple[float, float]:
+    """Check an observation and return it as ``(distance_m, offset_px)`` Python floats.
+
+    :param obs: ``[distance_m, offset_px]``, shape (2,), finite.
+    :raises ValueError: on a wrong shape or a NaN/inf entry.
+    """
+    arr = np.asarray(obs, dtype=np.float64)
+    if arr.shape != (2,):
+        raise ValueError(
+            f"obs must have shape (2,) = [distance_m, offset_px], got shape {arr.shape}"
+        )
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"obs must be finite, got [distance_m, offset_px] = {arr.tolist()}")
+    return float(arr[0]), float(arr[1])
+
+
+def make_action(
+    v_mps: float, w_radps: float, v_max_mps: float | None, w_max_radps: float | None
+) -> np.ndarray:
+    """Pack ``(v, w)`` into a float32 action, clipping each to ``±limit`` when a limit is set.
+
+    :param v_mps: forward speed [m/s].
+    :param w_radps: yaw rate [rad/s], counter-clockwise positive.
+    :param v_max_mps: symmetric speed limit [m/s], or None for no clip.
+    :param w_max_radps: symmetric yaw-rate limit [rad/s], or None for no clip.
+    """
+    if v_max_mps is not None:
+        v_mps = min(max(v_mps, -v_max_mps), v_max_mps)
+    if w_max_radps is not None:
+        w_radps = min(max(w_radps, -w_max_radps), w_max_radps)
+    return np.array([v_mps, w_radps], dtype=np.float32)
+
+
+def check_range(
+    owner: object,
+    field: str,
+    *,
+    gt: float | None = None,
+    ge: float | None = None,
+    optional: bool = False,
+) -> None:
+    """Raise a ValueError naming ``Class.field``, its value and the allowed range.
+
+    :param owner: the dataclass instance being validated.
+    :param field: the field name.
+    :param gt: exclusive lower bound, if any.
+    :param ge: inclusive lower bound, if any.
+    :param optional: None is also allowed.
+    """
+    value = getattr(owner, field)
+    if optional and value is None:
+        return
+    bounds = [f"> {gt:g}"] if gt is not None else []
+    bounds += [f">= {ge:g}"] if ge is not None else []
+    rule = " and ".join(bounds) or "finite"
+    if optional:
+        rule = f"None or {rule}"
+    ok = isinstance(value, Real) and not isinstance(value, bool) and math.isfinite(value)
+    ok = ok and (gt is None or value > gt) and (ge is None or value >= ge)
+    if not ok:
+        where = f"{type(owner).__name__}.{field}={value!r}"
+        raise ValueError(f"{where} is out of range: must be {rule} (a finite number)")
+
+
+@dataclass(frozen=True, kw_only=True)
+class LawParams:
+    """Output limits shared by every guidance law.
+
+    :param v_max_mps: clip ``|v|`` to this [m/s]; None (default) leaves it to the env.
+    :param w_max_radps: clip ``|w|`` to this [rad/s]; None (default) leaves it to the env.
+    """
+
+    v_max_mps: float | None = None
+    w_max_radps: float | None = None
+
+    def __post_init__(self) -> None:
+        check_range(self, "v_max_mps", gt=0, optional=True)
+        check_range(self, "w_max_radps", gt=0, optional=True)
+
+
+class GuidanceLaw(ABC):
+    """Base of the classical laws: validates the observation, runs the law, clips the output.
+
+    A new law subclasses this, sets ``params`` (a :class:`LawParams` subclass) and ``name``,
+    and implements :meth:`_command`; it overrides :meth:`reset` if it keeps memory.
+    """
+
+    name: str
+    params: LawParams
+
+    def reset(self) -> None:  # noqa: B027 - an optional hook: memoryless laws keep the no-op
+        """Forget remembered state; a memoryless law has nothing to forget."""
+
+    def act(self, obs: np.ndarray) -> np.ndarray:
+        """Map ``[distance_m, offset_px]`` to ``[v_mps, w_radps]``; offset > 0 gives w < 0.
+
+        :raises ValueError: if ``obs`` is not a finite array of shape (2,). A rejected
+            observation leaves the law's memory untouched.
+        """
+        distance_m, offset_px = validate_obs(obs)
+        v_mps, w_radps = self._command(distance_m, offset_px)
+        return make_action(v_mps, w_radps, self.params.v_max_mps, self.params.w_max_radps)
+
+    @abstractmethod
+    def _command(self, distance_m: float, offset_px: float) -> tuple[float, float]:
+        """Return ``(v [m/s], w [rad/s, counter-clockwise positive])`` before clipping."""
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}(name={self.name!r}, params={self.params!r})"

@@ -1,0 +1,95 @@
+"""Modified proportional navigation (MPN), SPEC.md §1.5.
+
+    rate = (o - o_prev) / dt          (0 on the first step after reset)
+    V    = kv (d - d_ref)
+    w    = -(N kw o / max(d, 0.1) + lambda rate)
+
+PN plus a constant-gain derivative term on the pixel offset. The law remembers the previous
+offset itself. The spec divides by d alone; ``max(d, 0.1 m)`` only guards d = 0 ("no valid
+reading yet") and readings below the camera's minimum depth (about 0.17 m, SPEC.md §1.3).
+
+## Thesis preset in SI
+kv, N and kw convert as for PN (:mod:`policies.pn`): 5.0 1/s, 0.1, 0.05 rad/s/px. The thesis does
+not state lambda. We take GS-MPN's maximum derivative gain, lambda = lambda_d = 1e-4 rad/px
+(0.1 mrad/s per px/s, see :mod:`policies.gsmpn`), so that MPN is the large-|rate| limit of GS-MPN
+and the two laws differ only by the gain scheduling.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from types import MappingProxyType
+
+from policies.base import GuidanceLaw, LawParams, check_range
+
+# Guards the division by d (SPEC.md §1.5 writes a bare "/ d"); see the module docstring.
+DISTANCE_FLOOR_M = 0.1
+
+
+@dataclass(frozen=True, kw_only=True)
+class MPNParams(LawParams):
+    """Parameters of :class:`MPN`, SI.
+
+    :param kv_per_s: speed gain kv [1/s].
+    :param d_ref_m: desired following distance d_ref [m].
+    :param nav_n: navigation constant N [-].
+    :param kw_rad_per_s_px: turn gain kw [rad/s per px at d = 1 m].
+    :param lambda_rad_per_px: derivative gain lambda [rad/s per px/s = rad/px].
+    :param dt_s: control period dt used for the offset rate [s].
+    """
+
+    kv_per_s: float
+    d_ref_m: float = 1.0
+    nav_n: float
+    kw_rad_per_s_px: float
+    lambda_rad_per_px: float
+    dt_s: float = 0.1
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        for field in ("kv_per_s", "d_ref_m", "nav_n", "kw_rad_per_s_px", "dt_s"):
+            check_range(self, field, gt=0)
+        # lambda = 0 is allowed: it is PN without PN's max(d, 1) floor.
+        check_range(self, "lambda_rad_per_px", ge=0)
+
+
+#: The thesis values converted to SI; lambda is our choice (module docstring).
+MPN_THESIS = MPNParams(
+    kv_per_s=5.0, d_ref_m=1.0, nav_n=0.1, kw_rad_per_s_px=0.05, lambda_rad_per_px=1e-4, dt_s=0.1
+)
+# TODO: replaced by the simulation search of eval/tune (issue 4)
+MPN_TUNED = MPN_THESIS
+
+PRESETS = MappingProxyType({"thesis": MPN_THESIS, "tuned": MPN_TUNED})
+
+
+class MPN(GuidanceLaw):
+    """Modified proportional navigation: PN plus a derivative term on the offset.
+
+    :param params: the gains; defaults to the tuned preset.
+    :param name: the name shown in tables and logs.
+    """
+
+    def __init__(self, params: MPNParams = MPN_TUNED, name: str = "mpn") -> None:
+        self.params: MPNParams = params
+        self.name = name
+        self._prev_offset_px: float | None = None
+
+    def reset(self) -> None:
+        """Forget the previous offset, so the next step's rate is 0."""
+        self._prev_offset_px = None
+
+    def _command(self, distance_m: float, offset_px: float) -> tuple[float, float]:
+        p = self.params
+        prev = offset_px if self._prev_offset_px is None else self._prev_offset_px
+        self._prev_offset_px = offset_px
+        # SPEC.md §1.5 MPN: rate = (o - o_prev) / dt; V = kv (d - 1.0);
+        # w = N kw o / d + lambda rate
+        rate_px_s = (offset_px - prev) / p.dt_s
+        v_mps = p.kv_per_s * (distance_m - p.d_ref_m)
+        w_law = (
+            p.nav_n * p.kw_rad_per_s_px * offset_px / max(distance_m, DISTANCE_FLOOR_M)
+            + p.lambda_rad_per_px * rate_px_s
+        )
+        # Sign convention: o > 0 (person right of centre) needs a clockwise turn, i.e. w < 0.
+        return v_mps, -w_law

@@ -1,0 +1,78 @@
+"""Proportional navigation (PN), SPEC.md §1.5.
+
+    V = kv (d - d_ref)
+    w = -(N kw o / max(d, 1.0))
+
+d = person distance [m], o = pixel offset [px] (> 0 = right of centre), d_ref = desired following
+distance [m]. The minus sign is the project's sign convention (see :mod:`policies.base`).
+
+## Thesis preset in SI
+The thesis gives kv = 5000, kw = 50.0, N = 0.1 without units. SPEC.md §1.5 "Units": the reading
+that makes them consistent is V in mm/s and w in mrad/s, with d in metres. So:
+
+- kv = 5000 mm/s per m = 5.0 m/s per m = 5.0 1/s.
+- N = 0.1 is a pure number and stays 0.1.
+- kw = 50 mrad/s per px (at d = 1 m) = 0.05 rad/s per px, so the pixel gain N kw is
+  5 mrad/s/px = 0.005 rad/s/px: 100 px off-centre at 2 m turns at 0.25 rad/s.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from types import MappingProxyType
+
+from policies.base import GuidanceLaw, LawParams, check_range
+
+# SPEC.md §1.5: PN divides by max(d, 1.0), which also covers d = 0 ("no valid reading yet").
+PN_DISTANCE_FLOOR_M = 1.0
+
+
+@dataclass(frozen=True, kw_only=True)
+class PNParams(LawParams):
+    """Parameters of :class:`PN`, SI.
+
+    :param kv_per_s: speed gain kv [1/s]: metres per second per metre of distance error.
+    :param d_ref_m: desired following distance d_ref [m] (the thesis's 1.0 m).
+    :param nav_n: navigation constant N [-].
+    :param kw_rad_per_s_px: turn gain kw [rad/s per px at d = 1 m; the law divides by d in m].
+    """
+
+    kv_per_s: float
+    d_ref_m: float = 1.0
+    nav_n: float
+    kw_rad_per_s_px: float
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        for field in ("kv_per_s", "d_ref_m", "nav_n", "kw_rad_per_s_px"):
+            check_range(self, field, gt=0)
+
+
+#: The thesis values converted to SI (module docstring has the conversion).
+PN_THESIS = PNParams(kv_per_s=5.0, d_ref_m=1.0, nav_n=0.1, kw_rad_per_s_px=0.05)
+# TODO: replaced by the simulation search of eval/tune (issue 4)
+PN_TUNED = PN_THESIS
+
+PRESETS = MappingProxyType({"thesis": PN_THESIS, "tuned": PN_TUNED})
+
+
+class PN(GuidanceLaw):
+    """Proportional navigation: turn in proportion to the offset, slowed by distance.
+
+    Memoryless, so :meth:`reset` does nothing.
+
+    :param params: the gains; defaults to the tuned preset.
+    :param name: the name shown in tables and logs.
+    """
+
+    def __init__(self, params: PNParams = PN_TUNED, name: str = "pn") -> None:
+        self.params: PNParams = params
+        self.name = name
+
+    def _command(self, distance_m: float, offset_px: float) -> tuple[float, float]:
+        p = self.params
+        # SPEC.md §1.5 PN: V = kv (d - 1.0); w = N kw o / max(d, 1.0)
+        v_mps = p.kv_per_s * (distance_m - p.d_ref_m)
+        w_law = p.nav_n * p.kw_rad_per_s_px * offset_px / max(distance_m, PN_DISTANCE_FLOOR_M)
+        # Sign convention: o > 0 (person right of centre) needs a clockwise turn, i.e. w < 0.
+        return v_mps, -w_law

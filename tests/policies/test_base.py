@@ -1,0 +1,106 @@
+"""policies/base.py: the observation/action contract shared by every policy."""
+
+from dataclasses import FrozenInstanceError
+
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from policies import MPN, MPN_THESIS, PN, PN_THESIS, Policy, available_policies, make_policy
+from policies.base import make_action, validate_obs
+from policies.pn import PNParams
+
+
+def obs(distance_m: float, offset_px: float) -> np.ndarray:
+    return np.array([distance_m, offset_px], dtype=np.float32)
+
+
+@pytest.mark.parametrize("name", available_policies())
+def test_every_registered_policy_satisfies_the_protocol(name: str) -> None:
+    assert isinstance(make_policy(name), Policy)
+
+
+@pytest.mark.parametrize("name", available_policies())
+def test_action_is_a_float32_pair(name: str) -> None:
+    action = make_policy(name).act(obs(2.0, 30.0))
+    assert action.shape == (2,)
+    assert action.dtype == np.float32
+
+
+@pytest.mark.parametrize("name", available_policies())
+@given(
+    distance_m=st.floats(min_value=1.01, max_value=10.0),
+    offset_px=st.floats(min_value=1.0, max_value=500.0),
+)
+def test_person_right_and_beyond_reference_gives_forward_clockwise_action(
+    name: str, distance_m: float, offset_px: float
+) -> None:
+    # SPEC.md §1.5 "Sign": o > 0 (right of centre) needs w < 0; d > d_ref = 1 m needs v > 0.
+    v_mps, w_radps = make_policy(name).act(obs(distance_m, offset_px))
+    assert v_mps > 0
+    assert w_radps < 0
+
+
+@pytest.mark.parametrize("name", available_policies())
+def test_person_left_of_centre_gives_counter_clockwise_turn(name: str) -> None:
+    _, w_radps = make_policy(name).act(obs(2.0, -50.0))
+    assert w_radps > 0
+
+
+@pytest.mark.parametrize(
+    "bad", [[1.0], [1.0, 2.0, 3.0], [[1.0, 2.0]], 1.0], ids=["1", "3", "1x2", "scalar"]
+)
+def test_obs_of_wrong_shape_is_rejected(bad: object) -> None:
+    with pytest.raises(ValueError, match=r"shape \(2,\)"):
+        PN().act(bad)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("bad", [[np.nan, 0.0], [1.0, np.inf], [-np.inf, 3.0]])
+def test_obs_with_nan_or_inf_is_rejected(bad: list[float]) -> None:
+    with pytest.raises(ValueError, match="finite"):
+        PN().act(np.array(bad, dtype=np.float32))
+
+
+def test_rejected_obs_leaves_law_memory_untouched() -> None:
+    law = MPN(MPN_THESIS)
+    law.act(obs(1.0, 10.0))
+    with pytest.raises(ValueError, match="finite"):
+        law.act(obs(1.0, np.nan))
+    # rate = (40 - 10) / 0.1 = 300 px/s, as if the bad obs never came;
+    # w = -(0.1 * 0.05 * 40 / 1 + 1e-4 * 300) = -(0.2 + 0.03) = -0.23
+    assert law.act(obs(1.0, 40.0))[1] == pytest.approx(-0.23, rel=1e-6)
+
+
+def test_validate_obs_returns_distance_and_offset_as_floats() -> None:
+    assert validate_obs(obs(1.5, -20.0)) == (1.5, -20.0)
+
+
+def test_make_action_clips_each_component_to_its_symmetric_limit() -> None:
+    np.testing.assert_array_equal(make_action(3.0, -4.0, 1.5, 2.0), [1.5, -2.0])
+    np.testing.assert_array_equal(make_action(-3.0, 4.0, 1.5, 2.0), [-1.5, 2.0])
+
+
+def test_make_action_without_limits_passes_values_through() -> None:
+    np.testing.assert_array_equal(make_action(30.0, -40.0, None, None), [30.0, -40.0])
+
+
+def test_law_clips_its_output_to_its_limits() -> None:
+    params = PNParams(kv_per_s=5.0, nav_n=0.1, kw_rad_per_s_px=0.05, v_max_mps=1.2, w_max_radps=0.1)
+    # Unclipped: v = 5 (3 - 1) = 10 m/s, w = -(0.005 * 300 / 3) = -0.5 rad/s.
+    v_mps, w_radps = PN(params).act(obs(3.0, 300.0))
+    assert v_mps == pytest.approx(1.2)
+    assert w_radps == pytest.approx(-0.1)
+
+
+@pytest.mark.parametrize("field", ["v_max_mps", "w_max_radps"])
+@pytest.mark.parametrize("value", [0.0, -1.0, float("nan")])
+def test_non_positive_output_limit_is_rejected_naming_the_field(field: str, value: float) -> None:
+    kwargs = {"kv_per_s": 5.0, "nav_n": 0.1, "kw_rad_per_s_px": 0.05, field: value}
+    with pytest.raises(ValueError, match=rf"PNParams\.{field}=.* must be None or > 0"):
+        PNParams(**kwargs)
+
+
+def test_params_are_frozen() -> None:
+    with pytest.raises(FrozenInstanceError):
+        PN_THESIS.kv_per_s = 1.0  # type: ignore[misc]
