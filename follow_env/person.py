@@ -79,14 +79,18 @@ def person_step(ps: np.ndarray, path: np.ndarray, accel: float, decel: float, dt
     # Speed allowed now: this leg's cap, and for every later waypoint the speed from which we
     # can still brake to its cap (0 at a pause or the end) over the distance left.
     allowed = path[k, PW_VMAX]
+    ad = decel * dt
     for j in range(k + 1, n):
         dist = path[j, PW_S] - s
         if 2.0 * decel * dist >= allowed * allowed:
             break  # too far to bind, and so is every waypoint after it
         cap = 0.0 if (j == n - 1 or path[j, PW_PAUSE] > 0.0) else path[j, PW_VMAX]
-        allowed = min(allowed, np.sqrt(cap * cap + 2.0 * decel * max(dist, 0.0)))
+        # Fastest speed now from which braking at `decel` still meets `cap` at the waypoint,
+        # counting this step's travel: v^2 = cap^2 + 2 decel (dist - v dt).
+        disc = ad * ad + cap * cap + 2.0 * decel * max(dist, 0.0)
+        allowed = min(allowed, -ad + np.sqrt(disc))
     allowed = max(allowed, _CREEP_MPS)
-    v = min(v + accel * dt, allowed) if v < allowed else max(v - decel * dt, allowed)
+    v = min(v + accel * dt, allowed)
     s += v * dt
     while k < n - 1 and s >= path[k + 1, PW_S]:
         k += 1

@@ -1,0 +1,577 @@
+"""``rgb_array`` frames of :class:`~follow_env.env.PersonFollowEnv`: a top-down map beside the
+robot's camera view, drawn with OpenCV (headless: no window is ever opened).
+
+Left panel (map): the room's walls fitted to the panel, a metre grid, the camera's horizontal
+field of view, the robot's footprint with a heading arrow, every person as a rotated rectangle
+(person 0, the one followed, in orange, others grey), the trails of the robot and the target,
+and a header with time, the observation, the ground truth and the episode end reason.
+
+Right panel (camera): the image frame scaled to fit, floor below the horizon, each person's true
+projected body box in grey, the box the perception published in green (with its centre and its
+offset from the image's centre column), or a "no detection" label.
+
+Everything is read from lane 0 of ``env.sim``; nothing here changes the simulation. Colours are
+written as RGB because the frame is returned as RGB and OpenCV's drawing does not care about the
+channel order.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING
+
+import cv2
+import numpy as np
+
+from follow_env.camera import Camera, body_box
+from follow_env.config import EnvConfig
+from follow_env.layout import (
+    I_N_PEOPLE,
+    I_N_WALLS,
+    I_REASON,
+    P_CX,
+    P_CY,
+    P_FX,
+    P_FY,
+    P_IMG_H,
+    P_IMG_W,
+    P_PERSON_D,
+    P_PERSON_H,
+    P_PERSON_W,
+    P_R00,
+    P_TX,
+    P_TY,
+    PS_TH,
+    PS_X,
+    PS_Y,
+    REASON_NAMES,
+    REASON_NONE,
+    S_BOX_X1,
+    S_BOX_X2,
+    S_BOX_Y1,
+    S_BOX_Y2,
+    S_DETECTED,
+    S_IN_FRAME,
+    S_OBS_D,
+    S_OBS_O,
+    S_T,
+    S_TH,
+    S_TRUE_D,
+    S_TRUE_O,
+    S_X,
+    S_Y,
+)
+
+if TYPE_CHECKING:
+    from follow_env.env import PersonFollowEnv
+
+__all__ = ["FRAME_HEIGHT_PX", "FRAME_WIDTH_PX", "Renderer"]
+
+# Frame layout (px). 1280 x 480 keeps both sides multiples of 16, which video encoders want.
+PANEL_W_PX = 640
+FRAME_HEIGHT_PX = 480
+FRAME_WIDTH_PX = 2 * PANEL_W_PX
+HEADER_PX = 40  # text strip above the map
+MAP_MARGIN_PX = 10
+
+# Drawing constants.
+FRUSTUM_LENGTH_M = 4.0  # how far the field-of-view wedge reaches on the map
+FRUSTUM_ALPHA = 0.35
+MIN_GRID_PX = 8.0  # coarser grid when 1 m would be closer than this on screen
+VIEW_PAD_M = 2.0  # room around people and trails when there are no walls to fit
+MIN_VIEW_M = 8.0
+
+# Sub-pixel drawing: OpenCV takes fixed-point coordinates with this many fractional bits.
+_SHIFT = 4
+_ONE = 1 << _SHIFT
+
+# Colours (RGB).
+C_BG = (40, 42, 48)
+C_FLOOR = (236, 234, 226)
+C_GRID = (214, 212, 204)
+C_WALL = (60, 60, 66)
+C_TEXT = (240, 240, 240)
+C_ROBOT = (45, 110, 215)
+C_ROBOT_EDGE = (20, 50, 110)
+C_TARGET = (240, 135, 30)
+C_OTHER = (150, 150, 150)
+C_PERSON_EDGE = (70, 60, 50)
+C_FRUSTUM = (255, 220, 90)
+C_SKY = (196, 202, 212)
+C_TRUE_BOX = (120, 120, 120)
+C_BODY = (205, 205, 205)
+C_DET = (40, 200, 60)
+C_CENTRE = (250, 250, 250)
+C_WARN = (235, 60, 50)
+
+_FONT = cv2.FONT_HERSHEY_SIMPLEX
+_FONT_SCALE = 0.45
+
+
+# ----------------------------------------------------------------------------------------------
+# Small helpers
+# ----------------------------------------------------------------------------------------------
+
+
+class _Trail:
+    """A growing (n, 2) float array of positions (m); appends are amortised O(1)."""
+
+    def __init__(self, capacity: int = 256) -> None:
+        self._buf = np.empty((capacity, 2))
+        self.n = 0
+
+    def clear(self) -> None:
+        self.n = 0
+
+    def append(self, x: float, y: float) -> None:
+        if self.n == len(self._buf):
+            self._buf = np.concatenate([self._buf, np.empty_like(self._buf)])
+        self._buf[self.n] = x, y
+        self.n += 1
+
+    @property
+    def points(self) -> np.ndarray:
+        """The recorded positions, oldest first (a view, m)."""
+        return self._buf[: self.n]
+
+
+class _MapView:
+    """World metres -> map pixels: x to the right, y up (the image's rows grow downwards)."""
+
+    def __init__(self, scale: float, ox: float, oy: float) -> None:
+        self.scale = scale  # px per m
+        self.ox, self.oy = ox, oy  # px of the world origin
+
+    def px(self, xy: np.ndarray) -> np.ndarray:
+        """Fixed-point int32 pixel coordinates (``_SHIFT`` fractional bits) of (..., 2) m."""
+        xy = np.asarray(xy, dtype=float)
+        out = np.empty(xy.shape, dtype=np.int32)
+        out[..., 0] = np.round((self.ox + self.scale * xy[..., 0]) * _ONE)
+        out[..., 1] = np.round((self.oy - self.scale * xy[..., 1]) * _ONE)
+        return out
+
+    def pt(self, x: float, y: float) -> tuple[int, int]:
+        """One point as a fixed-point tuple (for ``cv2.line`` / ``cv2.circle``)."""
+        return (
+            round((self.ox + self.scale * x) * _ONE),
+            round((self.oy - self.scale * y) * _ONE),
+        )
+
+
+def fit_view(
+    xmin: float, ymin: float, xmax: float, ymax: float, x0: int, y0: int, w: int, h: int
+) -> _MapView:
+    """The largest uniform scale showing ``[xmin, xmax] x [ymin, ymax]`` (m) centred in the
+    pixel rectangle at ``(x0, y0)`` of size ``w x h`` (px)."""
+    span_x, span_y = max(xmax - xmin, 1e-6), max(ymax - ymin, 1e-6)
+    scale = min(w / span_x, h / span_y)
+    ox = x0 + 0.5 * w - scale * 0.5 * (xmin + xmax)
+    oy = y0 + 0.5 * h + scale * 0.5 * (ymin + ymax)
+    return _MapView(scale, ox, oy)
+
+
+def grid_step_m(scale_px_per_m: float) -> float:
+    """The metre grid's spacing (m): 1 m unless that is too dense to read on screen."""
+    for step in (1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0):
+        if step * scale_px_per_m >= MIN_GRID_PX:
+            return step
+    return 200.0
+
+
+def rect_corners(x: float, y: float, th: float, length: float, width: float) -> np.ndarray:
+    """Corners (4, 2) (m) of a rectangle centred at ``(x, y)``, ``length`` along heading ``th``
+    (rad) and ``width`` across it, in drawing order."""
+    c, s = math.cos(th), math.sin(th)
+    hl, hw = 0.5 * length, 0.5 * width
+    local = np.array([[hl, hw], [-hl, hw], [-hl, -hw], [hl, -hw]])
+    rot = np.array([[c, -s], [s, c]])
+    return local @ rot.T + (x, y)
+
+
+def camera_edge_azimuths(params: np.ndarray) -> tuple[float, float]:
+    """Azimuths (rad, robot frame, CCW from forward) of the image's left and right edge
+    columns at the principal row: the horizontal field of view, with the camera's yaw and the
+    principal point taken into account (the pitch only shifts where the wedge is seen)."""
+    R = params[P_R00 : P_R00 + 9].reshape(3, 3)
+    fx, cx, width = params[P_FX], params[P_CX], params[P_IMG_W]
+    out = []
+    for u in (0.0, width):
+        d = R @ np.array([(u - cx) / fx, 0.0, 1.0])
+        out.append(math.atan2(d[1], d[0]))
+    return out[0], out[1]
+
+
+def horizon_row(params: np.ndarray) -> float:
+    """Image row (px, may lie outside the image) where the level floor meets the sky: the
+    projection of a horizontal direction along the optical axis's heading."""
+    R = params[P_R00 : P_R00 + 9].reshape(3, 3)
+    ax, ay = R[0, 2], R[1, 2]
+    n = math.hypot(ax, ay)
+    if n < 1e-9:  # looking straight up or down: no horizon in view
+        return -1e9 if R[2, 2] < 0.0 else 1e9
+    d_cam = R.T @ np.array([ax / n, ay / n, 0.0])
+    if d_cam[2] <= 1e-9:
+        return -1e9
+    return float(params[P_FY] * d_cam[1] / d_cam[2] + params[P_CY])
+
+
+def put_text(
+    img: np.ndarray,
+    text: str,
+    org: tuple[int, int],
+    color: tuple[int, int, int] = C_TEXT,
+    scale: float = _FONT_SCALE,
+    box: bool = True,
+) -> None:
+    """Text whose baseline starts at ``org`` (px), on a dark box so it reads on any background.
+
+    A box rather than a thick dark outline: OpenCV 5's fonts widen with thickness, so an
+    outline drawn thicker does not line up with the text."""
+    if box:
+        (tw, th), base = cv2.getTextSize(text, _FONT, scale, 1)
+        x, y = org
+        cv2.rectangle(img, (x - 3, y - th - 3), (x + tw + 3, y + base), C_BG, -1)
+    cv2.putText(img, text, org, _FONT, scale, color, 1, cv2.LINE_AA)
+
+
+def blend_poly(
+    img: np.ndarray, poly_fx: np.ndarray, color: tuple[int, int, int], alpha: float
+) -> None:
+    """Fill a fixed-point polygon (n, 2) translucently; blends only its bounding box, which
+    keeps this cheap whatever the panel size."""
+    h, w = img.shape[:2]
+    x1, y1 = (poly_fx.min(axis=0) >> _SHIFT) - 1
+    x2, y2 = (poly_fx.max(axis=0) >> _SHIFT) + 2
+    x1, y1, x2, y2 = max(int(x1), 0), max(int(y1), 0), min(int(x2), w), min(int(y2), h)
+    if x2 <= x1 or y2 <= y1:
+        return
+    roi = img[y1:y2, x1:x2]
+    layer = roi.copy()
+    shifted = poly_fx - np.array([x1 * _ONE, y1 * _ONE], dtype=np.int32)
+    cv2.fillPoly(layer, [shifted], color, cv2.LINE_AA, _SHIFT)
+    cv2.addWeighted(layer, alpha, roi, 1.0 - alpha, 0.0, dst=roi)
+
+
+# ----------------------------------------------------------------------------------------------
+# Renderer
+# ----------------------------------------------------------------------------------------------
+
+
+class Renderer:
+    """Draws ``rgb_array`` frames of a :class:`~follow_env.env.PersonFollowEnv`.
+
+    The frame is always ``FRAME_HEIGHT_PX x FRAME_WIDTH_PX x 3`` (480 x 1280) uint8 RGB, so a
+    video of an episode has one size whatever happens in it.
+
+    :param config: the environment's configuration (camera image size and robot footprint).
+    """
+
+    def __init__(self, config: EnvConfig) -> None:
+        self.config = config
+        self.camera = Camera.from_config(config.camera)
+        self.foot_l = config.robot.footprint_length_m
+        self.foot_w = config.robot.footprint_width_m
+        self.robot_trail = _Trail()
+        self.target_trail = _Trail()
+        # The map background (floor, grid, walls) only changes with the walls or the view;
+        # it is drawn once per key and copied each frame.
+        self._map_key: tuple[object, ...] | None = None
+        self._map_bg: np.ndarray | None = None
+        self._map_view: _MapView | None = None
+        self._grid_m = 1.0
+        # The camera panel: image scaled to fit the panel, letterboxed.
+        W, H = self.camera.width_px, self.camera.height_px
+        self.cam_scale = min(PANEL_W_PX / W, FRAME_HEIGHT_PX / H)
+        self.cam_w = round(W * self.cam_scale)
+        self.cam_h = round(H * self.cam_scale)
+        self.cam_x0 = (PANEL_W_PX - self.cam_w) // 2
+        self.cam_y0 = (FRAME_HEIGHT_PX - self.cam_h) // 2
+        self._cam_bg: np.ndarray | None = None  # needs the sim's params: built on first draw
+
+    # -- the interface PersonFollowEnv calls ---------------------------------------------------
+
+    def reset(self) -> None:
+        """Forget the trails (a new episode starts)."""
+        self.robot_trail.clear()
+        self.target_trail.clear()
+
+    def record(self, env: PersonFollowEnv) -> None:
+        """Append the robot's and the target's current positions (m) to the trails."""
+        fs = env.sim.fstate[0]
+        self.robot_trail.append(fs[S_X], fs[S_Y])
+        person = env.sim.pstate[0, 0]
+        self.target_trail.append(person[PS_X], person[PS_Y])
+
+    def draw(self, env: PersonFollowEnv) -> np.ndarray:
+        """The current frame: an RGB uint8 array (480, 1280, 3), C-contiguous, newly allocated
+        (callers such as ``RecordVideo`` keep every frame)."""
+        if self.robot_trail.n == 0:
+            # env.reset clears the trails without recording: start them at the reset pose.
+            self.record(env)
+        frame = np.empty((FRAME_HEIGHT_PX, FRAME_WIDTH_PX, 3), dtype=np.uint8)
+        self._draw_map(env, frame[:, :PANEL_W_PX])
+        self._draw_camera(env, frame[:, PANEL_W_PX:])
+        cv2.line(frame, (PANEL_W_PX, 0), (PANEL_W_PX, FRAME_HEIGHT_PX - 1), (0, 0, 0), 2)
+        return frame
+
+    # -- map panel -----------------------------------------------------------------------------
+
+    def _world_bounds(self, env: PersonFollowEnv) -> tuple[float, float, float, float]:
+        """Extent (m) the map shows: the walls when there are any; otherwise the people and
+        trails, padded and snapped to whole metres so the view (and its cached background)
+        changes only now and then."""
+        ist = env.sim.istate[0]
+        n_walls = int(ist[I_N_WALLS])
+        if n_walls > 0:
+            w = env.sim.walls[0, :n_walls]
+            xs, ys = np.concatenate([w[:, 0], w[:, 2]]), np.concatenate([w[:, 1], w[:, 3]])
+            pad = 0.3
+        else:
+            n_people = int(ist[I_N_PEOPLE])
+            pts = np.concatenate(
+                [
+                    self.robot_trail.points,
+                    self.target_trail.points,
+                    env.sim.pstate[0, :n_people][:, [PS_X, PS_Y]],
+                ]
+            )
+            xs, ys = pts[:, 0], pts[:, 1]
+            pad = VIEW_PAD_M
+        xmin, xmax = math.floor(xs.min() - pad), math.ceil(xs.max() + pad)
+        ymin, ymax = math.floor(ys.min() - pad), math.ceil(ys.max() + pad)
+        if xmax - xmin < MIN_VIEW_M:
+            c = 0.5 * (xmin + xmax)
+            xmin, xmax = c - 0.5 * MIN_VIEW_M, c + 0.5 * MIN_VIEW_M
+        if ymax - ymin < MIN_VIEW_M:
+            c = 0.5 * (ymin + ymax)
+            ymin, ymax = c - 0.5 * MIN_VIEW_M, c + 0.5 * MIN_VIEW_M
+        return float(xmin), float(ymin), float(xmax), float(ymax)
+
+    def _map_background(self, env: PersonFollowEnv) -> tuple[np.ndarray, _MapView]:
+        """The cached floor, grid and walls for the current walls and extent."""
+        n_walls = int(env.sim.istate[0, I_N_WALLS])
+        walls = env.sim.walls[0, :n_walls]
+        bounds = self._world_bounds(env)
+        key = (bounds, walls.tobytes())
+        if key == self._map_key and self._map_bg is not None and self._map_view is not None:
+            return self._map_bg, self._map_view
+        xmin, ymin, xmax, ymax = bounds
+        view = fit_view(
+            xmin,
+            ymin,
+            xmax,
+            ymax,
+            MAP_MARGIN_PX,
+            HEADER_PX + MAP_MARGIN_PX,
+            PANEL_W_PX - 2 * MAP_MARGIN_PX,
+            FRAME_HEIGHT_PX - HEADER_PX - 2 * MAP_MARGIN_PX,
+        )
+        bg = np.empty((FRAME_HEIGHT_PX, PANEL_W_PX, 3), dtype=np.uint8)
+        bg[:] = C_FLOOR
+        step = grid_step_m(view.scale)
+        # Grid lines over the whole panel, at multiples of the step (world-aligned).
+        gx0 = math.floor((0.0 - view.ox) / view.scale / step) * step
+        gx1 = (PANEL_W_PX - view.ox) / view.scale
+        gy0 = math.floor((view.oy - FRAME_HEIGHT_PX) / view.scale / step) * step
+        gy1 = view.oy / view.scale
+        for gx in np.arange(gx0, gx1 + step, step):
+            cv2.line(bg, view.pt(gx, gy0), view.pt(gx, gy1), C_GRID, 1, cv2.LINE_8, _SHIFT)
+        for gy in np.arange(gy0, gy1 + step, step):
+            cv2.line(bg, view.pt(gx0, gy), view.pt(gx1, gy), C_GRID, 1, cv2.LINE_8, _SHIFT)
+        wall_px = max(2, round(0.1 * view.scale))  # walls are 0.1 m thick in the contacts
+        for x1, y1, x2, y2 in walls:
+            cv2.line(bg, view.pt(x1, y1), view.pt(x2, y2), C_WALL, wall_px, cv2.LINE_AA, _SHIFT)
+        bg[:HEADER_PX] = C_BG
+        self._map_key, self._map_bg, self._map_view, self._grid_m = key, bg, view, step
+        return bg, view
+
+    def _draw_map(self, env: PersonFollowEnv, panel: np.ndarray) -> None:
+        bg, view = self._map_background(env)
+        # Drawing goes into a contiguous buffer: some OpenCV calls reject strided views.
+        img = bg.copy()
+        fs, ist, prm = env.sim.fstate[0], env.sim.istate[0], env.sim.params[0]
+        rx, ry, rth = float(fs[S_X]), float(fs[S_Y]), float(fs[S_TH])
+        c, s = math.cos(rth), math.sin(rth)
+
+        # Field of view: a wedge from the camera's position on the robot.
+        camx = rx + c * prm[P_TX] - s * prm[P_TY]
+        camy = ry + s * prm[P_TX] + c * prm[P_TY]
+        az_l, az_r = camera_edge_azimuths(prm)
+        sweep = (az_r - az_l + math.pi) % (2.0 * math.pi) - math.pi
+        angles = rth + az_l + sweep * np.linspace(0.0, 1.0, 16)
+        wedge = np.empty((len(angles) + 1, 2))
+        wedge[0] = camx, camy
+        wedge[1:, 0] = camx + FRUSTUM_LENGTH_M * np.cos(angles)
+        wedge[1:, 1] = camy + FRUSTUM_LENGTH_M * np.sin(angles)
+        wedge_px = view.px(wedge)
+        blend_poly(img, wedge_px, C_FRUSTUM, FRUSTUM_ALPHA)
+        cv2.polylines(img, [wedge_px], True, (200, 160, 40), 1, cv2.LINE_AA, _SHIFT)
+
+        # Trails under the bodies.
+        for trail, color in ((self.target_trail, C_TARGET), (self.robot_trail, C_ROBOT)):
+            if trail.n >= 2:
+                cv2.polylines(img, [view.px(trail.points)], False, color, 1, cv2.LINE_AA, _SHIFT)
+
+        # People: rotated rectangles, ``depth`` along their heading, with a heading tick.
+        pw, pd = prm[P_PERSON_W], prm[P_PERSON_D]
+        n_people = int(ist[I_N_PEOPLE])
+        for p in range(n_people - 1, -1, -1):  # target last, on top
+            px, py, pth = (float(v) for v in env.sim.pstate[0, p, [PS_X, PS_Y, PS_TH]])
+            color = C_TARGET if p == 0 else C_OTHER
+            poly = view.px(rect_corners(px, py, pth, pd, pw))
+            cv2.fillPoly(img, [poly], color, cv2.LINE_AA, _SHIFT)
+            cv2.polylines(img, [poly], True, C_PERSON_EDGE, 1, cv2.LINE_AA, _SHIFT)
+            tip = (px + (0.5 * pd + 0.15) * math.cos(pth), py + (0.5 * pd + 0.15) * math.sin(pth))
+            cv2.line(img, view.pt(px, py), view.pt(*tip), C_PERSON_EDGE, 1, cv2.LINE_AA, _SHIFT)
+            if p == 0:
+                u, v = view.pt(px, py)
+                put_text(img, "target", ((u >> _SHIFT) + 8, (v >> _SHIFT) - 8), C_TARGET, 0.4)
+
+        # Robot: footprint (centred on the wheel axle) and an arrow along its heading.
+        poly = view.px(rect_corners(rx, ry, rth, self.foot_l, self.foot_w))
+        cv2.fillPoly(img, [poly], C_ROBOT, cv2.LINE_AA, _SHIFT)
+        cv2.polylines(img, [poly], True, C_ROBOT_EDGE, 1, cv2.LINE_AA, _SHIFT)
+        reach = 0.5 * self.foot_l + 0.3
+        cv2.arrowedLine(
+            img,
+            view.pt(rx, ry),
+            view.pt(rx + reach * c, ry + reach * s),
+            C_ROBOT_EDGE,
+            2,
+            cv2.LINE_AA,
+            _SHIFT,
+            0.3,
+        )
+        cv2.circle(img, view.pt(camx, camy), 3 * _ONE, (250, 250, 250), -1, cv2.LINE_AA, _SHIFT)
+
+        # Header: time, observation, truth, end reason.
+        reason = int(ist[I_REASON])
+        line1 = f"t {fs[S_T]:5.1f} s   obs d {fs[S_OBS_D]:5.2f} m  offset {fs[S_OBS_O]:+5.0f} px"
+        line2 = (
+            f"true d {fs[S_TRUE_D]:5.2f} m  offset {fs[S_TRUE_O]:+5.0f} px   "
+            f"grid {self._grid_m:g} m"
+        )
+        put_text(img, line1, (8, 16), box=False)
+        put_text(img, line2, (8, 34), (200, 200, 200), box=False)
+        if reason != REASON_NONE:
+            text = f"end: {REASON_NAMES[reason]}"
+            (tw, _), _ = cv2.getTextSize(text, _FONT, _FONT_SCALE, 1)
+            put_text(img, text, (PANEL_W_PX - tw - 10, 16), C_WARN, box=False)
+        panel[:] = img
+
+    # -- camera panel --------------------------------------------------------------------------
+
+    def _camera_background(self, prm: np.ndarray) -> np.ndarray:
+        """Letterbox, sky and a floor darkening towards the robot (a depth cue), drawn once:
+        the camera is fixed on the robot, so the horizon never moves in the image."""
+        bg = np.empty((FRAME_HEIGHT_PX, PANEL_W_PX, 3), dtype=np.uint8)
+        bg[:] = C_BG
+        h_row = horizon_row(prm) * self.cam_scale  # in the scaled image
+        rows = np.arange(self.cam_h, dtype=float)
+        below = np.clip((rows - h_row) / max(self.cam_h - h_row, 1.0), 0.0, 1.0)
+        far, near = np.array([185.0, 175.0, 160.0]), np.array([130.0, 118.0, 100.0])
+        col = far + below[:, None] * (near - far)
+        col[rows < h_row] = C_SKY
+        img = bg[self.cam_y0 : self.cam_y0 + self.cam_h, self.cam_x0 : self.cam_x0 + self.cam_w]
+        img[:] = col[:, None, :].astype(np.uint8)
+        if 0.0 <= h_row < self.cam_h:
+            y = self.cam_y0 + round(h_row)
+            cv2.line(bg, (self.cam_x0, y), (self.cam_x0 + self.cam_w - 1, y), (150, 150, 150), 1)
+        return bg
+
+    def _img_pt(self, u: float, v: float) -> tuple[int, int]:
+        """Image pixel (px) -> fixed-point panel coordinates."""
+        return (
+            round((self.cam_x0 + self.cam_scale * u) * _ONE),
+            round((self.cam_y0 + self.cam_scale * v) * _ONE),
+        )
+
+    def _draw_camera(self, env: PersonFollowEnv, panel: np.ndarray) -> None:
+        fs, ist, prm = env.sim.fstate[0], env.sim.istate[0], env.sim.params[0]
+        if self._cam_bg is None:
+            self._cam_bg = self._camera_background(prm)
+        img = self._cam_bg.copy()
+        W, H = float(prm[P_IMG_W]), float(prm[P_IMG_H])
+        fx, fy, cx, cy = float(prm[P_FX]), float(prm[P_FY]), float(prm[P_CX]), float(prm[P_CY])
+        rx, ry, rth = float(fs[S_X]), float(fs[S_Y]), float(fs[S_TH])
+
+        # True body boxes, far to near so nearer bodies cover farther ones.
+        n_people = int(ist[I_N_PEOPLE])
+        boxes = []
+        for p in range(n_people):
+            px, py, pth = (float(v) for v in env.sim.pstate[0, p, [PS_X, PS_Y, PS_TH]])
+            u1, v1, u2, v2, found = body_box(
+                px,
+                py,
+                pth,
+                float(prm[P_PERSON_W]),
+                float(prm[P_PERSON_D]),
+                float(prm[P_PERSON_H]),
+                rx,
+                ry,
+                rth,
+                prm,
+                P_R00,
+                fx,
+                fy,
+                cx,
+                cy,
+            )
+            u1, v1, u2, v2 = max(u1, 0.0), max(v1, 0.0), min(u2, W), min(v2, H)
+            if found and u2 > u1 and v2 > v1:
+                boxes.append((math.hypot(px - rx, py - ry), p, u1, v1, u2, v2))
+        for _, p, u1, v1, u2, v2 in sorted(boxes, reverse=True):
+            a, b = self._img_pt(u1, v1), self._img_pt(u2, v2)
+            cv2.rectangle(img, a, b, C_BODY, -1, cv2.LINE_8, _SHIFT)
+            cv2.rectangle(img, a, b, C_TRUE_BOX, 1, cv2.LINE_AA, _SHIFT)
+            label = "target (true box)" if p == 0 else f"person {p}"
+            # Inside the box's top, but below the header line when the box reaches the top.
+            y_label = max((a[1] >> _SHIFT) + 16, self.cam_y0 + 44)
+            put_text(img, label, ((a[0] >> _SHIFT) + 5, y_label), (225, 225, 225), 0.4)
+
+        # The image's centre column, against which the observation's offset is measured.
+        u_mid = float(int(W) // 2)
+        top, bottom = self._img_pt(u_mid, 0.0), self._img_pt(u_mid, H)
+        cv2.line(img, top, bottom, C_CENTRE, 1, cv2.LINE_AA, _SHIFT)
+
+        # The published detection (already delayed by the perception's latency, as the
+        # observation is): box, centre pixel, and the offset as a bar from the centre column.
+        if fs[S_DETECTED] > 0.0:
+            x1, y1, x2, y2 = (float(fs[k]) for k in (S_BOX_X1, S_BOX_Y1, S_BOX_X2, S_BOX_Y2))
+            cv2.rectangle(
+                img, self._img_pt(x1, y1), self._img_pt(x2, y2), C_DET, 2, cv2.LINE_AA, _SHIFT
+            )
+            # Centre pixel as the perception takes it (integer column and row).
+            cu, cvv = float(int((x1 + x2) / 2.0)), float(int((y1 + y2) / 2.0))
+            centre = self._img_pt(cu, cvv)
+            cv2.line(img, self._img_pt(u_mid, cvv), centre, C_DET, 2, cv2.LINE_AA, _SHIFT)
+            cv2.drawMarker(
+                img,
+                (centre[0] >> _SHIFT, centre[1] >> _SHIFT),
+                C_DET,
+                cv2.MARKER_CROSS,
+                14,
+                2,
+                cv2.LINE_AA,
+            )
+        # Warnings bottom right, away from the header and the legend.
+        x_warn = self.cam_x0 + self.cam_w - 175
+        if fs[S_DETECTED] <= 0.0:
+            put_text(img, "no detection", (x_warn, self.cam_y0 + self.cam_h - 10), C_WARN, 0.6)
+        if fs[S_IN_FRAME] <= 0.0:
+            put_text(img, "target out of frame", (x_warn, self.cam_y0 + self.cam_h - 36), C_WARN)
+
+        put_text(
+            img,
+            f"camera {int(W)}x{int(H)}   obs d {fs[S_OBS_D]:5.2f} m   "
+            f"offset {fs[S_OBS_O]:+5.0f} px",
+            (self.cam_x0 + 8, self.cam_y0 + 18),
+        )
+        put_text(
+            img,
+            "grey: true boxes   green: published detection",
+            (self.cam_x0 + 8, self.cam_y0 + self.cam_h - 8),
+            (220, 220, 220),
+            0.4,
+        )
+        panel[:] = img

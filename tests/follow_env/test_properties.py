@@ -1,0 +1,107 @@
+"""Property tests: any valid configuration runs without NaN or exceptions; any out-of-range
+value raises ValueError."""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, assume, given, settings
+from hypothesis import strategies as st
+
+from follow_env.config import _SECTIONS, THESIS, EnvConfig
+from follow_env.core import BatchedSim
+from follow_env.layout import N_FSTATE, S_OBS_D, S_OBS_O, S_REWARD
+
+# Sections whose every field is drawn from its whole declared range. Scenario and episode keep
+# their defaults (a walk must fit its room; max_steps is kept small below).
+_FREE = ("robot", "motor", "pid", "camera", "perception", "person", "reward")
+
+
+def _value(meta: Any) -> st.SearchStrategy[Any]:
+    if meta["choices"] is not None:
+        return st.sampled_from(meta["choices"])
+    lo, hi = meta["lo"], meta["hi"]
+    if meta["integer"]:
+        return st.integers(int(lo), int(hi))
+    return st.floats(lo, hi, exclude_min=meta["lo_open"], allow_nan=False)
+
+
+@st.composite
+def configs(draw: st.DrawFn) -> EnvConfig:
+    sections: dict[str, Any] = {}
+    for name in _FREE:
+        cls = _SECTIONS[name]
+        fields = {
+            f.name: draw(_value(f.metadata))
+            for f in dataclasses.fields(cls)
+            if ("lo" in f.metadata and not isinstance(f.default, str))
+            or (f.metadata.get("choices") is not None)
+            if draw(st.booleans())  # leave about half the fields at their defaults
+        }
+        try:
+            sections[name] = cls(**fields)
+        except ValueError:
+            assume(False)  # a cross-field constraint: not a valid config
+    sections["episode"] = dataclasses.replace(THESIS.episode, max_steps=40)
+    sections["scenario"] = dataclasses.replace(
+        THESIS.scenario, name=draw(st.sampled_from(["straight", "curve", "random"]))
+    )
+    return THESIS.replace(**sections)
+
+
+@pytest.mark.slow
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.filter_too_much])
+@given(cfg=configs(), seed=st.integers(0, 2**32 - 1), action_seed=st.integers(0, 1000))
+def test_valid_configs_with_random_actions_never_give_nan(
+    cfg: EnvConfig, seed: int, action_seed: int
+) -> None:
+    sim = BatchedSim(cfg, 2)
+    sim.reset_lanes(np.arange(2), np.random.SeedSequence(seed).spawn(2))
+    rng = np.random.default_rng(action_seed)
+    for _ in range(40):
+        a = rng.uniform(-1, 1, (2, 2)) * [cfg.max_speed_mps * 1.5, cfg.max_turn_rate_radps * 1.5]
+        sim.step(a)
+        assert sim.fstate.shape == (2, N_FSTATE)
+        assert np.isfinite(sim.fstate[:, [S_OBS_D, S_OBS_O, S_REWARD]]).all()
+        assert np.isfinite(sim.fstate).all()
+
+
+def _bad_value(meta: Any, data: st.DataObject) -> Any:
+    if meta["choices"] is not None:
+        return data.draw(st.text(min_size=1).filter(lambda s: s not in meta["choices"]))
+    options = [st.just(float("nan")), st.just(float("inf")), st.just("3")]
+    if meta["lo"] is not None:
+        lo = meta["lo"]
+        options.append(
+            st.floats(lo - 1e6, lo, exclude_max=not meta["lo_open"]).filter(
+                lambda v: v < lo or (meta["lo_open"] and v == lo)
+            )
+        )
+    if meta["hi"] is not None:
+        hi = meta["hi"]
+        options.append(st.floats(hi, hi + 1e6, exclude_min=True))
+    if meta["integer"]:
+        options.append(st.just(0.5))
+    return data.draw(st.one_of(options))
+
+
+@settings(max_examples=200, deadline=None)
+@given(data=st.data())
+def test_out_of_range_values_always_raise_value_error_naming_the_field(
+    data: st.DataObject,
+) -> None:
+    section = data.draw(st.sampled_from(sorted(_SECTIONS)))
+    cls = _SECTIONS[section]
+    fields = [
+        f
+        for f in dataclasses.fields(cls)
+        if "lo" in f.metadata
+        and (not isinstance(f.default, str) or f.metadata["choices"] is not None)
+    ]
+    f = data.draw(st.sampled_from(fields))
+    bad = _bad_value(f.metadata, data)
+    with pytest.raises(ValueError, match=rf"{cls.__name__}\.{f.name}="):
+        cls(**{f.name: bad})
