@@ -53,7 +53,7 @@ def bench_single_env(quick: bool) -> list[tuple[str, float, str]]:
 
 
 BENCHMARKS: dict[str, Callable[[bool], list[tuple[str, float, str]]]] = {
-    "single env (steps/s)": bench_single_env,
+    "single env (steps/s)": bench_single_env
 }
 
 

@@ -111,14 +111,7 @@ def back_project(cam: Camera, uv: np.ndarray, depth_m: np.ndarray) -> np.ndarray
 
 @njit(cache=True, inline="always")
 def world_to_camera(
-    px: float,
-    py: float,
-    pz: float,
-    rx: float,
-    ry: float,
-    rth: float,
-    params: np.ndarray,
-    p0: int,
+    px: float, py: float, pz: float, rx: float, ry: float, rth: float, params: np.ndarray, p0: int
 ) -> tuple[float, float, float]:
     """A world point to the camera frame of a robot at pose (rx, ry, rth).
 

@@ -153,18 +153,10 @@ class RobotConfig(_Validated):
         lo_open=True,
     )
     footprint_length_m: float = param(
-        0.50,
-        0.05,
-        3.0,
-        "m",
-        "choice: rectangular footprint, centred on the wheel axle",
+        0.50, 0.05, 3.0, "m", "choice: rectangular footprint, centred on the wheel axle"
     )
     footprint_width_m: float = param(
-        0.45,
-        0.05,
-        3.0,
-        "m",
-        "choice: footprint width, wheels included",
+        0.45, 0.05, 3.0, "m", "choice: footprint width, wheels included"
     )
 
     def __post_init__(self) -> None:
@@ -186,47 +178,22 @@ class MotorConfig(_Validated):
     """
 
     no_load_speed_radps: float = param(
-        20.0,
-        1.0,
-        200.0,
-        "rad/s",
-        "choice: ~190 rpm at the wheel, i.e. 1.5 m/s with 75 mm wheels",
+        20.0, 1.0, 200.0, "rad/s", "choice: ~190 rpm at the wheel, i.e. 1.5 m/s with 75 mm wheels"
     )
     time_constant_s: float = param(
-        0.08,
-        0.001,
-        2.0,
-        "s",
-        "choice: mechanical lag of a loaded gear-motor",
-        lo_open=True,
+        0.08, 0.001, 2.0, "s", "choice: mechanical lag of a loaded gear-motor", lo_open=True
     )
     friction_duty_pct: float = param(
-        4.0,
-        0.0,
-        50.0,
-        "%",
-        "choice: Coulomb friction expressed as the duty it eats",
+        4.0, 0.0, 50.0, "%", "choice: Coulomb friction expressed as the duty it eats"
     )
     stall_duty_pct: float = param(
-        8.0,
-        0.0,
-        50.0,
-        "%",
-        "choice: static friction; SPEC §2 observes stalls at low duty",
+        8.0, 0.0, 50.0, "%", "choice: static friction; SPEC §2 observes stalls at low duty"
     )
     max_duty_pct: float = param(
-        99.0,
-        1.0,
-        100.0,
-        "%",
-        "SPEC §1.1: the gate driver cannot hold 100 %",
+        99.0, 1.0, 100.0, "%", "SPEC §1.1: the gate driver cannot hold 100 %"
     )
     gain_spread: float = param(
-        0.02,
-        0.0,
-        0.5,
-        "",
-        "choice: std of a per-episode, per-motor gain factor (SPEC §2 P_i)",
+        0.02, 0.0, 0.5, "", "choice: std of a per-episode, per-motor gain factor (SPEC §2 P_i)"
     )
 
     def __post_init__(self) -> None:
@@ -250,11 +217,7 @@ class EncoderConfig(_Validated):
     ppr: int = param(2048, 1, 1_000_000, "pulses/rev", "SPEC §1.1: AMT102-V", integer=True)
     quadrature: int = param(4, 1, 4, "counts/pulse", "SPEC §1.1: counted in 4x mode", integer=True)
     sample_period_s: float = param(
-        0.01,
-        0.0005,
-        0.1,
-        "s",
-        "SPEC §1.1: firmware estimates speed every 10 ms",
+        0.01, 0.0005, 0.1, "s", "SPEC §1.1: firmware estimates speed every 10 ms"
     )
     speed_quantum_mps: float = param(
         0.001,
@@ -306,11 +269,7 @@ class CameraConfig(_Validated):
     width_px: int = param(640, 16, 4096, "px", "choice: see class docstring", integer=True)
     height_px: int = param(480, 16, 4096, "px", "choice: see class docstring", integer=True)
     vfov_deg: float = param(
-        42.5,
-        5.0,
-        150.0,
-        "deg",
-        "datasheet: D435i colour vertical field of view",
+        42.5, 5.0, 150.0, "deg", "datasheet: D435i colour vertical field of view"
     )
     mount_x_m: float = param(0.20, -2.0, 2.0, "m", "choice: at the front of the base")
     mount_y_m: float = param(0.0, -2.0, 2.0, "m", "choice: on the centre line")
@@ -320,33 +279,17 @@ class CameraConfig(_Validated):
     depth_min_m: float = param(0.1, 0.0, 5.0, "m", "SPEC §1.3: range 0.1 to 10 m")
     depth_max_m: float = param(10.0, 0.5, 100.0, "m", "SPEC §1.3: range 0.1 to 10 m")
     depth_focal_px: float = param(
-        424.0,
-        10.0,
-        5000.0,
-        "px",
-        "SPEC §1.3: depth focal length at 848 px width",
+        424.0, 10.0, 5000.0, "px", "SPEC §1.3: depth focal length at 848 px width"
     )
     depth_baseline_m: float = param(0.05, 0.001, 1.0, "m", "SPEC §1.3: stereo baseline 50 mm")
     depth_subpixel: float = param(
-        0.08,
-        0.0,
-        1.0,
-        "px",
-        "SPEC §1.3: RMS = Z^2 subpixel / (f B); 0.08 typical, 0.03 tuned",
+        0.08, 0.0, 1.0, "px", "SPEC §1.3: RMS = Z^2 subpixel / (f B); 0.08 typical, 0.03 tuned"
     )
     depth_unit_m: float = param(
-        0.001,
-        0.0,
-        0.1,
-        "m",
-        "datasheet: depth is reported in whole millimetres; 0 = exact",
+        0.001, 0.0, 0.1, "m", "datasheet: depth is reported in whole millimetres; 0 = exact"
     )
     depth_invalid_prob: float = param(
-        0.02,
-        0.0,
-        1.0,
-        "",
-        "choice: share of random invalid (0) depth pixels",
+        0.02, 0.0, 1.0, "", "choice: share of random invalid (0) depth pixels"
     )
 
     def __post_init__(self) -> None:
@@ -388,63 +331,29 @@ class PerceptionConfig(_Validated):
     """Detector model, first-detection rule and distance filter (SPEC §1.3, §1.4)."""
 
     latency_frames: int = param(
-        1,
-        0,
-        8,
-        "frames",
-        "choice: the detector result arrives one 0.1 s frame late",
-        integer=True,
+        1, 0, 8, "frames", "choice: the detector result arrives one 0.1 s frame late", integer=True
     )
     miss_prob: float = param(0.03, 0.0, 1.0, "", "choice: independent misses per frame")
     burst_start_prob: float = param(
-        0.01,
-        0.0,
-        1.0,
-        "",
-        "SPEC §1.3: bursts of occlusion; chance per frame that one starts",
+        0.01, 0.0, 1.0, "", "SPEC §1.3: bursts of occlusion; chance per frame that one starts"
     )
     burst_mean_frames: float = param(
-        5.0,
-        1.0,
-        1000.0,
-        "frames",
-        "choice: mean length of a burst (geometric)",
+        5.0, 1.0, 1000.0, "frames", "choice: mean length of a burst (geometric)"
     )
     center_jitter_frac: float = param(
-        0.05,
-        0.0,
-        1.0,
-        "of box height",
-        "SPEC §1.3: centre jitter std ~ 1/20 of box height",
+        0.05, 0.0, 1.0, "of box height", "SPEC §1.3: centre jitter std ~ 1/20 of box height"
     )
     size_jitter_frac: float = param(
-        0.05,
-        0.0,
-        1.0,
-        "of box size",
-        "choice: width/height jitter std",
+        0.05, 0.0, 1.0, "of box size", "choice: width/height jitter std"
     )
     min_visible_fraction: float = param(
-        0.3,
-        0.0,
-        1.0,
-        "",
-        "choice: a body less visible than this is not detected",
+        0.3, 0.0, 1.0, "", "choice: a body less visible than this is not detected"
     )
     min_box_height_px: float = param(
-        10.0,
-        0.0,
-        1000.0,
-        "px",
-        "choice: smaller boxes are below the detector's resolution",
+        10.0, 0.0, 1000.0, "px", "choice: smaller boxes are below the detector's resolution"
     )
     filter_history: int = param(
-        5,
-        1,
-        32,
-        "samples",
-        "choice: SPEC §1.4 leaves the history length open",
-        integer=True,
+        5, 1, 32, "samples", "choice: SPEC §1.4 leaves the history length open", integer=True
     )
     detection_order: str = param(
         "area",
@@ -461,27 +370,15 @@ class PersonConfig(_Validated):
     width_m: float = param(0.45, 0.1, 1.5, "m", "issue: about 0.45 m wide (shoulders)")
     depth_m: float = param(0.25, 0.05, 1.5, "m", "choice: chest depth")
     cruise_speed_mps: float = param(
-        1.0,
-        0.05,
-        3.0,
-        "m/s",
-        "choice: ~1 m/s walking pace behind a transport robot",
+        1.0, 0.05, 3.0, "m/s", "choice: ~1 m/s walking pace behind a transport robot"
     )
     speed_spread_mps: float = param(
-        0.1,
-        0.0,
-        1.0,
-        "m/s",
-        "choice: per-episode cruise speed is uniform within +- this",
+        0.1, 0.0, 1.0, "m/s", "choice: per-episode cruise speed is uniform within +- this"
     )
     accel_mps2: float = param(0.5, 0.05, 5.0, "m/s^2", "choice: gait start from rest")
     decel_mps2: float = param(0.8, 0.05, 5.0, "m/s^2", "choice: gait stop")
     lateral_accel_mps2: float = param(
-        0.8,
-        0.05,
-        5.0,
-        "m/s^2",
-        "choice: people slow down in turns to keep v^2/R below this",
+        0.8, 0.05, 5.0, "m/s^2", "choice: people slow down in turns to keep v^2/R below this"
     )
 
     def __post_init__(self) -> None:
@@ -500,11 +397,7 @@ class ScenarioConfig(_Validated):
     name: str = param("straight", doc="SPEC §1.6 condition 1")
     walk_length_m: float = param(10.0, 0.5, 500.0, "m", "SPEC §1.6: the person walks 10 m")
     start_distance_m: float = param(
-        1.0,
-        0.4,
-        8.0,
-        "m",
-        "SPEC §1.6: the person starts 1 m in front (camera to body front)",
+        1.0, 0.4, 8.0, "m", "SPEC §1.6: the person starts 1 m in front (camera to body front)"
     )
     curve_turn_deg: float = param(
         90.0,
@@ -517,25 +410,13 @@ class ScenarioConfig(_Validated):
     room_length_m: float = param(24.0, 4.0, 200.0, "m", "choice: a hall with room to walk")
     room_width_m: float = param(16.0, 4.0, 200.0, "m", "choice: a hall with room to walk")
     random_duration_s: float = param(
-        40.0,
-        2.0,
-        600.0,
-        "s",
-        "choice: length of a 'random' walk in time",
+        40.0, 2.0, 600.0, "s", "choice: length of a 'random' walk in time"
     )
     stop_prob: float = param(
-        0.25,
-        0.0,
-        1.0,
-        "",
-        "choice: chance that a 'random' leg ends in a stop",
+        0.25, 0.0, 1.0, "", "choice: chance that a 'random' leg ends in a stop"
     )
     settle_s: float = param(
-        2.0,
-        0.0,
-        60.0,
-        "s",
-        "choice: time the episode runs on after the walk ends",
+        2.0, 0.0, 60.0, "s", "choice: time the episode runs on after the walk ends"
     )
 
     def __post_init__(self) -> None:
@@ -557,25 +438,13 @@ class RewardConfig(_Validated):
     alive_bonus: float = param(1.0, 0.0, 100.0, "/step", "choice: reward for following at all")
     distance_weight: float = param(1.0, 0.0, 100.0, "/m", "choice: |d - d_ref| penalty")
     offset_weight: float = param(
-        1.0,
-        0.0,
-        100.0,
-        "/half-width",
-        "choice: |offset| / (width/2) penalty",
+        1.0, 0.0, 100.0, "/half-width", "choice: |offset| / (width/2) penalty"
     )
     accel_weight: float = param(
-        0.02,
-        0.0,
-        100.0,
-        "/(m/s^2)",
-        "choice: smoothness, |robot acceleration| penalty",
+        0.02, 0.0, 100.0, "/(m/s^2)", "choice: smoothness, |robot acceleration| penalty"
     )
     lost_penalty: float = param(
-        1.0,
-        0.0,
-        1000.0,
-        "/step",
-        "choice: person outside the camera frame",
+        1.0, 0.0, 1000.0, "/step", "choice: person outside the camera frame"
     )
     collision_penalty: float = param(50.0, 0.0, 1e5, "", "choice: once, on a collision")
 
@@ -594,18 +463,10 @@ class EpisodeConfig(_Validated):
         integer=True,
     )
     lost_timeout_s: float = param(
-        3.0,
-        0.0,
-        1000.0,
-        "s",
-        "issue: terminate after 3 s without a detection",
+        3.0, 0.0, 1000.0, "s", "issue: terminate after 3 s without a detection"
     )
     person_clearance_m: float = param(
-        0.3,
-        0.0,
-        5.0,
-        "m",
-        "issue: closer than 0.3 m to the person is a collision",
+        0.3, 0.0, 5.0, "m", "issue: closer than 0.3 m to the person is a collision"
     )
 
 

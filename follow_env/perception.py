@@ -8,13 +8,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = [
-    "clip_box",
-    "depth_noise_std",
-    "distance_filter",
-    "first_detection",
-    "jitter_box",
-]
+__all__ = ["clip_box", "depth_noise_std", "distance_filter", "first_detection", "jitter_box"]
 
 
 @njit(cache=True, inline="always")

@@ -152,10 +152,7 @@ class _MapView:
 
     def pt(self, x: float, y: float) -> tuple[int, int]:
         """One point as a fixed-point tuple (for ``cv2.line`` / ``cv2.circle``)."""
-        return (
-            round((self.ox + self.scale * x) * _ONE),
-            round((self.oy - self.scale * y) * _ONE),
-        )
+        return (round((self.ox + self.scale * x) * _ONE), round((self.oy - self.scale * y) * _ONE))
 
 
 def fit_view(

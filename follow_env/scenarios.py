@@ -37,13 +37,7 @@ from follow_env.world import room_walls
 if TYPE_CHECKING:
     from follow_env.config import EnvConfig
 
-__all__ = [
-    "SCENARIOS",
-    "ScenarioBatch",
-    "ScenarioSpec",
-    "polyline_paths",
-    "register_scenario",
-]
+__all__ = ["SCENARIOS", "ScenarioBatch", "ScenarioSpec", "polyline_paths", "register_scenario"]
 
 # Waypoint spacing used to draw curved paths (m).
 _STEP_M = 0.25

@@ -56,14 +56,7 @@ def _cross(ax: float, ay: float, bx: float, by: float, cx: float, cy: float) -> 
 
 @njit(cache=True)
 def segment_distance(
-    a1x: float,
-    a1y: float,
-    a2x: float,
-    a2y: float,
-    b1x: float,
-    b1y: float,
-    b2x: float,
-    b2y: float,
+    a1x: float, a1y: float, a2x: float, a2y: float, b1x: float, b1y: float, b2x: float, b2y: float
 ) -> float:
     """Shortest distance between segments a and b (m); 0 when they cross."""
     d1 = _cross(a1x, a1y, a2x, a2y, b1x, b1y)

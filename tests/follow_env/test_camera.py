@@ -24,11 +24,7 @@ def test_default_intrinsics_come_from_the_d435i_field_of_view() -> None:
     assert (cfg.cx, cfg.cy) == (320.0, 240.0)
 
 
-@given(
-    u=st.floats(0, 639),
-    v=st.floats(0, 479),
-    z=st.floats(0.1, 10.0),
-)
+@given(u=st.floats(0, 639), v=st.floats(0, 479), z=st.floats(0.1, 10.0))
 def test_back_projection_then_projection_returns_the_pixel(u: float, v: float, z: float) -> None:
     p = back_project(CAM, np.array([u, v]), np.array(z))
     uv = project(CAM, p)

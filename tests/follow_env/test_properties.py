@@ -90,9 +90,7 @@ def _bad_value(meta: Any, data: st.DataObject) -> Any:
 
 @settings(max_examples=200, deadline=None)
 @given(data=st.data())
-def test_out_of_range_values_always_raise_value_error_naming_the_field(
-    data: st.DataObject,
-) -> None:
+def test_out_of_range_values_always_raise_value_error_naming_the_field(data: st.DataObject) -> None:
     section = data.draw(st.sampled_from(sorted(_SECTIONS)))
     cls = _SECTIONS[section]
     fields = [
