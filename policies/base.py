@@ -8,6 +8,12 @@ float32 array, shape (2,) (SPEC.md §1.4, step 5):
 | 0     | distance_m | m    | filtered distance to the person; 0 means no valid reading yet |
 | 1     | offset_px  | px   | box centre minus image centre; > 0 means right of centre     |
 
+## Before the first reading
+``distance_m <= 0`` means the perception has not measured the person yet (SPEC.md §1.4: the
+distance filter starts from nothing, and invalid depth reads as 0). The reference robot did not
+move before its first detection, so every guidance law then commands a zero action and leaves
+its memory untouched; without this, ``V = kv (0 - 1.0)`` would drive backwards at full speed.
+
 ## Action
 float32 array, shape (2,), SI:
 
@@ -32,6 +38,9 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 from numpy.typing import ArrayLike
+
+# A distance at or below this means "no valid reading yet" (SPEC.md §1.4: invalid depth is 0).
+NO_READING_M = 0.0
 
 
 @runtime_checkable
@@ -151,10 +160,15 @@ class GuidanceLaw(ABC):
     def act(self, obs: np.ndarray) -> np.ndarray:
         """Map ``[distance_m, offset_px]`` to ``[v_mps, w_radps]``; offset > 0 gives w < 0.
 
+        ``distance_m <= 0`` (no reading yet) gives ``[0, 0]`` and leaves the memory untouched
+        (module docstring, "Before the first reading").
+
         :raises ValueError: if ``obs`` is not a finite array of shape (2,). A rejected
             observation leaves the law's memory untouched.
         """
         distance_m, offset_px = validate_obs(obs)
+        if distance_m <= NO_READING_M:
+            return make_action(0.0, 0.0, None, None)
         v_mps, w_radps = self._command(distance_m, offset_px)
         return make_action(v_mps, w_radps, self.params.v_max_mps, self.params.w_max_radps)
 

@@ -18,8 +18,9 @@ The thesis disagrees with itself about the rest, so there are three variants, ch
   w = -(kw o / max(d, 1.0) + kd o). It has no N, so with the same kw its proportional gain is
   1/N = 10 times the listing's, and no rate term. ``nav_n`` and ``dt_s`` are unused.
 
-The rate is 0 on the first step after reset. ``max(d, 0.1 m)`` guards d = 0 ("no valid reading
-yet"), as in MPN; the equation variant keeps its own ``max(d, 1)``.
+The rate is 0 on the first step after reset. d <= 0 ("no valid reading yet") gives a zero action
+(:mod:`policies.base`); ``max(d, 0.1 m)`` guards readings below the camera's minimum depth, as in
+MPN; the equation variant keeps its own ``max(d, 1)``.
 
 ## Thesis preset in SI
 kv, N and kw convert as for PN (:mod:`policies.pn`): 5.0 1/s, 0.1, 0.05 rad/s/px.

@@ -5,8 +5,9 @@
     w    = -(N kw o / max(d, 0.1) + lambda rate)
 
 PN plus a constant-gain derivative term on the pixel offset. The law remembers the previous
-offset itself. The spec divides by d alone; ``max(d, 0.1 m)`` only guards d = 0 ("no valid
-reading yet") and readings below the camera's minimum depth (about 0.17 m, SPEC.md §1.3).
+offset itself. The spec divides by d alone; ``max(d, 0.1 m)`` only guards readings below the
+camera's minimum depth (about 0.17 m, SPEC.md §1.3). d <= 0 ("no valid reading yet") never
+reaches the law: it gives a zero action (:mod:`policies.base`).
 
 ## Thesis preset in SI
 kv, N and kw convert as for PN (:mod:`policies.pn`): 5.0 1/s, 0.1, 0.05 rad/s/px. The thesis does

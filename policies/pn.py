@@ -23,7 +23,8 @@ from types import MappingProxyType
 
 from policies.base import GuidanceLaw, LawParams, check_range
 
-# SPEC.md §1.5: PN divides by max(d, 1.0), which also covers d = 0 ("no valid reading yet").
+# SPEC.md §1.5: PN divides by max(d, 1.0). (d <= 0, "no valid reading yet", gives a zero action
+# before the law runs; see policies.base.)
 PN_DISTANCE_FLOOR_M = 1.0
 
 

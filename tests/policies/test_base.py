@@ -72,6 +72,28 @@ def test_rejected_obs_leaves_law_memory_untouched() -> None:
     assert law.act(obs(1.0, 40.0))[1] == pytest.approx(-0.23, rel=1e-6)
 
 
+@pytest.mark.parametrize("name", available_policies())
+@pytest.mark.parametrize("distance_m", [0.0, -0.5])
+def test_no_distance_reading_yet_gives_zero_action(name: str, distance_m: float) -> None:
+    # The reference robot did not move before its first reading; V = kv (0 - 1) would reverse.
+    np.testing.assert_array_equal(make_policy(name).act(obs(distance_m, 120.0)), [0.0, 0.0])
+
+
+def test_no_distance_reading_leaves_law_memory_untouched() -> None:
+    law = MPN(MPN_THESIS)
+    law.act(obs(1.0, 10.0))
+    law.act(obs(0.0, -300.0))  # no reading: ignored
+    # rate = (40 - 10) / 0.1 = 300 px/s; w = -(0.1 * 0.05 * 40 / 1 + 1e-4 * 300) = -0.23
+    assert law.act(obs(1.0, 40.0))[1] == pytest.approx(-0.23, rel=1e-6)
+
+
+def test_first_reading_after_no_reading_has_zero_rate() -> None:
+    law = MPN(MPN_THESIS)
+    law.act(obs(0.0, 80.0))
+    # No previous reading, so rate = 0: w = -(0.1 * 0.05 * 40 / 2) = -0.1; v = 5 (2 - 1)
+    np.testing.assert_allclose(law.act(obs(2.0, 40.0)), [5.0, -0.1], rtol=1e-6)
+
+
 def test_validate_obs_returns_distance_and_offset_as_floats() -> None:
     assert validate_obs(obs(1.5, -20.0)) == (1.5, -20.0)
 

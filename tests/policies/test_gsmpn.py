@@ -117,8 +117,8 @@ def test_gsmpn_first_step_after_reset_has_zero_rate() -> None:
 
 
 def test_gsmpn_divides_by_at_least_the_distance_floor() -> None:
-    # max(d, 0.1) on the first step (rate 0): w = -(0.1 * 0.05 * 2 / 0.1) = -0.1 at d = 0
-    assert GSMPN(GSMPN_THESIS).act(obs(0.0, 2.0))[1] == pytest.approx(-0.1, rel=1e-6)
+    # max(d, 0.1) on the first step (rate 0): w = -(0.1 * 0.05 * 2 / 0.1) = -0.1 at d = 0.05
+    assert GSMPN(GSMPN_THESIS).act(obs(0.05, 2.0))[1] == pytest.approx(-0.1, rel=1e-6)
 
 
 def test_gsmpn_three_variants_give_three_different_turn_rates() -> None:

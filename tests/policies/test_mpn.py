@@ -49,9 +49,9 @@ def test_mpn_rate_uses_dt() -> None:
     assert law.act(obs(1.0, 10.0))[1] == pytest.approx(-0.07, rel=1e-6)
 
 
-@pytest.mark.parametrize("distance_m", [0.0, 0.05, 0.1])
+@pytest.mark.parametrize("distance_m", [0.01, 0.05, 0.1])
 def test_mpn_divides_by_at_least_the_distance_floor(distance_m: float) -> None:
-    # max(d, 0.1): w = -(0.1 * 0.05 * 2 / 0.1) = -0.1 for any d <= 0.1 m, including 0 (no reading)
+    # max(d, 0.1): w = -(0.1 * 0.05 * 2 / 0.1) = -0.1 for any 0 < d <= 0.1 m
     assert MPN(MPN_THESIS).act(obs(distance_m, 2.0))[1] == pytest.approx(-0.1, rel=1e-6)
 
 

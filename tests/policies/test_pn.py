@@ -27,9 +27,9 @@ def test_pn_thesis_matches_hand_computed_values(
     np.testing.assert_allclose(PN(PN_THESIS).act(obs(distance_m, offset_px)), [v_mps, w_radps])
 
 
-@pytest.mark.parametrize("distance_m", [0.0, 0.3, 1.0])
+@pytest.mark.parametrize("distance_m", [0.05, 0.3, 1.0])
 def test_pn_divides_by_at_least_one_metre(distance_m: float) -> None:
-    # SPEC.md §1.5: max(d, 1.0), so any d <= 1 m (including 0 = no reading) turns like d = 1 m:
+    # SPEC.md §1.5: max(d, 1.0), so any 0 < d <= 1 m turns like d = 1 m:
     # w = -(0.1 * 0.05 * 60 / 1) = -0.3
     assert PN(PN_THESIS).act(obs(distance_m, 60.0))[1] == pytest.approx(-0.3)
 
