@@ -13,6 +13,7 @@ import argparse
 import time
 import warnings
 from collections.abc import Callable
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -52,8 +53,68 @@ def bench_single_env(quick: bool) -> list[tuple[str, float, str]]:
     return rows
 
 
+def vector_steps_per_s(env: Any, actions: Any, steps: int) -> float:
+    """Env-steps per second (lanes x steps) of a Gymnasium vector env, autoresets included."""
+    env.reset(seed=0)
+    for _ in range(20):  # warm up
+        env.step(actions)
+    best = 0.0
+    for _ in range(3):
+        t0 = time.perf_counter()
+        for _ in range(steps):
+            env.step(actions)
+        best = max(best, env.num_envs * steps / (time.perf_counter() - t0))
+    env.close()
+    return best
+
+
+def bench_vector_env(quick: bool) -> list[tuple[str, float, str]]:
+    """The native vector env against SyncVectorEnv and Gymnasium's numpy CartPoleVectorEnv."""
+    from gymnasium.envs.classic_control.cartpole import CartPoleVectorEnv
+
+    budget = 200_000 if quick else 2_000_000  # env-steps per measurement
+    follow = np.array([0.5, 0.0], dtype=np.float32)
+    single = single_env_steps_per_s("PersonFollow-v0", follow, budget // 40)
+    sync = vector_steps_per_s(
+        gym.make_vec("PersonFollow-v0", num_envs=16, vectorization_mode="sync"),
+        np.tile(follow, (16, 1)),
+        budget // 16 // 40,
+    )
+    cartpole = vector_steps_per_s(
+        CartPoleVectorEnv(num_envs=1024), np.ones(1024, dtype=np.int64), budget // 1024
+    )
+    rows = [
+        ("(a) single env", single, f"{single / sync:.2f}x (b)"),
+        ("(b) SyncVectorEnv N=16", sync, "1.00x (b)"),
+    ]
+    for n in (16, 256, 1024, 4096):
+        env = gym.make_vec("PersonFollow-v0", num_envs=n, vectorization_mode="vector_entry_point")
+        rate = vector_steps_per_s(env, np.tile(follow, (n, 1)), max(20, budget // n))
+        ratio = f"{rate / sync:.0f}x (b), {rate / cartpole:.2f}x (d)"
+        rows.append((f"(c) native vector env N={n}", rate, ratio))
+    rows.append(("(d) CartPoleVectorEnv N=1024", cartpole, "1.00x (d)"))
+    return rows
+
+
+def bench_memory(quick: bool) -> list[tuple[str, float, str]]:
+    """Bytes of simulation state per lane (the arrays of the batched core), by scenario."""
+    from follow_env.config import THESIS
+    from follow_env.core import BatchedSim
+
+    rows = []
+    for scenario in ("straight", "curve", "random"):
+        sim = BatchedSim(THESIS.replace(scenario={"name": scenario}), 1024)
+        arrays = (sim.params, sim.fstate, sim.istate, sim.pstate, sim.paths, sim.walls, sim.keys)
+        per_lane = sum(a.nbytes for a in arrays) / sim.n
+        sim.close()
+        rows.append((f"state per lane, {scenario}", per_lane, f"{per_lane / 1024:.1f} KiB"))
+    return rows
+
+
 BENCHMARKS: dict[str, Callable[[bool], list[tuple[str, float, str]]]] = {
-    "single env (steps/s)": bench_single_env
+    "single env (steps/s)": bench_single_env,
+    "vector env (env-steps/s)": bench_vector_env,
+    "memory (bytes)": bench_memory,
 }
 
 
@@ -65,10 +126,10 @@ def main() -> None:
     for title, fn in BENCHMARKS.items():
         rows = fn(args.quick)
         print(f"\n## {title}\n")
-        print(f"| {'what':<34} | {'rate':>14} | {'vs baseline':>16} |")
-        print(f"|{'-' * 36}|{'-' * 16}|{'-' * 18}|")
+        print(f"| {'what':<34} | {'value':>14} | {'ratio':>24} |")
+        print(f"|{'-' * 36}|{'-' * 16}|{'-' * 26}|")
         for name, rate, ratio in rows:
-            print(f"| {name:<34} | {rate:>14,.0f} | {ratio:>16} |")
+            print(f"| {name:<34} | {rate:>14,.0f} | {ratio:>24} |")
     print()
 
 

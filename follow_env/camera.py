@@ -111,13 +111,21 @@ def back_project(cam: Camera, uv: np.ndarray, depth_m: np.ndarray) -> np.ndarray
 
 @njit(cache=True, inline="always")
 def world_to_camera(
-    px: float, py: float, pz: float, rx: float, ry: float, rth: float, params: np.ndarray, p0: int
+    px: float,
+    py: float,
+    pz: float,
+    rx: float,
+    ry: float,
+    c: float,
+    s: float,
+    params: np.ndarray,
+    p0: int,
 ) -> tuple[float, float, float]:
-    """A world point to the camera frame of a robot at pose (rx, ry, rth).
+    """A world point to the camera frame of a robot at (rx, ry) with heading th, given
+    ``c = cos(th)`` and ``s = sin(th)`` (the caller computes them once per frame).
 
     ``params[p0:p0 + 12]`` holds R row-major then T (the layout's ``P_R00`` .. ``P_TZ``).
     """
-    c, s = np.cos(rth), np.sin(rth)
     dx, dy = px - rx, py - ry
     qx = c * dx + s * dy - params[p0 + 9]
     qy = -s * dx + c * dy - params[p0 + 10]
@@ -129,7 +137,7 @@ def world_to_camera(
     return xc, yc, zc
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def body_box(
     px: float,
     py: float,
@@ -146,6 +154,7 @@ def body_box(
     fy: float,
     cx: float,
     cy: float,
+    scratch: np.ndarray,
 ) -> tuple[float, float, float, float, bool]:
     """Image bounding box of an upright box body, before clipping to the image.
 
@@ -154,38 +163,42 @@ def body_box(
     cut at the near plane so a body partly behind the camera still gets the box of its visible
     part; the box is the extent of the projected points.
 
+    ``scratch`` is caller-owned room for 24 floats (the corners in the camera frame), so the
+    function allocates nothing and lanes can run in parallel.
+
     :return: ``(u1, v1, u2, v2, any_in_front)`` in pixels.
     """
     cth, sth = np.cos(pth), np.sin(pth)
+    rc, rs = np.cos(rth), np.sin(rth)
     hd, hw = 0.5 * depth, 0.5 * width
-    cam = np.empty((8, 3))
+    cam = scratch  # corner k at cam[3k : 3k + 3]
     k = 0
     for a in (-hd, hd):
         for b in (-hw, hw):
             wx = px + a * cth - b * sth
             wy = py + a * sth + b * cth
             for z in (0.0, height):
-                xc, yc, zc = world_to_camera(wx, wy, z, rx, ry, rth, params, p0)
-                cam[k, 0], cam[k, 1], cam[k, 2] = xc, yc, zc
+                xc, yc, zc = world_to_camera(wx, wy, z, rx, ry, rc, rs, params, p0)
+                cam[3 * k], cam[3 * k + 1], cam[3 * k + 2] = xc, yc, zc
                 k += 1
     u1, v1, u2, v2 = np.inf, np.inf, -np.inf, -np.inf
     found = False
     # Corner k = 4 ia + 2 ib + iz; edges join corners differing in exactly one bit.
     for i in range(8):
-        if cam[i, 2] > NEAR_PLANE_M:
-            u = fx * cam[i, 0] / cam[i, 2] + cx
-            v = fy * cam[i, 1] / cam[i, 2] + cy
+        if cam[3 * i + 2] > NEAR_PLANE_M:
+            u = fx * cam[3 * i] / cam[3 * i + 2] + cx
+            v = fy * cam[3 * i + 1] / cam[3 * i + 2] + cy
             u1, v1, u2, v2 = min(u1, u), min(v1, v), max(u2, u), max(v2, v)
             found = True
         for bit in (1, 2, 4):
             j = i ^ bit
             if j < i:
                 continue
-            zi, zj = cam[i, 2] - NEAR_PLANE_M, cam[j, 2] - NEAR_PLANE_M
+            zi, zj = cam[3 * i + 2] - NEAR_PLANE_M, cam[3 * j + 2] - NEAR_PLANE_M
             if zi * zj < 0.0:  # the edge crosses the near plane: add the crossing point
                 t = zi / (zi - zj)
-                xq = cam[i, 0] + t * (cam[j, 0] - cam[i, 0])
-                yq = cam[i, 1] + t * (cam[j, 1] - cam[i, 1])
+                xq = cam[3 * i] + t * (cam[3 * j] - cam[3 * i])
+                yq = cam[3 * i + 1] + t * (cam[3 * j + 1] - cam[3 * i + 1])
                 u = fx * xq / NEAR_PLANE_M + cx
                 v = fy * yq / NEAR_PLANE_M + cy
                 u1, v1, u2, v2 = min(u1, u), min(v1, v), max(u2, u), max(v2, v)

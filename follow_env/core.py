@@ -22,12 +22,15 @@ step index, so they never depend on the actions.
 
 from __future__ import annotations
 
+import os
+from concurrent.futures import ThreadPoolExecutor
+
 import numpy as np
 from numba import njit
 
 from follow_env.camera import Camera, body_box, world_to_camera
 from follow_env.config import EnvConfig
-from follow_env.drive import encoder_count, encoder_speed, motor_step, pid_step
+from follow_env.drive import lag_factor, wheel_tick
 from follow_env.kinematics import diff_drive_fk, diff_drive_ik, euler_pose_step
 from follow_env.layout import (
     DL_FIELDS,
@@ -35,6 +38,7 @@ from follow_env.layout import (
     I_BURST0,
     I_DETECTED_ID,
     I_DL_HEAD,
+    I_ENC_L,
     I_ENC_R,
     I_HIST_HEAD,
     I_HIST_N,
@@ -47,6 +51,7 @@ from follow_env.layout import (
     N_PARAMS,
     N_PSTATE,
     N_PW,
+    N_SCRATCH,
     P_ANTI_WINDUP,
     P_BURST_END,
     P_BURST_START,
@@ -83,7 +88,7 @@ from follow_env.layout import (
     P_MIN_BOX_H,
     P_MIN_VIS,
     P_MISS_P,
-    P_MOTOR_TAU,
+    P_MOTOR_ALPHA,
     P_MOTOR_WMAX,
     P_PERSON_ACC,
     P_PERSON_D,
@@ -131,6 +136,7 @@ from follow_env.layout import (
     REASON_STEP_LIMIT,
     REASON_WALK_OVER,
     S_ACCEL,
+    S_ANG_L,
     S_ANG_R,
     S_BOX_X1,
     S_BOX_X2,
@@ -138,13 +144,17 @@ from follow_env.layout import (
     S_BOX_Y2,
     S_CLEAR_PERSON,
     S_CLEAR_WALL,
+    S_D_L,
     S_D_R,
     S_DETECTED,
     S_DL0,
+    S_DUTY_L,
     S_DUTY_R,
+    S_EPREV_L,
     S_EPREV_R,
     S_HIST0,
     S_IN_FRAME,
+    S_INT_L,
     S_INT_R,
     S_LOST_T,
     S_OBS_D,
@@ -153,6 +163,7 @@ from follow_env.layout import (
     S_OMEGA_R,
     S_RAW_DEPTH,
     S_REWARD,
+    S_SCRATCH0,
     S_T,
     S_TERM,
     S_TH,
@@ -175,8 +186,8 @@ from follow_env.perception import (
     clip_box,
     depth_noise_std,
     distance_filter,
-    first_detection,
     jitter_box,
+    listed_before,
 )
 from follow_env.person import person_reset, person_step
 from follow_env.rng import (
@@ -210,7 +221,8 @@ def params_from_config(cfg: EnvConfig) -> np.ndarray:
     cam = Camera.from_config(c)
     p[P_WHEEL_R], p[P_TRACK] = r.wheel_radius_m, r.track_width_m
     p[P_FOOT_L], p[P_FOOT_W] = r.footprint_length_m, r.footprint_width_m
-    p[P_MOTOR_WMAX], p[P_MOTOR_TAU] = m.no_load_speed_radps, m.time_constant_s
+    p[P_MOTOR_WMAX] = m.no_load_speed_radps
+    p[P_MOTOR_ALPHA] = lag_factor(m.time_constant_s, e.sample_period_s)
     p[P_FRIC_DUTY], p[P_STALL_DUTY], p[P_MAX_DUTY] = (
         m.friction_duty_pct,
         m.stall_duty_pct,
@@ -264,7 +276,7 @@ def params_from_config(cfg: EnvConfig) -> np.ndarray:
 # ----------------------------------------------------------------------------------------------
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _depth_ray(
     cu: int,
     cv: int,
@@ -336,7 +348,7 @@ def _depth_ray(
     return best
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _frame(
     i: int,
     prm: np.ndarray,
@@ -346,8 +358,6 @@ def _frame(
     walls: np.ndarray,
     keys: np.ndarray,
     step: int,
-    boxes: np.ndarray,
-    det: np.ndarray,
 ) -> None:
     """Take a camera frame: detect, pick the first detection, read depth, push it through the
     delay line and the distance filter, and publish (SPEC §1.4). Also fills the ground truth."""
@@ -357,6 +367,9 @@ def _frame(
     rx, ry, rth = fs[S_X], fs[S_Y], fs[S_TH]
     kdet = keys[STREAM_DETECTOR]
     base = step * _SLOTS_PER_STEP
+    # The detector's list is walked as it is produced; the first listed detection is kept
+    # (SPEC §1.4 step 2, order as in perception.first_detection).
+    first, b1, b2, b3, b4, best_area = -1, 0.0, 0.0, 0.0, 0.0, -1.0
     for p in range(n_people):
         u1, v1, u2, v2, found = body_box(
             ps[p, PS_X],
@@ -374,6 +387,7 @@ def _frame(
             fy,
             cx,
             cy,
+            fs[S_SCRATCH0 : S_SCRATCH0 + N_SCRATCH],
         )
         visible = False
         c1, c2, c3, c4 = clip_box(u1, v1, u2, v2, W, H)
@@ -390,7 +404,6 @@ def _frame(
                 ist[I_BURST0 + p] = 0
         elif u_burst < prm[P_BURST_START]:
             ist[I_BURST0 + p] = 1
-        det[p] = False
         if visible and ist[I_BURST0 + p] == 0 and uniform_at(kdet, slot + 1) >= prm[P_MISS_P]:
             j1, j2, j3, j4 = jitter_box(
                 c1,
@@ -405,17 +418,16 @@ def _frame(
                 prm[P_JIT_S],
             )
             j1, j2, j3, j4 = clip_box(j1, j2, j3, j4, W, H)
-            if j3 > j1 and j4 > j2:
-                boxes[p, 0], boxes[p, 1], boxes[p, 2], boxes[p, 3] = j1, j2, j3, j4
-                det[p] = True
-    first = first_detection(boxes[:n_people], det[:n_people])
+            area = (j3 - j1) * (j4 - j2)
+            if j3 > j1 and j4 > j2 and listed_before(area, best_area):
+                first, b1, b2, b3, b4, best_area = p, j1, j2, j3, j4, area
 
     # Measurement of this frame: box centre pixel and the depth there (SPEC §1.4 step 3).
     m_det, m_cu, m_cv, m_raw = 0.0, 0.0, 0.0, 0.0
     if first >= 0:
         m_det = 1.0
-        cu = min(max(int((boxes[first, 0] + boxes[first, 2]) / 2.0), 0), int(W) - 1)
-        cv = min(max(int((boxes[first, 1] + boxes[first, 3]) / 2.0), 0), int(H) - 1)
+        cu = min(max(int((b1 + b3) / 2.0), 0), int(W) - 1)
+        cv = min(max(int((b2 + b4) / 2.0), 0), int(H) - 1)
         m_cu, m_cv = float(cu), float(cv)
         z = _depth_ray(cu, cv, prm, fs, ps, n_people, walls, ist[I_N_WALLS])
         kd = keys[STREAM_DEPTH]
@@ -426,8 +438,9 @@ def _frame(
             z += normal_at(kd, dslot) * prm[P_DEPTH_K] * z * z  # RMS ~ Z^2 (SPEC §1.3)
             if prm[P_DEPTH_UNIT] > 0.0:
                 z = np.round(z / prm[P_DEPTH_UNIT]) * prm[P_DEPTH_UNIT]
-            if uniform_at(kd, dslot + 1) < prm[P_INVALID_P] or z < prm[P_DEPTH_MIN]:
-                z = 0.0
+            invalid = uniform_at(kd, dslot + 1) < prm[P_INVALID_P]
+            if invalid or z < prm[P_DEPTH_MIN] or z > prm[P_DEPTH_MAX]:
+                z = 0.0  # out of range reads as invalid too, as on the camera
         m_raw = z
         ist[I_DETECTED_ID] = first
     else:
@@ -438,10 +451,10 @@ def _frame(
     head = (ist[I_DL_HEAD] + 1) % size
     if step == 0:  # reset: as if the robot had stood still for the whole delay
         for k in range(size):
-            _write_slot(fs, k, m_det, m_cu, m_cv, m_raw, boxes, first)
+            _write_slot(fs, k, m_det, m_cu, m_cv, m_raw, b1, b2, b3, b4)
         head = 0
     else:
-        _write_slot(fs, head, m_det, m_cu, m_cv, m_raw, boxes, first)
+        _write_slot(fs, head, m_det, m_cu, m_cv, m_raw, b1, b2, b3, b4)
     ist[I_DL_HEAD] = head
     out = S_DL0 + ((head + 1) % size) * DL_FIELDS
     fs[S_DETECTED] = fs[out]
@@ -470,7 +483,7 @@ def _frame(
     camx = rx + c * prm[P_TX] - s * prm[P_TY]
     camy = ry + s * prm[P_TX] + c * prm[P_TY]
     fs[S_TRUE_D] = np.hypot(ps[0, PS_X] - camx, ps[0, PS_Y] - camy) - 0.5 * prm[P_PERSON_D]
-    xc, _, zc = world_to_camera(ps[0, PS_X], ps[0, PS_Y], prm[P_TZ], rx, ry, rth, prm, P_R00)
+    xc, _, zc = world_to_camera(ps[0, PS_X], ps[0, PS_Y], prm[P_TZ], rx, ry, c, s, prm, P_R00)
     # Beside or behind the camera the offset is capped at one image width, on its side.
     side = W if xc >= 0.0 else -W
     fs[S_TRUE_O] = side
@@ -487,17 +500,17 @@ def _write_slot(
     cu: float,
     cv: float,
     raw: float,
-    boxes: np.ndarray,
-    first: int,
+    u1: float,
+    v1: float,
+    u2: float,
+    v2: float,
 ) -> None:
     o = S_DL0 + k * DL_FIELDS
     fs[o], fs[o + 1], fs[o + 2], fs[o + 3] = det, cu, cv, raw
-    if first >= 0:
-        fs[o + 4], fs[o + 5] = boxes[first, 0], boxes[first, 1]
-        fs[o + 6], fs[o + 7] = boxes[first, 2], boxes[first, 3]
+    fs[o + 4], fs[o + 5], fs[o + 6], fs[o + 7] = u1, v1, u2, v2
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _contacts(
     prm: np.ndarray, fs: np.ndarray, ist: np.ndarray, ps: np.ndarray, walls: np.ndarray
 ) -> int:
@@ -559,8 +572,6 @@ def reset_kernel(
     keys: np.ndarray,
 ) -> None:
     """Start a new episode on ``lanes`` (paths, walls, keys and params already written)."""
-    boxes = np.zeros((PEOPLE_MAX, 4))
-    det = np.zeros(PEOPLE_MAX, dtype=np.bool_)
     for j in range(lanes.shape[0]):
         i = lanes[j]
         fs, ist = fstate[i], istate[i]
@@ -571,12 +582,11 @@ def reset_kernel(
         ist[I_N_PEOPLE], ist[I_N_WALLS] = n_people[j], n_walls[j]
         for p in range(n_people[j]):
             person_reset(pstate[i, p], paths[i, p], n_points[j, p])
-        _frame(i, params[i], fs, ist, pstate[i], walls[i], keys[i], 0, boxes, det)
+        _frame(i, params[i], fs, ist, pstate[i], walls[i], keys[i], 0)
         _contacts(params[i], fs, ist, pstate[i], walls[i])
 
 
-@njit(cache=True)
-def step_kernel(
+def _step_lanes(
     params: np.ndarray,
     fstate: np.ndarray,
     istate: np.ndarray,
@@ -585,15 +595,18 @@ def step_kernel(
     walls: np.ndarray,
     keys: np.ndarray,
     actions: np.ndarray,
+    active: np.ndarray,
 ) -> None:
-    """Advance every lane by one control step under ``actions`` (N, 2): ``v`` m/s, ``w`` rad/s.
+    """Advance every active lane by one control step under ``actions`` (N, 2): ``v`` m/s,
+    ``w`` rad/s. Lanes whose ``active`` flag is False are left untouched.
 
     Results land in the state arrays: observation ``S_OBS_D``/``S_OBS_O``, ``S_REWARD``,
-    ``S_TERM``/``S_TRUNC`` and ``I_REASON``, plus the ground truth for ``info``.
+    ``S_TERM``/``S_TRUNC`` and ``I_REASON``, plus the ground truth for ``info``. Lanes share
+    nothing, so disjoint blocks of lanes may be stepped on different threads.
     """
-    boxes = np.zeros((PEOPLE_MAX, 4))
-    det = np.zeros(PEOPLE_MAX, dtype=np.bool_)
     for i in range(fstate.shape[0]):
+        if not active[i]:
+            continue
         prm, fs, ist, ps = params[i], fstate[i], istate[i], pstate[i]
         dt = prm[P_DT]
         ist[I_STEP] += 1
@@ -604,47 +617,86 @@ def step_kernel(
         r, L = prm[P_WHEEL_R], prm[P_TRACK]
         w_r, w_l = diff_drive_ik(v_cmd, w_cmd, r, L)
         fs[S_VTGT_R], fs[S_VTGT_L] = w_r * r, w_l * r
-        # 2. Inner drive loop (SPEC §1.1, §1.2).
+        # 2. Inner drive loop (SPEC §1.1, §1.2), on local copies of the wheel state.
         dt_in = prm[P_DT_IN]
-        cpr = prm[P_COUNTS_PER_REV]
+        cpr, diam, quantum = prm[P_COUNTS_PER_REV], 2.0 * r, prm[P_SPEED_Q]
+        kp, ki, kd, tau, max_duty = prm[P_KP], prm[P_KI], prm[P_KD], prm[P_TAU_D], prm[P_MAX_DUTY]
         aw = prm[P_ANTI_WINDUP] > 0.0
+        w_max, alpha = prm[P_MOTOR_WMAX], prm[P_MOTOR_ALPHA]
+        fric, stall = prm[P_FRIC_DUTY], prm[P_STALL_DUTY]
+        g_r, g_l = prm[P_GAIN_R], prm[P_GAIN_L]
+        t_r, t_l = fs[S_VTGT_R], fs[S_VTGT_L]
+        m_r, m_l = fs[S_VMEAS_R], fs[S_VMEAS_L]
+        e_r, e_l = fs[S_EPREV_R], fs[S_EPREV_L]
+        i_r, i_l = fs[S_INT_R], fs[S_INT_L]
+        d_r, d_l = fs[S_D_R], fs[S_D_L]
+        u_r, u_l = fs[S_DUTY_R], fs[S_DUTY_L]
+        o_r, o_l = fs[S_OMEGA_R], fs[S_OMEGA_L]
+        a_r, a_l = fs[S_ANG_R], fs[S_ANG_L]
+        c_r, c_l = ist[I_ENC_R], ist[I_ENC_L]
+        x, y, th, v, w = fs[S_X], fs[S_Y], fs[S_TH], fs[S_V], fs[S_W]
         for _ in range(int(prm[P_SUBSTEPS])):
-            for wheel in range(2):
-                o = 0 if wheel == 0 else 1  # right = 0, left = 1 in every pair of columns
-                duty, integ, dfilt = pid_step(
-                    fs[S_VTGT_R + o] - fs[S_VMEAS_R + o],
-                    fs[S_EPREV_R + o],
-                    fs[S_INT_R + o],
-                    fs[S_D_R + o],
-                    prm[P_KP],
-                    prm[P_KI],
-                    prm[P_KD],
-                    prm[P_TAU_D],
-                    dt_in,
-                    prm[P_MAX_DUTY],
-                    aw,
-                )
-                fs[S_EPREV_R + o] = fs[S_VTGT_R + o] - fs[S_VMEAS_R + o]
-                fs[S_INT_R + o], fs[S_D_R + o], fs[S_DUTY_R + o] = integ, dfilt, duty
-                fs[S_OMEGA_R + o] = motor_step(
-                    fs[S_OMEGA_R + o],
-                    duty,
-                    prm[P_GAIN_R + o],
-                    prm[P_MOTOR_WMAX],
-                    prm[P_MOTOR_TAU],
-                    prm[P_FRIC_DUTY],
-                    prm[P_STALL_DUTY],
-                    dt_in,
-                )
-                fs[S_ANG_R + o] += fs[S_OMEGA_R + o] * dt_in
-                count = encoder_count(fs[S_ANG_R + o], cpr)
-                fs[S_VMEAS_R + o] = encoder_speed(
-                    count, ist[I_ENC_R + o], cpr, dt_in, 2.0 * r, prm[P_SPEED_Q]
-                )
-                ist[I_ENC_R + o] = count
-            v, w = diff_drive_fk(fs[S_OMEGA_R], fs[S_OMEGA_L], r, L)
-            fs[S_X], fs[S_Y], fs[S_TH] = euler_pose_step(fs[S_X], fs[S_Y], fs[S_TH], v, w, dt_in)
-            fs[S_V], fs[S_W] = v, w
+            u_r, i_r, d_r, e_r, o_r, a_r, c_r, m_r = wheel_tick(
+                t_r,
+                m_r,
+                e_r,
+                i_r,
+                d_r,
+                o_r,
+                a_r,
+                c_r,
+                g_r,
+                kp,
+                ki,
+                kd,
+                tau,
+                dt_in,
+                max_duty,
+                aw,
+                w_max,
+                alpha,
+                fric,
+                stall,
+                cpr,
+                diam,
+                quantum,
+            )
+            u_l, i_l, d_l, e_l, o_l, a_l, c_l, m_l = wheel_tick(
+                t_l,
+                m_l,
+                e_l,
+                i_l,
+                d_l,
+                o_l,
+                a_l,
+                c_l,
+                g_l,
+                kp,
+                ki,
+                kd,
+                tau,
+                dt_in,
+                max_duty,
+                aw,
+                w_max,
+                alpha,
+                fric,
+                stall,
+                cpr,
+                diam,
+                quantum,
+            )
+            v, w = diff_drive_fk(o_r, o_l, r, L)
+            x, y, th = euler_pose_step(x, y, th, v, w, dt_in)
+        fs[S_VMEAS_R], fs[S_VMEAS_L] = m_r, m_l
+        fs[S_EPREV_R], fs[S_EPREV_L] = e_r, e_l
+        fs[S_INT_R], fs[S_INT_L] = i_r, i_l
+        fs[S_D_R], fs[S_D_L] = d_r, d_l
+        fs[S_DUTY_R], fs[S_DUTY_L] = u_r, u_l
+        fs[S_OMEGA_R], fs[S_OMEGA_L] = o_r, o_l
+        fs[S_ANG_R], fs[S_ANG_L] = a_r, a_l
+        ist[I_ENC_R], ist[I_ENC_L] = c_r, c_l
+        fs[S_X], fs[S_Y], fs[S_TH], fs[S_V], fs[S_W] = x, y, th, v, w
         # Robot acceleration as the robot computes it: finite difference of encoder speed.
         fs[S_VROBOT_PREV] = fs[S_VROBOT_MEAS]
         fs[S_VROBOT_MEAS] = 0.5 * (fs[S_VMEAS_R] + fs[S_VMEAS_L])
@@ -655,7 +707,7 @@ def step_kernel(
         if fs[S_WALK_END_T] < 0.0 and ps[0, PS_DONE] > 0.0:
             fs[S_WALK_END_T] = fs[S_T]
         # 4. Camera frame and perception (SPEC §1.4).
-        _frame(i, prm, fs, ist, ps, walls[i], keys[i], ist[I_STEP], boxes, det)
+        _frame(i, prm, fs, ist, ps, walls[i], keys[i], ist[I_STEP])
         # 5. Contacts, reward, episode end.
         reason = _contacts(prm, fs, ist, ps, walls[i])
         half_w = 0.5 * prm[P_IMG_W]
@@ -678,6 +730,15 @@ def step_kernel(
             reason, trunc = REASON_STEP_LIMIT, 1.0
         fs[S_REWARD], fs[S_TERM], fs[S_TRUNC] = reward, term, trunc
         ist[I_REASON] = reason
+
+
+# Compiled without the GIL so that BatchedSim can run disjoint blocks of lanes on several
+# threads. (numba's own parallel=True loop was tried and loses: every per-lane array view
+# touches the shared array's reference count atomically, and the threads fight over it.)
+step_kernel = njit(cache=True, nogil=True)(_step_lanes)
+
+PARALLEL_MIN_LANES = 256
+"""From this many lanes on, BatchedSim steps blocks of lanes on one thread per core."""
 
 
 class BatchedSim:
@@ -703,9 +764,18 @@ class BatchedSim:
         self.fstate = np.zeros((num_lanes, N_FSTATE))
         self.istate = np.zeros((num_lanes, N_ISTATE), dtype=np.int64)
         self.pstate = np.zeros((num_lanes, self.spec.max_people, N_PSTATE))
-        self.paths = np.zeros((num_lanes, self.spec.max_people, self.spec.max_points, N_PW))
+        self.max_points = self.spec.points_for(cfg)
+        self.paths = np.zeros((num_lanes, self.spec.max_people, self.max_points, N_PW))
         self.walls = np.zeros((num_lanes, self.spec.max_walls, 4))
         self.keys = np.zeros((num_lanes, N_STREAMS), dtype=np.uint64)
+        self._all = np.ones(num_lanes, dtype=np.bool_)
+        workers = min(os.cpu_count() or 1, max(1, num_lanes // (PARALLEL_MIN_LANES // 2)))
+        self._pool: ThreadPoolExecutor | None = None
+        self._blocks: list[tuple[int, int]] = []
+        if num_lanes >= PARALLEL_MIN_LANES and workers > 1:
+            edges = np.linspace(0, num_lanes, workers + 1).astype(int)
+            self._blocks = list(zip(edges[:-1].tolist(), edges[1:].tolist(), strict=True))
+            self._pool = ThreadPoolExecutor(workers, thread_name_prefix="personfollow")
 
     def reset_lanes(self, lanes: np.ndarray, seed_seqs: list[np.random.SeedSequence]) -> None:
         """Start a new episode on each of ``lanes``, seeded by the matching ``SeedSequence``."""
@@ -718,7 +788,7 @@ class BatchedSim:
         n_w = batch.walls.shape[1]
         if (
             n_people_max > self.spec.max_people
-            or n_pts > self.spec.max_points
+            or n_pts > self.max_points
             or (n_w > self.spec.max_walls)
         ):
             raise ValueError(
@@ -750,9 +820,10 @@ class BatchedSim:
             self.keys,
         )
 
-    def step(self, actions: np.ndarray) -> None:
-        """Advance all lanes by one control step; ``actions`` is (N, 2) float64 ``v, w``."""
-        step_kernel(
+    def step(self, actions: np.ndarray, active: np.ndarray | None = None) -> None:
+        """Advance the lanes by one control step; ``actions`` is (N, 2) float64 ``v, w``;
+        ``active`` (N,) bool selects the lanes to step (default: all)."""
+        arrays = (
             self.params,
             self.fstate,
             self.istate,
@@ -761,4 +832,20 @@ class BatchedSim:
             self.walls,
             self.keys,
             actions,
+            self._all if active is None else active,
         )
+        if self._pool is None:
+            step_kernel(*arrays)
+            return
+        # One block of lanes per thread; the kernel releases the GIL.
+        jobs = [
+            self._pool.submit(step_kernel, *(a[lo:hi] for a in arrays)) for lo, hi in self._blocks
+        ]
+        for job in jobs:
+            job.result()
+
+    def close(self) -> None:
+        """Stop the worker threads (if any)."""
+        if self._pool is not None:
+            self._pool.shutdown()
+            self._pool = None

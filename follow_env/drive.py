@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["encoder_count", "encoder_speed", "motor_step", "pid_step"]
+__all__ = ["encoder_count", "encoder_speed", "lag_factor", "motor_step", "pid_step", "wheel_tick"]
 
 # Below this speed (rad/s) a wheel whose duty cannot overcome static friction is held at rest.
 _STICTION_SPEED_RADPS = 0.2
@@ -19,7 +19,7 @@ _STICTION_SPEED_RADPS = 0.2
 @njit(cache=True, inline="always")
 def encoder_count(angle_rad: float, counts_per_rev: float) -> int:
     """Integer quadrature count for a wheel angle (counts in 4x mode, floor quantisation)."""
-    return int(np.floor(angle_rad * counts_per_rev / (2.0 * np.pi)))
+    return int(np.floor(angle_rad * (counts_per_rev / (2.0 * np.pi))))
 
 
 @njit(cache=True, inline="always")
@@ -37,10 +37,11 @@ def encoder_speed(
     firmware sends it as an int16 in mm/s, so it is truncated towards zero to ``quantum_mps``
     (0 disables that).
     """
-    rps = (count - prev_count) / counts_per_rev / period_s
-    vel = rps * np.pi * wheel_diameter_m
+    # rps * pi * D with rps = (count - prev) / ppr / period; the constant factor is written
+    # apart so the compiler can hoist it out of the tick loop.
+    vel = (count - prev_count) * (np.pi * wheel_diameter_m / (counts_per_rev * period_s))
     if quantum_mps > 0.0:
-        vel = np.trunc(vel / quantum_mps) * quantum_mps
+        vel = np.trunc(vel * (1.0 / quantum_mps)) * quantum_mps
     return vel
 
 
@@ -67,8 +68,8 @@ def pid_step(
 
     :return: ``(duty %, new integral, new filtered derivative)``.
     """
-    raw = (error - prev_error) / dt_s
-    d_new = (tau_s * d_filt + dt_s * raw) / (tau_s + dt_s)
+    # D = (tau D_prev + dt raw) / (tau + dt) with dt raw = e - e_prev.
+    d_new = (tau_s * d_filt + (error - prev_error)) / (tau_s + dt_s)
     i_new = integral + error * dt_s
     u = kp * error + ki * i_new + kd * d_new
     if anti_windup and abs(u) > max_duty and u * error > 0.0:
@@ -81,24 +82,30 @@ def pid_step(
     return u, i_new, d_new
 
 
+def lag_factor(tau_s: float, dt_s: float) -> float:
+    """``1 - exp(-dt / tau)``: the share of the gap to its steady speed a motor closes in one
+    tick of ``dt_s`` seconds (time constant ``tau_s``)."""
+    return float(1.0 - np.exp(-dt_s / tau_s))
+
+
 @njit(cache=True, inline="always")
 def motor_step(
     omega_radps: float,
     duty_pct: float,
     gain: float,
     no_load_radps: float,
-    tau_s: float,
+    alpha: float,
     friction_pct: float,
     stall_pct: float,
-    dt_s: float,
 ) -> float:
-    """Wheel speed after ``dt_s`` under ``duty_pct``: a first-order lag towards the steady speed.
+    """Wheel speed after one tick under ``duty_pct``: a first-order lag towards the steady speed.
 
     Steady speed: ``gain * no_load * sign(u) * (|u| - friction) / (100 - friction)`` for
     ``|u| > friction``, else 0 (Coulomb friction eats the first ``friction`` % of duty). A wheel
     turning slower than a small stiction speed while ``|u| < stall`` stops dead (static
-    friction: SPEC §2 reports motors stalling at low duty). The lag is integrated exactly:
-    ``omega += (omega_ss - omega) (1 - exp(-dt / tau))``.
+    friction: SPEC §2 reports motors stalling at low duty). The lag of time constant ``tau`` is
+    integrated exactly over a tick ``dt``: ``omega += (omega_ss - omega) alpha`` with
+    ``alpha = 1 - exp(-dt / tau)`` (see :func:`lag_factor`).
     """
     mag = abs(duty_pct)
     if mag <= stall_pct and abs(omega_radps) < _STICTION_SPEED_RADPS:
@@ -109,4 +116,49 @@ def motor_step(
         )
     else:
         target = 0.0
-    return omega_radps + (target - omega_radps) * (1.0 - np.exp(-dt_s / tau_s))
+    return omega_radps + (target - omega_radps) * alpha
+
+
+@njit(cache=True, inline="always")
+def wheel_tick(
+    target_mps: float,
+    measured_mps: float,
+    prev_error: float,
+    integral: float,
+    d_filt: float,
+    omega_radps: float,
+    angle_rad: float,
+    count: int,
+    gain: float,
+    kp: float,
+    ki: float,
+    kd: float,
+    tau_s: float,
+    dt_s: float,
+    max_duty: float,
+    anti_windup: bool,
+    no_load_radps: float,
+    alpha: float,
+    friction_pct: float,
+    stall_pct: float,
+    counts_per_rev: float,
+    wheel_diameter_m: float,
+    quantum_mps: float,
+) -> tuple[float, float, float, float, float, float, int, float]:
+    """One 10 ms tick of one wheel: PID on the last encoder estimate, the motor under the new
+    duty, the wheel turning, and the encoder's count and speed estimate at the tick's end.
+
+    :return: ``(duty %, integral, filtered D, error, omega rad/s, angle rad, count,
+        measured speed m/s)``.
+    """
+    error = target_mps - measured_mps
+    duty, integral, d_filt = pid_step(
+        error, prev_error, integral, d_filt, kp, ki, kd, tau_s, dt_s, max_duty, anti_windup
+    )
+    omega_radps = motor_step(omega_radps, duty, gain, no_load_radps, alpha, friction_pct, stall_pct)
+    angle_rad += omega_radps * dt_s
+    new_count = encoder_count(angle_rad, counts_per_rev)
+    measured_mps = encoder_speed(
+        new_count, count, counts_per_rev, dt_s, wheel_diameter_m, quantum_mps
+    )
+    return duty, integral, d_filt, error, omega_radps, angle_rad, new_count, measured_mps

@@ -6,90 +6,13 @@ from typing import Any, ClassVar
 
 import gymnasium as gym
 import numpy as np
-from gymnasium import spaces
 
 from follow_env.config import PRESETS, THESIS, EnvConfig
 from follow_env.core import BatchedSim
-from follow_env.layout import (
-    I_DETECTED_ID,
-    I_REASON,
-    I_STEP,
-    PS_TH,
-    PS_V,
-    PS_X,
-    PS_Y,
-    REASON_NAMES,
-    S_ACCEL,
-    S_CLEAR_PERSON,
-    S_CLEAR_WALL,
-    S_DETECTED,
-    S_DUTY_L,
-    S_DUTY_R,
-    S_IN_FRAME,
-    S_OBS_D,
-    S_OBS_O,
-    S_OMEGA_L,
-    S_OMEGA_R,
-    S_RAW_DEPTH,
-    S_REWARD,
-    S_T,
-    S_TERM,
-    S_TH,
-    S_TRUE_D,
-    S_TRUE_O,
-    S_TRUNC,
-    S_V,
-    S_VMEAS_L,
-    S_VMEAS_R,
-    S_VROBOT_MEAS,
-    S_VTGT_L,
-    S_VTGT_R,
-    S_W,
-    S_X,
-    S_Y,
-)
+from follow_env.info import INFO_KEYS, lane_info, make_spaces
+from follow_env.layout import S_OBS_D, S_OBS_O, S_REWARD, S_TERM, S_TRUNC
 
 __all__ = ["INFO_KEYS", "PersonFollowEnv", "resolve_config"]
-
-# info[key] <- fstate column, in this order (all floats, SI units unless the name says px/pct).
-_INFO_COLUMNS: tuple[tuple[str, int], ...] = (
-    ("time_s", S_T),
-    ("robot_x_m", S_X),
-    ("robot_y_m", S_Y),
-    ("robot_theta_rad", S_TH),
-    ("robot_v_mps", S_V),
-    ("robot_w_radps", S_W),
-    ("true_distance_m", S_TRUE_D),
-    ("true_offset_px", S_TRUE_O),
-    ("raw_depth_m", S_RAW_DEPTH),
-    ("wheel_target_r_mps", S_VTGT_R),
-    ("wheel_target_l_mps", S_VTGT_L),
-    ("wheel_measured_r_mps", S_VMEAS_R),
-    ("wheel_measured_l_mps", S_VMEAS_L),
-    ("wheel_true_r_radps", S_OMEGA_R),
-    ("wheel_true_l_radps", S_OMEGA_L),
-    ("duty_r_pct", S_DUTY_R),
-    ("duty_l_pct", S_DUTY_L),
-    ("encoder_speed_mps", S_VROBOT_MEAS),
-    ("accel_mps2", S_ACCEL),
-    ("wall_clearance_m", S_CLEAR_WALL),
-    ("person_clearance_m", S_CLEAR_PERSON),
-)
-_INFO_NAMES = tuple(k for k, _ in _INFO_COLUMNS)
-_INFO_COLS = np.array([c for _, c in _INFO_COLUMNS])
-INFO_KEYS: tuple[str, ...] = (
-    *_INFO_NAMES,
-    "person_x_m",
-    "person_y_m",
-    "person_theta_rad",
-    "person_v_mps",
-    "in_frame",
-    "detected",
-    "detected_person",
-    "step",
-    "termination",
-)
-"""Every key of the ``info`` dict returned by ``reset`` and ``step``."""
 
 
 def resolve_config(
@@ -162,7 +85,7 @@ class PersonFollowEnv(gym.Env[np.ndarray, np.ndarray]):
 
     | Num | Observation                           | Min      | Max         | Unit |
     |-----|---------------------------------------|----------|-------------|------|
-    | 0   | filtered distance (0: no reading yet) | 0        | ~10.5       | m    |
+    | 0   | filtered distance (0: no reading yet) | 0        | depth_max_m | m    |
     | 1   | box centre column - width // 2        | -width/2 | width/2 - 1 | px   |
 
     The offset is positive when the person is right of the image centre.
@@ -252,31 +175,7 @@ class PersonFollowEnv(gym.Env[np.ndarray, np.ndarray]):
         self.render_mode = render_mode
         self.sim = BatchedSim(self.config, 1)
         cfg = self.config
-        self._v_max = cfg.max_speed_mps
-        self._w_max = cfg.max_turn_rate_radps
-        self.action_space = spaces.Box(
-            low=np.array([-self._v_max, -self._w_max], dtype=np.float32),
-            high=np.array([self._v_max, self._w_max], dtype=np.float32),
-            dtype=np.float32,
-        )
-        half_w = cfg.camera.width_px // 2
-        # Depth noise can push a reading past depth_max_m; 4 sigma of it bounds the space.
-        d_hi = (
-            cfg.camera.depth_max_m
-            * (
-                1.0
-                + 4.0
-                * cfg.camera.depth_subpixel
-                * cfg.camera.depth_max_m
-                / (cfg.camera.depth_focal_px * cfg.camera.depth_baseline_m)
-            )
-            + 0.01
-        )
-        self.observation_space = spaces.Box(
-            low=np.array([0.0, -half_w], dtype=np.float32),
-            high=np.array([d_hi, cfg.camera.width_px - 1 - half_w], dtype=np.float32),
-            dtype=np.float32,
-        )
+        self.observation_space, self.action_space = make_spaces(cfg)
         self._action = np.zeros((1, 2))
         self._root: np.random.SeedSequence | None = None
         self._renderer: Any = None
@@ -335,17 +234,4 @@ class PersonFollowEnv(gym.Env[np.ndarray, np.ndarray]):
         return self.sim.fstate[0, S_OBS_D : S_OBS_O + 1].astype(np.float32)
 
     def _info(self) -> dict[str, Any]:
-        fs = self.sim.fstate[0]
-        info = dict(zip(_INFO_NAMES, fs[_INFO_COLS].tolist(), strict=True))
-        person = self.sim.pstate[0, 0]
-        info["person_x_m"] = float(person[PS_X])
-        info["person_y_m"] = float(person[PS_Y])
-        info["person_theta_rad"] = float(person[PS_TH])
-        info["person_v_mps"] = float(person[PS_V])
-        info["in_frame"] = bool(fs[S_IN_FRAME])
-        info["detected"] = bool(fs[S_DETECTED])
-        ist = self.sim.istate[0]
-        info["detected_person"] = int(ist[I_DETECTED_ID])
-        info["step"] = int(ist[I_STEP])
-        info["termination"] = REASON_NAMES[ist[I_REASON]]
-        return info
+        return lane_info(self.sim, 0)

@@ -11,7 +11,7 @@ P_TRACK = 1
 P_FOOT_L = 2
 P_FOOT_W = 3
 P_MOTOR_WMAX = 4
-P_MOTOR_TAU = 5
+P_MOTOR_ALPHA = 5  # 1 - exp(-dt_in / tau): the motor lag over one 10 ms tick
 P_FRIC_DUTY = 6
 P_STALL_DUTY = 7
 P_MAX_DUTY = 8
@@ -129,7 +129,9 @@ S_HIST0 = 43
 DL_MAX = 9  # delay-line slots: latency_frames <= 8
 DL_FIELDS = 8  # detected, cu, cv, raw depth, box x1, y1, x2, y2
 S_DL0 = S_HIST0 + HIST_MAX
-N_FSTATE = S_DL0 + DL_MAX * DL_FIELDS
+S_SCRATCH0 = S_DL0 + DL_MAX * DL_FIELDS  # per-lane scratch for the camera (8 corners x 3)
+N_SCRATCH = 24
+N_FSTATE = S_SCRATCH0 + N_SCRATCH
 
 # --- per-lane integer state: ``istate[lane, I_*]`` (int64) ---
 I_STEP = 0

@@ -44,6 +44,16 @@ def jitter_box(
     return cu - 0.5 * w, cv - 0.5 * h, cu + 0.5 * w, cv + 0.5 * h
 
 
+@njit(cache=True, inline="always")
+def listed_before(area: float, best_area: float) -> bool:
+    """The detector's order: does a box of ``area`` (px^2) come before the best so far?
+
+    Detectors list boxes by confidence; it is modelled as box area, largest first, and a tie
+    keeps the box seen first.
+    """
+    return area > best_area
+
+
 @njit(cache=True)
 def first_detection(boxes: np.ndarray, detected: np.ndarray) -> int:
     """The detection the robot follows: the first of the detector's list (SPEC §1.4 step 2).
@@ -58,7 +68,7 @@ def first_detection(boxes: np.ndarray, detected: np.ndarray) -> int:
         if not detected[i]:
             continue
         area = (boxes[i, 2] - boxes[i, 0]) * (boxes[i, 3] - boxes[i, 1])
-        if area > best_area:
+        if listed_before(area, best_area):
             best, best_area = i, area
     return best
 
@@ -69,7 +79,7 @@ def depth_noise_std(z_m: float, subpixel: float, focal_px: float, baseline_m: fl
     return z_m * z_m * subpixel / (focal_px * baseline_m)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def distance_filter(
     raw_m: float, prev_m: float, history: np.ndarray, count: int, head: int, length: int
 ) -> tuple[float, int, int]:

@@ -35,7 +35,7 @@ __all__ = ["person_reset", "person_step"]
 _CREEP_MPS = 0.05
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _place(ps: np.ndarray, path: np.ndarray) -> None:
     """Set position and heading from the arc length and leg index."""
     n = int(ps[PS_NPTS])
@@ -62,7 +62,7 @@ def person_reset(ps: np.ndarray, path: np.ndarray, n_points: int) -> None:
     _place(ps, path)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def person_step(ps: np.ndarray, path: np.ndarray, accel: float, decel: float, dt: float) -> None:
     """Advance one person by ``dt`` seconds along its path (state ``ps`` updated in place)."""
     n = int(ps[PS_NPTS])

@@ -266,6 +266,7 @@ class Renderer:
     def __init__(self, config: EnvConfig) -> None:
         self.config = config
         self.camera = Camera.from_config(config.camera)
+        self._scratch = np.zeros(24)  # body_box works in caller-owned memory
         self.foot_l = config.robot.footprint_length_m
         self.foot_w = config.robot.footprint_width_m
         self.robot_trail = _Trail()
@@ -513,6 +514,7 @@ class Renderer:
                 fy,
                 cx,
                 cy,
+                self._scratch,
             )
             u1, v1, u2, v2 = max(u1, 0.0), max(v1, 0.0), min(u2, W), min(v2, H)
             if found and u2 > u1 and v2 > v1:

@@ -67,17 +67,26 @@ class ScenarioSpec:
     name: str
     fn: ScenarioFn
     max_people: int
-    max_points: int
+    max_points: int | Callable[[EnvConfig], int]
     max_walls: int
+
+    def points_for(self, cfg: EnvConfig) -> int:
+        """Waypoints a path may have under ``cfg`` (sizes the core's path arrays)."""
+        return self.max_points(cfg) if callable(self.max_points) else self.max_points
 
 
 SCENARIOS: dict[str, ScenarioSpec] = {}
 
 
 def register_scenario(
-    name: str, *, max_people: int = 1, max_points: int = 64, max_walls: int = 4
+    name: str,
+    *,
+    max_people: int = 1,
+    max_points: int | Callable[[EnvConfig], int] = 64,
+    max_walls: int = 4,
 ) -> Callable[[ScenarioFn], ScenarioFn]:
-    """Register ``fn`` as scenario ``name``; the sizes bound what the function returns."""
+    """Register ``fn`` as scenario ``name``; the sizes bound what the function returns
+    (``max_points`` may depend on the configuration)."""
 
     def deco(fn: ScenarioFn) -> ScenarioFn:
         if name in SCENARIOS:
@@ -179,18 +188,17 @@ def _arc_points(length: float, turn_rad: float) -> np.ndarray:
     return np.stack([radius * np.sin(th), radius * (1.0 - np.cos(th))], axis=-1)
 
 
-@register_scenario("curve", max_points=2048)
+def _curve_points(cfg: EnvConfig) -> int:
+    return max(2, math.ceil(cfg.scenario.walk_length_m / _STEP_M) + 1)
+
+
+@register_scenario("curve", max_points=_curve_points)
 def curve(rng: LaneRandom, cfg: EnvConfig) -> ScenarioBatch:
     """SPEC §1.6 condition 2: the thesis start, then one arc of ``curve_turn_deg``."""
     n = rng.n
     sc = cfg.scenario
     turn = math.radians(sc.curve_turn_deg)
     local = _arc_points(sc.walk_length_m, turn)
-    if len(local) > 2048:
-        raise ValueError(
-            f"ScenarioConfig.walk_length_m={sc.walk_length_m!r} is out of range for 'curve': "
-            f"must be <= {2047 * _STEP_M:g} m"
-        )
     pose = np.zeros((n, 3))
     pose[:, 0] = -0.5 * sc.room_length_m + 3.0
     pose[:, 1] = -math.copysign(0.5 * sc.room_width_m - 3.0, turn) if turn != 0 else 0.0

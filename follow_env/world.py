@@ -13,14 +13,7 @@ import numpy as np
 import pymunk
 from numba import njit
 
-__all__ = [
-    "WALL_RADIUS_M",
-    "World",
-    "rect_rect_distance",
-    "rect_segment_distance",
-    "room_walls",
-    "segment_distance",
-]
+__all__ = ["WALL_RADIUS_M", "World", "rect_rect_distance", "rect_segment_distance", "room_walls"]
 
 WALL_RADIUS_M = 0.05
 """Half the thickness of a wall segment (m): pymunk's segment radius."""
@@ -50,54 +43,67 @@ def _point_segment_distance(
 
 
 @njit(cache=True, inline="always")
-def _cross(ax: float, ay: float, bx: float, by: float, cx: float, cy: float) -> float:
-    return (bx - ax) * (cy - ay) - (by - ay) * (cx - ax)
+def _point_box_distance(x: float, y: float, hl: float, hw: float) -> float:
+    """Distance from (x, y) to the axis-aligned box |x| <= hl, |y| <= hw (0 inside)."""
+    ex, ey = max(abs(x) - hl, 0.0), max(abs(y) - hw, 0.0)
+    return np.sqrt(ex * ex + ey * ey)
 
 
-@njit(cache=True)
-def segment_distance(
-    a1x: float, a1y: float, a2x: float, a2y: float, b1x: float, b1y: float, b2x: float, b2y: float
+@njit(cache=True, inline="always")
+def _segment_crosses_box(x1: float, y1: float, x2: float, y2: float, hl: float, hw: float) -> bool:
+    """Does the segment meet the axis-aligned box? (Liang-Barsky clipping.)"""
+    dx, dy = x2 - x1, y2 - y1
+    t0, t1 = 0.0, 1.0
+    for k in range(4):
+        if k == 0:
+            p, q = -dx, x1 + hl
+        elif k == 1:
+            p, q = dx, hl - x1
+        elif k == 2:
+            p, q = -dy, y1 + hw
+        else:
+            p, q = dy, hw - y1
+        if p == 0.0:
+            if q < 0.0:
+                return False
+        else:
+            r = q / p
+            if p < 0.0:
+                t0 = max(t0, r)
+            else:
+                t1 = min(t1, r)
+            if t0 > t1:
+                return False
+    return True
+
+
+@njit(cache=True, inline="always")
+def _segment_box_distance(
+    x1: float, y1: float, x2: float, y2: float, hl: float, hw: float
 ) -> float:
-    """Shortest distance between segments a and b (m); 0 when they cross."""
-    d1 = _cross(a1x, a1y, a2x, a2y, b1x, b1y)
-    d2 = _cross(a1x, a1y, a2x, a2y, b2x, b2y)
-    d3 = _cross(b1x, b1y, b2x, b2y, a1x, a1y)
-    d4 = _cross(b1x, b1y, b2x, b2y, a2x, a2y)
-    if d1 * d2 < 0.0 and d3 * d4 < 0.0:
+    """Distance from a segment to the axis-aligned box |x| <= hl, |y| <= hw; 0 if they meet.
+
+    For two convex shapes that do not meet, the closest pair has a vertex of one of them: an
+    end of the segment, or a corner of the box.
+    """
+    if _segment_crosses_box(x1, y1, x2, y2, hl, hw):
         return 0.0
-    return min(
-        min(
-            _point_segment_distance(a1x, a1y, b1x, b1y, b2x, b2y),
-            _point_segment_distance(a2x, a2y, b1x, b1y, b2x, b2y),
-        ),
-        min(
-            _point_segment_distance(b1x, b1y, a1x, a1y, a2x, a2y),
-            _point_segment_distance(b2x, b2y, a1x, a1y, a2x, a2y),
-        ),
-    )
+    best = min(_point_box_distance(x1, y1, hl, hw), _point_box_distance(x2, y2, hl, hw))
+    for k in range(4):
+        cx = hl if k in (1, 2) else -hl
+        cy = hw if k in (2, 3) else -hw
+        best = min(best, _point_segment_distance(cx, cy, x1, y1, x2, y2))
+    return best
 
 
 @njit(cache=True, inline="always")
-def _rect_corner(
-    cx: float, cy: float, th: float, length: float, width: float, k: int
-) -> tuple[float, float]:
-    """Corner k (0..3, counter-clockwise from rear-right) of a rectangle centred at (cx, cy)."""
-    a = 0.5 * length * (1.0 if k in (1, 2) else -1.0)
-    b = 0.5 * width * (1.0 if k in (2, 3) else -1.0)
-    c, s = np.cos(th), np.sin(th)
-    return cx + a * c - b * s, cy + a * s + b * c
+def _to_frame(x: float, y: float, cx: float, cy: float, c: float, s: float) -> tuple[float, float]:
+    """World point into the frame centred at (cx, cy) with x axis (c, s)."""
+    dx, dy = x - cx, y - cy
+    return c * dx + s * dy, -s * dx + c * dy
 
 
 @njit(cache=True, inline="always")
-def _inside_rect(
-    px: float, py: float, cx: float, cy: float, th: float, length: float, width: float
-) -> bool:
-    c, s = np.cos(th), np.sin(th)
-    dx, dy = px - cx, py - cy
-    return abs(c * dx + s * dy) <= 0.5 * length and abs(-s * dx + c * dy) <= 0.5 * width
-
-
-@njit(cache=True)
 def rect_segment_distance(
     cx: float,
     cy: float,
@@ -111,17 +117,13 @@ def rect_segment_distance(
 ) -> float:
     """Distance (m) from a rectangle (centre, heading, length along it, width) to a segment;
     0 when they overlap."""
-    if _inside_rect(x1, y1, cx, cy, th, length, width):
-        return 0.0
-    best = np.inf
-    for k in range(4):
-        ax, ay = _rect_corner(cx, cy, th, length, width, k)
-        bx, by = _rect_corner(cx, cy, th, length, width, (k + 1) % 4)
-        best = min(best, segment_distance(ax, ay, bx, by, x1, y1, x2, y2))
-    return best
+    c, s = np.cos(th), np.sin(th)
+    ax, ay = _to_frame(x1, y1, cx, cy, c, s)
+    bx, by = _to_frame(x2, y2, cx, cy, c, s)
+    return _segment_box_distance(ax, ay, bx, by, 0.5 * length, 0.5 * width)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def rect_rect_distance(
     c1x: float,
     c1y: float,
@@ -135,13 +137,23 @@ def rect_rect_distance(
     w2: float,
 ) -> float:
     """Distance (m) between two rectangles; 0 when they overlap."""
-    best = np.inf
-    for k in range(4):
-        ax, ay = _rect_corner(c2x, c2y, th2, l2, w2, k)
-        bx, by = _rect_corner(c2x, c2y, th2, l2, w2, (k + 1) % 4)
-        best = min(best, rect_segment_distance(c1x, c1y, th1, l1, w1, ax, ay, bx, by))
-    if _inside_rect(c1x, c1y, c2x, c2y, th2, l2, w2):
+    c1, s1 = np.cos(th1), np.sin(th1)
+    c2, s2 = np.cos(th2), np.sin(th2)
+    hl2, hw2 = 0.5 * l2, 0.5 * w2
+    # Rectangle 1 wholly inside rectangle 2 meets none of its edges: test its centre.
+    qx, qy = _to_frame(c1x, c1y, c2x, c2y, c2, s2)
+    if abs(qx) <= hl2 and abs(qy) <= hw2:
         return 0.0
+    best = np.inf
+    # Rectangle 2's edges, in rectangle 1's frame, against rectangle 1 as a box.
+    px, py = 0.0, 0.0
+    for k in range(5):
+        a = hl2 if (k % 4) in (1, 2) else -hl2
+        b = hw2 if (k % 4) in (2, 3) else -hw2
+        x, y = _to_frame(c2x + a * c2 - b * s2, c2y + a * s2 + b * c2, c1x, c1y, c1, s1)
+        if k > 0:
+            best = min(best, _segment_box_distance(px, py, x, y, 0.5 * l1, 0.5 * w1))
+        px, py = x, y
     return best
 
 

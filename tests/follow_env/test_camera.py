@@ -68,7 +68,22 @@ def _box(
 ) -> tuple[float, float, float, float, bool]:
     prm = params_from_config(THESIS)
     return body_box(
-        px, py, pth, 0.45, 0.25, 1.7, rx, ry, rth, prm, P_R00, CAM.fx, CAM.fy, CAM.cx, CAM.cy
+        px,
+        py,
+        pth,
+        0.45,
+        0.25,
+        1.7,
+        rx,
+        ry,
+        rth,
+        prm,
+        P_R00,
+        CAM.fx,
+        CAM.fy,
+        CAM.cx,
+        CAM.cy,
+        np.zeros(24),
     )
 
 

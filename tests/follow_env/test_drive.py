@@ -6,10 +6,11 @@ import numpy as np
 
 from follow_env.config import THESIS
 from follow_env.core import BatchedSim
-from follow_env.drive import encoder_count, encoder_speed, motor_step, pid_step
+from follow_env.drive import encoder_count, encoder_speed, lag_factor, motor_step, pid_step
 from follow_env.layout import S_DUTY_R, S_OMEGA_R, S_VMEAS_R
 
 CPR = 2048 * 4
+ALPHA = lag_factor(0.08, 0.01)  # tau 80 ms over a 10 ms tick
 
 
 def test_encoder_counts_are_integers_floored_at_4x_resolution() -> None:
@@ -74,23 +75,23 @@ def test_motor_lags_towards_its_steady_speed() -> None:
     # friction 4 %, 52 % duty -> steady 20 * (52 - 4) / 96 = 10 rad/s; tau 0.08 s
     w = 0.0
     for _ in range(100):  # 1 s = 12.5 tau
-        w = motor_step(w, 52.0, 1.0, 20.0, 0.08, 4.0, 8.0, 0.01)
+        w = motor_step(w, 52.0, 1.0, 20.0, ALPHA, 4.0, 8.0)
     assert np.isclose(w, 10.0, rtol=1e-4)
-    one = motor_step(0.0, 52.0, 1.0, 20.0, 0.08, 4.0, 8.0, 0.01)
+    one = motor_step(0.0, 52.0, 1.0, 20.0, ALPHA, 4.0, 8.0)
     assert np.isclose(one, 10.0 * (1 - np.exp(-0.01 / 0.08)))
 
 
 def test_motor_stalls_below_the_static_friction_duty() -> None:
-    assert motor_step(0.0, 7.0, 1.0, 20.0, 0.08, 4.0, 8.0, 0.01) == 0.0
-    assert motor_step(0.0, 9.0, 1.0, 20.0, 0.08, 4.0, 8.0, 0.01) > 0.0
+    assert motor_step(0.0, 7.0, 1.0, 20.0, ALPHA, 4.0, 8.0) == 0.0
+    assert motor_step(0.0, 9.0, 1.0, 20.0, ALPHA, 4.0, 8.0) > 0.0
     # A turning wheel keeps turning at the same low duty (only static friction holds it).
-    assert motor_step(5.0, 7.0, 1.0, 20.0, 0.08, 4.0, 8.0, 0.01) > 0.0
+    assert motor_step(5.0, 7.0, 1.0, 20.0, ALPHA, 4.0, 8.0) > 0.0
 
 
 def test_motor_speed_saturates_at_the_duty_limit() -> None:
     w = 0.0
     for _ in range(200):
-        w = motor_step(w, 99.0, 1.0, 20.0, 0.08, 4.0, 8.0, 0.01)
+        w = motor_step(w, 99.0, 1.0, 20.0, ALPHA, 4.0, 8.0)
     assert np.isclose(w, 20.0 * 95.0 / 96.0, rtol=1e-4)
 
 

@@ -10,14 +10,7 @@ from follow_env.world import (
     rect_rect_distance,
     rect_segment_distance,
     room_walls,
-    segment_distance,
 )
-
-
-def test_segment_distance_of_crossing_and_parallel_segments() -> None:
-    assert segment_distance(0, 0, 2, 2, 0, 2, 2, 0) == 0.0
-    assert np.isclose(segment_distance(0, 0, 1, 0, 0, 1, 1, 1), 1.0)
-    assert np.isclose(segment_distance(0, 0, 1, 0, 2, 0, 3, 0), 1.0)
 
 
 def test_rectangle_to_segment_distance() -> None:
@@ -34,6 +27,46 @@ def test_rectangle_to_rectangle_distance() -> None:
     assert rect_rect_distance(0, 0, 0, 0.5, 0.4, 0.3, 0.1, 0.7, 0.5, 0.4) == 0.0
     # One inside the other.
     assert rect_rect_distance(0, 0, 0, 2.0, 2.0, 0.1, 0.1, 0.3, 0.2, 0.2) == 0.0
+
+
+def test_rectangle_distance_agrees_with_brute_force_sampling() -> None:
+    rng = np.random.default_rng(1)
+    for _ in range(200):
+        r1 = (*rng.uniform(-1, 1, 2), rng.uniform(-np.pi, np.pi), *rng.uniform(0.2, 1.0, 2))
+        r2 = (*rng.uniform(-1, 1, 2), rng.uniform(-np.pi, np.pi), *rng.uniform(0.2, 1.0, 2))
+        d = rect_rect_distance(*r1, *r2)
+        # Sample both outlines densely; the sampled distance bounds the true one from above.
+        p1, p2 = _outline(*r1), _outline(*r2)
+        sampled = np.min(np.linalg.norm(p1[:, None] - p2[None], axis=-1))
+        overlap = _inside(p1, *r2).any() or _inside(p2, *r1).any()
+        if overlap:
+            assert d == 0.0
+        else:
+            assert d <= sampled + 1e-9
+            assert sampled - d < 0.01  # within the sampling step
+
+
+def _outline(cx: float, cy: float, th: float, length: float, width: float) -> np.ndarray:
+    t = np.linspace(0, 1, 100, endpoint=False)
+    hl, hw = length / 2, width / 2
+    local = np.concatenate(
+        [
+            np.column_stack([-hl + 2 * hl * t, np.full_like(t, -hw)]),
+            np.column_stack([np.full_like(t, hl), -hw + 2 * hw * t]),
+            np.column_stack([hl - 2 * hl * t, np.full_like(t, hw)]),
+            np.column_stack([np.full_like(t, -hl), hw - 2 * hw * t]),
+        ]
+    )
+    c, s = np.cos(th), np.sin(th)
+    return local @ np.array([[c, s], [-s, c]]) + [cx, cy]
+
+
+def _inside(
+    points: np.ndarray, cx: float, cy: float, th: float, length: float, width: float
+) -> np.ndarray:
+    c, s = np.cos(th), np.sin(th)
+    d = points - [cx, cy]
+    return (np.abs(d @ [c, s]) <= length / 2) & (np.abs(d @ [-s, c]) <= width / 2)
 
 
 def test_compiled_wall_contact_agrees_with_pymunk() -> None:
