@@ -197,7 +197,7 @@ from follow_env.rng import (
     STREAM_MOTOR,
     STREAM_PERSON,
     LaneRandom,
-    episode_keys,
+    LaneSeeds,
     normal_at,
     uniform_at,
 )
@@ -768,6 +768,7 @@ class BatchedSim:
         self.paths = np.zeros((num_lanes, self.spec.max_people, self.max_points, N_PW))
         self.walls = np.zeros((num_lanes, self.spec.max_walls, 4))
         self.keys = np.zeros((num_lanes, N_STREAMS), dtype=np.uint64)
+        self.seeds = LaneSeeds(num_lanes)
         self._all = np.ones(num_lanes, dtype=np.bool_)
         workers = min(os.cpu_count() or 1, max(1, num_lanes // (PARALLEL_MIN_LANES // 2)))
         self._pool: ThreadPoolExecutor | None = None
@@ -777,10 +778,18 @@ class BatchedSim:
             self._blocks = list(zip(edges[:-1].tolist(), edges[1:].tolist(), strict=True))
             self._pool = ThreadPoolExecutor(workers, thread_name_prefix="personfollow")
 
-    def reset_lanes(self, lanes: np.ndarray, seed_seqs: list[np.random.SeedSequence]) -> None:
-        """Start a new episode on each of ``lanes``, seeded by the matching ``SeedSequence``."""
+    def reset_lanes(self, lanes: np.ndarray, seeds: list[int | None] | None = None) -> None:
+        """Start the next episode of each of ``lanes``.
+
+        :param lanes: lane indices.
+        :param seeds: new root seeds for these lanes (an int, or ``None`` for OS entropy,
+            each); without it every lane goes on to its next episode (see
+            :class:`~follow_env.rng.LaneSeeds`).
+        """
         lanes = np.asarray(lanes, dtype=np.int64)
-        keys = np.stack([episode_keys(ss) for ss in seed_seqs])
+        if seeds is not None:
+            self.seeds.seed(lanes, list(seeds))
+        keys = self.seeds.next_keys(lanes)
         self.keys[lanes] = keys
         batch = self.spec.fn(LaneRandom(keys[:, STREAM_PERSON]), self.cfg)
         n_people_max = batch.paths.shape[1]

@@ -177,7 +177,7 @@ class PersonFollowEnv(gym.Env[np.ndarray, np.ndarray]):
         cfg = self.config
         self.observation_space, self.action_space = make_spaces(cfg)
         self._action = np.zeros((1, 2))
-        self._root: np.random.SeedSequence | None = None
+        self._lane = np.zeros(1, dtype=np.int64)
         self._renderer: Any = None
         self._episode_over = True
 
@@ -191,9 +191,7 @@ class PersonFollowEnv(gym.Env[np.ndarray, np.ndarray]):
         super().reset(seed=seed)
         if options:
             raise ValueError(f"options={options!r} is out of range: this env takes no options")
-        if seed is not None or self._root is None:
-            self._root = np.random.SeedSequence(seed)
-        self.sim.reset_lanes(np.zeros(1, dtype=np.int64), self._root.spawn(1))
+        self.sim.reset_lanes(self._lane, None if seed is None else [seed])
         self._episode_over = False
         if self._renderer is not None:
             self._renderer.reset()

@@ -53,7 +53,6 @@ class PersonFollowSB3VecEnv(VecEnv):
         self.render_mode = None
         self.full_info = full_info
         self.sim = BatchedSim(self.config, num_envs)
-        self._roots: list[np.random.SeedSequence | None] = [None] * num_envs
         self._actions = np.zeros((num_envs, 2))
         obs_space, act_space = make_spaces(self.config)
         super().__init__(num_envs, obs_space, act_space)
@@ -62,10 +61,10 @@ class PersonFollowSB3VecEnv(VecEnv):
 
     def reset(self) -> np.ndarray:
         """Reset every lane (seeded by ``seed()`` if it was called since the last reset)."""
-        for i, seed in enumerate(self._seeds):
-            if seed is not None or self._roots[i] is None:
-                self._roots[i] = np.random.SeedSequence(seed)
-        self._reset_lanes(np.arange(self.num_envs))
+        seeded = [i for i, seed in enumerate(self._seeds) if seed is not None]
+        if seeded:
+            self.sim.seeds.seed(np.array(seeded), [self._seeds[i] for i in seeded])
+        self.sim.reset_lanes(np.arange(self.num_envs))
         self._reset_seeds()
         self._reset_options()
         return observations(self.sim)
@@ -95,7 +94,7 @@ class PersonFollowSB3VecEnv(VecEnv):
             for i in lanes:
                 infos[i]["terminal_observation"] = obs[i].copy()
                 infos[i]["TimeLimit.truncated"] = bool(truncated[i] and not terminated[i])
-            self._reset_lanes(lanes)
+            self.sim.reset_lanes(lanes)
             obs = observations(self.sim)
         return obs, rewards, dones, infos
 
@@ -130,15 +129,6 @@ class PersonFollowSB3VecEnv(VecEnv):
         return [None for _ in range(self.num_envs)]
 
     # -- helpers ------------------------------------------------------------------------------
-
-    def _reset_lanes(self, lanes: np.ndarray) -> None:
-        children = []
-        for i in lanes:
-            root = self._roots[i]
-            if root is None:
-                root = self._roots[i] = np.random.SeedSequence()
-            children.append(root.spawn(1)[0])
-        self.sim.reset_lanes(lanes, children)
 
     def _infos(self) -> list[dict[str, Any]]:
         if not self.full_info:

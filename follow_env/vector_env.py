@@ -21,14 +21,12 @@ from follow_env.env import resolve_config
 from follow_env.info import batch_info, make_spaces, observations
 from follow_env.layout import S_REWARD, S_TERM, S_TRUNC
 
-__all__ = ["PersonFollowVectorEnv", "lane_seed_sequences"]
+__all__ = ["PersonFollowVectorEnv", "lane_seeds"]
 
 
-def lane_seed_sequences(
-    num_envs: int, seed: int | list[int | None] | None
-) -> list[np.random.SeedSequence]:
-    """Root ``SeedSequence`` of every lane: an int ``s`` gives lane ``i`` the seed ``s + i``
-    (Gymnasium's convention), a list gives one seed per lane, ``None`` fresh OS entropy."""
+def lane_seeds(num_envs: int, seed: int | list[int | None] | None) -> list[int | None]:
+    """Root seed of every lane: an int ``s`` gives lane ``i`` the seed ``s + i`` (Gymnasium's
+    convention), a list gives one seed per lane, ``None`` fresh OS entropy."""
     if seed is None:
         seeds: list[int | None] = [None] * num_envs
     elif isinstance(seed, int | np.integer):
@@ -40,7 +38,7 @@ def lane_seed_sequences(
                 f"seed has {len(seeds)} entries: must be an int, None, or a list of "
                 f"num_envs={num_envs} seeds"
             )
-    return [np.random.SeedSequence(s) for s in seeds]
+    return seeds
 
 
 class PersonFollowVectorEnv(VectorEnv):
@@ -98,7 +96,6 @@ class PersonFollowVectorEnv(VectorEnv):
         self.observation_space = batch_space(self.single_observation_space, num_envs)
         self.action_space = batch_space(self.single_action_space, num_envs)
         self.sim = BatchedSim(self.config, num_envs)
-        self._roots: list[np.random.SeedSequence | None] = [None] * num_envs
         self._autoreset = np.zeros(num_envs, dtype=np.bool_)
         self._actions = np.zeros((num_envs, 2))
         self._mask = np.ones(num_envs, dtype=np.bool_)
@@ -127,12 +124,8 @@ class PersonFollowVectorEnv(VectorEnv):
                 f"of shape ({self.num_envs},) with at least one True"
             )
         lanes = np.flatnonzero(mask)
-        if seed is not None or any(self._roots[i] is None for i in lanes):
-            fresh = lane_seed_sequences(self.num_envs, seed)
-            for i in lanes:
-                if seed is not None or self._roots[i] is None:
-                    self._roots[i] = fresh[i]
-        self._reset_lanes(lanes)
+        seeds = None if seed is None else [lane_seeds(self.num_envs, seed)[i] for i in lanes]
+        self._reset_lanes(lanes, seeds)
         self._autoreset[lanes] = False
         info = self._info()
         if mask.all():
@@ -221,15 +214,9 @@ class PersonFollowVectorEnv(VectorEnv):
 
     # -- helpers ------------------------------------------------------------------------------
 
-    def _reset_lanes(self, lanes: np.ndarray) -> None:
-        """Start each lane's next episode: the next child of its root SeedSequence."""
-        children = []
-        for i in lanes:
-            root = self._roots[i]
-            if root is None:
-                root = self._roots[i] = np.random.SeedSequence()
-            children.append(root.spawn(1)[0])
-        self.sim.reset_lanes(lanes, children)
+    def _reset_lanes(self, lanes: np.ndarray, seeds: list[int | None] | None = None) -> None:
+        """Start each lane's next episode (with new root seeds if given)."""
+        self.sim.reset_lanes(lanes, seeds)
         for i in lanes if self._renderers else ():
             self._renderers[i][0].reset()
 

@@ -99,7 +99,7 @@ def _wheel_step_response(target_mps: float) -> tuple[np.ndarray, np.ndarray]:
     """Right wheel's true linear speed and duty every 10 ms after a step in the target."""
     cfg = THESIS.replace(episode={"control_dt_s": 0.01}, motor={"gain_spread": 0.0})
     sim = BatchedSim(cfg, 1)
-    sim.reset_lanes(np.zeros(1, dtype=np.int64), [np.random.SeedSequence(0)])
+    sim.reset_lanes(np.zeros(1, dtype=np.int64), [0])
     speed, duty = [], []
     for _ in range(150):
         sim.step(np.array([[target_mps, 0.0]]))
@@ -127,7 +127,7 @@ def test_default_pid_has_no_sustained_oscillation() -> None:
 def test_measured_speed_tracks_true_speed_within_quantisation() -> None:
     cfg = THESIS.replace(motor={"gain_spread": 0.0})
     sim = BatchedSim(cfg, 1)
-    sim.reset_lanes(np.zeros(1, dtype=np.int64), [np.random.SeedSequence(0)])
+    sim.reset_lanes(np.zeros(1, dtype=np.int64), [0])
     for _ in range(10):
         sim.step(np.array([[0.5, 0.0]]))
     true = sim.fstate[0, S_OMEGA_R] * cfg.robot.wheel_radius_m

@@ -3,9 +3,10 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from scipy import stats
 
-from follow_env.rng import N_STREAMS, LaneRandom, episode_keys, normal_at, uniform_at
+from follow_env.rng import N_STREAMS, LaneRandom, LaneSeeds, episode_keys, normal_at, uniform_at
 
 
 def test_draws_are_pure_functions_of_key_and_counter() -> None:
@@ -43,3 +44,32 @@ def test_a_lane_draws_the_same_numbers_whatever_else_is_in_the_batch() -> None:
     alone = LaneRandom(keys[:1]).uniform(10)
     together = LaneRandom(keys).uniform(10)
     assert np.array_equal(alone[0], together[0])
+
+
+@pytest.mark.parametrize(
+    "seed", [0, 1, 7, 2**32 - 1, 2**32 + 5, 2**64 + 3, 12345678901234567890123]
+)
+def test_lane_seeds_replay_numpy_seed_sequence_spawn_exactly(seed: int) -> None:
+    seeds = LaneSeeds(1)
+    seeds.seed(np.zeros(1, dtype=np.int64), [seed])
+    root = np.random.SeedSequence(seed)
+    for _ in range(4):  # episode k is the k-th spawned child
+        expected = root.spawn(1)[0].generate_state(N_STREAMS, np.uint64)
+        assert np.array_equal(seeds.next_keys(np.zeros(1, dtype=np.int64))[0], expected)
+
+
+def test_lane_seeds_handle_large_episode_counts_and_many_lanes() -> None:
+    seeds = LaneSeeds(3)
+    seeds.seed(np.arange(3), [10, 11, 12])
+    seeds.episode[:] = [0, 2**32 + 1, 5]
+    keys = seeds.next_keys(np.arange(3))
+    for lane, (seed, k) in enumerate([(10, 0), (11, 2**32 + 1), (12, 5)]):
+        expected = np.random.SeedSequence(seed, spawn_key=(k,)).generate_state(N_STREAMS, np.uint64)
+        assert np.array_equal(keys[lane], expected)
+
+
+def test_lane_seeds_refuse_bad_seeds() -> None:
+    seeds = LaneSeeds(1)
+    for bad in (-1, 1.5, "3", 2**256):
+        with pytest.raises(ValueError, match="seed="):
+            seeds.seed(np.zeros(1, dtype=np.int64), [bad])  # type: ignore[list-item]

@@ -97,7 +97,7 @@ def test_disabled_autoreset_needs_a_masked_reset() -> None:
     assert trunc.all()
     with pytest.raises(ValueError, match="reset_mask"):
         vec.step(a)
-    obs, info = vec.reset(options={"reset_mask": np.array([True, False])})
+    _, info = vec.reset(options={"reset_mask": np.array([True, False])})
     assert info["_step"].tolist() == [True, False]
     with pytest.raises(ValueError, match="lanes \\[1\\]"):
         vec.step(a)
@@ -117,7 +117,7 @@ def test_vector_env_validates_its_arguments() -> None:
         PersonFollowVectorEnv(0)
     with pytest.raises(ValueError, match="autoreset_mode='sometimes'"):
         PersonFollowVectorEnv(2, autoreset_mode="sometimes")
-    with pytest.raises(ValueError, match="PerceptionConfig.miss_prob=2"):
+    with pytest.raises(ValueError, match=r"PerceptionConfig\.miss_prob=2"):
         PersonFollowVectorEnv(2, perception={"miss_prob": 2.0})
     vec = PersonFollowVectorEnv(2)
     vec.reset(seed=0)
