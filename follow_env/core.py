@@ -198,7 +198,7 @@ from follow_env.rng import (
     STREAM_PERSON,
     LaneRandom,
     LaneSeeds,
-    normal_at,
+    normal_pair_at,
     uniform_at,
 )
 from follow_env.scenarios import SCENARIOS, ScenarioSpec
@@ -405,17 +405,10 @@ def _frame(
         elif u_burst < prm[P_BURST_START]:
             ist[I_BURST0 + p] = 1
         if visible and ist[I_BURST0 + p] == 0 and uniform_at(kdet, slot + 1) >= prm[P_MISS_P]:
+            z_cu, z_cv = normal_pair_at(kdet, slot + 2)
+            z_w, z_h = normal_pair_at(kdet, slot + 3)
             j1, j2, j3, j4 = jitter_box(
-                c1,
-                c2,
-                c3,
-                c4,
-                normal_at(kdet, slot + 2),
-                normal_at(kdet, slot + 3),
-                normal_at(kdet, slot + 4),
-                normal_at(kdet, slot + 5),
-                prm[P_JIT_C],
-                prm[P_JIT_S],
+                c1, c2, c3, c4, z_cu, z_cv, z_w, z_h, prm[P_JIT_C], prm[P_JIT_S]
             )
             j1, j2, j3, j4 = clip_box(j1, j2, j3, j4, W, H)
             area = (j3 - j1) * (j4 - j2)
@@ -435,7 +428,7 @@ def _frame(
         if z < prm[P_DEPTH_MIN] or z > prm[P_DEPTH_MAX]:
             z = 0.0
         else:
-            z += normal_at(kd, dslot) * prm[P_DEPTH_K] * z * z  # RMS ~ Z^2 (SPEC §1.3)
+            z += normal_pair_at(kd, dslot)[0] * prm[P_DEPTH_K] * z * z  # RMS ~ Z^2 (SPEC §1.3)
             if prm[P_DEPTH_UNIT] > 0.0:
                 z = np.round(z / prm[P_DEPTH_UNIT]) * prm[P_DEPTH_UNIT]
             invalid = uniform_at(kd, dslot + 1) < prm[P_INVALID_P]
@@ -776,7 +769,7 @@ class BatchedSim:
         if num_lanes >= PARALLEL_MIN_LANES and workers > 1:
             edges = np.linspace(0, num_lanes, workers + 1).astype(int)
             self._blocks = list(zip(edges[:-1].tolist(), edges[1:].tolist(), strict=True))
-            self._pool = ThreadPoolExecutor(workers, thread_name_prefix="personfollow")
+            self._pool = ThreadPoolExecutor(workers - 1, thread_name_prefix="personfollow")
 
     def reset_lanes(self, lanes: np.ndarray, seeds: list[int | None] | None = None) -> None:
         """Start the next episode of each of ``lanes``.
@@ -846,10 +839,14 @@ class BatchedSim:
         if self._pool is None:
             step_kernel(*arrays)
             return
-        # One block of lanes per thread; the kernel releases the GIL.
+        # One block of lanes per core; the kernel releases the GIL, and this thread takes the
+        # first block itself rather than wait idle.
         jobs = [
-            self._pool.submit(step_kernel, *(a[lo:hi] for a in arrays)) for lo, hi in self._blocks
+            self._pool.submit(step_kernel, *(a[lo:hi] for a in arrays))
+            for lo, hi in self._blocks[1:]
         ]
+        lo, hi = self._blocks[0]
+        step_kernel(*(a[lo:hi] for a in arrays))
         for job in jobs:
             job.result()
 

@@ -24,6 +24,7 @@ __all__ = [
     "LaneSeeds",
     "episode_keys",
     "normal_at",
+    "normal_pair_at",
     "uniform_at",
 ]
 
@@ -66,6 +67,17 @@ def normal_at(key: np.uint64, counter: int) -> float:
     u1 = 1.0 - uniform_at(k, 2 * counter)  # in (0, 1]: log is finite
     u2 = uniform_at(k, 2 * counter + 1)
     return np.sqrt(-2.0 * np.log(u1)) * np.cos(2.0 * np.pi * u2)
+
+
+@njit(cache=True, inline="always")
+def normal_pair_at(key: np.uint64, counter: int) -> tuple[float, float]:
+    """Two independent standard normal draws for ``counter`` (both outputs of one Box-Muller
+    transform; the first equals :func:`normal_at` of the same counter)."""
+    k = key ^ _NORMAL_DOMAIN
+    u1 = 1.0 - uniform_at(k, 2 * counter)
+    u2 = uniform_at(k, 2 * counter + 1)
+    r = np.sqrt(-2.0 * np.log(u1))
+    return r * np.cos(2.0 * np.pi * u2), r * np.sin(2.0 * np.pi * u2)
 
 
 @njit(cache=True)

@@ -6,7 +6,15 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from follow_env.rng import N_STREAMS, LaneRandom, LaneSeeds, episode_keys, normal_at, uniform_at
+from follow_env.rng import (
+    N_STREAMS,
+    LaneRandom,
+    LaneSeeds,
+    episode_keys,
+    normal_at,
+    normal_pair_at,
+    uniform_at,
+)
 
 
 def test_draws_are_pure_functions_of_key_and_counter() -> None:
@@ -73,3 +81,12 @@ def test_lane_seeds_refuse_bad_seeds() -> None:
     for bad in (-1, 1.5, "3", 2**256):
         with pytest.raises(ValueError, match="seed="):
             seeds.seed(np.zeros(1, dtype=np.int64), [bad])  # type: ignore[list-item]
+
+
+def test_normal_pairs_are_independent_standard_normals() -> None:
+    key = episode_keys(np.random.SeedSequence(8))[0]
+    pairs = np.array([normal_pair_at(key, c) for c in range(20000)])
+    assert stats.kstest(pairs[:, 0], "norm").pvalue > 1e-3
+    assert stats.kstest(pairs[:, 1], "norm").pvalue > 1e-3
+    assert abs(np.corrcoef(pairs[:, 0], pairs[:, 1])[0, 1]) < 0.03
+    assert pairs[5, 0] == normal_at(key, 5)
