@@ -1,0 +1,87 @@
+"""Atomic writes: a file or a folder appears whole, or not at all.
+
+Every file the evaluation writes goes to a temporary name beside its target and is renamed into
+place when complete (``os.replace`` is atomic on one file system), so an interrupted run never
+leaves a half-written CSV, plot or video that a later reader would trust.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import shutil
+import tempfile
+from collections.abc import Iterator
+from pathlib import Path
+
+__all__ = ["atomic_folder", "atomic_path", "atomic_write_text"]
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+@contextlib.contextmanager
+def atomic_path(path: str | Path) -> Iterator[Path]:
+    """Yield a temporary path beside ``path``; rename it to ``path`` if the block succeeds.
+
+    The temporary name keeps the target's suffix (writers such as ``cv2.VideoWriter`` and
+    ``savefig`` pick the format from it). On an exception the temporary file is removed.
+
+    :raises OSError: if the folder is not writable (the message names it).
+    """
+    path = Path(path)
+    try:
+        fd, tmp_name = tempfile.mkstemp(
+            prefix=f".{path.stem}.", suffix=f".tmp{path.suffix}", dir=path.parent
+        )
+    except OSError as e:
+        raise OSError(f"cannot write to {path.parent}: {e.strerror or e}") from None
+    os.close(fd)
+    tmp = Path(tmp_name)
+    os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; give the file the usual mode
+    try:
+        yield tmp
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+def atomic_write_text(path: str | Path, text: str) -> Path:
+    """Write ``text`` (UTF-8) to ``path`` atomically; returns the path."""
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        tmp.write_text(text, encoding="utf-8")
+    return path
+
+
+@contextlib.contextmanager
+def atomic_folder(path: str | Path) -> Iterator[Path]:
+    """Yield a temporary folder beside ``path``; rename it to ``path`` if the block succeeds.
+
+    ``path`` must not exist, or be an empty folder (a run folder is never overwritten).
+    On an exception the temporary folder and everything in it is removed.
+
+    :raises FileExistsError: if ``path`` exists and is not an empty folder.
+    :raises OSError: if the parent folder cannot be created or written (the message names it).
+    """
+    path = Path(path)
+    if path.exists() and not (path.is_dir() and not any(path.iterdir())):
+        raise FileExistsError(
+            f"{path} already exists and is not an empty folder; choose another output folder"
+        )
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent))
+        os.chmod(tmp, 0o777 & ~_umask())  # mkdtemp makes 0700; give the folder the usual mode
+    except OSError as e:
+        raise OSError(f"cannot write to {path.parent}: {e.strerror or e}") from None
+    try:
+        yield tmp
+        os.replace(tmp, path)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise

@@ -1,0 +1,329 @@
+"""``follow-eval``: run the identical-rollout comparison, or score step logs.
+
+::
+
+    follow-eval run --policies pn,mpn,gsmpn --scenarios straight,curve --episodes 20 --seed 0 \\
+        --out runs/eval-<timestamp> [--workers auto|N] [--config thesis] [--video]
+    follow-eval metrics LOG.csv [LOG.csv | FOLDER ...] [--out DIR]
+
+(also ``python -m eval ...``). ``run`` writes into its output folder::
+
+    summary.csv summary.md summary.json summary.tex   the table (policy x scenario)
+    comparisons.csv                                  paired differences per pair of policies
+    episodes.csv                                     every episode's metrics
+    logs/<policy>/<scenario>/seed_<k>.csv            step logs (eval.steplog)
+    plots/thesis_metrics.png offsets_seed<k>.png trajectories_seed<k>.png
+    videos/<policy>_<scenario>_seed<k>.mp4           with --video
+    meta.json                                        command, grid, gains, versions, timing
+
+The folder appears whole when the run succeeds, or not at all. Bad arguments or input give one
+line on stderr (``follow-eval: error: ...``) and exit status 2, never a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import sys
+import time
+from collections.abc import Sequence
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any, NoReturn
+
+import follow_env
+from eval.atomic import atomic_folder, atomic_write_text
+from eval.steplog import StepLogError, read_step_log, step_log_files, write_step_log
+
+__all__ = ["main"]
+
+PROG = "follow-eval"
+USAGE_ERROR = 2
+
+
+class UsageError(Exception):
+    """Bad arguments or input: reported as one line, exit status 2."""
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse that reports errors as one line (no usage dump), exit status 2."""
+
+    def error(self, message: str) -> NoReturn:
+        raise UsageError(message)
+
+
+def _names(text: str, what: str) -> list[str]:
+    names = [n.strip() for n in text.split(",") if n.strip()]
+    if not names:
+        raise UsageError(f"--{what} is empty: give a comma-separated list of names")
+    return list(dict.fromkeys(names))  # drop repeats, keep order
+
+
+def _workers(text: str) -> int | None:
+    if text == "auto":
+        return None
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not 'auto' or an integer >= 1") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"{value} is out of range: must be 'auto' or >= 1")
+    return value
+
+
+def _non_negative(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"{value} is out of range: must be >= 0")
+    return value
+
+
+def _positive(text: str) -> int:
+    value = _non_negative(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"{value} is out of range: must be >= 1")
+    return value
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The ``follow-eval`` argument parser."""
+    parser = _Parser(
+        prog=PROG, description="Compare person-following controllers on identical rollouts."
+    )
+    sub = parser.add_subparsers(dest="command", required=True, metavar="{run,metrics}")
+    run = sub.add_parser(
+        "run",
+        help="run policies on a scenario x seed grid and write tables, logs and plots",
+        description="Run every policy on every scenario and seed (identical rollouts).",
+    )
+    run.add_argument(
+        "--policies",
+        default="pn,mpn,gsmpn",
+        help="comma-separated policy names, e.g. pn,mpn:thesis,gsmpn-listing "
+        "(default: %(default)s)",
+    )
+    run.add_argument(
+        "--scenarios",
+        default="straight,curve",
+        help="comma-separated scenario names (default: %(default)s)",
+    )
+    run.add_argument(
+        "--episodes", type=_positive, default=20, help="seeds per scenario (default: %(default)s)"
+    )
+    run.add_argument(
+        "--seed",
+        type=_non_negative,
+        default=0,
+        help="first seed; episodes use seed .. seed + episodes - 1 (default: %(default)s)",
+    )
+    run.add_argument(
+        "--config",
+        default="thesis",
+        choices=sorted(follow_env.PRESETS),
+        help="env preset (default: %(default)s)",
+    )
+    run.add_argument(
+        "--out", type=Path, default=None, help="output folder (default: runs/eval-<timestamp>)"
+    )
+    run.add_argument(
+        "--workers",
+        type=_workers,
+        default=None,
+        help="processes: 'auto' (default: a pool only when it pays off) or a number",
+    )
+    run.add_argument(
+        "--plot-seed",
+        type=_non_negative,
+        default=None,
+        help="the seed shown in the offset/trajectory plots and videos (default: --seed)",
+    )
+    run.add_argument(
+        "--video", action="store_true", help="also write an mp4 per policy and scenario"
+    )
+    metrics = sub.add_parser(
+        "metrics",
+        help="compute the same tables from step-log CSVs (simulated or recorded on a robot)",
+        description="Score step logs (eval.steplog layout); folders are searched for *.csv.",
+    )
+    metrics.add_argument("logs", nargs="+", type=Path, help="step-log CSV files or folders")
+    metrics.add_argument(
+        "--policy",
+        default="robot",
+        help="policy label for logs without a policy column (default: %(default)s)",
+    )
+    metrics.add_argument(
+        "--scenario",
+        default="recorded",
+        help="scenario label for logs without a scenario column (default: %(default)s)",
+    )
+    metrics.add_argument(
+        "--out", type=Path, default=None, help="also write the tables into this new folder"
+    )
+    return parser
+
+
+def _check_run_args(args: argparse.Namespace) -> tuple[list[str], list[str]]:
+    from policies import make_policy
+
+    policies = _names(args.policies, "policies")
+    for name in policies:
+        try:
+            make_policy(name)
+        except (ValueError, TypeError) as e:
+            raise UsageError(f"--policies: {e}") from None
+    scenarios = _names(args.scenarios, "scenarios")
+    for name in scenarios:
+        if name not in follow_env.SCENARIOS:
+            known = ", ".join(sorted(follow_env.SCENARIOS))
+            raise UsageError(f"--scenarios: unknown scenario {name!r}; known scenarios: {known}")
+    seeds = range(args.seed, args.seed + args.episodes)
+    if args.plot_seed is not None and args.plot_seed not in seeds:
+        raise UsageError(
+            f"--plot-seed {args.plot_seed} is out of range: must be one of the run's seeds "
+            f"{seeds.start}..{seeds.stop - 1}"
+        )
+    return policies, scenarios
+
+
+def _versions() -> dict[str, str]:
+    from importlib.metadata import PackageNotFoundError, version
+
+    out = {"python": platform.python_version()}
+    for package in ("personfollow", "gymnasium", "numpy", "numba", "scipy", "pandas"):
+        try:
+            out[package] = version(package)
+        except PackageNotFoundError:
+            out[package] = "not installed"
+    return out
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    """``follow-eval run``: see the module docstring."""
+    from eval.report import (
+        markdown_report,
+        plot_offsets,
+        plot_thesis_metrics,
+        plot_trajectories,
+        safe_name,
+        write_tables,
+        write_video,
+    )
+    from eval.rollout import auto_workers, rollout
+    from eval.stats import compare, episode_table, summarize
+    from policies import make_policy
+
+    policies, scenarios = _check_run_args(args)
+    seeds = list(range(args.seed, args.seed + args.episodes))
+    plot_seed = args.seed if args.plot_seed is None else args.plot_seed
+    out: Path = args.out or Path("runs") / f"eval-{datetime.now():%Y%m%d-%H%M%S}"
+    n_episodes = len(policies) * len(scenarios) * len(seeds)
+    workers = args.workers or auto_workers(n_episodes)
+    started = time.perf_counter()
+    with atomic_folder(out) as tmp:
+        episodes = rollout(
+            policies, scenarios, seeds, config=args.config, workers=workers, progress=True
+        )
+        for ep in episodes:
+            folder = tmp / "logs" / safe_name(ep.policy) / safe_name(ep.scenario)
+            folder.mkdir(parents=True, exist_ok=True)
+            write_step_log(ep.log, folder / f"seed_{ep.seed}.csv")
+        table = episode_table(episodes)
+        summary = summarize(table, seed=args.seed)
+        comparisons = compare(table, seed=args.seed)
+        (tmp / "plots").mkdir()
+        plot_thesis_metrics(summary, tmp / "plots" / "thesis_metrics.png")
+        plot_offsets(episodes, plot_seed, tmp / "plots" / f"offsets_seed{plot_seed}.png")
+        plot_trajectories(episodes, plot_seed, tmp / "plots" / f"trajectories_seed{plot_seed}.png")
+        if args.video:
+            (tmp / "videos").mkdir()
+            for policy in dict.fromkeys(ep.policy for ep in episodes):
+                for scenario in scenarios:
+                    name = f"{safe_name(policy)}_{safe_name(scenario)}_seed{plot_seed}.mp4"
+                    write_video(
+                        policy, scenario, plot_seed, tmp / "videos" / name, config=args.config
+                    )
+        elapsed = time.perf_counter() - started
+        meta: dict[str, Any] = {
+            "command": " ".join([PROG, *sys.argv[1:]]),
+            "finished_utc": datetime.now(UTC).isoformat(timespec="seconds"),
+            "elapsed_s": round(elapsed, 2),
+            "policies": {p.name: repr(getattr(p, "params", p)) for p in map(make_policy, policies)},
+            "scenarios": scenarios,
+            "seeds": seeds,
+            "config": args.config,
+            "workers": workers,
+            "plot_seed": plot_seed,
+            "versions": _versions(),
+        }
+        write_tables(tmp, summary, table, comparisons, meta)
+        atomic_write_text(tmp / "meta.json", json.dumps(meta, indent=2) + "\n")
+    print(markdown_report(summary, comparisons))
+    plots = ", ".join(sorted(p.name for p in (out / "plots").iterdir()))
+    print(
+        f"{n_episodes} episodes in {elapsed:.1f} s ({workers} process"
+        f"{'es' if workers > 1 else ''}). Wrote {out}/: summary.csv|md|json|tex, "
+        f"comparisons.csv, episodes.csv, logs/, plots/ ({plots})"
+        + (", videos/" if args.video else "")
+    )
+    return 0
+
+
+def cmd_metrics(args: argparse.Namespace) -> int:
+    """``follow-eval metrics``: the same tables from step-log files."""
+    from eval.report import markdown_report, plot_thesis_metrics, write_tables
+    from eval.rollout import Episode
+    from eval.stats import compare, episode_table, summarize
+
+    files = step_log_files(args.logs)
+    if not files:
+        raise UsageError(f"no *.csv step logs under {', '.join(map(str, args.logs))}")
+    episodes = []
+    for i, path in enumerate(files):
+        log = read_step_log(path)
+        policy = _first_text(log, "policy") or args.policy
+        scenario = _first_text(log, "scenario") or args.scenario
+        seed = int(log["seed"].iloc[0]) if "seed" in log and log["seed"].notna().all() else i
+        if "termination" not in log:
+            log = log.assign(termination="")
+        episodes.append(Episode(policy, scenario, seed, log))
+    table = episode_table(episodes)
+    summary = summarize(table)
+    comparisons = compare(table)
+    if args.out is not None:
+        with atomic_folder(args.out) as tmp:
+            meta = {"command": " ".join([PROG, *sys.argv[1:]]), "logs": [str(f) for f in files]}
+            write_tables(tmp, summary, table, comparisons, meta)
+            (tmp / "plots").mkdir()
+            plot_thesis_metrics(summary, tmp / "plots" / "thesis_metrics.png")
+    print(markdown_report(summary, comparisons))
+    where = f"; wrote {args.out}/" if args.out is not None else ""
+    print(f"{len(files)} step log{'s' if len(files) != 1 else ''} scored{where}")
+    return 0
+
+
+def _first_text(log: Any, column: str) -> str | None:
+    if column not in log:
+        return None
+    values = [v for v in log[column] if isinstance(v, str) and v]
+    return values[0] if values else None
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``follow-eval`` and ``python -m eval``; returns the exit status."""
+    try:
+        args = build_parser().parse_args(argv)
+        return cmd_run(args) if args.command == "run" else cmd_metrics(args)
+    except (UsageError, StepLogError, FileExistsError, OSError, ValueError) as e:
+        print(f"{PROG}: error: {e}", file=sys.stderr)
+        return USAGE_ERROR
+    except KeyboardInterrupt:
+        print(f"{PROG}: interrupted; nothing was written", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,298 @@
+"""Metrics of one episode, each one function over a step log (:mod:`eval.steplog`).
+
+## The thesis's metrics (SPEC.md §1.6), and how each reading was decided
+- ``mean_offset_px``: MeanOffset, the mean absolute pixel offset. From the **observed** offset
+  (``obs_offset_px``), because the thesis logged camera data: what the detector published, with
+  its jitter, not the true position of the person. Only rows with a fresh detection count
+  (``detected == 1``; all rows when the log has no ``detected`` column): between detections the
+  observation is a held copy, not a measurement. The ground-truth version is the extra metric
+  ``mean_true_offset_px``.
+- ``std_offset_px``: StdOffset, the standard deviation of the signed observed offset over the
+  same rows (population form, ddof = 0, as ``numpy.std``).
+- ``mean_accel_mm_s2``: MeanAccel, the mean **magnitude** of the robot's acceleration, in mm/s²,
+  from encoder speed (``accel_mps2``, as the robot computes it). The thesis says "mean of the
+  acceleration"; the signed mean telescopes to (v_end - v_start) / T, which is about 0 for every
+  run that starts and ends at rest and says nothing, so it is read like MeanOffset: mean |a|.
+- ``std_accel_mm_s2``: StdAccel, the standard deviation of the signed acceleration (ddof = 0),
+  mm/s²: the thesis's smoothness figure.
+- ``in_frame_rate_pct``: InFrameRate, the share of rows with the person inside the camera frame,
+  %. From the ground truth ``in_frame`` when the log has it (simulation), otherwise from
+  ``detected`` (all a real robot can know).
+
+## Further metrics
+``mean_true_offset_px`` (mean |true offset|, simulation only), ``mean_distance_error_m`` and
+``rms_distance_error_m`` (distance minus the 1.0 m reference, SPEC.md §1.5; true distance when
+logged, else the published one where it is > 0), ``reacquire_time_s``, ``jerk_rms_m_s3``,
+``turn_accel_rms_rad_s2``, ``lost_rate_pct`` and ``collision_rate_pct`` (per episode 100 or 0,
+so their mean over episodes is a rate), ``path_length_ratio``.
+
+A metric whose columns a log lacks is NaN for that log. Adding a metric is one decorated
+function here::
+
+    @metric("max_offset_px", "px", "max |offset| (px)")
+    def max_offset_px(log: pd.DataFrame) -> float:
+        return float(log["obs_offset_px"].abs().max())
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from types import MappingProxyType
+
+import numpy as np
+import pandas as pd
+
+__all__ = ["METRICS", "THESIS_METRICS", "Metric", "episode_metrics", "extra_metrics", "metric"]
+
+#: Desired following distance (SPEC.md §1.5: "the 1.0 m in V").
+TARGET_DISTANCE_M = 1.0
+#: Episode endings that count as a collision (``follow_env.INFO_KEYS`` "termination").
+COLLISION_ENDINGS = frozenset({"collision_wall", "collision_person"})
+LOST_ENDING = "lost"
+
+MetricFn = Callable[[pd.DataFrame], float]
+
+
+@dataclass(frozen=True)
+class Metric:
+    """A named metric of one episode.
+
+    :param name: column name in tables (unit in the name).
+    :param unit: unit for labels.
+    :param label: short human label for plots and tables.
+    :param fn: the function over a step log.
+    :param thesis: one of the thesis's five metrics (SPEC.md §1.6).
+    """
+
+    name: str
+    unit: str
+    label: str
+    fn: MetricFn
+    thesis: bool = False
+
+
+_REGISTRY: dict[str, Metric] = {}
+
+
+def metric(
+    name: str, unit: str, label: str, *, thesis: bool = False
+) -> Callable[[MetricFn], MetricFn]:
+    """Register a metric function under ``name`` (module docstring has an example).
+
+    :raises ValueError: if the name is taken.
+    """
+
+    def register(fn: MetricFn) -> MetricFn:
+        if name in _REGISTRY:
+            raise ValueError(f"metric {name!r} is already registered")
+        _REGISTRY[name] = Metric(name, unit, label, fn, thesis)
+        return fn
+
+    return register
+
+
+def _camera_rows(log: pd.DataFrame) -> pd.Series:
+    """Observed offsets of the rows with a fresh detection (all rows without ``detected``)."""
+    offset = log["obs_offset_px"]
+    if "detected" in log:
+        offset = offset[log["detected"] > 0.5]
+    return offset.dropna()
+
+
+def _finite(values: pd.Series | np.ndarray) -> np.ndarray:
+    arr = np.asarray(values, dtype=np.float64)
+    return arr[np.isfinite(arr)]
+
+
+def _mean(values: np.ndarray) -> float:
+    return float(np.mean(values)) if values.size else float("nan")
+
+
+def _std(values: np.ndarray) -> float:
+    return float(np.std(values)) if values.size else float("nan")
+
+
+# -- the thesis's metrics (SPEC.md §1.6) ---------------------------------------------------------
+
+
+@metric("mean_offset_px", "px", "MeanOffset (px)", thesis=True)
+def mean_offset_px(log: pd.DataFrame) -> float:
+    """MeanOffset [px]: mean |observed offset| over rows with a fresh detection."""
+    return _mean(np.abs(_finite(_camera_rows(log))))
+
+
+@metric("std_offset_px", "px", "StdOffset (px)", thesis=True)
+def std_offset_px(log: pd.DataFrame) -> float:
+    """StdOffset [px]: standard deviation (ddof 0) of the signed observed offset."""
+    return _std(_finite(_camera_rows(log)))
+
+
+@metric("mean_accel_mm_s2", "mm/s²", "MeanAccel (mm/s²)", thesis=True)
+def mean_accel_mm_s2(log: pd.DataFrame) -> float:
+    """MeanAccel [mm/s²]: mean |acceleration from encoder speed| (module docstring: why |a|)."""
+    return 1000.0 * _mean(np.abs(_finite(log["accel_mps2"])))
+
+
+@metric("std_accel_mm_s2", "mm/s²", "StdAccel (mm/s²)", thesis=True)
+def std_accel_mm_s2(log: pd.DataFrame) -> float:
+    """StdAccel [mm/s²]: standard deviation (ddof 0) of the signed acceleration."""
+    return 1000.0 * _std(_finite(log["accel_mps2"]))
+
+
+@metric("in_frame_rate_pct", "%", "InFrameRate (%)", thesis=True)
+def in_frame_rate_pct(log: pd.DataFrame) -> float:
+    """InFrameRate [%]: rows with the person in the camera frame (ground truth, else detected)."""
+    column = "in_frame" if "in_frame" in log else "detected" if "detected" in log else None
+    if column is None:
+        return float("nan")
+    return 100.0 * _mean(_finite(log[column]) > 0.5)
+
+
+# -- further metrics ------------------------------------------------------------------------------
+
+
+@metric("mean_true_offset_px", "px", "mean |true offset| (px)")
+def mean_true_offset_px(log: pd.DataFrame) -> float:
+    """Mean |true offset| [px] over every row (simulation ground truth; NaN without it)."""
+    if "true_offset_px" not in log:
+        return float("nan")
+    return _mean(np.abs(_finite(log["true_offset_px"])))
+
+
+def _distance_error_m(log: pd.DataFrame) -> np.ndarray:
+    if "true_distance_m" in log:
+        distance = _finite(log["true_distance_m"])
+    else:  # a real robot's log: the published distance, where there is one (0 = none yet)
+        distance = _finite(log["obs_distance_m"])
+        distance = distance[distance > 0.0]
+    return distance - TARGET_DISTANCE_M
+
+
+@metric("mean_distance_error_m", "m", "mean distance error (m)")
+def mean_distance_error_m(log: pd.DataFrame) -> float:
+    """Mean of (distance - 1.0 m) [m]: > 0 means the robot trails too far behind."""
+    return _mean(_distance_error_m(log))
+
+
+@metric("rms_distance_error_m", "m", "RMS distance error (m)")
+def rms_distance_error_m(log: pd.DataFrame) -> float:
+    """Root mean square of (distance - 1.0 m) [m]."""
+    error = _distance_error_m(log)
+    return float(np.sqrt(np.mean(error**2))) if error.size else float("nan")
+
+
+@metric("reacquire_time_s", "s", "time to reacquire (s)")
+def reacquire_time_s(log: pd.DataFrame) -> float:
+    """Mean time [s] from losing the person until the next detection; NaN if never lost.
+
+    A loss starts at a row where the person is out of the frame (ground truth ``in_frame``;
+    without it, a row without detection) after a row where it was not, and ends at the next row
+    with a detection. Losses that never end (the episode ended first) are not timed: they show
+    in ``lost_rate_pct``.
+    """
+    if "detected" not in log:
+        return float("nan")
+    detected = log["detected"].to_numpy() > 0.5
+    lost = log["in_frame"].to_numpy() < 0.5 if "in_frame" in log else ~detected
+    t = log["time_s"].to_numpy()
+    starts = np.flatnonzero(lost[1:] & ~lost[:-1]) + 1
+    durations = []
+    for k in starts:
+        found = np.flatnonzero(detected[k:] & ~lost[k:])
+        if found.size:
+            durations.append(t[k + found[0]] - t[k])
+    return _mean(np.asarray(durations))
+
+
+@metric("jerk_rms_m_s3", "m/s³", "jerk RMS (m/s³)")
+def jerk_rms_m_s3(log: pd.DataFrame) -> float:
+    """RMS of the jerk [m/s³]: the finite difference of ``accel_mps2`` between rows."""
+    t = log["time_s"].to_numpy(dtype=np.float64)
+    a = log["accel_mps2"].to_numpy(dtype=np.float64)
+    jerk = _finite(np.diff(a) / np.diff(t))
+    return float(np.sqrt(np.mean(jerk**2))) if jerk.size else float("nan")
+
+
+@metric("turn_accel_rms_rad_s2", "rad/s²", "turn accel RMS (rad/s²)")
+def turn_accel_rms_rad_s2(log: pd.DataFrame) -> float:
+    """RMS of the yaw acceleration [rad/s²]: finite difference of ``robot_w_radps`` between rows.
+
+    The three classical laws share V = kv (d - 1) and differ only in w (SPEC.md §1.5), so
+    MeanAccel/StdAccel, being forward accelerations, can barely tell them apart; this is the
+    smoothness of what they do differ in. NaN without ``robot_w_radps``.
+    """
+    if "robot_w_radps" not in log:
+        return float("nan")
+    t = log["time_s"].to_numpy(dtype=np.float64)
+    w = log["robot_w_radps"].to_numpy(dtype=np.float64)
+    yaw_accel = _finite(np.diff(w) / np.diff(t))
+    return float(np.sqrt(np.mean(yaw_accel**2))) if yaw_accel.size else float("nan")
+
+
+def _ending(log: pd.DataFrame) -> str | None:
+    if "termination" not in log:
+        return None
+    endings = [str(e) for e in log["termination"] if isinstance(e, str) and e]
+    return endings[-1] if endings else ""
+
+
+@metric("lost_rate_pct", "%", "lost person (%)")
+def lost_rate_pct(log: pd.DataFrame) -> float:
+    """100 if the episode ended because the person was lost (``termination == "lost"``), else 0.
+
+    Averaged over episodes it is the lost-person rate in %. NaN without a ``termination`` column.
+    """
+    ending = _ending(log)
+    return float("nan") if ending is None else 100.0 * (ending == LOST_ENDING)
+
+
+@metric("collision_rate_pct", "%", "collision (%)")
+def collision_rate_pct(log: pd.DataFrame) -> float:
+    """100 if the episode ended in a collision with a wall or the person, else 0.
+
+    Averaged over episodes it is the collision rate in %. NaN without a ``termination`` column.
+    """
+    ending = _ending(log)
+    return float("nan") if ending is None else 100.0 * (ending in COLLISION_ENDINGS)
+
+
+def _path_length_m(x: pd.Series, y: pd.Series) -> float:
+    return float(np.hypot(np.diff(x.to_numpy()), np.diff(y.to_numpy())).sum())
+
+
+@metric("path_length_ratio", "", "path length ratio")
+def path_length_ratio(log: pd.DataFrame) -> float:
+    """Robot path length / person path length over the episode [-]; NaN without poses.
+
+    Near 1 for a robot that follows in the person's footsteps; above 1 when it weaves.
+    """
+    needed = ("robot_x_m", "robot_y_m", "person_x_m", "person_y_m")
+    if not all(c in log for c in needed):
+        return float("nan")
+    person = _path_length_m(log["person_x_m"], log["person_y_m"])
+    if not person > 0.0:
+        return float("nan")
+    return _path_length_m(log["robot_x_m"], log["robot_y_m"]) / person
+
+
+METRICS: MappingProxyType[str, Metric] = MappingProxyType(_REGISTRY)
+"""Every registered metric by name, in registration order (the table's column order)."""
+#: The thesis's five metrics, in the order of its table (SPEC.md §1.6).
+THESIS_METRICS: tuple[str, ...] = (
+    "mean_offset_px",
+    "std_offset_px",
+    "mean_accel_mm_s2",
+    "std_accel_mm_s2",
+    "in_frame_rate_pct",
+)
+
+
+def extra_metrics() -> tuple[str, ...]:
+    """The registered metrics beyond the thesis's five, in registration order."""
+    return tuple(n for n in _REGISTRY if n not in THESIS_METRICS)
+
+
+def episode_metrics(log: pd.DataFrame) -> dict[str, float]:
+    """Every registered metric of one step log, by name, in table order."""
+    return {name: float(m.fn(log)) for name, m in _REGISTRY.items()}

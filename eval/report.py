@@ -1,0 +1,323 @@
+"""Reports: the summary table as CSV, Markdown, JSON and LaTeX; plots; videos.
+
+Every file is written atomically (:mod:`eval.atomic`). The thesis's metrics appear in the
+thesis's units (px, mm/s², %); everything else is SI, as its column name says.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from eval.atomic import atomic_path, atomic_write_text
+from eval.metrics import METRICS, THESIS_METRICS, extra_metrics
+from eval.rollout import Episode
+
+__all__ = [
+    "comparison_markdown",
+    "markdown_report",
+    "plot_offsets",
+    "plot_thesis_metrics",
+    "plot_trajectories",
+    "safe_name",
+    "summary_latex",
+    "summary_markdown",
+    "write_tables",
+    "write_video",
+]
+
+#: The leading columns of summary.csv, fixed by the evaluation issue (thesis metrics first).
+SUMMARY_LEADING = ("policy", "scenario", "episodes", *THESIS_METRICS)
+
+
+def safe_name(name: str) -> str:
+    """A policy or scenario name as a file name part: ``"pn:tuned"`` -> ``"pn_tuned"``."""
+    return re.sub(r"[^A-Za-z0-9._-]+", "_", name).strip("_") or "_"
+
+
+def _fmt(value: float, digits: int) -> str:
+    return "n/a" if not np.isfinite(value) else f"{value:.{digits}f}"
+
+
+def _digits(name: str) -> int:
+    if name.endswith(("_pct", "_px", "_mm_s2")):
+        return 1
+    return 3
+
+
+def _with_ci(summary: pd.DataFrame, name: str) -> pd.Series:
+    d = _digits(name)
+    return pd.Series(
+        [
+            f"{_fmt(m, d)} [{_fmt(lo, d)}, {_fmt(hi, d)}]" if np.isfinite(lo) else _fmt(m, d)
+            for m, lo, hi in zip(
+                summary[name], summary[f"{name}_ci_low"], summary[f"{name}_ci_high"], strict=True
+            )
+        ],
+        index=summary.index,
+    )
+
+
+def _label(name: str) -> str:
+    return METRICS[name].label if name in METRICS else name
+
+
+def summary_markdown(summary: pd.DataFrame, *, extras: bool = False) -> str:
+    """The summary as a Markdown table: mean [95 % CI] per cell.
+
+    :param summary: from :func:`eval.stats.summarize`.
+    :param extras: the further metrics instead of the thesis's five.
+    """
+    names = [m for m in (extra_metrics() if extras else THESIS_METRICS) if m in summary]
+    table = summary[["policy", "scenario", "episodes"]].copy()
+    for name in names:
+        table[_label(name)] = _with_ci(summary, name)
+    return table.to_markdown(index=False, disable_numparse=True)
+
+
+def comparison_markdown(comparisons: pd.DataFrame, metrics: Sequence[str] = THESIS_METRICS) -> str:
+    """Paired differences A - B on the same seeds: ``diff [95 % CI] (p = Wilcoxon)``."""
+    rows = []
+    for (scenario, a, b), group in comparisons.groupby(
+        ["scenario", "policy_a", "policy_b"], sort=False
+    ):
+        row = {"scenario": scenario, "A - B": f"{a} - {b}"}
+        by_metric = group.set_index("metric")
+        for name in metrics:
+            if name not in by_metric.index:
+                continue
+            r = by_metric.loc[name]
+            d = _digits(name)
+            p = "n/a" if not np.isfinite(r["wilcoxon_p"]) else f"{r['wilcoxon_p']:.2g}"
+            ci = (
+                f" [{_fmt(r['diff_ci_low'], d)}, {_fmt(r['diff_ci_high'], d)}]"
+                if np.isfinite(r["diff_ci_low"])
+                else ""
+            )
+            row[_label(name)] = f"{_fmt(r['mean_diff'], d)}{ci} p={p}"
+        rows.append(row)
+    return pd.DataFrame(rows).to_markdown(index=False, disable_numparse=True) if rows else ""
+
+
+def markdown_report(summary: pd.DataFrame, comparisons: pd.DataFrame | None = None) -> str:
+    """The thesis table, the further metrics and (if given) the paired comparisons."""
+    parts = [
+        "## Thesis metrics (SPEC.md §1.6): mean [95 % bootstrap CI] over episodes\n",
+        summary_markdown(summary),
+        "\n\n## Further metrics\n",
+        summary_markdown(summary, extras=True),
+    ]
+    if comparisons is not None and not comparisons.empty:
+        parts += [
+            "\n\n## Paired differences on the same seeds: A - B [95 % CI], Wilcoxon p\n",
+            comparison_markdown(comparisons),
+        ]
+    return "".join(parts) + "\n"
+
+
+def summary_latex(summary: pd.DataFrame) -> str:
+    """The thesis table as a LaTeX ``tabular`` (booktabs): mean [95 % CI] per cell."""
+    table = summary[["policy", "scenario", "episodes"]].copy()
+    for name in THESIS_METRICS:
+        if name in summary:
+            table[_label(name)] = _with_ci(summary, name)
+    return table.to_latex(index=False, escape=True, column_format="ll" + "r" * (table.shape[1] - 2))
+
+
+def _json_value(value: Any) -> Any:
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, np.generic):
+        return _json_value(value.item())
+    return value
+
+
+def _records(frame: pd.DataFrame) -> list[dict[str, Any]]:
+    return [{k: _json_value(v) for k, v in row.items()} for row in frame.to_dict("records")]
+
+
+def write_tables(
+    out: Path,
+    summary: pd.DataFrame,
+    episodes: pd.DataFrame,
+    comparisons: pd.DataFrame,
+    meta: Mapping[str, Any],
+) -> dict[str, Path]:
+    """Write summary.{csv,md,json,tex}, episodes.csv and comparisons.csv into ``out``.
+
+    :returns: the written files by kind.
+    """
+    float_format = "%.6g"
+    files: dict[str, Path] = {}
+    for name, frame in (
+        ("summary.csv", summary),
+        ("episodes.csv", episodes),
+        ("comparisons.csv", comparisons),
+    ):
+        with atomic_path(out / name) as tmp:
+            frame.to_csv(tmp, index=False, float_format=float_format, lineterminator="\n")
+        files[name] = out / name
+    files["summary.md"] = atomic_write_text(
+        out / "summary.md", markdown_report(summary, comparisons)
+    )
+    files["summary.tex"] = atomic_write_text(out / "summary.tex", summary_latex(summary))
+    document = {
+        "meta": {k: _json_value(v) for k, v in meta.items()},
+        "metrics": {
+            name: {"unit": m.unit, "label": m.label, "thesis": m.thesis}
+            for name, m in METRICS.items()
+        },
+        "summary": _records(summary),
+        "comparisons": _records(comparisons),
+    }
+    files["summary.json"] = atomic_write_text(
+        out / "summary.json", json.dumps(document, indent=2, allow_nan=False) + "\n"
+    )
+    return files
+
+
+# -- plots ----------------------------------------------------------------------------------------
+
+
+def _pyplot() -> Any:
+    import matplotlib
+
+    matplotlib.use("Agg")  # no display: files only
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _save(fig: Any, path: Path) -> Path:
+    plt = _pyplot()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png", dpi=110, bbox_inches="tight")
+    plt.close(fig)
+    return path
+
+
+def plot_thesis_metrics(summary: pd.DataFrame, path: Path) -> Path:
+    """Bar charts of the thesis's five metrics: scenarios on x, a bar per policy, 95 % CIs."""
+    plt = _pyplot()
+    policies = list(dict.fromkeys(summary["policy"]))
+    scenarios = list(dict.fromkeys(summary["scenario"]))
+    fig, axes = plt.subplots(1, len(THESIS_METRICS), figsize=(4.0 * len(THESIS_METRICS), 3.8))
+    width = 0.8 / len(policies)
+    x = np.arange(len(scenarios))
+    for ax, name in zip(np.atleast_1d(axes), THESIS_METRICS, strict=True):
+        for i, policy in enumerate(policies):
+            rows = summary[summary["policy"] == policy].set_index("scenario").reindex(scenarios)
+            mean = rows[name].to_numpy(dtype=float)
+            low = rows[f"{name}_ci_low"].to_numpy(dtype=float)
+            high = rows[f"{name}_ci_high"].to_numpy(dtype=float)
+            err = np.vstack([mean - low, high - mean])
+            err = np.where(np.isfinite(err), err, 0.0)
+            ax.bar(
+                x + (i - (len(policies) - 1) / 2) * width,
+                mean,
+                width,
+                yerr=err,
+                capsize=3,
+                label=policy,
+            )
+        ax.set_xticks(x, scenarios)
+        ax.set_title(_label(name))
+        ax.grid(axis="y", alpha=0.3)
+    np.atleast_1d(axes)[0].legend(fontsize="small")
+    fig.suptitle("Thesis metrics, mean over episodes with 95 % bootstrap CI")
+    fig.tight_layout()
+    return _save(fig, path)
+
+
+def _one_seed(episodes: Sequence[Episode], seed: int) -> dict[str, list[Episode]]:
+    by_scenario: dict[str, list[Episode]] = {}
+    for ep in episodes:
+        if ep.seed == seed:
+            by_scenario.setdefault(ep.scenario, []).append(ep)
+    return by_scenario
+
+
+def plot_offsets(episodes: Sequence[Episode], seed: int, path: Path) -> Path:
+    """Observed offset over time for every policy on one seed, a panel per scenario."""
+    plt = _pyplot()
+    by_scenario = _one_seed(episodes, seed)
+    if not by_scenario:
+        raise ValueError(f"no episode with seed {seed} to plot")
+    fig, axes = plt.subplots(
+        len(by_scenario), 1, figsize=(9, 3.0 * len(by_scenario)), squeeze=False
+    )
+    for ax, (scenario, eps) in zip(axes[:, 0], by_scenario.items(), strict=True):
+        for ep in eps:
+            log = ep.log
+            ax.plot(log["time_s"], log["obs_offset_px"], label=ep.policy, lw=1.2)
+        ax.axhline(0.0, color="k", lw=0.6)
+        ax.set_title(f"{scenario}, seed {seed}: observed offset")
+        ax.set_ylabel("offset (px, > 0 right)")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize="small")
+    axes[-1, 0].set_xlabel("time (s)")
+    fig.tight_layout()
+    return _save(fig, path)
+
+
+def plot_trajectories(episodes: Sequence[Episode], seed: int, path: Path) -> Path:
+    """Top-down paths of the person and of every policy's robot on one seed, per scenario."""
+    plt = _pyplot()
+    by_scenario = _one_seed(episodes, seed)
+    if not by_scenario:
+        raise ValueError(f"no episode with seed {seed} to plot")
+    n = len(by_scenario)
+    fig, axes = plt.subplots(1, n, figsize=(5.5 * n, 5.0), squeeze=False)
+    for ax, (scenario, eps) in zip(axes[0], by_scenario.items(), strict=True):
+        person = eps[0].log
+        ax.plot(person["person_x_m"], person["person_y_m"], "k--", lw=2, label="person")
+        for ep in eps:
+            (line,) = ax.plot(ep.log["robot_x_m"], ep.log["robot_y_m"], lw=1.2, label=ep.policy)
+            end = ep.log.iloc[-1]
+            ax.plot(end["robot_x_m"], end["robot_y_m"], "o", ms=4, color=line.get_color())
+        ax.set_aspect("equal", adjustable="datalim")
+        ax.set_title(f"{scenario}, seed {seed}")
+        ax.set_xlabel("x (m)")
+        ax.set_ylabel("y (m)")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize="small")
+    fig.tight_layout()
+    return _save(fig, path)
+
+
+def write_video(
+    policy: str, scenario: str, seed: int, path: Path, *, config: Any = "thesis", fps: int = 10
+) -> Path:
+    """Render one episode (identical to the evaluated one) to an mp4 (OpenCV, mp4v).
+
+    :param fps: frames per second; 10 plays the 0.1 s control steps in real time.
+    """
+    import cv2
+
+    from eval.rollout import run_episode
+
+    writer: Any = None
+    with atomic_path(path) as tmp:
+        try:
+
+            def on_frame(frame: np.ndarray) -> None:
+                nonlocal writer
+                if writer is None:
+                    h, w = frame.shape[:2]
+                    writer = cv2.VideoWriter(str(tmp), cv2.VideoWriter_fourcc(*"mp4v"), fps, (w, h))
+                    if not writer.isOpened():
+                        raise OSError(f"cannot open a video writer for {path}")
+                writer.write(cv2.cvtColor(frame, cv2.COLOR_RGB2BGR))  # OpenCV wants BGR
+
+            run_episode(policy, scenario, seed, config=config, on_frame=on_frame)
+        finally:
+            if writer is not None:
+                writer.release()
+    return path

@@ -1,0 +1,174 @@
+"""Statistics over episodes: means with bootstrap intervals, and paired comparisons.
+
+- :func:`episode_table`: one row per episode (policy, scenario, seed, ending, every metric).
+- :func:`summarize`: per policy x scenario cell, the mean of each metric over its episodes and a
+  95 % bootstrap confidence interval of that mean (``scipy.stats.bootstrap``, BCa).
+- :func:`compare`: per scenario and pair of policies, the paired difference A - B on the same
+  seeds (identical rollouts make the pairing valid): its mean, a bootstrap CI, and the Wilcoxon
+  signed-rank p-value (``scipy.stats.wilcoxon``, two-sided).
+
+Episodes where a metric is NaN (e.g. ``reacquire_time_s`` when the person was never lost) are
+left out of that metric's mean, interval and test; ``<metric>_n`` in the episode counts says how
+many were used.
+"""
+
+from __future__ import annotations
+
+import itertools
+import warnings
+from collections.abc import Sequence
+
+import numpy as np
+import pandas as pd
+from scipy import stats
+
+from eval.metrics import METRICS, THESIS_METRICS, episode_metrics, extra_metrics
+from eval.rollout import Episode
+
+__all__ = ["CONFIDENCE", "compare", "episode_table", "metric_columns", "summarize"]
+
+#: Confidence level of every interval.
+CONFIDENCE = 0.95
+#: Bootstrap resamples (scipy's default); 9999 keeps the interval ends stable to ~1 % here.
+N_RESAMPLES = 9999
+KEY_COLUMNS = ("policy", "scenario")
+
+
+def metric_columns() -> list[str]:
+    """Metric columns in table order: the thesis's five, then the others."""
+    return [*THESIS_METRICS, *extra_metrics()]
+
+
+def episode_table(episodes: Sequence[Episode]) -> pd.DataFrame:
+    """One row per episode: ``policy, scenario, seed, steps, termination`` and every metric."""
+    rows = [
+        {
+            "policy": ep.policy,
+            "scenario": ep.scenario,
+            "seed": ep.seed,
+            "steps": ep.steps,
+            "termination": ep.termination,
+            **episode_metrics(ep.log),
+        }
+        for ep in episodes
+    ]
+    return pd.DataFrame(
+        rows, columns=["policy", "scenario", "seed", "steps", "termination", *METRICS]
+    )
+
+
+def _ci(values: np.ndarray, rng: np.random.Generator) -> tuple[float, float]:
+    """Bootstrap CI of the mean of ``values`` (NaN-free); degenerate cases handled by hand."""
+    if values.size < 2:
+        return (np.nan, np.nan)  # one episode gives no interval
+    if np.ptp(values) == 0.0:
+        return (float(values[0]), float(values[0]))  # every resample has the same mean
+    with warnings.catch_warnings():
+        # BCa warns and may give NaN when nearly every value is equal (e.g. one collision in
+        # twenty); fall back to the percentile interval then.
+        warnings.simplefilter("ignore", stats.DegenerateDataWarning)
+        res = stats.bootstrap(
+            (values,),
+            np.mean,
+            confidence_level=CONFIDENCE,
+            n_resamples=N_RESAMPLES,
+            method="BCa",
+            random_state=rng,
+        )
+        low, high = res.confidence_interval
+        if not (np.isfinite(low) and np.isfinite(high)):
+            res = stats.bootstrap(
+                (values,),
+                np.mean,
+                confidence_level=CONFIDENCE,
+                n_resamples=N_RESAMPLES,
+                method="percentile",
+                random_state=rng,
+            )
+            low, high = res.confidence_interval
+    return (float(low), float(high))
+
+
+def summarize(table: pd.DataFrame, *, seed: int = 0) -> pd.DataFrame:
+    """Mean and 95 % bootstrap CI of every metric per (policy, scenario).
+
+    :param table: an :func:`episode_table`.
+    :param seed: seeds the bootstrap resampling, so a report is reproducible.
+    :returns: columns ``policy, scenario, episodes``, the metric means in
+        :func:`metric_columns` order, then ``<metric>_ci_low`` and ``<metric>_ci_high`` for each
+        metric. Rows keep the order the cells first appear in ``table``.
+    """
+    metrics = [m for m in metric_columns() if m in table]
+    rng = np.random.default_rng(seed)
+    rows = []
+    for (policy, scenario), cell in table.groupby(list(KEY_COLUMNS), sort=False):
+        row: dict[str, object] = {"policy": policy, "scenario": scenario, "episodes": len(cell)}
+        bounds: dict[str, float] = {}
+        for m in metrics:
+            values = cell[m].to_numpy(dtype=np.float64)
+            values = values[np.isfinite(values)]
+            row[m] = float(values.mean()) if values.size else np.nan
+            bounds[f"{m}_ci_low"], bounds[f"{m}_ci_high"] = _ci(values, rng)
+        rows.append({**row, **bounds})
+    columns = ["policy", "scenario", "episodes", *metrics]
+    columns += [f"{m}_ci_{end}" for m in metrics for end in ("low", "high")]
+    return pd.DataFrame(rows, columns=columns)
+
+
+def compare(
+    table: pd.DataFrame, *, metrics: Sequence[str] | None = None, seed: int = 0
+) -> pd.DataFrame:
+    """Paired comparison of every pair of policies per scenario, on the seeds both ran.
+
+    :param table: an :func:`episode_table`.
+    :param metrics: the metrics to compare (default: all in :func:`metric_columns` order).
+    :param seed: seeds the bootstrap resampling.
+    :returns: one row per (scenario, policy_a, policy_b, metric) with ``n`` (paired seeds with
+        both values finite), ``mean_a``, ``mean_b``, ``mean_diff`` (A - B), ``diff_ci_low``,
+        ``diff_ci_high`` and ``wilcoxon_p`` (NaN when every difference is 0 or n < 2).
+    """
+    metrics = [m for m in (metrics or metric_columns()) if m in table]
+    rng = np.random.default_rng(seed)
+    policies = list(dict.fromkeys(table["policy"]))
+    rows = []
+    for scenario in dict.fromkeys(table["scenario"]):
+        in_scenario = table[table["scenario"] == scenario]
+        for a, b in itertools.combinations(policies, 2):
+            pa = in_scenario[in_scenario["policy"] == a].set_index("seed")
+            pb = in_scenario[in_scenario["policy"] == b].set_index("seed")
+            seeds = pa.index.intersection(pb.index)
+            if seeds.empty:
+                continue
+            for m in metrics:
+                va = pa.loc[seeds, m].to_numpy(dtype=np.float64)
+                vb = pb.loc[seeds, m].to_numpy(dtype=np.float64)
+                ok = np.isfinite(va) & np.isfinite(vb)
+                diff = va[ok] - vb[ok]
+                low, high = _ci(diff, rng)
+                rows.append(
+                    {
+                        "scenario": scenario,
+                        "policy_a": a,
+                        "policy_b": b,
+                        "metric": m,
+                        "n": int(ok.sum()),
+                        "mean_a": float(va[ok].mean()) if ok.any() else np.nan,
+                        "mean_b": float(vb[ok].mean()) if ok.any() else np.nan,
+                        "mean_diff": float(diff.mean()) if diff.size else np.nan,
+                        "diff_ci_low": low,
+                        "diff_ci_high": high,
+                        "wilcoxon_p": _wilcoxon_p(diff),
+                    }
+                )
+    columns = ["scenario", "policy_a", "policy_b", "metric", "n", "mean_a", "mean_b"]
+    columns += ["mean_diff", "diff_ci_low", "diff_ci_high", "wilcoxon_p"]
+    return pd.DataFrame(rows, columns=columns)
+
+
+def _wilcoxon_p(diff: np.ndarray) -> float:
+    """Two-sided Wilcoxon signed-rank p-value of paired differences; NaN if undefined."""
+    if diff.size < 2 or not np.any(diff != 0.0):
+        return np.nan
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # small-sample and tie notices; the p-value stands
+        return float(stats.wilcoxon(diff).pvalue)

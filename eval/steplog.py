@@ -1,0 +1,252 @@
+"""Step logs: one CSV per episode, one row per control step, in a layout a real robot can write.
+
+The reference robot logged its camera and encoder data to CSV every 0.1 s (SPEC.md §1.6). A step
+log here is that file, extended with the simulation's ground truth. Only the first columns are
+needed to compute the thesis metrics, so a log recorded on the real robot (time, observation,
+encoder speeds) is read and scored by the same code as a simulated one; every other column is
+optional and the metrics that need it give NaN without it.
+
+## Columns
+In this order (units in the names; a real robot's log may leave out any optional column):
+
+| column | unit | required | meaning |
+|---|---|---|---|
+| ``policy``, ``scenario``, ``seed`` | | no | what ran (text, text, integer); constant per file |
+| ``step`` | | no | control step index, 0 at reset |
+| ``time_s`` | s | yes | time since reset; strictly increasing |
+| ``obs_distance_m`` | m | yes | published distance (SPEC §1.4; 0 = no reading yet) |
+| ``obs_offset_px`` | px | yes | published offset, > 0 right of centre (held when not detected) |
+| ``detected`` | 0/1 | no | a fresh detection was published at this step |
+| ``raw_depth_m`` | m | no | the depth pixel behind the last detection, before the filter |
+| ``action_v_mps``, ``action_w_radps`` | m/s, rad/s | no | command sent (final row: none) |
+| ``wheel_target_r_mps``, ``wheel_target_l_mps`` | m/s | no | PID set-points |
+| ``wheel_measured_r_mps``, ``wheel_measured_l_mps`` | m/s | no | encoder wheel speeds |
+| ``duty_r_pct``, ``duty_l_pct`` | % | no | motor duty |
+| ``encoder_speed_mps`` | m/s | see below | robot speed from the encoders, (right + left) / 2 |
+| ``accel_mps2`` | m/s² | see below | finite difference of ``encoder_speed_mps`` over one step |
+| ``true_distance_m``, ``true_offset_px``, ``in_frame`` | m, px, 0/1 | no | the person's truth |
+| ``robot_x_m`` ... ``robot_w_radps`` | m, rad, m/s, rad/s | no | robot pose and speeds |
+| ``person_x_m`` ... ``person_v_mps`` | m, rad, m/s | no | person pose and speed |
+| ``wheel_true_r_radps``, ``wheel_true_l_radps`` | rad/s | no | true wheel speeds |
+| ``wall_clearance_m``, ``person_clearance_m`` | m | no | clearances |
+| ``detected_person`` | | no | index of the person the detector picked first (-1: none) |
+| ``reward`` | | no | the env's reward for the step that led to this row |
+| ``termination`` | | no | why the episode ended (final row only; see ``follow_env.INFO_KEYS``) |
+
+One of ``accel_mps2`` and ``encoder_speed_mps`` is required; when only the speed is logged, the
+acceleration is computed from it as the robot does (finite difference per row).
+
+Row k holds the observation published at time k dt, the state at that time and the action the
+policy chose from it; the final row holds the state the episode ended in (no action).
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from collections.abc import Iterable
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from eval.atomic import atomic_path
+
+__all__ = [
+    "ACTION_COLUMNS",
+    "COLUMNS",
+    "META_COLUMNS",
+    "REQUIRED_COLUMNS",
+    "TEXT_COLUMNS",
+    "StepLogError",
+    "read_step_log",
+    "validate_step_log",
+    "write_step_log",
+]
+
+META_COLUMNS: tuple[str, ...] = ("policy", "scenario", "seed")
+ACTION_COLUMNS: tuple[str, ...] = ("action_v_mps", "action_w_radps")
+#: Every column a simulated step log has, in file order (module docstring).
+COLUMNS: tuple[str, ...] = (
+    *META_COLUMNS,
+    "step",
+    "time_s",
+    "obs_distance_m",
+    "obs_offset_px",
+    "detected",
+    "raw_depth_m",
+    *ACTION_COLUMNS,
+    "wheel_target_r_mps",
+    "wheel_target_l_mps",
+    "wheel_measured_r_mps",
+    "wheel_measured_l_mps",
+    "duty_r_pct",
+    "duty_l_pct",
+    "encoder_speed_mps",
+    "accel_mps2",
+    "true_distance_m",
+    "true_offset_px",
+    "in_frame",
+    "robot_x_m",
+    "robot_y_m",
+    "robot_theta_rad",
+    "robot_v_mps",
+    "robot_w_radps",
+    "person_x_m",
+    "person_y_m",
+    "person_theta_rad",
+    "person_v_mps",
+    "wheel_true_r_radps",
+    "wheel_true_l_radps",
+    "wall_clearance_m",
+    "person_clearance_m",
+    "detected_person",
+    "reward",
+    "termination",
+)
+#: Columns holding text; every other column is numeric.
+TEXT_COLUMNS: frozenset[str] = frozenset({"policy", "scenario", "termination"})
+#: Columns a log must have, with a value in every row.
+REQUIRED_COLUMNS: tuple[str, ...] = ("time_s", "obs_distance_m", "obs_offset_px")
+# One of these must be present (module docstring).
+_ACCEL_SOURCES = ("accel_mps2", "encoder_speed_mps")
+# Enough digits that float32 observations and float64 ground truth survive the round trip to
+# 1e-9 relative, at a third of the size of full repr precision.
+FLOAT_FORMAT = "%.9g"
+
+
+class StepLogError(ValueError):
+    """A step log file is missing, unreadable or malformed; the message names file and row."""
+
+
+def write_step_log(log: pd.DataFrame, path: str | Path) -> Path:
+    """Write ``log`` as CSV atomically (a temporary file renamed into place).
+
+    :param log: a step log (columns as in :data:`COLUMNS`, any subset in any order is written
+        as given).
+    :param path: the target file; its folder must exist.
+    :returns: the path written.
+    """
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        log.to_csv(tmp, index=False, float_format=FLOAT_FORMAT, lineterminator="\n")
+    return path
+
+
+def read_step_log(path: str | Path) -> pd.DataFrame:
+    """Read and validate a step log.
+
+    Cells may be empty (not recorded) except in the required columns. Text columns come back
+    as strings (empty string when blank), every other column as float64.
+
+    :raises StepLogError: naming the file, and the line and column for a malformed row: a
+        missing file, no header, a missing required column, a row with the wrong number of
+        fields, a cell that is not a number, a non-finite or non-increasing ``time_s``.
+    """
+    path = Path(path)
+    try:
+        with path.open(newline="", encoding="utf-8") as f:
+            rows = list(csv.reader(f))
+    except FileNotFoundError:
+        raise StepLogError(f"{path}: no such file") from None
+    except IsADirectoryError:
+        raise StepLogError(f"{path}: is a folder, not a step log CSV") from None
+    except UnicodeDecodeError as e:
+        raise StepLogError(f"{path}: not a text CSV file ({e.reason} at byte {e.start})") from None
+    except OSError as e:
+        raise StepLogError(f"{path}: cannot read: {e.strerror or e}") from None
+    except csv.Error as e:
+        raise StepLogError(f"{path}: not a valid CSV file: {e}") from None
+    if not rows or not any(cell.strip() for cell in rows[0]):
+        raise StepLogError(f"{path}: empty file; expected a header line with the columns")
+    header = [cell.strip() for cell in rows[0]]
+    return _to_frame(path, header, rows[1:])
+
+
+def _to_frame(path: Path, header: list[str], rows: list[list[str]]) -> pd.DataFrame:
+    dupes = sorted({c for c in header if header.count(c) > 1})
+    if dupes:
+        raise StepLogError(f"{path}: duplicate column(s) {', '.join(dupes)} in the header")
+    missing = [c for c in REQUIRED_COLUMNS if c not in header]
+    if not any(c in header for c in _ACCEL_SOURCES):
+        missing.append(" or ".join(_ACCEL_SOURCES))
+    if missing:
+        raise StepLogError(
+            f"{path}: missing column(s) {', '.join(missing)}; a step log needs "
+            f"{', '.join(REQUIRED_COLUMNS)} and accel_mps2 or encoder_speed_mps"
+        )
+    # Skip blank lines (a trailing newline at the end of a hand-written file).
+    numbered = [(i + 2, r) for i, r in enumerate(rows) if any(cell.strip() for cell in r)]
+    if not numbered:
+        raise StepLogError(f"{path}: no data rows after the header")
+    for line, row in numbered:
+        if len(row) != len(header):
+            raise StepLogError(
+                f"{path}: line {line}: expected {len(header)} fields as in the header, "
+                f"found {len(row)}"
+            )
+    lines = [line for line, _ in numbered]
+    data = {name: [row[j].strip() for _, row in numbered] for j, name in enumerate(header) if name}
+    frame = pd.DataFrame(index=pd.RangeIndex(len(numbered)))
+    for name, cells in data.items():
+        if name in TEXT_COLUMNS:
+            frame[name] = cells
+            continue
+        values = pd.to_numeric(pd.Series(cells).replace("", np.nan), errors="coerce")
+        bad = values.isna() & (pd.Series(cells) != "")
+        if bad.any():
+            k = int(np.flatnonzero(bad.to_numpy())[0])
+            raise StepLogError(
+                f"{path}: line {lines[k]}, column {name}: {cells[k]!r} is not a number"
+            )
+        if name in REQUIRED_COLUMNS and values.isna().any():
+            k = int(np.flatnonzero(values.isna().to_numpy())[0])
+            raise StepLogError(f"{path}: line {lines[k]}, column {name}: value is missing")
+        frame[name] = values.astype(np.float64)
+    validate_step_log(frame, path, lines)
+    if "accel_mps2" not in frame:
+        frame["accel_mps2"] = accel_from_speed(frame["time_s"], frame["encoder_speed_mps"])
+    return frame
+
+
+def validate_step_log(
+    log: pd.DataFrame, path: str | Path = "<log>", lines: Iterable[int] | None = None
+) -> None:
+    """Check the invariants every step log keeps: finite, strictly increasing ``time_s``.
+
+    :param log: the step log.
+    :param path: the file name used in messages.
+    :param lines: file line numbers of the rows (default: row index + 2, after a header).
+    :raises StepLogError: naming the first offending line.
+    """
+    t = log["time_s"].to_numpy(dtype=np.float64)
+    line_of = list(lines) if lines is not None else [k + 2 for k in range(len(t))]
+    for k, value in enumerate(t):
+        if not math.isfinite(value):
+            raise StepLogError(f"{path}: line {line_of[k]}, column time_s: {value} is not finite")
+        if k > 0 and value <= t[k - 1]:
+            raise StepLogError(
+                f"{path}: line {line_of[k]}, column time_s: {value:g} s is not after the "
+                f"previous row's {t[k - 1]:g} s"
+            )
+
+
+def accel_from_speed(time_s: pd.Series, speed_mps: pd.Series) -> pd.Series:
+    """Acceleration as the robot computes it: speed difference over the time between rows.
+
+    The first row has no predecessor and gets 0 (the robot starts at rest, SPEC.md §1.6).
+
+    :param time_s: sample times [s].
+    :param speed_mps: encoder speed [m/s].
+    :returns: acceleration [m/s²].
+    """
+    accel = speed_mps.diff() / time_s.diff()
+    return accel.fillna(0.0) if len(accel) else accel
+
+
+def step_log_files(paths: Iterable[str | Path]) -> list[Path]:
+    """Expand folders into the ``*.csv`` files below them (sorted); keep files as given."""
+    out: list[Path] = []
+    for p in map(Path, paths):
+        out.extend(sorted(p.rglob("*.csv")) if p.is_dir() else [p])
+    return out

@@ -1,0 +1,67 @@
+"""eval/atomic.py: files and folders appear whole or not at all."""
+
+from pathlib import Path
+
+import pytest
+
+from eval.atomic import atomic_folder, atomic_path, atomic_write_text
+
+
+def test_atomic_path_renames_into_place(tmp_path: Path) -> None:
+    with atomic_path(tmp_path / "a.txt") as tmp:
+        tmp.write_text("hello")
+        assert not (tmp_path / "a.txt").exists()
+    assert (tmp_path / "a.txt").read_text() == "hello"
+    assert [p.name for p in tmp_path.iterdir()] == ["a.txt"]
+
+
+def test_atomic_path_leaves_nothing_on_failure(tmp_path: Path) -> None:
+    def write_half(tmp: Path) -> None:
+        tmp.write_text("half")
+        raise RuntimeError("writer failed")
+
+    with pytest.raises(RuntimeError), atomic_path(tmp_path / "a.txt") as tmp:
+        write_half(tmp)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_atomic_path_keeps_the_suffix_for_format_sniffing_writers(tmp_path: Path) -> None:
+    with atomic_path(tmp_path / "v.mp4") as tmp:
+        assert tmp.suffix == ".mp4"
+
+
+def test_atomic_write_into_missing_folder_names_it(tmp_path: Path) -> None:
+    with pytest.raises(OSError, match=r"cannot write to .*missing"):
+        atomic_write_text(tmp_path / "missing" / "a.txt", "x")
+
+
+def test_atomic_folder_appears_only_when_complete(tmp_path: Path) -> None:
+    with atomic_folder(tmp_path / "run") as tmp:
+        (tmp / "a.csv").write_text("x")
+        assert not (tmp_path / "run").exists()
+    assert (tmp_path / "run" / "a.csv").read_text() == "x"
+
+
+def test_atomic_folder_is_removed_on_failure(tmp_path: Path) -> None:
+    def write_and_stop(tmp: Path) -> None:
+        (tmp / "a.csv").write_text("x")
+        raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt), atomic_folder(tmp_path / "run") as tmp:
+        write_and_stop(tmp)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_atomic_folder_fills_an_empty_folder(tmp_path: Path) -> None:
+    (tmp_path / "run").mkdir()
+    with atomic_folder(tmp_path / "run") as tmp:
+        (tmp / "a.csv").write_text("x")
+    assert (tmp_path / "run" / "a.csv").exists()
+
+
+def test_atomic_folder_never_overwrites_a_previous_run(tmp_path: Path) -> None:
+    (tmp_path / "run").mkdir()
+    (tmp_path / "run" / "old.csv").write_text("keep")
+    with pytest.raises(FileExistsError, match="already exists and is not an empty folder"):
+        atomic_folder(tmp_path / "run").__enter__()
+    assert (tmp_path / "run" / "old.csv").read_text() == "keep"

@@ -1,0 +1,223 @@
+"""eval/cli.py: ``follow-eval run`` and ``metrics`` end to end, and one-line errors."""
+
+import json
+import os
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from eval.cli import main
+from eval.metrics import THESIS_METRICS
+
+LEADING = [
+    "policy",
+    "scenario",
+    "episodes",
+    "mean_offset_px",
+    "std_offset_px",
+    "mean_accel_mm_s2",
+    "std_accel_mm_s2",
+    "in_frame_rate_pct",
+]
+GRID = ["--policies", "pn,gsmpn:thesis", "--scenarios", "straight,curve", "--episodes", "2"]
+
+
+@pytest.fixture(scope="module")
+def run_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("cli") / "run"
+    assert main(["run", *GRID, "--seed", "5", "--out", str(out), "--workers", "1"]) == 0
+    return out
+
+
+def test_run_writes_every_report_file(run_dir: Path) -> None:
+    names = {p.relative_to(run_dir).as_posix() for p in run_dir.rglob("*") if p.is_file()}
+    expected = {
+        "summary.csv",
+        "summary.md",
+        "summary.json",
+        "summary.tex",
+        "comparisons.csv",
+        "episodes.csv",
+        "meta.json",
+        "plots/thesis_metrics.png",
+        "plots/offsets_seed5.png",
+        "plots/trajectories_seed5.png",
+    }
+    logs = {
+        f"logs/{p}/{s}/seed_{k}.csv"
+        for p in ("pn_tuned", "gsmpn_thesis")
+        for s in ("straight", "curve")
+        for k in (5, 6)
+    }
+    assert names == expected | logs
+    assert not any(p.name.startswith(".") for p in run_dir.parent.iterdir())  # no temp left
+
+
+def test_summary_csv_has_the_thesis_columns_first(run_dir: Path) -> None:
+    summary = pd.read_csv(run_dir / "summary.csv")
+    assert list(summary.columns[: len(LEADING)]) == LEADING
+    assert "mean_offset_px_ci_low" in summary.columns
+    assert "rms_distance_error_m" in summary.columns
+    assert len(summary) == 4
+    assert set(summary["episodes"]) == {2}
+    assert list(summary["policy"]) == ["pn:tuned", "pn:tuned", "gsmpn:thesis", "gsmpn:thesis"]
+
+
+def test_json_and_markdown_and_latex_parse(run_dir: Path) -> None:
+    document = json.loads((run_dir / "summary.json").read_text())
+    assert len(document["summary"]) == 4
+    assert document["meta"]["seeds"] == [5, 6]
+    assert document["metrics"]["mean_accel_mm_s2"]["unit"] == "mm/s²"
+    assert {r["policy_a"] for r in document["comparisons"]} == {"pn:tuned"}
+    markdown = (run_dir / "summary.md").read_text()
+    assert "| MeanOffset (px)" in markdown
+    latex = (run_dir / "summary.tex").read_text()
+    assert "\\begin{tabular}" in latex
+    assert "pn:tuned" in latex
+
+
+def test_plots_are_png_files(run_dir: Path) -> None:
+    for png in (run_dir / "plots").iterdir():
+        assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_run_prints_the_table_and_where_it_wrote(
+    tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
+    out = tmp_path / "r"
+    args = ["run", "--policies", "pn", "--scenarios", "straight", "--episodes", "1"]
+    assert main([*args, "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "| policy" in printed
+    assert "MeanOffset (px)" in printed
+    assert f"Wrote {out}/" in printed
+
+
+def test_metrics_on_the_run_logs_reproduces_the_summary(
+    run_dir: Path, tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
+    out = tmp_path / "scored"
+    assert main(["metrics", str(run_dir / "logs"), "--out", str(out)]) == 0
+    assert "8 step logs scored" in capsys.readouterr().out
+    key = ["policy", "scenario"]
+    ran = pd.read_csv(run_dir / "summary.csv").sort_values(key, ignore_index=True)
+    scored = pd.read_csv(out / "summary.csv").sort_values(key, ignore_index=True)
+    pd.testing.assert_frame_equal(scored[LEADING], ran[LEADING], check_exact=False, rtol=1e-5)
+
+
+def test_metrics_labels_a_minimal_robot_log(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    log = tmp_path / "robot.csv"
+    log.write_text(
+        "time_s,obs_distance_m,obs_offset_px,encoder_speed_mps\n0,1,10,0\n0.1,1,-10,0.1\n"
+    )
+    assert main(["metrics", str(log), "--policy", "gsmpn-real"]) == 0
+    printed = capsys.readouterr().out
+    assert "gsmpn-real" in printed
+    assert "| recorded" in printed
+
+
+def one_line_error(capsys: pytest.CaptureFixture) -> str:
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1, err
+    assert err.startswith("follow-eval: error: ")
+    assert "Traceback" not in err
+    return err
+
+
+def test_metrics_on_malformed_row_names_file_and_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
+    log = tmp_path / "bad.csv"
+    log.write_text("time_s,obs_distance_m,obs_offset_px,accel_mps2\n0,1,0,0\n0.1,1,oops,0\n")
+    assert main(["metrics", str(log)]) == 2
+    err = one_line_error(capsys)
+    assert "bad.csv: line 3, column obs_offset_px: 'oops' is not a number" in err
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["run", "--policies", "pn,lqr"], "unknown policy 'lqr'; known names: "),
+        (["run", "--scenarios", "zigzag"], "unknown scenario 'zigzag'; known scenarios: "),
+        (["run", "--episodes", "0"], "--episodes: 0 is out of range: must be >= 1"),
+        (["run", "--episodes", "many"], "--episodes: 'many' is not an integer"),
+        (["run", "--workers", "0"], "--workers: 0 is out of range"),
+        (["run", "--policies", ","], "--policies is empty"),
+        (["run", "--config", "harsh"], "--config: invalid choice: 'harsh'"),
+        (["run", "--plot-seed", "99", "--episodes", "2"], "--plot-seed 99 is out of range"),
+        (["metrics", "nowhere.csv"], "nowhere.csv: no such file"),
+        (["fly"], "invalid choice: 'fly'"),
+        ([], "the following arguments are required: {run,metrics}"),
+    ],
+)
+def test_bad_arguments_give_one_line_and_exit_2(
+    args: list[str], message: str, capsys: pytest.CaptureFixture
+) -> None:
+    assert main(args) == 2
+    assert message in one_line_error(capsys)
+
+
+def test_existing_run_folder_is_never_overwritten(
+    tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
+    (tmp_path / "old.txt").write_text("keep")
+    assert main(["run", "--episodes", "1", "--out", str(tmp_path)]) == 2
+    assert "already exists and is not an empty folder" in one_line_error(capsys)
+    assert (tmp_path / "old.txt").read_text() == "keep"
+
+
+@pytest.mark.skipif(os.geteuid() == 0, reason="root can write into read-only folders")
+def test_unwritable_folder_gives_one_line(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    locked = tmp_path / "locked"
+    locked.mkdir(mode=0o500)
+    assert main(["run", "--episodes", "1", "--out", str(locked / "run")]) == 2
+    assert "cannot write to" in one_line_error(capsys)
+
+
+def test_output_path_through_a_file_gives_one_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
+    # Works as root too: a folder cannot be made below a regular file.
+    (tmp_path / "file").write_text("x")
+    args = ["run", "--policies", "pn", "--scenarios", "straight", "--episodes", "1"]
+    assert main([*args, "--out", str(tmp_path / "file" / "run")]) == 2
+    assert "cannot write to" in one_line_error(capsys)
+
+
+@pytest.mark.slow
+def test_video_is_one_mp4_per_policy_and_scenario(tmp_path: Path) -> None:
+    import cv2
+
+    out = tmp_path / "run"
+    args = ["run", "--policies", "pn,mpn", "--scenarios", "straight", "--episodes", "1"]
+    assert main([*args, "--seed", "2", "--video", "--out", str(out)]) == 0
+    videos = sorted(p.name for p in (out / "videos").iterdir())
+    assert videos == ["mpn_tuned_straight_seed2.mp4", "pn_tuned_straight_seed2.mp4"]
+    capture = cv2.VideoCapture(str(out / "videos" / videos[0]))
+    steps = len(pd.read_csv(out / "logs" / "mpn_tuned" / "straight" / "seed_2.csv"))
+    assert int(capture.get(cv2.CAP_PROP_FRAME_COUNT)) == steps  # one frame per row
+    assert (capture.get(cv2.CAP_PROP_FRAME_WIDTH), capture.get(cv2.CAP_PROP_FRAME_HEIGHT)) == (
+        1280,
+        480,
+    )
+
+
+def test_python_dash_m_eval_is_the_same_cli() -> None:
+    import subprocess
+    import sys
+
+    done = subprocess.run(
+        [sys.executable, "-m", "eval", "run", "--episodes", "0"],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    assert done.returncode == 2
+    assert done.stderr.strip() == (
+        "follow-eval: error: argument --episodes: 0 is out of range: must be >= 1"
+    )
+
+
+def test_thesis_metrics_are_the_leading_metric_columns() -> None:
+    assert LEADING[3:] == list(THESIS_METRICS)

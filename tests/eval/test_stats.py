@@ -1,0 +1,70 @@
+"""eval/stats.py: bootstrap means and paired comparisons."""
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from eval.stats import compare, summarize
+
+
+def table(values: dict[str, list[float]], metric: str = "mean_offset_px") -> pd.DataFrame:
+    rows = [
+        {"policy": p, "scenario": "straight", "seed": s, metric: v}
+        for p, vs in values.items()
+        for s, v in enumerate(vs)
+    ]
+    return pd.DataFrame(rows)
+
+
+def test_summary_mean_and_ci_bracket_the_sample_mean() -> None:
+    rng = np.random.default_rng(1)
+    values = list(rng.normal(20.0, 3.0, size=20))
+    row = summarize(table({"pn": values})).iloc[0]
+    assert row["episodes"] == 20
+    assert row["mean_offset_px"] == pytest.approx(np.mean(values))
+    assert row["mean_offset_px_ci_low"] < row["mean_offset_px"] < row["mean_offset_px_ci_high"]
+    # 95 % CI of a mean of 20 draws with sd 3: roughly +- 2 * 3 / sqrt(20) = +- 1.3
+    assert 0.5 < row["mean_offset_px_ci_high"] - row["mean_offset_px_ci_low"] < 4.0
+
+
+def test_summary_is_reproducible_for_a_seed() -> None:
+    t = table({"pn": [1.0, 2.0, 4.0, 8.0, 3.0]})
+    pd.testing.assert_frame_equal(summarize(t, seed=3), summarize(t, seed=3))
+
+
+def test_identical_values_give_a_zero_width_interval() -> None:
+    row = summarize(table({"pn": [100.0] * 5}, "in_frame_rate_pct")).iloc[0]
+    assert row["in_frame_rate_pct_ci_low"] == row["in_frame_rate_pct_ci_high"] == 100.0
+
+
+def test_one_episode_has_no_interval() -> None:
+    row = summarize(table({"pn": [3.0]})).iloc[0]
+    assert row["mean_offset_px"] == 3.0
+    assert np.isnan(row["mean_offset_px_ci_low"])
+
+
+def test_nan_episodes_are_left_out_of_a_metric() -> None:
+    row = summarize(table({"pn": [1.0, np.nan, 3.0]}, "reacquire_time_s")).iloc[0]
+    assert row["reacquire_time_s"] == pytest.approx(2.0)
+
+
+def test_summary_keeps_the_order_policies_first_appear_in() -> None:
+    t = table({"mpn": [1.0, 2.0], "pn": [3.0, 4.0]})
+    assert list(summarize(t)["policy"]) == ["mpn", "pn"]
+
+
+def test_paired_comparison_on_same_seeds() -> None:
+    # B is A + 2 on every seed, plus a little noise: A - B is about -2 and clearly significant.
+    a = [10.0, 12.0, 9.0, 15.0, 11.0, 13.0, 10.5, 14.0, 9.5, 12.5]
+    b = [x + 2.0 + 0.1 * k for k, x in enumerate(a)]
+    [row] = compare(table({"a": a, "b": b})).to_dict("records")
+    assert (row["policy_a"], row["policy_b"], row["n"]) == ("a", "b", 10)
+    assert row["mean_diff"] == pytest.approx(np.mean(np.subtract(a, b)))
+    assert row["diff_ci_low"] < row["mean_diff"] < row["diff_ci_high"] < 0
+    assert row["wilcoxon_p"] < 0.01
+
+
+def test_paired_comparison_of_equal_policies_has_no_p_value() -> None:
+    [row] = compare(table({"a": [1.0, 2.0, 3.0], "b": [1.0, 2.0, 3.0]})).to_dict("records")
+    assert row["mean_diff"] == 0.0
+    assert np.isnan(row["wilcoxon_p"])

@@ -1,0 +1,118 @@
+"""eval/steplog.py: step-log CSVs round-trip, and malformed files give errors naming the row."""
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from eval.steplog import COLUMNS, StepLogError, read_step_log, write_step_log
+
+HEADER = "time_s,obs_distance_m,obs_offset_px,accel_mps2"
+
+
+def write(tmp_path: Path, text: str, name: str = "log.csv") -> Path:
+    path = tmp_path / name
+    path.write_text(text, encoding="utf-8")
+    return path
+
+
+def test_minimal_robot_log_is_read_as_floats(tmp_path: Path) -> None:
+    log = read_step_log(write(tmp_path, f"{HEADER}\n0.0,1.0,5,0.0\n0.1,1.1,-3,0.2\n"))
+    assert list(log.columns) == HEADER.split(",")
+    np.testing.assert_allclose(log["obs_offset_px"], [5.0, -3.0])
+    assert all(log.dtypes == np.float64)
+
+
+def test_simulated_log_round_trips(tmp_path: Path) -> None:
+    from eval.rollout import run_episode
+
+    log = run_episode("pn:thesis", "straight", 0).log
+    back = read_step_log(write_step_log(log, tmp_path / "ep.csv"))
+    assert list(back.columns) == list(COLUMNS)
+    assert list(back["termination"]) == list(log["termination"])
+    assert back["policy"].iloc[0] == "pn:thesis"
+    numeric = [c for c in COLUMNS if c not in ("policy", "scenario", "termination")]
+    np.testing.assert_allclose(
+        back[numeric].to_numpy(), log[numeric].to_numpy(dtype=float), rtol=1e-8, equal_nan=True
+    )
+
+
+def test_final_row_has_no_action(tmp_path: Path) -> None:
+    from eval.rollout import run_episode
+
+    log = run_episode("pn:thesis", "straight", 0).log
+    assert log["action_v_mps"].iloc[:-1].notna().all()
+    assert np.isnan(log["action_v_mps"].iloc[-1])
+    assert log["termination"].iloc[-1] != ""
+    assert (log["termination"].iloc[:-1] == "").all()
+
+
+def test_acceleration_is_derived_from_encoder_speed_when_not_logged(tmp_path: Path) -> None:
+    text = "time_s,obs_distance_m,obs_offset_px,encoder_speed_mps\n"
+    text += "0,1,0,0\n0.1,1,0,0.05\n0.2,1,0,0.05\n"
+    log = read_step_log(write(tmp_path, text))
+    # (0.05 - 0) / 0.1 = 0.5 m/s², then 0; the first row has no predecessor: 0.
+    np.testing.assert_allclose(log["accel_mps2"], [0.0, 0.5, 0.0])
+
+
+def test_row_with_extra_field_names_file_and_line(tmp_path: Path) -> None:
+    path = write(tmp_path, f"{HEADER}\n0.0,1.0,5,0.0\n0.1,1.1,-3,0.2,9\n")
+    with pytest.raises(StepLogError, match=r"log\.csv: line 3: expected 4 fields .* found 5"):
+        read_step_log(path)
+
+
+def test_row_with_missing_field_names_the_line(tmp_path: Path) -> None:
+    with pytest.raises(StepLogError, match=r"line 2: expected 4 fields .* found 3"):
+        read_step_log(write(tmp_path, f"{HEADER}\n0.0,1.0,5\n"))
+
+
+def test_cell_that_is_not_a_number_names_line_column_and_value(tmp_path: Path) -> None:
+    path = write(tmp_path, f"{HEADER}\n0.0,1.0,5,0.0\n0.1,1.1,left,0.2\n")
+    with pytest.raises(
+        StepLogError, match=r"log\.csv: line 3, column obs_offset_px: 'left' is not a number"
+    ):
+        read_step_log(path)
+
+
+def test_empty_required_cell_names_the_line(tmp_path: Path) -> None:
+    with pytest.raises(StepLogError, match=r"line 3, column obs_distance_m: value is missing"):
+        read_step_log(write(tmp_path, f"{HEADER}\n0.0,1.0,5,0.0\n0.1,,5,0.0\n"))
+
+
+def test_time_going_backwards_names_the_line(tmp_path: Path) -> None:
+    with pytest.raises(StepLogError, match=r"line 4, column time_s: 0.1 s is not after .* 0.2 s"):
+        read_step_log(write(tmp_path, f"{HEADER}\n0.0,1,0,0\n0.2,1,0,0\n0.1,1,0,0\n"))
+
+
+def test_missing_required_column_is_named(tmp_path: Path) -> None:
+    with pytest.raises(StepLogError, match=r"missing column.*obs_offset_px"):
+        read_step_log(write(tmp_path, "time_s,obs_distance_m,accel_mps2\n0,1,0\n"))
+
+
+def test_log_without_acceleration_or_speed_is_rejected(tmp_path: Path) -> None:
+    with pytest.raises(StepLogError, match="accel_mps2 or encoder_speed_mps"):
+        read_step_log(write(tmp_path, "time_s,obs_distance_m,obs_offset_px\n0,1,0\n"))
+
+
+@pytest.mark.parametrize(("text", "message"), [("", "empty file"), (f"{HEADER}\n", "no data rows")])
+def test_empty_file_or_header_only_is_rejected(tmp_path: Path, text: str, message: str) -> None:
+    with pytest.raises(StepLogError, match=message):
+        read_step_log(write(tmp_path, text))
+
+
+def test_missing_file_is_named(tmp_path: Path) -> None:
+    with pytest.raises(StepLogError, match=r"nope\.csv: no such file"):
+        read_step_log(tmp_path / "nope.csv")
+
+
+def test_binary_file_is_rejected_as_not_text(tmp_path: Path) -> None:
+    path = tmp_path / "log.csv"
+    path.write_bytes(b"\xff\xfe\x00binary")
+    with pytest.raises(StepLogError, match="not a text CSV"):
+        read_step_log(path)
+
+
+def test_write_leaves_no_temporary_file(tmp_path: Path) -> None:
+    write_step_log(pd.DataFrame({"time_s": [0.0], "obs_offset_px": [1.0]}), tmp_path / "a.csv")
+    assert [p.name for p in tmp_path.iterdir()] == ["a.csv"]
