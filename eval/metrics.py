@@ -152,7 +152,7 @@ def in_frame_rate_pct(log: pd.DataFrame) -> float:
 # -- further metrics ------------------------------------------------------------------------------
 
 
-@metric("mean_true_offset_px", "px", "mean |true offset| (px)")
+@metric("mean_true_offset_px", "px", "MeanTrueOffset (px)")
 def mean_true_offset_px(log: pd.DataFrame) -> float:
     """Mean |true offset| [px] over every row (simulation ground truth; NaN without it)."""
     if "true_offset_px" not in log:
