@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import math
 import os
-from collections.abc import Callable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from multiprocessing import get_context
@@ -272,12 +272,3 @@ def _tasks(
         if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
             raise ValueError(f"seed={seed!r} is out of range: must be an integer >= 0")
     return [(p, s, int(seed), config) for p in policies for s in scenarios for seed in seeds]
-
-
-def iter_cells(episodes: Sequence[Episode]) -> Iterator[tuple[str, str, list[Episode]]]:
-    """Group episodes by (policy, scenario), in the order they first appear."""
-    cells: dict[tuple[str, str], list[Episode]] = {}
-    for ep in episodes:
-        cells.setdefault((ep.policy, ep.scenario), []).append(ep)
-    for (policy, scenario), eps in cells.items():
-        yield policy, scenario, eps

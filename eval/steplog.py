@@ -59,7 +59,9 @@ __all__ = [
     "REQUIRED_COLUMNS",
     "TEXT_COLUMNS",
     "StepLogError",
+    "accel_from_speed",
     "read_step_log",
+    "step_log_files",
     "validate_step_log",
     "write_step_log",
 ]
