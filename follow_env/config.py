@@ -27,6 +27,7 @@ __all__ = [
     "IDEAL",
     "NOISY",
     "PRESETS",
+    "RANDOMIZED",
     "THESIS",
     "CameraConfig",
     "EncoderConfig",
@@ -36,6 +37,7 @@ __all__ = [
     "PIDConfig",
     "PerceptionConfig",
     "PersonConfig",
+    "RandomizationConfig",
     "RewardConfig",
     "RobotConfig",
     "ScenarioConfig",
@@ -355,6 +357,19 @@ class PerceptionConfig(_Validated):
     filter_history: int = param(
         5, 1, 32, "samples", "choice: SPEC §1.4 leaves the history length open", integer=True
     )
+    association: str = param(
+        "first",
+        doc="SPEC §1.4: the robot follows the first detection ('first'); 'tracker' keeps the "
+        "detection that best overlaps the last target box (IoU gate, constant-velocity "
+        "prediction), the fix for bystanders who steal the target",
+        choices=("first", "tracker"),
+    )
+    tracker_iou_gate: float = param(
+        0.1, 0.0, 1.0, "", "choice: least IoU with the predicted box for a detection to match"
+    )
+    tracker_coast_frames: int = param(
+        10, 0, 1000, "frames", "choice: frames the tracker waits for its target (1 s)", integer=True
+    )
     detection_order: str = param(
         "area",
         doc="choice: the detector lists boxes by confidence, modelled as box area (largest first)",
@@ -377,6 +392,12 @@ class PersonConfig(_Validated):
     )
     accel_mps2: float = param(0.5, 0.05, 5.0, "m/s^2", "choice: gait start from rest")
     decel_mps2: float = param(0.8, 0.05, 5.0, "m/s^2", "choice: gait stop")
+    social_radius_m: float = param(
+        0.7, 0.0, 5.0, "m", "choice: people step aside from others closer than this"
+    )
+    social_strength_mps2: float = param(
+        1.5, 0.0, 50.0, "m/s^2", "choice: strength of that sideways social force"
+    )
     lateral_accel_mps2: float = param(
         0.8, 0.05, 5.0, "m/s^2", "choice: people slow down in turns to keep v^2/R below this"
     )
@@ -431,6 +452,40 @@ class ScenarioConfig(_Validated):
 
 
 @dataclass(frozen=True)
+class RandomizationConfig(_Validated):
+    """Domain randomisation and disturbances, drawn per episode (and per step for pushes and
+    encoder noise) from the episode's own streams, never from the actions. All off by default;
+    the ``randomized`` preset switches them on."""
+
+    wheel_radius_error: float = param(
+        0.0, 0.0, 0.2, "", "std of the real/assumed wheel radius ratio minus 1"
+    )
+    track_width_error: float = param(
+        0.0, 0.0, 0.2, "", "std of the real/assumed track width ratio minus 1"
+    )
+    encoder_noise_counts: float = param(
+        0.0, 0.0, 100.0, "counts", "std of extra counts read per 10 ms tick"
+    )
+    camera_tilt_deg: float = param(
+        0.0, 0.0, 20.0, "deg", "std of the camera's real pitch around its configured one"
+    )
+    detector_level_spread: float = param(
+        0.0, 0.0, 1.0, "", "jitter, miss and burst rates scale by U(1 - s, 1 + s)"
+    )
+    latency_frames_max: int = param(
+        0, 0, 8, "frames", "latency is drawn from [latency_frames, this] (0: fixed)", integer=True
+    )
+    depth_noise_scale_max: float = param(1.0, 1.0, 10.0, "", "depth noise scales by U(1, this)")
+    friction_spread: float = param(
+        0.0, 0.0, 0.9, "", "motor friction and stall duty scale by U(1 - s, 1 + s) (floor)"
+    )
+    push_prob: float = param(0.0, 0.0, 1.0, "/step", "chance of a push in a control step")
+    push_speed_mps: float = param(
+        0.3, 0.0, 5.0, "m/s", "a push moves the robot at this speed for one step"
+    )
+
+
+@dataclass(frozen=True)
 class RewardConfig(_Validated):
     """Dense following reward, from ground truth (see ``PersonFollowEnv`` docstring)."""
 
@@ -481,6 +536,7 @@ _SECTIONS: dict[str, type] = {
     "scenario": ScenarioConfig,
     "reward": RewardConfig,
     "episode": EpisodeConfig,
+    "randomization": RandomizationConfig,
 }
 
 
@@ -498,6 +554,7 @@ class EnvConfig:
     scenario: ScenarioConfig = field(default_factory=ScenarioConfig)
     reward: RewardConfig = field(default_factory=RewardConfig)
     episode: EpisodeConfig = field(default_factory=EpisodeConfig)
+    randomization: RandomizationConfig = field(default_factory=RandomizationConfig)
 
     def __post_init__(self) -> None:
         for name, cls in _SECTIONS.items():
@@ -512,6 +569,18 @@ class EnvConfig:
                 f"EpisodeConfig.control_dt_s={self.episode.control_dt_s!r} is out of range: "
                 f"must be a whole multiple of encoder.sample_period_s "
                 f"({self.encoder.sample_period_s} s)"
+            )
+
+        lat_max = self.randomization.latency_frames_max
+        if lat_max and lat_max < self.perception.latency_frames:
+            raise ValueError(
+                f"RandomizationConfig.latency_frames_max={lat_max!r} is out of range: must be 0 "
+                f"or >= perception.latency_frames ({self.perception.latency_frames})"
+            )
+        if self.sub_steps > 4096:
+            raise ValueError(
+                f"EpisodeConfig.control_dt_s={self.episode.control_dt_s!r} is out of range: at "
+                "most 4096 encoder periods per control step"
             )
 
     @property
@@ -615,4 +684,25 @@ NOISY = EnvConfig(
 )
 """Harsher sensing than the thesis robot: a slower detector, more misses and occlusions."""
 
-PRESETS: dict[str, EnvConfig] = {"thesis": THESIS, "ideal": IDEAL, "noisy": NOISY}
+RANDOMIZED = NOISY.replace(
+    randomization=RandomizationConfig(
+        wheel_radius_error=0.02,
+        track_width_error=0.03,
+        encoder_noise_counts=1.0,
+        camera_tilt_deg=2.0,
+        detector_level_spread=0.5,
+        latency_frames_max=3,
+        depth_noise_scale_max=2.0,
+        friction_spread=0.3,
+        push_prob=0.01,
+        push_speed_mps=0.3,
+    )
+)
+"""The noisy preset with every domain randomisation and pushes on: for robust training."""
+
+PRESETS: dict[str, EnvConfig] = {
+    "thesis": THESIS,
+    "ideal": IDEAL,
+    "noisy": NOISY,
+    "randomized": RANDOMIZED,
+}

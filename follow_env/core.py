@@ -22,13 +22,14 @@ step index, so they never depend on the actions.
 
 from __future__ import annotations
 
+import dataclasses
 import os
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 from numba import njit
 
-from follow_env.camera import Camera, body_box, world_to_camera
+from follow_env.camera import NEAR_PLANE_M, Camera, body_box, world_to_camera
 from follow_env.config import EnvConfig
 from follow_env.drive import lag_factor, wheel_tick
 from follow_env.kinematics import diff_drive_fk, diff_drive_ik, euler_pose_step
@@ -53,6 +54,7 @@ from follow_env.layout import (
     N_PW,
     N_SCRATCH,
     P_ANTI_WINDUP,
+    P_ASSOC,
     P_BURST_END,
     P_BURST_START,
     P_CLEARANCE,
@@ -65,6 +67,7 @@ from follow_env.layout import (
     P_DEPTH_UNIT,
     P_DT,
     P_DT_IN,
+    P_ENC_NOISE,
     P_FOOT_L,
     P_FOOT_W,
     P_FRIC_DUTY,
@@ -95,6 +98,8 @@ from follow_env.layout import (
     P_PERSON_DEC,
     P_PERSON_H,
     P_PERSON_W,
+    P_PUSH_P,
+    P_PUSH_V,
     P_R00,
     P_R01,
     P_R02,
@@ -111,12 +116,17 @@ from follow_env.layout import (
     P_R_LOST,
     P_R_OFF,
     P_SETTLE,
+    P_SOCIAL_K,
+    P_SOCIAL_R,
     P_SPEED_Q,
     P_STALL_DUTY,
     P_SUBSTEPS,
     P_TARGET_D,
     P_TAU_D,
     P_TRACK,
+    P_TRACK_TRUE,
+    P_TRK_COAST,
+    P_TRK_IOU,
     P_TX,
     P_TY,
     P_TZ,
@@ -124,11 +134,13 @@ from follow_env.layout import (
     P_W_MAX,
     P_WALL_R,
     P_WHEEL_R,
+    P_WHEEL_R_TRUE,
     PEOPLE_MAX,
     PS_DONE,
     PS_TH,
     PS_X,
     PS_Y,
+    REASON_COLLISION_BYSTANDER,
     REASON_COLLISION_PERSON,
     REASON_COLLISION_WALL,
     REASON_LOST,
@@ -161,16 +173,27 @@ from follow_env.layout import (
     S_OBS_O,
     S_OMEGA_L,
     S_OMEGA_R,
+    S_PUSH_VX,
+    S_PUSH_VY,
     S_RAW_DEPTH,
     S_REWARD,
     S_SCRATCH0,
     S_T,
     S_TERM,
     S_TH,
+    S_TRK_CX,
+    S_TRK_CY,
+    S_TRK_H,
+    S_TRK_LOST,
+    S_TRK_ON,
+    S_TRK_VX,
+    S_TRK_VY,
+    S_TRK_W,
     S_TRUE_D,
     S_TRUE_O,
     S_TRUNC,
     S_V,
+    S_VIS_FRAC,
     S_VMEAS_L,
     S_VMEAS_R,
     S_VROBOT_MEAS,
@@ -181,28 +204,42 @@ from follow_env.layout import (
     S_WALK_END_T,
     S_X,
     S_Y,
+    W_H,
+    W_X1,
+    W_X2,
+    W_Y1,
+    W_Y2,
+    WALL_FIELDS,
 )
 from follow_env.perception import (
+    box_iou,
     clip_box,
     depth_noise_std,
     distance_filter,
     jitter_box,
     listed_before,
 )
-from follow_env.person import person_reset, person_step
+from follow_env.person import person_reset, person_step, social_forces
 from follow_env.rng import (
     N_STREAMS,
     STREAM_DEPTH,
     STREAM_DETECTOR,
     STREAM_MOTOR,
     STREAM_PERSON,
+    STREAM_RANDOMIZE,
     LaneRandom,
     LaneSeeds,
     normal_pair_at,
     uniform_at,
 )
 from follow_env.scenarios import SCENARIOS, ScenarioSpec
-from follow_env.world import WALL_RADIUS_M, rect_rect_distance, rect_segment_distance
+from follow_env.world import (
+    WALL_RADIUS_M,
+    point_segment_distance,
+    rect_rect_distance,
+    rect_segment_distance,
+    segment_distance,
+)
 
 __all__ = ["BatchedSim", "params_from_config", "reset_kernel", "step_kernel"]
 
@@ -210,8 +247,17 @@ __all__ = ["BatchedSim", "params_from_config", "reset_kernel", "step_kernel"]
 _SLOTS_PER_STEP = 256
 _SLOTS_PER_PERSON = 8
 _SLOT_DEPTH = 240
-# Walls are modelled this tall for depth rays that pass over them (m).
-_WALL_HEIGHT_M = 3.0
+# Body sample points for line of sight: columns across the body, rows up it.
+_LOS_COLS = 3
+_LOS_ROWS = 5
+# Occluders nearer than this (m) to a sight line, beyond the body's half width, are tested.
+_LOS_MARGIN_M = 0.1
+# Encoder-noise draws: their own key domain, counted by step and 10 ms tick.
+_ENC_DOMAIN = np.uint64(0xA0761D6478BD642F)
+_MAX_SUBSTEPS = 4096
+# Tracker gains: alpha-beta filter on the box centre (and alpha on its size).
+_TRK_ALPHA = 0.6
+_TRK_BETA = 0.2
 
 
 def params_from_config(cfg: EnvConfig) -> np.ndarray:
@@ -268,6 +314,16 @@ def params_from_config(cfg: EnvConfig) -> np.ndarray:
     p[P_CLEARANCE], p[P_SETTLE] = ep.person_clearance_m, cfg.scenario.settle_s
     p[P_WALL_R] = WALL_RADIUS_M
     p[P_V_MAX], p[P_W_MAX] = cfg.max_speed_mps, cfg.max_turn_rate_radps
+    p[P_WHEEL_R_TRUE], p[P_TRACK_TRUE] = r.wheel_radius_m, r.track_width_m
+    rnd = cfg.randomization
+    p[P_ENC_NOISE], p[P_PUSH_P], p[P_PUSH_V] = (
+        rnd.encoder_noise_counts,
+        rnd.push_prob,
+        rnd.push_speed_mps,
+    )
+    p[P_ASSOC] = 1.0 if d.association == "tracker" else 0.0
+    p[P_TRK_IOU], p[P_TRK_COAST] = d.tracker_iou_gate, d.tracker_coast_frames
+    p[P_SOCIAL_R], p[P_SOCIAL_K] = pe.social_radius_m, pe.social_strength_mps2
     return p
 
 
@@ -312,7 +368,7 @@ def _depth_ray(
             continue
         t = ((ax - ox) * ey - (ay - oy) * ex) / den
         u = ((ax - ox) * dwy - (ay - oy) * dwx) / den
-        if 0.0 < t < best and 0.0 <= u <= 1.0 and oz + t * dwz <= _WALL_HEIGHT_M:
+        if 0.0 < t < best and 0.0 <= u <= 1.0 and oz + t * dwz <= walls[k, W_H]:
             best = t
     hd, hw, hh = 0.5 * prm[P_PERSON_D], 0.5 * prm[P_PERSON_W], prm[P_PERSON_H]
     for p in range(n_people):
@@ -349,6 +405,168 @@ def _depth_ray(
 
 
 @njit(cache=True, inline="always")
+def _sight_blocked(
+    ox: float,
+    oy: float,
+    oz: float,
+    sx: float,
+    sy: float,
+    sz: float,
+    scratch: np.ndarray,
+    n_cand: int,
+    walls: np.ndarray,
+    ps: np.ndarray,
+    radius: float,
+    height: float,
+) -> bool:
+    """Is the sight line from the camera (ox, oy, oz) to the point (sx, sy, sz) cut by one of
+    the candidate occluders listed in ``scratch[24:24 + n_cand]`` (wall k as k, person q as
+    -(q + 1))? Walls are vertical strips up to their height, people upright cylinders."""
+    dx, dy, dz = sx - ox, sy - oy, sz - oz
+    for j in range(n_cand):
+        k = int(scratch[24 + j])
+        if k >= 0:
+            ex, ey = walls[k, W_X2] - walls[k, W_X1], walls[k, W_Y2] - walls[k, W_Y1]
+            den = dx * ey - dy * ex
+            if den == 0.0:
+                continue
+            ax, ay = walls[k, W_X1] - ox, walls[k, W_Y1] - oy
+            t = (ax * ey - ay * ex) / den
+            u = (ax * dy - ay * dx) / den
+            if 0.0 < t < 1.0 and 0.0 <= u <= 1.0 and oz + t * dz < walls[k, W_H]:
+                return True
+        else:
+            q = -k - 1
+            qx, qy = ps[q, PS_X] - ox, ps[q, PS_Y] - oy
+            t = (qx * dx + qy * dy) / (dx * dx + dy * dy)
+            if 0.0 < t < 1.0:
+                ex, ey = t * dx - qx, t * dy - qy
+                if ex * ex + ey * ey < radius * radius and oz + t * dz < height:
+                    return True
+    return False
+
+
+@njit(cache=True, inline="always")
+def _sight_box(
+    p: int,
+    frac: float,
+    u1: float,
+    v1: float,
+    u2: float,
+    v2: float,
+    c1: float,
+    c2: float,
+    c3: float,
+    c4: float,
+    ox: float,
+    oy: float,
+    prm: np.ndarray,
+    ps: np.ndarray,
+    n_people: int,
+    walls: np.ndarray,
+    n_walls: int,
+    c_th: float,
+    s_th: float,
+    rx: float,
+    ry: float,
+    scratch: np.ndarray,
+) -> tuple[float, float, float, float, float]:
+    """Line of sight from the camera to person ``p``: the visible share and the box of the
+    part in sight.
+
+    Occluders near the sight line to the body (walls and obstacles, other people) are listed
+    first; with none, the body is in plain sight and nothing changes. Otherwise a grid of
+    _LOS_COLS x _LOS_ROWS points on the body's near face, each standing for its cell of the
+    projected box, is tested: the visible share scales by the in-sight share of the points
+    inside the image, and the box shrinks to the cells in sight (a partly hidden person gives
+    the box of the visible part; a fully hidden one is not seen).
+    """
+    px, py = ps[p, PS_X], ps[p, PS_Y]
+    dx, dy = px - ox, py - oy
+    dist = np.sqrt(dx * dx + dy * dy)
+    if dist < 1e-6:
+        return frac, c1, c2, c3, c4
+    half_w, height = 0.5 * prm[P_PERSON_W], prm[P_PERSON_H]
+    reach = half_w + _LOS_MARGIN_M
+    n_cand = 0
+    for k in range(n_walls):
+        if (
+            n_cand < N_SCRATCH - 24
+            and segment_distance(
+                ox, oy, px, py, walls[k, W_X1], walls[k, W_Y1], walls[k, W_X2], walls[k, W_Y2]
+            )
+            < reach
+        ):
+            scratch[24 + n_cand] = k
+            n_cand += 1
+    for q in range(n_people):
+        if q != p and n_cand < N_SCRATCH - 24:
+            d = point_segment_distance(ps[q, PS_X], ps[q, PS_Y], ox, oy, px, py)
+            if d < reach + half_w:
+                scratch[24 + n_cand] = -(q + 1)
+                n_cand += 1
+    if n_cand == 0:
+        return frac, c1, c2, c3, c4
+    ux, uy = dx / dist, dy / dist
+    nx, ny = px - ux * 0.5 * prm[P_PERSON_D], py - uy * 0.5 * prm[P_PERSON_D]  # near face
+    oz = prm[P_TZ]
+    W, H = prm[P_IMG_W], prm[P_IMG_H]
+    n_img, n_vis = 0, 0
+    su1, sv1, su2, sv2 = np.inf, np.inf, -np.inf, -np.inf
+    for ci in range(_LOS_COLS):
+        off = ((ci + 0.5) / _LOS_COLS - 0.5) * 2.0 * half_w
+        sx, sy = nx - uy * off, ny + ux * off
+        for ri in range(_LOS_ROWS):
+            sz = (ri + 0.5) / _LOS_ROWS * height
+            xc, yc, zc = world_to_camera(sx, sy, sz, rx, ry, c_th, s_th, prm, P_R00)
+            if zc <= NEAR_PLANE_M:
+                continue
+            su = prm[P_FX] * xc / zc + prm[P_CX]
+            sv = prm[P_FY] * yc / zc + prm[P_CY]
+            if su < 0.0 or su >= W or sv < 0.0 or sv >= H:
+                continue
+            n_img += 1
+            if _sight_blocked(ox, oy, oz, sx, sy, sz, scratch, n_cand, walls, ps, half_w, height):
+                continue
+            n_vis += 1
+            su1, sv1, su2, sv2 = min(su1, su), min(sv1, sv), max(su2, su), max(sv2, sv)
+    if n_img == 0 or n_vis == n_img:
+        return frac, c1, c2, c3, c4
+    if n_vis == 0:
+        return 0.0, c1, c2, c3, c4
+    cw, ch = 0.5 * (u2 - u1) / _LOS_COLS, 0.5 * (v2 - v1) / _LOS_ROWS
+    return (
+        frac * n_vis / n_img,
+        max(c1, su1 - cw),
+        max(c2, sv1 - ch),
+        min(c3, su2 + cw),
+        min(c4, sv2 + ch),
+    )
+
+
+@njit(cache=True, inline="always")
+def _track_update(
+    fs: np.ndarray, b1: float, b2: float, b3: float, b4: float, matched: bool
+) -> None:
+    """The tracker takes a detection: an alpha-beta (constant-velocity) filter on the box
+    centre (px/frame) and a smoothed size when it matched its track; a fresh track else."""
+    cu, cv, w, h = 0.5 * (b1 + b3), 0.5 * (b2 + b4), b3 - b1, b4 - b2
+    if matched:
+        pu, pv = fs[S_TRK_CX] + fs[S_TRK_VX], fs[S_TRK_CY] + fs[S_TRK_VY]
+        ru, rv = cu - pu, cv - pv
+        fs[S_TRK_CX], fs[S_TRK_CY] = pu + _TRK_ALPHA * ru, pv + _TRK_ALPHA * rv
+        fs[S_TRK_VX] += _TRK_BETA * ru
+        fs[S_TRK_VY] += _TRK_BETA * rv
+        fs[S_TRK_W] += _TRK_ALPHA * (w - fs[S_TRK_W])
+        fs[S_TRK_H] += _TRK_ALPHA * (h - fs[S_TRK_H])
+    else:
+        fs[S_TRK_CX], fs[S_TRK_CY], fs[S_TRK_W], fs[S_TRK_H] = cu, cv, w, h
+        fs[S_TRK_VX] = fs[S_TRK_VY] = 0.0
+    fs[S_TRK_LOST] = 0.0
+    fs[S_TRK_ON] = 1.0
+
+
+@njit(cache=True, inline="always")
 def _frame(
     i: int,
     prm: np.ndarray,
@@ -367,9 +585,18 @@ def _frame(
     rx, ry, rth = fs[S_X], fs[S_Y], fs[S_TH]
     kdet = keys[STREAM_DETECTOR]
     base = step * _SLOTS_PER_STEP
-    # The detector's list is walked as it is produced; the first listed detection is kept
-    # (SPEC §1.4 step 2, order as in perception.first_detection).
+    # The detector's list is walked as it is produced: the first listed detection is kept
+    # (SPEC §1.4 step 2, order as in perception.first_detection), and so is the one that best
+    # overlaps the tracker's predicted box.
     first, b1, b2, b3, b4, best_area = -1, 0.0, 0.0, 0.0, 0.0, -1.0
+    tracking = prm[P_ASSOC] > 0.0 and fs[S_TRK_ON] > 0.0
+    t_cx, t_cy = fs[S_TRK_CX] + fs[S_TRK_VX], fs[S_TRK_CY] + fs[S_TRK_VY]
+    t_hw, t_hh = 0.5 * fs[S_TRK_W], 0.5 * fs[S_TRK_H]
+    match, m1, m2, m3, m4, best_iou = -1, 0.0, 0.0, 0.0, 0.0, prm[P_TRK_IOU]
+    c_th, s_th = np.cos(rth), np.sin(rth)
+    ox = rx + c_th * prm[P_TX] - s_th * prm[P_TY]
+    oy = ry + s_th * prm[P_TX] + c_th * prm[P_TY]
+    scratch = fs[S_SCRATCH0 : S_SCRATCH0 + N_SCRATCH]
     for p in range(n_people):
         u1, v1, u2, v2, found = body_box(
             ps[p, PS_X],
@@ -387,15 +614,43 @@ def _frame(
             fy,
             cx,
             cy,
-            fs[S_SCRATCH0 : S_SCRATCH0 + N_SCRATCH],
+            scratch,
         )
         visible = False
+        frac = 0.0
         c1, c2, c3, c4 = clip_box(u1, v1, u2, v2, W, H)
         if found and c3 > c1 and c4 > c2:
             frac = (c3 - c1) * (c4 - c2) / ((u2 - u1) * (v2 - v1))
+            # Obstacles and other people may hide part of the body: keep the box of the
+            # part in sight and scale the visible share (line of sight, see _sight_box).
+            frac, c1, c2, c3, c4 = _sight_box(
+                p,
+                frac,
+                u1,
+                v1,
+                u2,
+                v2,
+                c1,
+                c2,
+                c3,
+                c4,
+                ox,
+                oy,
+                prm,
+                ps,
+                n_people,
+                walls,
+                ist[I_N_WALLS],
+                c_th,
+                s_th,
+                rx,
+                ry,
+                scratch,
+            )
             visible = frac >= prm[P_MIN_VIS] and (c4 - c2) >= prm[P_MIN_BOX_H]
         if p == 0:
             fs[S_IN_FRAME] = 1.0 if visible else 0.0
+            fs[S_VIS_FRAC] = frac
         # Bursts of occlusion: a two-state Markov chain per person, stepped every frame.
         slot = base + p * _SLOTS_PER_PERSON
         u_burst = uniform_at(kdet, slot)
@@ -411,9 +666,32 @@ def _frame(
                 c1, c2, c3, c4, z_cu, z_cv, z_w, z_h, prm[P_JIT_C], prm[P_JIT_S]
             )
             j1, j2, j3, j4 = clip_box(j1, j2, j3, j4, W, H)
-            area = (j3 - j1) * (j4 - j2)
-            if j3 > j1 and j4 > j2 and listed_before(area, best_area):
-                first, b1, b2, b3, b4, best_area = p, j1, j2, j3, j4, area
+            if j3 > j1 and j4 > j2:
+                area = (j3 - j1) * (j4 - j2)
+                if listed_before(area, best_area):
+                    first, b1, b2, b3, b4, best_area = p, j1, j2, j3, j4, area
+                if tracking:
+                    iou = box_iou(
+                        j1, j2, j3, j4, t_cx - t_hw, t_cy - t_hh, t_cx + t_hw, t_cy + t_hh
+                    )
+                    if iou >= best_iou:
+                        match, m1, m2, m3, m4, best_iou = p, j1, j2, j3, j4, iou
+
+    if prm[P_ASSOC] > 0.0:
+        # Tracker: follow the matched detection; without one, coast on the prediction for a
+        # while and publish nothing; once lost, start again from the first detection.
+        if tracking and match >= 0:
+            first, b1, b2, b3, b4 = match, m1, m2, m3, m4
+        elif tracking and fs[S_TRK_LOST] < prm[P_TRK_COAST]:
+            first = -1
+        if first >= 0:
+            _track_update(fs, b1, b2, b3, b4, tracking and match >= 0)
+        elif fs[S_TRK_ON] > 0.0:
+            fs[S_TRK_LOST] += 1.0
+            fs[S_TRK_CX] += fs[S_TRK_VX]
+            fs[S_TRK_CY] += fs[S_TRK_VY]
+            if fs[S_TRK_LOST] > prm[P_TRK_COAST]:
+                fs[S_TRK_ON] = 0.0
 
     # Measurement of this frame: box centre pixel and the depth there (SPEC §1.4 step 3).
     m_det, m_cu, m_cv, m_raw = 0.0, 0.0, 0.0, 0.0
@@ -518,29 +796,34 @@ def _contacts(
                 x, y, th, fl, fw, walls[k, 0], walls[k, 1], walls[k, 2], walls[k, 3]
             ),
         )
-    person = np.inf
+    # The followed person must stay beyond the clearance; others must not be touched.
+    target = np.inf
+    other = np.inf
     for p in range(ist[I_N_PEOPLE]):
-        person = min(
-            person,
-            rect_rect_distance(
-                x,
-                y,
-                th,
-                fl,
-                fw,
-                ps[p, PS_X],
-                ps[p, PS_Y],
-                ps[p, PS_TH],
-                prm[P_PERSON_D],
-                prm[P_PERSON_W],
-            ),
+        d = rect_rect_distance(
+            x,
+            y,
+            th,
+            fl,
+            fw,
+            ps[p, PS_X],
+            ps[p, PS_Y],
+            ps[p, PS_TH],
+            prm[P_PERSON_D],
+            prm[P_PERSON_W],
         )
+        if p == 0:
+            target = d
+        else:
+            other = min(other, d)
     fs[S_CLEAR_WALL] = wall - prm[P_WALL_R]
-    fs[S_CLEAR_PERSON] = person
+    fs[S_CLEAR_PERSON] = target
     if fs[S_CLEAR_WALL] <= 0.0:
         return REASON_COLLISION_WALL
-    if person < prm[P_CLEARANCE]:
+    if target < prm[P_CLEARANCE]:
         return REASON_COLLISION_PERSON
+    if other <= 0.0:
+        return REASON_COLLISION_BYSTANDER
     return REASON_NONE
 
 
@@ -628,7 +911,23 @@ def _step_lanes(
         a_r, a_l = fs[S_ANG_R], fs[S_ANG_L]
         c_r, c_l = ist[I_ENC_R], ist[I_ENC_L]
         x, y, th, v, w = fs[S_X], fs[S_Y], fs[S_TH], fs[S_V], fs[S_W]
-        for _ in range(int(prm[P_SUBSTEPS])):
+        # Real wheels and track may differ from what the controller assumes (randomisation).
+        r_true, L_true = prm[P_WHEEL_R_TRUE], prm[P_TRACK_TRUE]
+        enc_noise = prm[P_ENC_NOISE]
+        krand = keys[i, STREAM_RANDOMIZE]
+        step_no = ist[I_STEP]
+        # A push (randomisation): the robot is shoved at push speed for this control step.
+        push_x, push_y = 0.0, 0.0
+        if prm[P_PUSH_P] > 0.0 and uniform_at(krand, step_no * _SLOTS_PER_STEP) < prm[P_PUSH_P]:
+            ang = 2.0 * np.pi * uniform_at(krand, step_no * _SLOTS_PER_STEP + 1)
+            push_x, push_y = prm[P_PUSH_V] * np.cos(ang), prm[P_PUSH_V] * np.sin(ang)
+        fs[S_PUSH_VX], fs[S_PUSH_VY] = push_x, push_y
+        n_sub = int(prm[P_SUBSTEPS])
+        for tick in range(n_sub):
+            n_r, n_l = 0, 0
+            if enc_noise > 0.0:  # extra counts read this tick, per wheel
+                z_r, z_l = normal_pair_at(krand ^ _ENC_DOMAIN, step_no * _MAX_SUBSTEPS + tick)
+                n_r, n_l = int(np.round(z_r * enc_noise)), int(np.round(z_l * enc_noise))
             u_r, i_r, d_r, e_r, o_r, a_r, c_r, m_r = wheel_tick(
                 t_r,
                 m_r,
@@ -638,6 +937,7 @@ def _step_lanes(
                 o_r,
                 a_r,
                 c_r,
+                n_r,
                 g_r,
                 kp,
                 ki,
@@ -663,6 +963,7 @@ def _step_lanes(
                 o_l,
                 a_l,
                 c_l,
+                n_l,
                 g_l,
                 kp,
                 ki,
@@ -679,8 +980,10 @@ def _step_lanes(
                 diam,
                 quantum,
             )
-            v, w = diff_drive_fk(o_r, o_l, r, L)
+            v, w = diff_drive_fk(o_r, o_l, r_true, L_true)
             x, y, th = euler_pose_step(x, y, th, v, w, dt_in)
+            x += push_x * dt_in
+            y += push_y * dt_in
         fs[S_VMEAS_R], fs[S_VMEAS_L] = m_r, m_l
         fs[S_EPREV_R], fs[S_EPREV_L] = e_r, e_l
         fs[S_INT_R], fs[S_INT_L] = i_r, i_l
@@ -694,7 +997,9 @@ def _step_lanes(
         fs[S_VROBOT_PREV] = fs[S_VROBOT_MEAS]
         fs[S_VROBOT_MEAS] = 0.5 * (fs[S_VMEAS_R] + fs[S_VMEAS_L])
         fs[S_ACCEL] = (fs[S_VROBOT_MEAS] - fs[S_VROBOT_PREV]) / dt
-        # 3. People walk.
+        # 3. People walk, keeping out of each other's way.
+        if ist[I_N_PEOPLE] > 1:
+            social_forces(ps, ist[I_N_PEOPLE], prm[P_SOCIAL_R], prm[P_SOCIAL_K])
         for p in range(ist[I_N_PEOPLE]):
             person_step(ps[p], paths[i, p], prm[P_PERSON_ACC], prm[P_PERSON_DEC], dt)
         if fs[S_WALK_END_T] < 0.0 and ps[0, PS_DONE] > 0.0:
@@ -759,7 +1064,7 @@ class BatchedSim:
         self.pstate = np.zeros((num_lanes, self.spec.max_people, N_PSTATE))
         self.max_points = self.spec.points_for(cfg)
         self.paths = np.zeros((num_lanes, self.spec.max_people, self.max_points, N_PW))
-        self.walls = np.zeros((num_lanes, self.spec.max_walls, 4))
+        self.walls = np.zeros((num_lanes, self.spec.max_walls, WALL_FIELDS))
         self.keys = np.zeros((num_lanes, N_STREAMS), dtype=np.uint64)
         self.seeds = LaneSeeds(num_lanes)
         self._all = np.ones(num_lanes, dtype=np.bool_)
@@ -807,6 +1112,7 @@ class BatchedSim:
             gains = 1.0 + LaneRandom(keys[:, STREAM_MOTOR]).normal(2, scale=spread)
             self.params[lanes, P_GAIN_R] = np.clip(gains[:, 0], 0.5, 1.5)
             self.params[lanes, P_GAIN_L] = np.clip(gains[:, 1], 0.5, 1.5)
+        self._randomize(lanes, LaneRandom(keys[:, STREAM_RANDOMIZE]))
         reset_kernel(
             lanes,
             np.ascontiguousarray(batch.robot_pose, dtype=np.float64),
@@ -821,6 +1127,42 @@ class BatchedSim:
             self.walls,
             self.keys,
         )
+
+    def _randomize(self, lanes: np.ndarray, rng: LaneRandom) -> None:
+        """Per-episode domain randomisation of ``lanes`` (RandomizationConfig): every draw is
+        made whether or not its effect is on, so switching one on never shifts the others."""
+        rc, prm = self.cfg.randomization, self.params
+        base = self.base_params
+        err = rng.normal(2)  # wheel radius, track width
+        prm[lanes, P_WHEEL_R_TRUE] = base[P_WHEEL_R] * np.clip(
+            1.0 + rc.wheel_radius_error * err[:, 0], 0.5, 1.5
+        )
+        prm[lanes, P_TRACK_TRUE] = base[P_TRACK] * np.clip(
+            1.0 + rc.track_width_error * err[:, 1], 0.5, 1.5
+        )
+        tilt = rc.camera_tilt_deg * rng.normal()
+        if rc.camera_tilt_deg > 0.0:
+            cam = self.cfg.camera
+            for j, lane in enumerate(lanes):
+                rot = Camera.from_config(
+                    dataclasses.replace(cam, pitch_deg=cam.pitch_deg + float(tilt[j]))
+                ).R
+                prm[lane, P_R00 : P_R22 + 1] = rot.ravel()
+        level = 1.0 + rc.detector_level_spread * rng.uniform(3, low=-1.0, high=1.0)
+        prm[lanes, P_JIT_C] = base[P_JIT_C] * level[:, 0]
+        prm[lanes, P_JIT_S] = base[P_JIT_S] * level[:, 0]
+        prm[lanes, P_MISS_P] = np.clip(base[P_MISS_P] * level[:, 1], 0.0, 1.0)
+        prm[lanes, P_BURST_START] = np.clip(base[P_BURST_START] * level[:, 2], 0.0, 1.0)
+        lat_lo = int(base[P_LATENCY])
+        lat_hi = max(lat_lo, rc.latency_frames_max)
+        u = rng.uniform()
+        prm[lanes, P_LATENCY] = np.minimum(lat_lo + np.floor(u * (lat_hi - lat_lo + 1)), lat_hi)
+        prm[lanes, P_DEPTH_K] = base[P_DEPTH_K] * (
+            1.0 + (rc.depth_noise_scale_max - 1.0) * rng.uniform()
+        )
+        fric = 1.0 + rc.friction_spread * rng.uniform(low=-1.0, high=1.0)
+        prm[lanes, P_FRIC_DUTY] = base[P_FRIC_DUTY] * fric
+        prm[lanes, P_STALL_DUTY] = base[P_STALL_DUTY] * fric
 
     def step(self, actions: np.ndarray, active: np.ndarray | None = None) -> None:
         """Advance the lanes by one control step; ``actions`` is (N, 2) float64 ``v, w``;

@@ -129,6 +129,7 @@ def wheel_tick(
     omega_radps: float,
     angle_rad: float,
     count: int,
+    count_noise: int,
     gain: float,
     kp: float,
     ki: float,
@@ -146,7 +147,8 @@ def wheel_tick(
     quantum_mps: float,
 ) -> tuple[float, float, float, float, float, float, int, float]:
     """One 10 ms tick of one wheel: PID on the last encoder estimate, the motor under the new
-    duty, the wheel turning, and the encoder's count and speed estimate at the tick's end.
+    duty, the wheel turning, and the encoder's count (with ``count_noise`` extra counts read)
+    and speed estimate at the tick's end.
 
     :return: ``(duty %, integral, filtered D, error, omega rad/s, angle rad, count,
         measured speed m/s)``.
@@ -157,7 +159,7 @@ def wheel_tick(
     )
     omega_radps = motor_step(omega_radps, duty, gain, no_load_radps, alpha, friction_pct, stall_pct)
     angle_rad += omega_radps * dt_s
-    new_count = encoder_count(angle_rad, counts_per_rev)
+    new_count = encoder_count(angle_rad, counts_per_rev) + count_noise
     measured_mps = encoder_speed(
         new_count, count, counts_per_rev, dt_s, wheel_diameter_m, quantum_mps
     )

@@ -78,7 +78,17 @@ P_SETTLE = 68
 P_WALL_R = 69
 P_V_MAX = 70
 P_W_MAX = 71
-N_PARAMS = 72
+P_WHEEL_R_TRUE = 72  # the wheels' real radius (WHEEL_R is what the controller assumes)
+P_TRACK_TRUE = 73  # the real track width (TRACK is what the controller assumes)
+P_ENC_NOISE = 74  # std of extra encoder counts per tick
+P_PUSH_P = 75  # chance per control step of a push
+P_PUSH_V = 76  # push speed (m/s) for one control step
+P_ASSOC = 77  # 0: first detection (reference), 1: tracker
+P_TRK_IOU = 78  # tracker gate: least IoU with the predicted box
+P_TRK_COAST = 79  # tracker: frames kept without a match
+P_SOCIAL_R = 80  # people keep this far from each other (m)
+P_SOCIAL_K = 81  # strength of the sideways social force (m/s^2)
+N_PARAMS = 82
 
 # --- per-lane float state: ``fstate[lane, S_*]`` ---
 S_X = 0
@@ -124,13 +134,24 @@ S_CLEAR_PERSON = 39
 S_REWARD = 40
 S_TERM = 41
 S_TRUNC = 42
+S_TRK_CX = 43
+S_TRK_CY = 44
+S_TRK_W = 45
+S_TRK_H = 46
+S_TRK_VX = 47
+S_TRK_VY = 48
+S_TRK_LOST = 49
+S_TRK_ON = 50
+S_VIS_FRAC = 51
+S_PUSH_VX = 52
+S_PUSH_VY = 53
 HIST_MAX = 32  # longest distance-filter history (PerceptionConfig.filter_history)
-S_HIST0 = 43
+S_HIST0 = 54
 DL_MAX = 9  # delay-line slots: latency_frames <= 8
 DL_FIELDS = 8  # detected, cu, cv, raw depth, box x1, y1, x2, y2
 S_DL0 = S_HIST0 + HIST_MAX
 S_SCRATCH0 = S_DL0 + DL_MAX * DL_FIELDS  # per-lane scratch for the camera (8 corners x 3)
-N_SCRATCH = 24
+N_SCRATCH = 24 + 64  # 8 body corners x 3, then up to 64 occluder indices
 N_FSTATE = S_SCRATCH0 + N_SCRATCH
 
 # --- per-lane integer state: ``istate[lane, I_*]`` (int64) ---
@@ -158,7 +179,11 @@ PS_Y = 5
 PS_TH = 6
 PS_DONE = 7
 PS_NPTS = 8
-N_PSTATE = 9
+PS_LAT = 9
+PS_LATV = 10
+PS_FORCE = 11
+PS_SLOW = 12
+N_PSTATE = 13
 
 # --- path waypoints: ``paths[lane, person, k, PW_*]`` (float64) ---
 PW_X = 0
@@ -168,6 +193,14 @@ PW_VMAX = 3
 PW_PAUSE = 4
 N_PW = 5
 
+# --- walls and obstacles: ``walls[lane, k, W_*]`` (float64): a segment and its height ---
+W_X1 = 0
+W_Y1 = 1
+W_X2 = 2
+W_Y2 = 3
+W_H = 4  # height (m): walls and pillars are tall, furniture low
+WALL_FIELDS = 5
+
 # --- episode end reasons (``istate[lane, I_REASON]``) ---
 REASON_NONE = 0
 REASON_COLLISION_WALL = 1
@@ -175,4 +208,13 @@ REASON_COLLISION_PERSON = 2
 REASON_LOST = 3
 REASON_WALK_OVER = 4
 REASON_STEP_LIMIT = 5
-REASON_NAMES = ("", "collision_wall", "collision_person", "lost", "walk_over", "step_limit")
+REASON_COLLISION_BYSTANDER = 6
+REASON_NAMES = (
+    "",
+    "collision_wall",
+    "collision_person",
+    "lost",
+    "walk_over",
+    "step_limit",
+    "collision_bystander",
+)

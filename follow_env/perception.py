@@ -45,6 +45,20 @@ def jitter_box(
 
 
 @njit(cache=True, inline="always")
+def box_iou(
+    a1: float, a2: float, a3: float, a4: float, b1: float, b2: float, b3: float, b4: float
+) -> float:
+    """Intersection over union of boxes ``(u1, v1, u2, v2)`` a and b (0 when disjoint)."""
+    iw = min(a3, b3) - max(a1, b1)
+    ih = min(a4, b4) - max(a2, b2)
+    if iw <= 0.0 or ih <= 0.0:
+        return 0.0
+    inter = iw * ih
+    union = (a3 - a1) * (a4 - a2) + (b3 - b1) * (b4 - b2) - inter
+    return inter / union if union > 0.0 else 0.0
+
+
+@njit(cache=True, inline="always")
 def listed_before(area: float, best_area: float) -> bool:
     """The detector's order: does a box of ``area`` (px^2) come before the best so far?
 

@@ -377,7 +377,7 @@ class Renderer:
         for gy in np.arange(gy0, gy1 + step, step):
             cv2.line(bg, view.pt(gx0, gy), view.pt(gx1, gy), C_GRID, 1, cv2.LINE_8, _SHIFT)
         wall_px = max(2, round(0.1 * view.scale))  # walls are 0.1 m thick in the contacts
-        for x1, y1, x2, y2 in walls:
+        for x1, y1, x2, y2 in walls[:, :4]:
             cv2.line(bg, view.pt(x1, y1), view.pt(x2, y2), C_WALL, wall_px, cv2.LINE_AA, _SHIFT)
         bg[:HEADER_PX] = C_BG
         self._map_key, self._map_bg, self._map_view, self._grid_m = key, bg, view, step

@@ -32,8 +32,9 @@ STREAM_PERSON = 0
 STREAM_DETECTOR = 1
 STREAM_DEPTH = 2
 STREAM_MOTOR = 3
-STREAM_WORLD = 4  # reserved for world/scenario extras (obstacles, bystanders)
-N_STREAMS = 5
+STREAM_WORLD = 4  # maps, obstacles and bystanders of a scenario
+STREAM_RANDOMIZE = 5  # domain randomisation and disturbances
+N_STREAMS = 6
 
 _U = np.uint64
 _C1 = _U(0xBF58476D1CE4E5B9)

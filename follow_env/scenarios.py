@@ -53,7 +53,7 @@ class ScenarioBatch:
     paths: np.ndarray  # (n, people, points, N_PW), see follow_env.layout PW_*
     n_points: np.ndarray  # (n, people) int: waypoints used per path (>= 2)
     n_people: np.ndarray  # (n,) int: people present (>= 1; person 0 is the target)
-    walls: np.ndarray  # (n, walls, 4): x1, y1, x2, y2 m
+    walls: np.ndarray  # (n, walls, 5): x1, y1, x2, y2, height m (follow_env.layout W_*)
     n_walls: np.ndarray  # (n,) int
 
 
@@ -331,3 +331,7 @@ def random(rng: LaneRandom, cfg: EnvConfig) -> ScenarioBatch:
         walls=walls,
         n_walls=n_walls,
     )
+
+
+# The realistic-world scenarios register themselves on import (they build on the helpers above).
+import follow_env.world_scenarios  # noqa: E402, F401

@@ -22,12 +22,33 @@ _CAT_WALL = 0b01
 _CAT_ROBOT = 0b10
 
 
-def room_walls(length_m: float, width_m: float) -> np.ndarray:
-    """The four walls of a rectangular room centred on the origin: (4, 4) ``x1, y1, x2, y2``."""
+WALL_HEIGHT_M = 3.0
+"""Height of walls and pillars (m): taller than anyone, so they hide people entirely."""
+
+
+def room_walls(length_m: float, width_m: float, height_m: float = WALL_HEIGHT_M) -> np.ndarray:
+    """The four walls of a rectangular room centred on the origin: (4, 5)
+    ``x1, y1, x2, y2, height``."""
     hx, hy = 0.5 * length_m, 0.5 * width_m
-    return np.array(
-        [[-hx, -hy, hx, -hy], [hx, -hy, hx, hy], [hx, hy, -hx, hy], [-hx, hy, -hx, -hy]]
-    )
+    corners = [(-hx, -hy), (hx, -hy), (hx, hy), (-hx, hy)]
+    return polygon_walls(corners, height_m)
+
+
+def polygon_walls(corners: list[tuple[float, float]], height_m: float) -> np.ndarray:
+    """The closed outline through ``corners`` (m) as wall segments of ``height_m``: (n, 5)."""
+    pts = np.asarray(corners, dtype=float)
+    nxt = np.roll(pts, -1, axis=0)
+    return np.column_stack([pts, nxt, np.full(len(pts), height_m)])
+
+
+def box_walls(
+    cx: float, cy: float, length_m: float, width_m: float, heading_rad: float, height_m: float
+) -> np.ndarray:
+    """A box obstacle (pillar, cabinet, table) as its four sides: (4, 5)."""
+    c, s = np.cos(heading_rad), np.sin(heading_rad)
+    hl, hw = 0.5 * length_m, 0.5 * width_m
+    local = [(-hl, -hw), (hl, -hw), (hl, hw), (-hl, hw)]
+    return polygon_walls([(cx + a * c - b * s, cy + a * s + b * c) for a, b in local], height_m)
 
 
 @njit(cache=True, inline="always")
@@ -40,6 +61,37 @@ def _point_segment_distance(
     t = min(max(t, 0.0), 1.0)
     ex, ey = ax + t * dx - px, ay + t * dy - py
     return np.sqrt(ex * ex + ey * ey)
+
+
+@njit(cache=True, inline="always")
+def segment_distance(
+    a1x: float, a1y: float, a2x: float, a2y: float, b1x: float, b1y: float, b2x: float, b2y: float
+) -> float:
+    """Shortest distance (m) between segments a and b; 0 when they cross."""
+    d1 = (a2x - a1x) * (b1y - a1y) - (a2y - a1y) * (b1x - a1x)
+    d2 = (a2x - a1x) * (b2y - a1y) - (a2y - a1y) * (b2x - a1x)
+    d3 = (b2x - b1x) * (a1y - b1y) - (b2y - b1y) * (a1x - b1x)
+    d4 = (b2x - b1x) * (a2y - b1y) - (b2y - b1y) * (a2x - b1x)
+    if d1 * d2 < 0.0 and d3 * d4 < 0.0:
+        return 0.0
+    return min(
+        min(
+            _point_segment_distance(a1x, a1y, b1x, b1y, b2x, b2y),
+            _point_segment_distance(a2x, a2y, b1x, b1y, b2x, b2y),
+        ),
+        min(
+            _point_segment_distance(b1x, b1y, a1x, a1y, a2x, a2y),
+            _point_segment_distance(b2x, b2y, a1x, a1y, a2x, a2y),
+        ),
+    )
+
+
+@njit(cache=True, inline="always")
+def point_segment_distance(
+    px: float, py: float, ax: float, ay: float, bx: float, by: float
+) -> float:
+    """Distance (m) from point (px, py) to the segment a-b."""
+    return _point_segment_distance(px, py, ax, ay, bx, by)
 
 
 @njit(cache=True, inline="always")
@@ -160,7 +212,8 @@ def rect_rect_distance(
 class World:
     """A pymunk space with the walls and the robot's footprint.
 
-    :param walls: (n, 4) wall segments ``x1, y1, x2, y2`` (m).
+    :param walls: (n, 5) wall segments ``x1, y1, x2, y2, height`` (m); a height column is
+        optional.
     :param footprint_length_m: robot footprint along its heading (m).
     :param footprint_width_m: robot footprint across (m).
     """
@@ -168,9 +221,10 @@ class World:
     def __init__(
         self, walls: np.ndarray, footprint_length_m: float, footprint_width_m: float
     ) -> None:
-        self.walls = np.asarray(walls, dtype=float).reshape(-1, 4)
+        walls = np.asarray(walls, dtype=float)
+        self.walls = walls.reshape(-1, walls.shape[-1])
         self.space = pymunk.Space()
-        for x1, y1, x2, y2 in self.walls:
+        for x1, y1, x2, y2 in self.walls[:, :4]:
             seg = pymunk.Segment(self.space.static_body, (x1, y1), (x2, y2), WALL_RADIUS_M)
             seg.filter = pymunk.ShapeFilter(categories=_CAT_WALL)
             self.space.add(seg)

@@ -139,7 +139,7 @@ def test_metrics_on_malformed_row_names_file_and_line(
     ("args", "message"),
     [
         (["run", "--policies", "pn,lqr"], "unknown policy 'lqr'; known names: "),
-        (["run", "--scenarios", "zigzag"], "unknown scenario 'zigzag'; known scenarios: "),
+        (["run", "--scenarios", "moonwalk"], "unknown scenario 'moonwalk'; known scenarios: "),
         (["run", "--episodes", "0"], "--episodes: 0 is out of range: must be >= 1"),
         (["run", "--episodes", "many"], "--episodes: 'many' is not an integer"),
         (["run", "--workers", "0"], "--workers: 0 is out of range"),

@@ -113,8 +113,8 @@ def test_unknown_policy_error_lists_the_known_names() -> None:
 
 
 def test_unknown_scenario_error_lists_the_known_scenarios() -> None:
-    with pytest.raises(ValueError, match=r"unknown scenario 'zigzag'; known scenarios: .*curve"):
-        rollout(["pn"], ["zigzag"], [0])
+    with pytest.raises(ValueError, match=r"unknown scenario 'moonwalk'; known scenarios: .*curve"):
+        rollout(["pn"], ["moonwalk"], [0])
 
 
 @pytest.mark.parametrize("empty", ["policies", "scenarios", "seeds"])

@@ -1,0 +1,961 @@
+"""T-RRT: a transition-based RRT on a 2-D cost map (SPEC §3), for people's walking paths.
+
+A plain RRT finds *a* path; people walk down the middle of corridors and keep off walls. T-RRT
+(SPEC §3) grows the tree with a *transition test* on a cost map whose cost rises near
+obstacles, so the tree prefers the valleys of the cost (the middle of free space) and only
+climbs towards obstacles when it has to. A deterministic post-processing pass then takes out
+the random zigzags and resamples the path to waypoints a simulated person can walk.
+
+**Cost map** (:class:`CostMap`, built by :func:`cost_map_from_obstacles`): a grid of cells of
+``resolution_m`` with its lower-left corner at ``(x0_m, y0_m)``; cell ``[iy, ix]`` covers
+``x0 + ix res <= x < x0 + (ix + 1) res`` and likewise in y. Each cell has an occupancy flag
+(the body of a walker, a disc of ``body_radius_m``, would touch an obstacle) and a cost
+``exp(-clearance / length_scale_m)`` in (0, 1], where ``clearance`` is the distance (m) from
+the edge of the body to the nearest obstacle: 1 at contact, falling off over a few length
+scales. A point outside the grid is never free.
+
+**The planner** (:func:`plan`), SPEC §3 step by step, in compiled code:
+
+1. *sample* a point uniformly over the grid, or the goal with probability ``goal_bias``;
+2. find the *nearest node* of the tree (linear scan: a few thousand nodes at most);
+3. *extend* from it towards the sample by at most ``step_m``;
+4. reject the new node unless the segment from its parent stays in free space (every cell it
+   crosses is free, traced exactly: Amanatides & Woo's grid traversal);
+5. the *transition test* (:func:`transition_probability`): a child no costlier than its parent
+   is accepted; otherwise ``dC = (child_cost - parent_cost) / distance`` and the child is
+   accepted with probability ``exp(-dC / (K T))``, with ``K`` the mean cost of start and goal;
+6. the *temperature update* (:func:`update_temperature`) after every uphill test;
+7. stop when a new node lies within ``goal_tol_m`` of the goal and the segment to the goal is
+   free (the goal joins the tree), or when ``max_iters`` iterations have run.
+
+**Reading of SPEC §3's temperature rule.** The text says, literally: "on acceptance
+``T = T / alpha`` and reset the failure count; on rejection, if failures reached a maximum then
+``T = T * alpha`` and reset the count, else count the failure". We follow it to the letter, with
+``alpha > 1`` (the value of the T-RRT literature, e.g. 2): every accepted *uphill* move cools
+the search (T falls, uphill moves get rarer), and a run of rejected uphill moves heats it (T
+rises once the count of failures has *reached* ``n_fail_max``: the rejection after
+``n_fail_max`` counted failures multiplies T by alpha). With ``alpha < 1`` the same formulas
+would run away (acceptances would make acceptance likelier), so ``alpha`` must exceed 1.
+The update runs only inside the transition test, i.e. for uphill children: a downhill child is
+accepted outright and a colliding one never reaches the test, and neither changes T.
+
+**Randomness** comes from :func:`follow_env.rng.uniform_at` with the caller's key, so the same
+key always grows the same tree. Iteration ``i`` reads counters ``counter0 + 4 i + slot``: slot
+0 the goal-bias coin, 1 and 2 the sample's x and y, 3 the transition test's draw
+(:data:`COUNTERS_PER_ITER`; a caller sharing a stream reserves :func:`counters_needed`).
+
+**Post-processing** (deterministic, never leaves free space): a greedy shortcut (from each
+waypoint, jump to the farthest later one whose straight segment is free *and* no costlier at
+its worst than the stretch of path it replaces, so shortcuts do not hug walls the tree kept
+away from), Chaikin corner cutting (a cut that would hit an obstacle keeps its corner), and
+resampling by arc length to waypoints at most ``waypoint_spacing_m`` apart (keeping any corner
+whose chord would not be free).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numba import njit
+from numpy.typing import ArrayLike
+from scipy import ndimage
+
+from follow_env.config import _Validated, param
+from follow_env.rng import uniform_at
+
+__all__ = [
+    "COUNTERS_PER_ITER",
+    "CostMap",
+    "PlanResult",
+    "TRRTParams",
+    "cost_map_from_obstacles",
+    "counters_needed",
+    "plan",
+    "segment_is_free",
+    "transition_probability",
+    "update_temperature",
+]
+
+# Random counters read per iteration (see the module docstring for the slots).
+COUNTERS_PER_ITER = 4
+_SLOT_GOAL, _SLOT_X, _SLOT_Y, _SLOT_TEST = 0, 1, 2, 3
+
+# Numerical guard only: T stays within float range however long a run of acceptances or
+# failures lasts (SPEC §3 puts no bound on T; ordinary runs never come near these).
+_T_MIN = 1e-200
+_T_MAX = 1e200
+
+# Slots of the statistics array the kernel fills.
+_ST_DOWNHILL = 0  # children accepted without a test (child cost <= parent cost)
+_ST_UP_ACCEPT = 1  # uphill children accepted by the transition test
+_ST_UP_REJECT = 2  # uphill children rejected by the transition test
+_ST_COLLISION = 3  # new nodes rejected because they or their segment leave free space
+_ST_COOL = 4  # T = T / alpha events
+_ST_HEAT = 5  # T = T * alpha events
+_N_ST = 6
+
+# Columns of the uphill log: one row per transition test of an uphill child.
+_LOG_T, _LOG_DC, _LOG_ACCEPTED = 0, 1, 2
+
+
+# --- cost map ----------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, eq=False)
+class CostMap:
+    """A 2-D cost map with its occupancy grid.
+
+    :param cost: (ny, nx) float, cost of each cell (finite, >= 0; dimensionless).
+    :param occupied: (ny, nx) bool, True where a walker's body would touch an obstacle.
+    :param x0_m: x of the grid's lower-left corner (m).
+    :param y0_m: y of the grid's lower-left corner (m).
+    :param resolution_m: side of a cell (m).
+    """
+
+    cost: np.ndarray
+    occupied: np.ndarray
+    x0_m: float
+    y0_m: float
+    resolution_m: float
+
+    def __post_init__(self) -> None:
+        cost = np.array(self.cost, dtype=np.float64, order="C")
+        occupied = np.array(self.occupied, dtype=np.bool_, order="C")
+        if cost.ndim != 2 or cost.shape[0] < 1 or cost.shape[1] < 1:
+            raise ValueError(
+                f"CostMap.cost has shape {cost.shape}: must be 2-D (ny, nx), non-empty"
+            )
+        if occupied.shape != cost.shape:
+            raise ValueError(
+                f"CostMap.occupied has shape {occupied.shape}: must match cost {cost.shape}"
+            )
+        if not np.all(np.isfinite(cost)) or np.any(cost < 0.0):
+            raise ValueError("CostMap.cost is out of range: every cell must be finite and >= 0")
+        for name in ("x0_m", "y0_m", "resolution_m"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int | float | np.floating):
+                raise ValueError(f"CostMap.{name}={value!r} is out of range: must be a number")
+            if not math.isfinite(value):
+                raise ValueError(f"CostMap.{name}={value!r} is out of range: must be finite")
+        if self.resolution_m <= 0.0:
+            raise ValueError(
+                f"CostMap.resolution_m={self.resolution_m!r} is out of range: must be > 0 m"
+            )
+        cost.flags.writeable = False
+        occupied.flags.writeable = False
+        object.__setattr__(self, "cost", cost)
+        object.__setattr__(self, "occupied", occupied)
+        for name in ("x0_m", "y0_m", "resolution_m"):
+            object.__setattr__(self, name, float(getattr(self, name)))
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """Grid size (ny, nx) in cells."""
+        return self.cost.shape  # type: ignore[return-value]
+
+    @property
+    def bounds(self) -> tuple[float, float, float, float]:
+        """``(xmin, ymin, xmax, ymax)`` of the grid (m)."""
+        ny, nx = self.shape
+        r = self.resolution_m
+        return self.x0_m, self.y0_m, self.x0_m + nx * r, self.y0_m + ny * r
+
+    def cell_of(self, xy: ArrayLike) -> tuple[int, int] | None:
+        """The cell ``(ix, iy)`` holding point ``xy`` (m), or None outside the grid."""
+        x, y = (float(v) for v in np.asarray(xy, dtype=np.float64).reshape(2))
+        ix, iy = _cell(x, y, self.x0_m, self.y0_m, self.resolution_m, *self.shape)
+        return None if ix < 0 else (ix, iy)
+
+    def is_free(self, xy: ArrayLike) -> bool:
+        """True when point ``xy`` (m) is inside the grid in an unoccupied cell."""
+        cell = self.cell_of(xy)
+        return cell is not None and not self.occupied[cell[1], cell[0]]
+
+    def cost_at(self, xy: ArrayLike) -> float:
+        """Cost of the cell holding point ``xy`` (m); ValueError outside the grid."""
+        cell = self.cell_of(xy)
+        if cell is None:
+            raise ValueError(f"xy={tuple(np.asarray(xy).tolist())!r} is outside the cost map")
+        return float(self.cost[cell[1], cell[0]])
+
+
+def _as_rows(values: ArrayLike | None, widths: tuple[int, ...], name: str) -> np.ndarray:
+    """``values`` as a float (n, w) array with w one of ``widths``; None or empty -> (0, w)."""
+    if values is None:
+        return np.zeros((0, widths[-1]))
+    a = np.asarray(values, dtype=np.float64)
+    if a.size == 0:
+        return np.zeros((0, widths[-1]))
+    if a.ndim == 1:
+        a = a[None, :]
+    if a.ndim != 2 or a.shape[1] not in widths:
+        raise ValueError(
+            f"{name} has shape {a.shape}: must be (n, {' or '.join(map(str, widths))})"
+        )
+    if not np.all(np.isfinite(a)):
+        raise ValueError(f"{name} holds a non-finite value: every coordinate must be finite")
+    return a
+
+
+def cost_map_from_obstacles(
+    bounds: tuple[float, float, float, float],
+    walls: ArrayLike | None = None,
+    boxes: ArrayLike | None = None,
+    *,
+    resolution_m: float = 0.1,
+    wall_thickness_m: float = 0.1,
+    body_radius_m: float = 0.25,
+    length_scale_m: float = 0.5,
+) -> CostMap:
+    """Rasterise walls and boxes into a :class:`CostMap` over ``bounds``.
+
+    Obstacle cells are those whose centre lies within an obstacle grown by half a cell (so a
+    wall thinner than a cell still makes an unbroken line). ``scipy.ndimage`` gives every cell
+    its distance to the nearest obstacle cell; less half a cell, that is its clearance to the
+    obstacle, accurate to about half a cell. A cell is occupied when a walker's disc of
+    ``body_radius_m`` centred on it would touch an obstacle (clearance < body radius); its cost
+    is ``exp(-(clearance - body_radius_m) / length_scale_m)``: 1 at the edge of free space,
+    ``e**-1`` one length scale further out. The grid's border is not an obstacle by itself:
+    pass walls for it (points outside the grid are never free to the planner).
+
+    :param bounds: ``(xmin, ymin, xmax, ymax)`` of the map (m).
+    :param walls: (n, 4) segments ``x1, y1, x2, y2`` (m), each ``wall_thickness_m`` thick
+        (with rounded ends: every point within half the thickness of the segment).
+    :param boxes: (m, 5) ``cx, cy, length, width, yaw`` (m, m, m, m, rad): rectangles of
+        ``length`` along their heading ``yaw``; (m, 4) rows ``cx, cy, length, width`` are
+        axis-aligned.
+    :param resolution_m: cell side (m).
+    :param wall_thickness_m: thickness of every wall (m).
+    :param body_radius_m: radius of the walker's body (m): obstacles are inflated by it. The
+        default is half an adult's shoulder width (~0.45 m) plus a few cm; a door then needs
+        to be wider than about 2 x (0.25 + half the wall) + a cell to stay open.
+    :param length_scale_m: distance over which the cost falls by a factor e (m).
+    """
+    xmin, ymin, xmax, ymax = (float(v) for v in bounds)
+    if not all(math.isfinite(v) for v in (xmin, ymin, xmax, ymax)) or xmax <= xmin or ymax <= ymin:
+        raise ValueError(
+            f"bounds={tuple(bounds)!r} is out of range: must be finite (xmin, ymin, xmax, ymax) "
+            "with xmax > xmin and ymax > ymin (m)"
+        )
+    for name, value, strict in (
+        ("resolution_m", resolution_m, True),
+        ("wall_thickness_m", wall_thickness_m, False),
+        ("body_radius_m", body_radius_m, False),
+        ("length_scale_m", length_scale_m, True),
+    ):
+        if not math.isfinite(value) or value < 0.0 or (strict and value == 0.0):
+            raise ValueError(
+                f"{name}={value!r} is out of range: must be {'>' if strict else '>='} 0 m"
+            )
+    wall_rows = _as_rows(walls, (4,), "walls")
+    box_rows = _as_rows(boxes, (4, 5), "boxes")
+    if box_rows.shape[1] == 4:
+        box_rows = np.column_stack([box_rows, np.zeros(len(box_rows))])
+    if np.any(box_rows[:, 2:4] < 0.0):
+        raise ValueError("boxes has a negative length or width: sizes must be >= 0 m")
+
+    res = float(resolution_m)
+    nx = max(1, math.ceil((xmax - xmin) / res - 1e-9))
+    ny = max(1, math.ceil((ymax - ymin) / res - 1e-9))
+    xc = xmin + (np.arange(nx) + 0.5) * res  # cell centres (m)
+    yc = ymin + (np.arange(ny) + 0.5) * res
+    obstacle = np.zeros((ny, nx), dtype=np.bool_)
+    grow = 0.5 * res  # half a cell: thin walls still rasterise without gaps
+
+    def window(x_lo: float, x_hi: float, y_lo: float, y_hi: float) -> tuple[slice, slice]:
+        # Only the cells under an obstacle's bounding box are tested: obstacles are small.
+        i0 = max(0, math.floor((x_lo - xmin) / res))
+        i1 = min(nx, math.ceil((x_hi - xmin) / res) + 1)
+        j0 = max(0, math.floor((y_lo - ymin) / res))
+        j1 = min(ny, math.ceil((y_hi - ymin) / res) + 1)
+        return slice(j0, max(j0, j1)), slice(i0, max(i0, i1))
+
+    reach = 0.5 * wall_thickness_m + grow
+    for x1, y1, x2, y2 in wall_rows:
+        sy, sx = window(
+            min(x1, x2) - reach, max(x1, x2) + reach, min(y1, y2) - reach, max(y1, y2) + reach
+        )
+        px, py = np.meshgrid(xc[sx], yc[sy])
+        dx, dy = x2 - x1, y2 - y1
+        den = dx * dx + dy * dy
+        t = 0.0 if den == 0.0 else np.clip(((px - x1) * dx + (py - y1) * dy) / den, 0.0, 1.0)
+        dist = np.hypot(x1 + t * dx - px, y1 + t * dy - py)
+        obstacle[sy, sx] |= dist <= reach
+    for cx, cy, length, width, yaw in box_rows:
+        c, s = math.cos(yaw), math.sin(yaw)
+        hl, hw = 0.5 * length, 0.5 * width
+        ex = abs(c) * hl + abs(s) * hw + grow  # half extents of the bounding box
+        ey = abs(s) * hl + abs(c) * hw + grow
+        sy, sx = window(cx - ex, cx + ex, cy - ey, cy + ey)
+        px, py = np.meshgrid(xc[sx] - cx, yc[sy] - cy)
+        u, v = c * px + s * py, -s * px + c * py  # cell centres in the box's frame
+        dist = np.hypot(np.maximum(np.abs(u) - hl, 0.0), np.maximum(np.abs(v) - hw, 0.0))
+        obstacle[sy, sx] |= dist <= grow
+
+    if obstacle.any():
+        # Distance (m) from each cell centre to the nearest obstacle cell centre, less the half
+        # cell the obstacles were grown by: the clearance to the obstacle itself.
+        clearance = ndimage.distance_transform_edt(~obstacle) * res - grow
+        clearance = np.maximum(clearance, 0.0)
+        clearance[obstacle] = 0.0
+    else:
+        clearance = np.full((ny, nx), np.inf)
+    body_clearance = clearance - body_radius_m
+    occupied = obstacle | (body_clearance < 0.0)  # obstacle cells even for a point walker
+    cost = np.exp(-np.maximum(body_clearance, 0.0) / length_scale_m)
+    return CostMap(cost, occupied, xmin, ymin, res)
+
+
+# --- compiled geometry -------------------------------------------------------------------------
+
+
+@njit(cache=True, inline="always")
+def _cell(x: float, y: float, x0: float, y0: float, res: float, ny: int, nx: int) -> tuple:
+    """Cell (ix, iy) holding (x, y), or (-1, -1) outside the grid."""
+    gx = (x - x0) / res
+    gy = (y - y0) / res
+    if not (gx >= 0.0 and gy >= 0.0 and gx < nx and gy < ny):  # also rejects NaN
+        return -1, -1
+    return int(gx), int(gy)
+
+
+@njit(cache=True)
+def _trace(
+    cost: np.ndarray,
+    occ: np.ndarray,
+    x0: float,
+    y0: float,
+    res: float,
+    ax: float,
+    ay: float,
+    bx: float,
+    by: float,
+) -> float:
+    """Highest cost of the cells the segment a-b crosses, or inf if any is occupied or off the
+    grid. Every crossed cell is visited (Amanatides & Woo's traversal), not sampled."""
+    ny, nx = cost.shape
+    ix, iy = _cell(ax, ay, x0, y0, res, ny, nx)
+    ex, ey = _cell(bx, by, x0, y0, res, ny, nx)
+    if ix < 0 or ex < 0 or occ[iy, ix] or occ[ey, ex]:
+        return np.inf
+    worst = max(cost[iy, ix], cost[ey, ex])
+    gx, gy = (ax - x0) / res, (ay - y0) / res
+    dx, dy = (bx - ax) / res, (by - ay) / res
+    step_x = 1 if dx > 0.0 else -1
+    step_y = 1 if dy > 0.0 else -1
+    # Parameter t (0 at a, 1 at b) of the next vertical / horizontal cell border, and its step.
+    if dx != 0.0:
+        t_max_x = ((ix + 1 - gx) / dx) if dx > 0.0 else ((ix - gx) / dx)
+        t_dx = abs(1.0 / dx)
+    else:
+        t_max_x, t_dx = np.inf, np.inf
+    if dy != 0.0:
+        t_max_y = ((iy + 1 - gy) / dy) if dy > 0.0 else ((iy - gy) / dy)
+        t_dy = abs(1.0 / dy)
+    else:
+        t_max_y, t_dy = np.inf, np.inf
+    for _ in range(abs(ex - ix) + abs(ey - iy)):
+        if t_max_x < t_max_y:
+            ix += step_x
+            t_max_x += t_dx
+        else:
+            iy += step_y
+            t_max_y += t_dy
+        if ix < 0 or iy < 0 or ix >= nx or iy >= ny or occ[iy, ix]:
+            return np.inf
+        worst = max(worst, cost[iy, ix])
+    return worst
+
+
+# --- the transition test and the temperature rule (SPEC §3) -------------------------------------
+
+
+@njit(cache=True)
+def transition_probability(
+    child_cost: float, parent_cost: float, distance_m: float, K: float, T: float
+) -> float:
+    """Probability that SPEC §3's transition test accepts a child.
+
+    1 when ``child_cost <= parent_cost``; else ``exp(-dC / (K T))`` with
+    ``dC = (child_cost - parent_cost) / distance_m`` (cost per m).
+
+    :param child_cost: cost at the new node.
+    :param parent_cost: cost at its parent.
+    :param distance_m: length of the extension (m, > 0).
+    :param K: cost normaliser, the mean cost of start and goal (> 0).
+    :param T: temperature (> 0).
+    """
+    if child_cost <= parent_cost:
+        return 1.0
+    dC = (child_cost - parent_cost) / distance_m
+    return np.exp(-dC / (K * T))
+
+
+@njit(cache=True)
+def update_temperature(
+    T: float, n_fail: int, accepted: bool, alpha: float, n_fail_max: int
+) -> tuple[float, int]:
+    """SPEC §3's temperature rule after the transition test of an uphill child.
+
+    Accepted: ``T = T / alpha`` and the failure count resets. Rejected: if the count has
+    reached ``n_fail_max``, ``T = T * alpha`` and the count resets; else the failure is counted.
+    (With ``alpha > 1``: acceptances cool, runs of failures heat; see the module docstring.)
+
+    :param T: temperature before the update (> 0).
+    :param n_fail: uphill rejections counted since the last reset.
+    :param accepted: the outcome of the test.
+    :param alpha: temperature factor (> 1).
+    :param n_fail_max: failures counted before T is multiplied by alpha.
+    :return: ``(T, n_fail)`` after the update.
+    """
+    if accepted:
+        return max(T / alpha, _T_MIN), 0
+    if n_fail >= n_fail_max:
+        return min(T * alpha, _T_MAX), 0
+    return T, n_fail + 1
+
+
+# --- the planner loop --------------------------------------------------------------------------
+
+
+@njit(cache=True)
+def _grow_tree(
+    cost: np.ndarray,
+    occ: np.ndarray,
+    x0: float,
+    y0: float,
+    res: float,
+    sx: float,
+    sy: float,
+    gx: float,
+    gy: float,
+    key: np.uint64,
+    counter0: int,
+    step: float,
+    max_iters: int,
+    goal_bias: float,
+    goal_tol: float,
+    alpha: float,
+    n_fail_max: int,
+    T0: float,
+    K: float,
+) -> tuple:
+    """Grow a T-RRT from (sx, sy) towards (gx, gy) (SPEC §3; see the module docstring).
+
+    :return: ``(nodes (n, 2), parent (n,), goal_index or -1, iterations, T, stats, log)``.
+    """
+    ny, nx = cost.shape
+    width, height = nx * res, ny * res
+    cap = max_iters + 2  # the start, one node per iteration at most, the goal
+    nodes = np.empty((cap, 2))
+    parent = np.empty(cap, dtype=np.int64)
+    node_cost = np.empty(cap)
+    stats = np.zeros(_N_ST, dtype=np.int64)
+    log = np.empty((max_iters, 3))
+    n_log = 0
+    nodes[0, 0], nodes[0, 1] = sx, sy
+    parent[0] = -1
+    ix, iy = _cell(sx, sy, x0, y0, res, ny, nx)
+    node_cost[0] = cost[iy, ix]
+    n = 1
+    T = T0
+    n_fail = 0
+    goal_i = -1
+
+    # Start already at the goal: no search.
+    if (
+        np.hypot(gx - sx, gy - sy) <= goal_tol
+        and _trace(cost, occ, x0, y0, res, sx, sy, gx, gy) < np.inf
+    ):
+        nodes[1, 0], nodes[1, 1] = gx, gy
+        parent[1] = 0
+        return nodes[:2], parent[:2], 1, 0, T, stats, log[:0]
+
+    it = 0
+    while it < max_iters:
+        c = counter0 + COUNTERS_PER_ITER * it
+        it += 1
+        # 1. Sample: the goal with probability goal_bias, else uniform over the grid.
+        if uniform_at(key, c + _SLOT_GOAL) < goal_bias:
+            qx, qy = gx, gy
+        else:
+            qx = x0 + width * uniform_at(key, c + _SLOT_X)
+            qy = y0 + height * uniform_at(key, c + _SLOT_Y)
+        # 2. Nearest node (linear scan over the preallocated tree).
+        best, best_d2 = 0, np.inf
+        for j in range(n):
+            ddx, ddy = nodes[j, 0] - qx, nodes[j, 1] - qy
+            d2 = ddx * ddx + ddy * ddy
+            if d2 < best_d2:
+                best, best_d2 = j, d2
+        d = np.sqrt(best_d2)
+        if d < 1e-9:
+            continue  # the sample is a node already: nothing to extend
+        # 3. Extend by at most one step.
+        px, py = nodes[best, 0], nodes[best, 1]
+        if d > step:
+            qx = px + (qx - px) * (step / d)
+            qy = py + (qy - py) * (step / d)
+            d = step
+        # 4. Collision: the child and the whole segment from its parent must be free.
+        if _trace(cost, occ, x0, y0, res, px, py, qx, qy) == np.inf:
+            stats[_ST_COLLISION] += 1
+            continue
+        # 5. Transition test (SPEC §3), 6. temperature update on uphill moves only.
+        ix, iy = _cell(qx, qy, x0, y0, res, ny, nx)
+        child_cost = cost[iy, ix]
+        if child_cost <= node_cost[best]:
+            stats[_ST_DOWNHILL] += 1
+        else:
+            p = transition_probability(child_cost, node_cost[best], d, K, T)
+            accepted = uniform_at(key, c + _SLOT_TEST) < p
+            log[n_log, _LOG_T] = T
+            log[n_log, _LOG_DC] = (child_cost - node_cost[best]) / d
+            log[n_log, _LOG_ACCEPTED] = 1.0 if accepted else 0.0
+            n_log += 1
+            T, n_fail = update_temperature(T, n_fail, accepted, alpha, n_fail_max)
+            if accepted:
+                stats[_ST_COOL] += 1
+            elif n_fail == 0:  # a rejection resets the count only when it heats
+                stats[_ST_HEAT] += 1
+            if not accepted:
+                stats[_ST_UP_REJECT] += 1
+                continue
+            stats[_ST_UP_ACCEPT] += 1
+        nodes[n, 0], nodes[n, 1] = qx, qy
+        parent[n] = best
+        node_cost[n] = child_cost
+        n += 1
+        # 7. Goal reached: within tolerance and a free last segment.
+        if np.hypot(gx - qx, gy - qy) <= goal_tol:
+            if qx == gx and qy == gy:
+                goal_i = n - 1
+                break
+            if _trace(cost, occ, x0, y0, res, qx, qy, gx, gy) < np.inf:
+                nodes[n, 0], nodes[n, 1] = gx, gy
+                parent[n] = n - 1
+                goal_i = n
+                n += 1
+                break
+    return nodes[:n], parent[:n], goal_i, it, T, stats, log[:n_log]
+
+
+@njit(cache=True)
+def _branch(nodes: np.ndarray, parent: np.ndarray, leaf: int) -> np.ndarray:
+    """Points from the root to ``leaf`` along the tree: (k, 2)."""
+    k = 0
+    i = leaf
+    while i >= 0:
+        k += 1
+        i = parent[i]
+    out = np.empty((k, 2))
+    i = leaf
+    for j in range(k - 1, -1, -1):
+        out[j] = nodes[i]
+        i = parent[i]
+    return out
+
+
+# --- post-processing ---------------------------------------------------------------------------
+
+
+@njit(cache=True)
+def _shortcut(
+    path: np.ndarray,
+    cost: np.ndarray,
+    occ: np.ndarray,
+    x0: float,
+    y0: float,
+    res: float,
+    ceiling: float,
+) -> np.ndarray:
+    """Greedy shortcut: from each kept point, jump to the farthest later point whose segment is
+    free and whose worst cost is no higher than that of the stretch of path it replaces, or
+    than ``ceiling`` (cost units) if that is higher."""
+    n = path.shape[0]
+    seg_worst = np.empty(max(n - 1, 0))
+    for k in range(n - 1):
+        seg_worst[k] = _trace(
+            cost, occ, x0, y0, res, path[k, 0], path[k, 1], path[k + 1, 0], path[k + 1, 1]
+        )
+    out = np.empty((n, 2))
+    out[0] = path[0]
+    m = 1
+    i = 0
+    while i < n - 1:
+        target = i + 1
+        stretch = seg_worst[i]
+        for j in range(i + 2, n):
+            stretch = max(stretch, seg_worst[j - 1])
+            w = _trace(cost, occ, x0, y0, res, path[i, 0], path[i, 1], path[j, 0], path[j, 1])
+            if w <= max(stretch, ceiling) + 1e-12:
+                target = j
+        out[m] = path[target]
+        m += 1
+        i = target
+    return out[:m]
+
+
+@njit(cache=True)
+def _chaikin(
+    path: np.ndarray,
+    cost: np.ndarray,
+    occ: np.ndarray,
+    x0: float,
+    y0: float,
+    res: float,
+    ceiling: float,
+) -> np.ndarray:
+    """One pass of Chaikin's corner cutting: each corner becomes two points at a quarter of
+    its segments; a cut whose segment is not free, or costlier at its worst than both the
+    corner it replaces and ``ceiling``, keeps the corner."""
+    n = path.shape[0]
+    if n < 3:
+        return path.copy()
+    out = np.empty((3 * n, 2))
+    out[0] = path[0]
+    m = 1
+    for k in range(1, n - 1):
+        a, b, c = path[k - 1], path[k], path[k + 1]
+        rx, ry = 0.75 * b[0] + 0.25 * a[0], 0.75 * b[1] + 0.25 * a[1]  # on a-b, near b
+        qx, qy = 0.75 * b[0] + 0.25 * c[0], 0.75 * b[1] + 0.25 * c[1]  # on b-c, near b
+        cut = _trace(cost, occ, x0, y0, res, rx, ry, qx, qy)
+        corner = max(
+            _trace(cost, occ, x0, y0, res, rx, ry, b[0], b[1]),
+            _trace(cost, occ, x0, y0, res, b[0], b[1], qx, qy),
+        )
+        out[m, 0], out[m, 1] = rx, ry
+        m += 1
+        if not cut <= max(corner, ceiling) + 1e-12:
+            out[m] = b
+            m += 1
+        out[m, 0], out[m, 1] = qx, qy
+        m += 1
+    out[m] = path[n - 1]
+    m += 1
+    return out[:m]
+
+
+@njit(cache=True)
+def _resample(
+    path: np.ndarray,
+    spacing: float,
+    cost: np.ndarray,
+    occ: np.ndarray,
+    x0: float,
+    y0: float,
+    res: float,
+) -> np.ndarray:
+    """Points evenly spaced by arc length, at most ``spacing`` (m) apart, ends kept; a corner
+    of ``path`` between two new points stays in when their chord would not be free."""
+    n = path.shape[0]
+    s = np.zeros(n)
+    for k in range(1, n):
+        s[k] = s[k - 1] + np.hypot(path[k, 0] - path[k - 1, 0], path[k, 1] - path[k - 1, 1])
+    total = s[n - 1]
+    if total <= 0.0:  # start == goal: still a path of two waypoints
+        out = np.empty((2, 2))
+        out[0], out[1] = path[0], path[n - 1]
+        return out
+    pieces = max(1, int(np.ceil(total / spacing - 1e-9)))
+    out = np.empty((pieces + 1 + n, 2))
+    out[0] = path[0]
+    m = 1
+    seg = 0  # path[seg] .. path[seg + 1] holds the current arc length
+    for q in range(1, pieces + 1):
+        target = total * q / pieces
+        first_corner = seg + 1
+        while seg < n - 2 and s[seg + 1] < target:
+            seg += 1
+        if q == pieces:
+            x, y = path[n - 1, 0], path[n - 1, 1]
+            seg = n - 2
+        else:
+            ds = s[seg + 1] - s[seg]
+            f = 0.0 if ds <= 0.0 else (target - s[seg]) / ds
+            x = path[seg, 0] + f * (path[seg + 1, 0] - path[seg, 0])
+            y = path[seg, 1] + f * (path[seg + 1, 1] - path[seg, 1])
+        # Corners passed since the last point: keep them if the chord cuts into an obstacle.
+        if seg >= first_corner and (
+            _trace(cost, occ, x0, y0, res, out[m - 1, 0], out[m - 1, 1], x, y) == np.inf
+        ):
+            for k in range(first_corner, seg + 1):
+                if path[k, 0] != out[m - 1, 0] or path[k, 1] != out[m - 1, 1]:
+                    out[m] = path[k]
+                    m += 1
+        out[m, 0], out[m, 1] = x, y
+        m += 1
+    return out[:m]
+
+
+# --- Python API --------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class TRRTParams(_Validated):
+    """Parameters of the T-RRT planner (SPEC §3) and of its post-processing.
+
+    The spec gives the algorithm only; every value here is a choice, tuned so that a path
+    through a 20 m x 14 m maze is found in a few milliseconds.
+    """
+
+    step_m: float = param(
+        1.0,
+        0.0,
+        10.0,
+        "m",
+        "choice: a long step grows the tree fast; post-processing smooths the corners",
+        lo_open=True,
+    )
+    max_iters: int = param(
+        20_000, 1, 1_000_000, "iterations", "choice: ample for a maze", integer=True
+    )
+    goal_bias: float = param(
+        0.05, 0.0, 1.0, "", "choice: share of samples drawn at the goal, as usual for RRTs"
+    )
+    goal_tol_m: float = param(
+        0.5, 0.0, 10.0, "m", "choice: a node this close to the goal connects to it", lo_open=True
+    )
+    alpha: float = param(
+        2.0,
+        1.0,
+        100.0,
+        "",
+        "SPEC §3: temperature factor; > 1 so that acceptances cool (module docstring)",
+        lo_open=True,
+    )
+    n_fail_max: int = param(
+        2,
+        0,
+        1_000_000,
+        "failures",
+        "SPEC §3: uphill rejections counted before T rises. Choice of value: the rule settles "
+        "near 1 / (n_fail_max + 2) of uphill moves accepted; 2 (about 25 %) still finds "
+        "1 m doorways quickly, 10 (8 %) takes several times longer there",
+        integer=True,
+    )
+    T0: float = param(
+        1.0, 0.0, 1e12, "", "choice: initial temperature (the rule adapts it)", lo_open=True
+    )
+    k_floor: float = param(
+        0.01,
+        0.0,
+        1e6,
+        "",
+        "choice: least K (SPEC §3: mean cost of start and goal), so that start and goal far "
+        "from all obstacles (cost ~ 0) do not make every uphill step impossible",
+        lo_open=True,
+    )
+    shortcut: bool = field(default=True)  # greedy shortcut pass (module docstring)
+    smooth_cost_max: float = param(
+        0.5,
+        0.0,
+        1e12,
+        "",
+        "choice: shortcuts and corner cuts may take the path up to this cost (or the tree "
+        "path's own worst cost over the stretch, if higher); 0.5 with the cost of "
+        "cost_map_from_obstacles keeps ln(2) length scales (0.35 m) clear of the body",
+    )
+    smooth_passes: int = param(
+        2, 0, 8, "passes", "choice: Chaikin corner-cutting passes after the shortcut", integer=True
+    )
+    waypoint_spacing_m: float = param(
+        0.3, 0.01, 10.0, "m", "choice: waypoints a walker follows, as in the scenarios (0.25 m)"
+    )
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if not isinstance(self.shortcut, bool):
+            raise ValueError(
+                f"TRRTParams.shortcut={self.shortcut!r} is out of range: must be True or False"
+            )
+
+
+@dataclass(frozen=True, eq=False)
+class PlanResult:
+    """Outcome of :func:`plan`.
+
+    ``path`` is what a walker follows; the rest describes the search. ``uphill_log`` has one
+    row per transition test of an uphill child: the temperature T at the test, ``dC`` (cost per
+    m) and 1.0 if accepted else 0.0, so the acceptance probability of each test is
+    ``exp(-dC / (K T))``.
+    """
+
+    path: np.ndarray  # (n, 2) m: start .. goal, post-processed; (0, 2) when not success
+    success: bool
+    status: str  # "reached" or "iterations_exhausted"
+    iterations: int  # iterations run (0: start within goal_tol_m of a visible goal)
+    raw_path: np.ndarray  # (k, 2) m: the tree's branch from start to goal; (0, 2) on failure
+    tree_xy: np.ndarray  # (nodes, 2) m: every node of the tree, the start first
+    tree_parent: np.ndarray  # (nodes,) int: index of each node's parent, -1 for the start
+    K: float  # cost normaliser used (mean cost of start and goal, floored at k_floor)
+    temperature_final: float  # T when the search stopped
+    n_downhill: int  # children accepted without a test (child cost <= parent cost)
+    n_uphill_accepted: int  # uphill children accepted by the transition test
+    n_uphill_rejected: int  # uphill children rejected by the transition test
+    n_collision_rejected: int  # new nodes rejected for leaving free space
+    n_cooled: int  # times T was divided by alpha
+    n_heated: int  # times T was multiplied by alpha
+    uphill_log: np.ndarray  # (tests, 3): T, dC (cost/m), accepted (1.0 / 0.0)
+
+    @property
+    def uphill_acceptance_rate(self) -> float:
+        """Share of uphill transition tests passed (NaN when none ran)."""
+        tests = self.n_uphill_accepted + self.n_uphill_rejected
+        return self.n_uphill_accepted / tests if tests else math.nan
+
+    @property
+    def length_m(self) -> float:
+        """Length of ``path`` (m)."""
+        return float(np.sum(np.linalg.norm(np.diff(self.path, axis=0), axis=1)))
+
+
+def counters_needed(params: TRRTParams) -> int:
+    """Random counters :func:`plan` may read from ``counter0`` on: reserve this many when the
+    key's stream is shared (e.g. ``LaneRandom.reserve``)."""
+    return COUNTERS_PER_ITER * params.max_iters
+
+
+def _point(cost_map: CostMap, xy: ArrayLike, name: str) -> tuple[float, float]:
+    """``xy`` as two floats, checked to be a free point of the map; ValueError naming it."""
+    try:
+        a = np.asarray(xy, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name}={xy!r} is not a point: must be (x, y) in m") from None
+    if a.shape != (2,) or not np.all(np.isfinite(a)):
+        raise ValueError(f"{name}={xy!r} is not a point: must be two finite numbers (x, y) in m")
+    x, y = float(a[0]), float(a[1])
+    cell = cost_map.cell_of(a)
+    if cell is None:
+        xmin, ymin, xmax, ymax = cost_map.bounds
+        raise ValueError(
+            f"{name}=({x:g}, {y:g}) is outside the cost map: must have x in [{xmin:g}, {xmax:g})"
+            f" m and y in [{ymin:g}, {ymax:g}) m"
+        )
+    if cost_map.occupied[cell[1], cell[0]]:
+        raise ValueError(
+            f"{name}=({x:g}, {y:g}) is inside an obstacle: cell (ix={cell[0]}, iy={cell[1]}) of "
+            "the cost map is occupied (obstacles are inflated by the body radius)"
+        )
+    return x, y
+
+
+def _key(key: Any, name: str = "key") -> np.uint64:
+    if isinstance(key, bool) or not isinstance(key, int | np.integer) or not 0 <= key < 2**64:
+        raise ValueError(f"{name}={key!r} is out of range: must be an integer in [0, 2**64)")
+    return np.uint64(key)
+
+
+def plan(
+    cost_map: CostMap,
+    start_xy: ArrayLike,
+    goal_xy: ArrayLike,
+    key: int | np.uint64,
+    params: TRRTParams | None = None,
+    *,
+    counter0: int = 0,
+) -> PlanResult:
+    """Plan a walking path from ``start_xy`` to ``goal_xy`` with T-RRT (SPEC §3).
+
+    Deterministic: the same map, points, key, counter0 and params give the same tree and path.
+    Not finding a path is an outcome, not an error: ``success`` is False, ``path`` empty and
+    ``status`` ``"iterations_exhausted"``.
+
+    :param cost_map: the map (see :func:`cost_map_from_obstacles`).
+    :param start_xy: start point (m), in free space.
+    :param goal_xy: goal point (m), in free space.
+    :param key: random stream key, an integer in [0, 2**64) (e.g. a ``LaneRandom`` key).
+    :param params: planner parameters (default :class:`TRRTParams()`).
+    :param counter0: first random counter read; the search reads at most
+        :func:`counters_needed` counters from there.
+    :raises ValueError: a point outside the map or in an obstacle, a bad key or counter0.
+    """
+    p = TRRTParams() if params is None else params
+    if not isinstance(p, TRRTParams):
+        raise ValueError(f"params={params!r} is not a TRRTParams")
+    if not isinstance(cost_map, CostMap):
+        raise ValueError(f"cost_map={cost_map!r} is not a CostMap")
+    sx, sy = _point(cost_map, start_xy, "start_xy")
+    gx, gy = _point(cost_map, goal_xy, "goal_xy")
+    k = _key(key)
+    if (
+        isinstance(counter0, bool)
+        or not isinstance(counter0, int | np.integer)
+        or not 0 <= counter0 < 2**62
+    ):
+        raise ValueError(f"counter0={counter0!r} is out of range: must be an integer in [0, 2**62)")
+    cost, occ = cost_map.cost, cost_map.occupied
+    x0, y0, res = cost_map.x0_m, cost_map.y0_m, cost_map.resolution_m
+    # SPEC §3: K = mean cost of start and goal, floored (see TRRTParams.k_floor).
+    K = max(0.5 * (cost_map.cost_at((sx, sy)) + cost_map.cost_at((gx, gy))), p.k_floor)
+    nodes, parent, goal_i, iters, T, stats, log = _grow_tree(
+        cost,
+        occ,
+        x0,
+        y0,
+        res,
+        sx,
+        sy,
+        gx,
+        gy,
+        k,
+        int(counter0),
+        p.step_m,
+        p.max_iters,
+        p.goal_bias,
+        p.goal_tol_m,
+        p.alpha,
+        p.n_fail_max,
+        p.T0,
+        K,
+    )
+    success = goal_i >= 0
+    if success:
+        raw = _branch(nodes, parent, goal_i)
+        ceiling = p.smooth_cost_max
+        path = _shortcut(raw, cost, occ, x0, y0, res, ceiling) if p.shortcut else raw
+        for _ in range(p.smooth_passes):
+            path = _chaikin(path, cost, occ, x0, y0, res, ceiling)
+        path = _resample(path, p.waypoint_spacing_m, cost, occ, x0, y0, res)
+    else:
+        raw = np.zeros((0, 2))
+        path = np.zeros((0, 2))
+    return PlanResult(
+        path=path,
+        success=success,
+        status="reached" if success else "iterations_exhausted",
+        iterations=int(iters),
+        raw_path=raw,
+        tree_xy=nodes.copy(),
+        tree_parent=parent.copy(),
+        K=float(K),
+        temperature_final=float(T),
+        n_downhill=int(stats[_ST_DOWNHILL]),
+        n_uphill_accepted=int(stats[_ST_UP_ACCEPT]),
+        n_uphill_rejected=int(stats[_ST_UP_REJECT]),
+        n_collision_rejected=int(stats[_ST_COLLISION]),
+        n_cooled=int(stats[_ST_COOL]),
+        n_heated=int(stats[_ST_HEAT]),
+        uphill_log=log.copy(),
+    )
+
+
+def segment_is_free(cost_map: CostMap, a_xy: ArrayLike, b_xy: ArrayLike) -> bool:
+    """True when the segment a-b (m) crosses only free cells of ``cost_map``."""
+    a = np.asarray(a_xy, dtype=np.float64).reshape(2)
+    b = np.asarray(b_xy, dtype=np.float64).reshape(2)
+    w = _trace(
+        cost_map.cost,
+        cost_map.occupied,
+        cost_map.x0_m,
+        cost_map.y0_m,
+        cost_map.resolution_m,
+        a[0],
+        a[1],
+        b[0],
+        b[1],
+    )
+    return bool(w < np.inf)
