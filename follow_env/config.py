@@ -360,12 +360,28 @@ class PerceptionConfig(_Validated):
     association: str = param(
         "first",
         doc="SPEC §1.4: the robot follows the first detection ('first'); 'tracker' keeps the "
-        "detection that best overlaps the last target box (IoU gate, constant-velocity "
-        "prediction), the fix for bystanders who steal the target",
+        "detection that looks like the target and best overlaps its predicted box (appearance "
+        "and IoU gates, constant-velocity prediction), the fix for bystanders who steal it",
         choices=("first", "tracker"),
     )
     tracker_iou_gate: float = param(
         0.1, 0.0, 1.0, "", "choice: least IoU with the predicted box for a detection to match"
+    )
+    tracker_appearance_gate: float = param(
+        0.15,
+        0.0,
+        1.0,
+        "",
+        "choice: the tracker takes a detection as the target's only if its "
+        "appearance is this close to what it learnt (re-identification)",
+    )
+    appearance_noise: float = param(
+        0.05,
+        0.0,
+        1.0,
+        "",
+        "choice: std of the appearance value a detection carries; people "
+        "look like uniform draws on [0, 1], so two of them look alike now and then",
     )
     tracker_coast_frames: int = param(
         10, 0, 1000, "frames", "choice: frames the tracker waits for its target (1 s)", integer=True

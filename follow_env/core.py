@@ -54,6 +54,7 @@ from follow_env.layout import (
     N_PW,
     N_SCRATCH,
     P_ANTI_WINDUP,
+    P_APP_NOISE,
     P_ASSOC,
     P_BURST_END,
     P_BURST_START,
@@ -125,6 +126,7 @@ from follow_env.layout import (
     P_TAU_D,
     P_TRACK,
     P_TRACK_TRUE,
+    P_TRK_APP_GATE,
     P_TRK_COAST,
     P_TRK_IOU,
     P_TX,
@@ -181,6 +183,7 @@ from follow_env.layout import (
     S_T,
     S_TERM,
     S_TH,
+    S_TRK_APP,
     S_TRK_CX,
     S_TRK_CY,
     S_TRK_H,
@@ -255,6 +258,9 @@ _LOS_MARGIN_M = 0.1
 # Encoder-noise draws: their own key domain, counted by step and 10 ms tick.
 _ENC_DOMAIN = np.uint64(0xA0761D6478BD642F)
 _MAX_SUBSTEPS = 4096
+# Appearance draws (re-identification): their own key domain, one per person index.
+_APPEARANCE_DOMAIN = np.uint64(0xE7037ED1A0B428DB)
+_TRK_ALPHA_APP = 0.05  # how fast the learnt look follows new views (slowly: no drift)
 # Tracker gains: alpha-beta filter on the box centre (and alpha on its size).
 _TRK_ALPHA = 0.6
 _TRK_BETA = 0.2
@@ -323,6 +329,7 @@ def params_from_config(cfg: EnvConfig) -> np.ndarray:
     )
     p[P_ASSOC] = 1.0 if d.association == "tracker" else 0.0
     p[P_TRK_IOU], p[P_TRK_COAST] = d.tracker_iou_gate, d.tracker_coast_frames
+    p[P_TRK_APP_GATE], p[P_APP_NOISE] = d.tracker_appearance_gate, d.appearance_noise
     p[P_SOCIAL_R], p[P_SOCIAL_K] = pe.social_radius_m, pe.social_strength_mps2
     return p
 
@@ -593,6 +600,13 @@ def _frame(
     t_cx, t_cy = fs[S_TRK_CX] + fs[S_TRK_VX], fs[S_TRK_CY] + fs[S_TRK_VY]
     t_hw, t_hh = 0.5 * fs[S_TRK_W], 0.5 * fs[S_TRK_H]
     match, m1, m2, m3, m4, best_iou = -1, 0.0, 0.0, 0.0, 0.0, prm[P_TRK_IOU]
+    # Re-identification: once the target's appearance is known the tracker only takes
+    # detections that look like it; the best-listed such one when no track is running.
+    known = prm[P_ASSOC] > 0.0 and fs[S_TRK_APP] >= 0.0
+    reid, r1, r2, r3, r4, reid_area, reid_app = -1, 0.0, 0.0, 0.0, 0.0, -1.0, 0.0
+    first_app = 0.0
+    m_app = 0.0
+    k_app = keys[STREAM_DETECTOR] ^ _APPEARANCE_DOMAIN
     c_th, s_th = np.cos(rth), np.sin(rth)
     ox = rx + c_th * prm[P_TX] - s_th * prm[P_TY]
     oy = ry + s_th * prm[P_TX] + c_th * prm[P_TY]
@@ -668,24 +682,38 @@ def _frame(
             j1, j2, j3, j4 = clip_box(j1, j2, j3, j4, W, H)
             if j3 > j1 and j4 > j2:
                 area = (j3 - j1) * (j4 - j2)
+                # What a re-identification network would see: the person's own appearance
+                # (one number per person and episode) plus noise.
+                app = uniform_at(k_app, p) + prm[P_APP_NOISE] * normal_pair_at(kdet, slot + 4)[0]
                 if listed_before(area, best_area):
-                    first, b1, b2, b3, b4, best_area = p, j1, j2, j3, j4, area
-                if tracking:
+                    first, b1, b2, b3, b4, best_area, first_app = p, j1, j2, j3, j4, area, app
+                alike = not known or abs(app - fs[S_TRK_APP]) < prm[P_TRK_APP_GATE]
+                if alike and listed_before(area, reid_area):
+                    reid, r1, r2, r3, r4, reid_area, reid_app = p, j1, j2, j3, j4, area, app
+                if tracking and alike:
                     iou = box_iou(
                         j1, j2, j3, j4, t_cx - t_hw, t_cy - t_hh, t_cx + t_hw, t_cy + t_hh
                     )
                     if iou >= best_iou:
-                        match, m1, m2, m3, m4, best_iou = p, j1, j2, j3, j4, iou
+                        match, m1, m2, m3, m4, best_iou, m_app = p, j1, j2, j3, j4, iou, app
 
     if prm[P_ASSOC] > 0.0:
         # Tracker: follow the matched detection; without one, coast on the prediction for a
-        # while and publish nothing; once lost, start again from the first detection.
+        # while and publish nothing; with no track, take the best-listed detection that looks
+        # like the target (the first detection before the target's look is known).
         if tracking and match >= 0:
-            first, b1, b2, b3, b4 = match, m1, m2, m3, m4
+            first, b1, b2, b3, b4, first_app = match, m1, m2, m3, m4, m_app
         elif tracking and fs[S_TRK_LOST] < prm[P_TRK_COAST]:
             first = -1
+        else:
+            first, b1, b2, b3, b4, first_app = reid, r1, r2, r3, r4, reid_app
         if first >= 0:
             _track_update(fs, b1, b2, b3, b4, tracking and match >= 0)
+            # The target's look: learnt from the first track, refined while matched.
+            if fs[S_TRK_APP] < 0.0:
+                fs[S_TRK_APP] = first_app
+            else:
+                fs[S_TRK_APP] += _TRK_ALPHA_APP * (first_app - fs[S_TRK_APP])
         elif fs[S_TRK_ON] > 0.0:
             fs[S_TRK_LOST] += 1.0
             fs[S_TRK_CX] += fs[S_TRK_VX]
@@ -855,6 +883,7 @@ def reset_kernel(
         ist[:] = 0
         fs[S_X], fs[S_Y], fs[S_TH] = pose[j, 0], pose[j, 1], pose[j, 2]
         fs[S_WALK_END_T] = -1.0
+        fs[S_TRK_APP] = -1.0  # the target's look is not known yet
         ist[I_N_PEOPLE], ist[I_N_WALLS] = n_people[j], n_walls[j]
         for p in range(n_people[j]):
             person_reset(pstate[i, p], paths[i, p], n_points[j, p])

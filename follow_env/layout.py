@@ -88,7 +88,9 @@ P_TRK_IOU = 78  # tracker gate: least IoU with the predicted box
 P_TRK_COAST = 79  # tracker: frames kept without a match
 P_SOCIAL_R = 80  # people keep this far from each other (m)
 P_SOCIAL_K = 81  # strength of the sideways social force (m/s^2)
-N_PARAMS = 82
+P_TRK_APP_GATE = 82  # tracker: largest appearance difference of the same person
+P_APP_NOISE = 83  # std of the appearance a detection carries
+N_PARAMS = 84
 
 # --- per-lane float state: ``fstate[lane, S_*]`` ---
 S_X = 0
@@ -145,8 +147,9 @@ S_TRK_ON = 50
 S_VIS_FRAC = 51
 S_PUSH_VX = 52
 S_PUSH_VY = 53
+S_TRK_APP = 54  # the target's appearance as the tracker learnt it (-1: not yet)
 HIST_MAX = 32  # longest distance-filter history (PerceptionConfig.filter_history)
-S_HIST0 = 54
+S_HIST0 = 55
 DL_MAX = 9  # delay-line slots: latency_frames <= 8
 DL_FIELDS = 8  # detected, cu, cv, raw depth, box x1, y1, x2, y2
 S_DL0 = S_HIST0 + HIST_MAX

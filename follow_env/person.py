@@ -49,6 +49,10 @@ _LAT_MAX_M = 0.5
 # Someone ahead within this lateral distance (m) slows a walker, never below this share.
 _AHEAD_HALF_WIDTH_M = 0.4
 _SLOW_MIN = 0.2
+# Someone coming the other way this far ahead (m) and within this lateral distance (m) makes
+# a walker keep to the right.
+_MEET_AHEAD_M = 3.0
+_MEET_HALF_WIDTH_M = 0.6
 
 
 @njit(cache=True, inline="always")
@@ -136,8 +140,9 @@ def social_forces(ps: np.ndarray, n_people: int, radius: float, strength: float)
     from everyone's positions at the start of the step, so the order of people is irrelevant.
 
     Another person closer than ``radius`` pushes with ``strength (1 - d / radius)`` along the
-    line between them, of which the walker feels the part across their path; one ahead within
-    a shoulder's width, going the same way, slows them in proportion to the gap.
+    line between them, of which the walker feels the part across their path, plus a step to the
+    right when they meet head-on; one ahead within a shoulder's width, going the same way,
+    slows them in proportion to the gap.
     """
     for p in range(n_people):
         force, slow = 0.0, 1.0
@@ -147,14 +152,18 @@ def social_forces(ps: np.ndarray, n_people: int, radius: float, strength: float)
                 continue
             dx, dy = ps[q, PS_X] - ps[p, PS_X], ps[q, PS_Y] - ps[p, PS_Y]
             d = np.sqrt(dx * dx + dy * dy)
-            if d >= radius or d == 0.0:
+            if d == 0.0:
                 continue
             ahead, left = c * dx + s * dy, -s * dx + c * dy
-            force -= strength * (1.0 - d / radius) * left / d
+            push = strength * max(1.0 - d / radius, 0.0)
+            force -= push * left / d
+            facing = c * np.cos(ps[q, PS_TH]) + s * np.sin(ps[q, PS_TH])
+            if facing < -0.5 and 0.0 < ahead < _MEET_AHEAD_M and abs(left) < _MEET_HALF_WIDTH_M:
+                force -= strength  # someone coming the other way: keep to the right, early
             # Walking behind someone who goes the same way: slow down (one crossing the path
             # is passed by stepping aside instead).
-            same_way = c * np.cos(ps[q, PS_TH]) + s * np.sin(ps[q, PS_TH]) > 0.5
-            if same_way and ahead > 0.0 and abs(left) < _AHEAD_HALF_WIDTH_M:
+            same_way = facing > 0.5
+            if same_way and 0.0 < ahead < radius and abs(left) < _AHEAD_HALF_WIDTH_M:
                 gap = (ahead - _AHEAD_HALF_WIDTH_M) / max(radius - _AHEAD_HALF_WIDTH_M, 1e-6)
                 slow = min(slow, max(gap, _SLOW_MIN))
         ps[p, PS_FORCE] = force
