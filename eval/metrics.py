@@ -48,7 +48,7 @@ __all__ = ["METRICS", "THESIS_METRICS", "Metric", "episode_metrics", "extra_metr
 #: Desired following distance (SPEC.md §1.5: "the 1.0 m in V").
 TARGET_DISTANCE_M = 1.0
 #: Episode endings that count as a collision (``follow_env.INFO_KEYS`` "termination").
-COLLISION_ENDINGS = frozenset({"collision_wall", "collision_person"})
+COLLISION_ENDINGS = frozenset({"collision_wall", "collision_person", "collision_bystander"})
 LOST_ENDING = "lost"
 
 MetricFn = Callable[[pd.DataFrame], float]
@@ -249,12 +249,25 @@ def lost_rate_pct(log: pd.DataFrame) -> float:
 
 @metric("collision_rate_pct", "%", "collision (%)")
 def collision_rate_pct(log: pd.DataFrame) -> float:
-    """100 if the episode ended in a collision with a wall or the person, else 0.
+    """100 if the episode ended in a collision (a wall or obstacle, the person, a bystander),
+    else 0.
 
     Averaged over episodes it is the collision rate in %. NaN without a ``termination`` column.
     """
     ending = _ending(log)
     return float("nan") if ending is None else 100.0 * (ending in COLLISION_ENDINGS)
+
+
+@metric("target_swap_rate_pct", "%", "target swap (%)")
+def target_swap_rate_pct(log: pd.DataFrame) -> float:
+    """Share (%) of the frames with a detection in which the perception took a person other
+    than the target (``detected_person`` > 0): a bystander stole the target. NaN without a
+    ``detected_person`` column (a real robot does not know who it followed)."""
+    if "detected_person" not in log:
+        return float("nan")
+    picked = log["detected_person"].to_numpy(dtype=float)
+    picked = picked[np.isfinite(picked) & (picked >= 0)]
+    return 100.0 * float(np.mean(picked > 0)) if picked.size else float("nan")
 
 
 def _path_length_m(x: pd.Series, y: pd.Series) -> float:

@@ -115,6 +115,7 @@ def test_turn_accel_rms_is_rms_of_yaw_rate_differences_over_time() -> None:
         ("lost", 100.0, 0.0),
         ("collision_wall", 0.0, 100.0),
         ("collision_person", 0.0, 100.0),
+        ("collision_bystander", 0.0, 100.0),
         ("walk_over", 0.0, 0.0),
     ],
 )
@@ -124,6 +125,13 @@ def test_lost_and_collision_rates_come_from_the_final_row(
     log = make_log(termination=["", "", ending])
     assert METRICS["lost_rate_pct"].fn(log) == lost
     assert METRICS["collision_rate_pct"].fn(log) == collision
+
+
+def test_target_swap_rate_is_the_share_of_detections_that_took_a_bystander() -> None:
+    # 5 frames with a detection (index >= 0), 2 of them a bystander's; -1 frames do not count.
+    log = make_log(detected_person=[0, 0, -1, 1, 2, 0, -1])
+    assert METRICS["target_swap_rate_pct"].fn(log) == pytest.approx(40.0)
+    assert math.isnan(METRICS["target_swap_rate_pct"].fn(make_log(detected_person=[-1, -1])))
 
 
 def test_path_length_ratio_is_robot_over_person_path() -> None:
@@ -147,6 +155,7 @@ def test_metrics_needing_absent_columns_are_nan() -> None:
         "lost_rate_pct",
         "collision_rate_pct",
         "path_length_ratio",
+        "target_swap_rate_pct",
     ):
         assert math.isnan(values[name]), name
     assert values["mean_offset_px"] == pytest.approx(1.5)
