@@ -109,23 +109,26 @@ class PersonFollowEnv(gym.Env[np.ndarray, np.ndarray]):
 
     ## Episode End
 
-    Terminated: the robot's footprint touches a wall, comes closer than
-    ``person_clearance_m`` (0.3 m) to the person, or has not detected the person for longer
-    than ``lost_timeout_s`` (3 s). Truncated: the person's walk is over and ``settle_s`` (2 s)
-    have passed, or ``max_steps`` steps were taken. ``info["termination"]`` names the reason
-    (``collision_wall``, ``collision_person``, ``lost``, ``walk_over``, ``step_limit``).
+    Terminated: the robot's footprint touches a wall or an obstacle, comes closer than
+    ``person_clearance_m`` (0.3 m) to the person, touches a bystander, or has not detected
+    the person for longer than ``lost_timeout_s`` (3 s). Truncated: the person's walk is over
+    and ``settle_s`` (2 s) have passed, or ``max_steps`` steps were taken.
+    ``info["termination"]`` names the reason (``collision_wall``, ``collision_person``,
+    ``collision_bystander``, ``lost``, ``walk_over``, ``step_limit``).
 
     ## Arguments
 
     ``gym.make("PersonFollow-v0", scenario="curve", config="noisy", render_mode="rgb_array",
     perception={"latency_frames": 2}, episode__lost_timeout_s=5.0)``
 
-    * ``config``: preset name (``thesis`` default, ``ideal``, ``noisy``), an ``EnvConfig``, or a
-      dict of section overrides.
-    * ``scenario``: a registered scenario name (``straight``, ``curve``, ``random``).
+    * ``config``: preset name (``thesis`` default, ``ideal``, ``noisy``, ``randomized``), an
+      ``EnvConfig``, or a dict of section overrides.
+    * ``scenario``: a registered scenario name (``straight``, ``curve``, ``random``,
+      ``corridor_turn``, ``doorway``, ``occlusion``, ``crossing``, ``crowd``, ``stop_and_go``,
+      ``zigzag``, ``random_world``).
     * any config section as a dict (``robot``, ``motor``, ``encoder``, ``pid``, ``camera``,
-      ``perception``, ``person``, ``scenario``, ``reward``, ``episode``), or one field as
-      ``section__field=value``.
+      ``perception``, ``person``, ``scenario``, ``reward``, ``episode``, ``randomization``), or
+      one field as ``section__field=value``.
     * ``render_mode``: ``"rgb_array"`` (top-down view beside the camera view) or ``None``.
 
     An unknown argument or an out-of-range value raises ``ValueError`` naming it.
