@@ -92,6 +92,13 @@ def bench_vector_env(quick: bool) -> list[tuple[str, float, str]]:
         rate = vector_steps_per_s(env, np.tile(follow, (n, 1)), max(20, budget // n))
         ratio = f"{rate / sync:.0f}x (b), {rate / cartpole:.2f}x (d)"
         rows.append((f"(c) native vector env N={n}", rate, ratio))
+    # The realistic world's heaviest built-in case: five people, occlusion tests between them.
+    env = gym.make_vec(
+        "PersonFollow-v0", num_envs=1024, vectorization_mode="vector_entry_point", scenario="crowd"
+    )
+    rate = vector_steps_per_s(env, np.tile(follow, (1024, 1)), max(20, budget // 1024))
+    ratio = f"{rate / sync:.0f}x (b), {rate / cartpole:.2f}x (d)"
+    rows.append(("(c) native, crowd scenario N=1024", rate, ratio))
     rows.append(("(d) CartPoleVectorEnv N=1024", cartpole, "1.00x (d)"))
     return rows
 
@@ -102,7 +109,7 @@ def bench_memory(quick: bool) -> list[tuple[str, float, str]]:
     from follow_env.core import BatchedSim
 
     rows = []
-    for scenario in ("straight", "curve", "random"):
+    for scenario in ("straight", "curve", "random", "crowd", "random_world"):
         sim = BatchedSim(THESIS.replace(scenario={"name": scenario}), 1024)
         arrays = (sim.params, sim.fstate, sim.istate, sim.pstate, sim.paths, sim.walls, sim.keys)
         per_lane = sum(a.nbytes for a in arrays) / sim.n

@@ -929,6 +929,23 @@ def _step_lanes(
         aw = prm[P_ANTI_WINDUP] > 0.0
         w_max, alpha = prm[P_MOTOR_WMAX], prm[P_MOTOR_ALPHA]
         fric, stall = prm[P_FRIC_DUTY], prm[P_STALL_DUTY]
+        # The constants of every wheel tick, in drive.wheel_tick's order.
+        drive = (
+            kp,
+            ki,
+            kd,
+            tau,
+            dt_in,
+            max_duty,
+            aw,
+            w_max,
+            alpha,
+            fric,
+            stall,
+            cpr,
+            diam,
+            quantum,
+        )
         g_r, g_l = prm[P_GAIN_R], prm[P_GAIN_L]
         t_r, t_l = fs[S_VTGT_R], fs[S_VTGT_L]
         m_r, m_l = fs[S_VMEAS_R], fs[S_VMEAS_L]
@@ -958,56 +975,10 @@ def _step_lanes(
                 z_r, z_l = normal_pair_at(krand ^ _ENC_DOMAIN, step_no * _MAX_SUBSTEPS + tick)
                 n_r, n_l = int(np.round(z_r * enc_noise)), int(np.round(z_l * enc_noise))
             u_r, i_r, d_r, e_r, o_r, a_r, c_r, m_r = wheel_tick(
-                t_r,
-                m_r,
-                e_r,
-                i_r,
-                d_r,
-                o_r,
-                a_r,
-                c_r,
-                n_r,
-                g_r,
-                kp,
-                ki,
-                kd,
-                tau,
-                dt_in,
-                max_duty,
-                aw,
-                w_max,
-                alpha,
-                fric,
-                stall,
-                cpr,
-                diam,
-                quantum,
+                t_r, m_r, e_r, i_r, d_r, o_r, a_r, c_r, n_r, g_r, drive
             )
             u_l, i_l, d_l, e_l, o_l, a_l, c_l, m_l = wheel_tick(
-                t_l,
-                m_l,
-                e_l,
-                i_l,
-                d_l,
-                o_l,
-                a_l,
-                c_l,
-                n_l,
-                g_l,
-                kp,
-                ki,
-                kd,
-                tau,
-                dt_in,
-                max_duty,
-                aw,
-                w_max,
-                alpha,
-                fric,
-                stall,
-                cpr,
-                diam,
-                quantum,
+                t_l, m_l, e_l, i_l, d_l, o_l, a_l, c_l, n_l, g_l, drive
             )
             v, w = diff_drive_fk(o_r, o_l, r_true, L_true)
             x, y, th = euler_pose_step(x, y, th, v, w, dt_in)

@@ -131,28 +131,35 @@ def wheel_tick(
     count: int,
     count_noise: int,
     gain: float,
-    kp: float,
-    ki: float,
-    kd: float,
-    tau_s: float,
-    dt_s: float,
-    max_duty: float,
-    anti_windup: bool,
-    no_load_radps: float,
-    alpha: float,
-    friction_pct: float,
-    stall_pct: float,
-    counts_per_rev: float,
-    wheel_diameter_m: float,
-    quantum_mps: float,
+    consts: tuple,
 ) -> tuple[float, float, float, float, float, float, int, float]:
     """One 10 ms tick of one wheel: PID on the last encoder estimate, the motor under the new
     duty, the wheel turning, and the encoder's count (with ``count_noise`` extra counts read)
     and speed estimate at the tick's end.
 
+    ``consts`` holds the tick's constants: ``(kp, ki, kd, tau_s, dt_s, max_duty, anti_windup,
+    no_load_radps, alpha, friction_pct, stall_pct, counts_per_rev, wheel_diameter_m,
+    quantum_mps)``, as in :func:`pid_step`, :func:`motor_step` and :func:`encoder_speed`.
+
     :return: ``(duty %, integral, filtered D, error, omega rad/s, angle rad, count,
         measured speed m/s)``.
     """
+    (
+        kp,
+        ki,
+        kd,
+        tau_s,
+        dt_s,
+        max_duty,
+        anti_windup,
+        no_load_radps,
+        alpha,
+        friction_pct,
+        stall_pct,
+        counts_per_rev,
+        wheel_diameter_m,
+        quantum_mps,
+    ) = consts
     error = target_mps - measured_mps
     duty, integral, d_filt = pid_step(
         error, prev_error, integral, d_filt, kp, ki, kd, tau_s, dt_s, max_duty, anti_windup
