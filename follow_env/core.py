@@ -741,22 +741,20 @@ def _frame(
             if invalid or z < prm[P_DEPTH_MIN] or z > prm[P_DEPTH_MAX]:
                 z = 0.0  # out of range reads as invalid too, as on the camera
         m_raw = z
-        ist[I_DETECTED_ID] = first
-    else:
-        ist[I_DETECTED_ID] = -1
 
     # Delay line of latency_frames: write this frame, publish the one latency frames old.
     size = int(prm[P_LATENCY]) + 1
     head = (ist[I_DL_HEAD] + 1) % size
     if step == 0:  # reset: as if the robot had stood still for the whole delay
         for k in range(size):
-            _write_slot(fs, k, m_det, m_cu, m_cv, m_raw, b1, b2, b3, b4)
+            _write_slot(fs, k, m_det, m_cu, m_cv, m_raw, b1, b2, b3, b4, first)
         head = 0
     else:
-        _write_slot(fs, head, m_det, m_cu, m_cv, m_raw, b1, b2, b3, b4)
+        _write_slot(fs, head, m_det, m_cu, m_cv, m_raw, b1, b2, b3, b4, first)
     ist[I_DL_HEAD] = head
     out = S_DL0 + ((head + 1) % size) * DL_FIELDS
     fs[S_DETECTED] = fs[out]
+    ist[I_DETECTED_ID] = int(fs[out + 8])  # whose detection is published (-1: none)
     if fs[out] > 0.0:
         d, n, h = distance_filter(
             fs[out + 3],
@@ -803,10 +801,12 @@ def _write_slot(
     v1: float,
     u2: float,
     v2: float,
+    owner: int,
 ) -> None:
     o = S_DL0 + k * DL_FIELDS
     fs[o], fs[o + 1], fs[o + 2], fs[o + 3] = det, cu, cv, raw
     fs[o + 4], fs[o + 5], fs[o + 6], fs[o + 7] = u1, v1, u2, v2
+    fs[o + 8] = owner
 
 
 @njit(cache=True, inline="always")

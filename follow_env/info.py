@@ -97,9 +97,10 @@ INFO_KEYS: tuple[str, ...] = (
     "step",
     "termination",
 )
-"""Every key of the ``info`` dict: floats, then ``in_frame``/``detected`` (bool),
-``detected_person`` (index of the person the perception follows, -1 for none), ``step`` (int)
-and ``termination`` (why the episode ended, or "")."""
+"""Every key of the ``info`` dict: floats, then ``in_frame`` (bool: enough of the target in
+the image and in sight to be detected), ``detected`` (bool: this step's observation is a fresh
+detection), ``detected_person`` (whose detection it is: 0 the target, >0 a bystander, -1
+none), ``step`` (int) and ``termination`` (why the episode ended, or "")."""
 
 
 def make_spaces(cfg: EnvConfig) -> tuple[spaces.Box, spaces.Box]:

@@ -151,7 +151,7 @@ S_TRK_APP = 54  # the target's appearance as the tracker learnt it (-1: not yet)
 HIST_MAX = 32  # longest distance-filter history (PerceptionConfig.filter_history)
 S_HIST0 = 55
 DL_MAX = 9  # delay-line slots: latency_frames <= 8
-DL_FIELDS = 8  # detected, cu, cv, raw depth, box x1, y1, x2, y2
+DL_FIELDS = 9  # detected, cu, cv, raw depth, box x1, y1, x2, y2, whose (person index)
 S_DL0 = S_HIST0 + HIST_MAX
 S_SCRATCH0 = S_DL0 + DL_MAX * DL_FIELDS  # per-lane scratch for the camera (8 corners x 3)
 N_SCRATCH = 24 + 64  # 8 body corners x 3, then up to 64 occluder indices

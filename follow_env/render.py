@@ -1,14 +1,23 @@
 """``rgb_array`` frames of :class:`~follow_env.env.PersonFollowEnv`: a top-down map beside the
 robot's camera view, drawn with OpenCV (headless: no window is ever opened).
 
-Left panel (map): the room's walls fitted to the panel, a metre grid, the camera's horizontal
-field of view, the robot's footprint with a heading arrow, every person as a rotated rectangle
-(person 0, the one followed, in orange, others grey), the trails of the robot and the target,
-and a header with time, the observation, the ground truth and the episode end reason.
+Left panel (map): the room's walls and obstacles fitted to the panel, shaded by height (walls
+and pillars at least as tall as a person dark: they hide a whole body; lower furniture light:
+it hides legs only), a metre grid, the camera's horizontal field of view, the robot's footprint
+with a heading arrow, every person as a rotated rectangle (the target, person 0, in orange,
+bystanders grey), the trails of the robot and the target, the line of sight from the camera to
+the target coloured by how much of the target is in sight (see :func:`sight_state`), a ring
+round the person whose detection the perception took this frame (green on the target, red with
+"followed: bystander N" when a bystander has stolen it), and a header with time, the
+observation, the ground truth, who is followed, the target's visible share and the episode end
+reason.
 
 Right panel (camera): the image frame scaled to fit, floor below the horizon, each person's true
-projected body box in grey, the box the perception published in green (with its centre and its
-offset from the image's centre column), or a "no detection" label.
+projected body box in grey (labelled), the box the perception published in green when it is the
+target's and red when it is a bystander's (with its centre and its offset from the image's
+centre column), the tracker's box dashed in cyan when a track exists, and warnings ("no
+detection", "target hidden", ...). Obstacles are not drawn in the camera view: the line of sight
+on the map and the target's visible share say what they hide.
 
 Everything is read from lane 0 of ``env.sim``; nothing here changes the simulation. Colours are
 written as RGB because the frame is returned as RGB and OpenCV's drawing does not care about the
@@ -17,8 +26,9 @@ channel order.
 
 from __future__ import annotations
 
+import itertools
 import math
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 import cv2
 import numpy as np
@@ -26,6 +36,7 @@ import numpy as np
 from follow_env.camera import Camera, body_box
 from follow_env.config import EnvConfig
 from follow_env.layout import (
+    I_DETECTED_ID,
     I_N_PEOPLE,
     I_N_WALLS,
     I_REASON,
@@ -35,6 +46,8 @@ from follow_env.layout import (
     P_FY,
     P_IMG_H,
     P_IMG_W,
+    P_LATENCY,
+    P_MIN_VIS,
     P_PERSON_D,
     P_PERSON_H,
     P_PERSON_W,
@@ -56,16 +69,35 @@ from follow_env.layout import (
     S_OBS_O,
     S_T,
     S_TH,
+    S_TRK_CX,
+    S_TRK_CY,
+    S_TRK_H,
+    S_TRK_LOST,
+    S_TRK_ON,
+    S_TRK_W,
     S_TRUE_D,
     S_TRUE_O,
+    S_VIS_FRAC,
     S_X,
     S_Y,
+    W_H,
 )
 
 if TYPE_CHECKING:
     from follow_env.env import PersonFollowEnv
 
-__all__ = ["FRAME_HEIGHT_PX", "FRAME_WIDTH_PX", "Renderer"]
+__all__ = [
+    "C_STOLEN",
+    "FRAME_HEIGHT_PX",
+    "FRAME_WIDTH_PX",
+    "SIGHT_CLEAR",
+    "SIGHT_HIDDEN",
+    "SIGHT_OUT_OF_VIEW",
+    "SIGHT_PARTLY",
+    "Renderer",
+    "sight_state",
+    "wall_loops",
+]
 
 # Frame layout (px). 1280 x 480 keeps both sides multiples of 16, which video encoders want.
 PANEL_W_PX = 640
@@ -73,6 +105,7 @@ FRAME_HEIGHT_PX = 480
 FRAME_WIDTH_PX = 2 * PANEL_W_PX
 HEADER_PX = 40  # text strip above the map
 MAP_MARGIN_PX = 10
+HEADER_MID_PX = 236  # column of the header's middle block (who is followed, visible share)
 
 # Drawing constants.
 FRUSTUM_LENGTH_M = 4.0  # how far the field-of-view wedge reaches on the map
@@ -80,6 +113,8 @@ FRUSTUM_ALPHA = 0.35
 MIN_GRID_PX = 8.0  # coarser grid when 1 m would be closer than this on screen
 VIEW_PAD_M = 2.0  # room around people and trails when there are no walls to fit
 MIN_VIEW_M = 8.0
+RING_RADIUS_M = 0.45  # the "followed" ring round a person on the map
+DASH_PX = 6.0  # dash and gap length of dashed lines
 
 # Sub-pixel drawing: OpenCV takes fixed-point coordinates with this many fractional bits.
 _SHIFT = 4
@@ -89,7 +124,9 @@ _ONE = 1 << _SHIFT
 C_BG = (40, 42, 48)
 C_FLOOR = (236, 234, 226)
 C_GRID = (214, 212, 204)
-C_WALL = (60, 60, 66)
+C_WALL = (60, 60, 66)  # walls and pillars: hide a whole person
+C_LOW = (190, 170, 138)  # furniture lower than a person: hides legs only
+C_LOW_EDGE = (125, 105, 78)
 C_TEXT = (240, 240, 240)
 C_ROBOT = (45, 110, 215)
 C_ROBOT_EDGE = (20, 50, 110)
@@ -100,12 +137,26 @@ C_FRUSTUM = (255, 220, 90)
 C_SKY = (196, 202, 212)
 C_TRUE_BOX = (120, 120, 120)
 C_BODY = (205, 205, 205)
-C_DET = (40, 200, 60)
+C_DET = (40, 200, 60)  # published detection of the target; the followed ring on the target
+C_STOLEN = (220, 0, 0)  # a bystander's detection is followed: the stolen target
+C_TRACK = (0, 200, 235)
 C_CENTRE = (250, 250, 250)
 C_WARN = (235, 60, 50)
+# Line of sight to the target, by sight state (index = SIGHT_*).
+C_SIGHT = ((40, 170, 60), (245, 150, 0), (235, 60, 50), (140, 140, 140))
 
 _FONT = cv2.FONT_HERSHEY_SIMPLEX
 _FONT_SCALE = 0.45
+
+# How much of the target the camera sees (see sight_state).
+SIGHT_CLEAR = 0
+SIGHT_PARTLY = 1
+SIGHT_HIDDEN = 2
+SIGHT_OUT_OF_VIEW = 3
+_SIGHT_WORDS = ("in sight", "partly hidden", "hidden", "out of view")
+
+# A wall segment ready to draw: fixed-point end points, colour, thickness (px).
+_WallLine = tuple[tuple[int, int], tuple[int, int], tuple[int, int, int], int]
 
 
 # ----------------------------------------------------------------------------------------------
@@ -153,6 +204,14 @@ class _MapView:
     def pt(self, x: float, y: float) -> tuple[int, int]:
         """One point as a fixed-point tuple (for ``cv2.line`` / ``cv2.circle``)."""
         return (round((self.ox + self.scale * x) * _ONE), round((self.oy - self.scale * y) * _ONE))
+
+
+class _Seen(NamedTuple):
+    """One person as the camera would see them with nothing in the way."""
+
+    dist_m: float  # from the robot's centre, for drawing far to near
+    box: tuple[float, float, float, float]  # body box clipped to the image (px)
+    image_share: float  # share of the body's box inside the image (0 when not in view)
 
 
 def fit_view(
@@ -212,6 +271,53 @@ def horizon_row(params: np.ndarray) -> float:
     return float(params[P_FY] * d_cam[1] / d_cam[2] + params[P_CY])
 
 
+def wall_loops(walls: np.ndarray, tol_m: float = 1e-6) -> list[tuple[int, int]]:
+    """Runs ``[start, end)`` of wall segments (rows ``x1, y1, x2, y2, ...``, m) that form
+    closed outlines: at least three segments listed head to tail whose last end meets the
+    first start, as :func:`follow_env.world.polygon_walls` and ``box_walls`` write them.
+    Open chains (a corridor's side, a partition) are not loops."""
+    loops = []
+    n, k = len(walls), 0
+    while k < n:
+        j = k
+        while (
+            j + 1 < n
+            and abs(walls[j, 2] - walls[j + 1, 0]) <= tol_m
+            and abs(walls[j, 3] - walls[j + 1, 1]) <= tol_m
+        ):
+            j += 1
+        closed = abs(walls[j, 2] - walls[k, 0]) <= tol_m and abs(walls[j, 3] - walls[k, 1]) <= tol_m
+        if j - k >= 2 and closed:
+            loops.append((k, j + 1))
+        k = j + 1
+    return loops
+
+
+def sight_state(vis_frac: float, image_share: float, min_visible: float) -> int:
+    """How much of the target the camera sees, for the line of sight's colour.
+
+    :param vis_frac: the target's visible share the core computed (``S_VIS_FRAC``): the share
+        of the body's box inside the image times the share of it not blocked by obstacles or
+        people (line of sight).
+    :param image_share: the share of the body's box inside the image with nothing in the way
+        (0 when the body is outside the field of view).
+    :param min_visible: the detector's threshold, ``perception.min_visible_fraction``.
+    :return: ``SIGHT_OUT_OF_VIEW`` when no part of the body is in the image;
+        ``SIGHT_HIDDEN`` when it is in the image but fully blocked (``vis_frac == 0``);
+        ``SIGHT_PARTLY`` when something blocks part of it, or less than ``min_visible`` is in
+        sight (too little to detect); ``SIGHT_CLEAR`` otherwise.
+    """
+    if image_share <= 0.0:
+        return SIGHT_OUT_OF_VIEW
+    if vis_frac <= 0.0:
+        return SIGHT_HIDDEN
+    # The core leaves the share unchanged when every sampled point is in sight, so any drop
+    # below the image share means something stands in the way (the margin absorbs rounding).
+    if vis_frac < min_visible or vis_frac < image_share * (1.0 - 1e-6):
+        return SIGHT_PARTLY
+    return SIGHT_CLEAR
+
+
 def put_text(
     img: np.ndarray,
     text: str,
@@ -219,15 +325,17 @@ def put_text(
     color: tuple[int, int, int] = C_TEXT,
     scale: float = _FONT_SCALE,
     box: bool = True,
+    box_color: tuple[int, int, int] = C_BG,
 ) -> None:
-    """Text whose baseline starts at ``org`` (px), on a dark box so it reads on any background.
+    """Text whose baseline starts at ``org`` (px), on a filled box (``box_color``, dark unless
+    told) so it reads on any background.
 
     A box rather than a thick dark outline: OpenCV 5's fonts widen with thickness, so an
     outline drawn thicker does not line up with the text."""
     if box:
         (tw, th), base = cv2.getTextSize(text, _FONT, scale, 1)
         x, y = org
-        cv2.rectangle(img, (x - 3, y - th - 3), (x + tw + 3, y + base), C_BG, -1)
+        cv2.rectangle(img, (x - 3, y - th - 3), (x + tw + 3, y + base), box_color, -1)
     cv2.putText(img, text, org, _FONT, scale, color, 1, cv2.LINE_AA)
 
 
@@ -247,6 +355,36 @@ def blend_poly(
     shifted = poly_fx - np.array([x1 * _ONE, y1 * _ONE], dtype=np.int32)
     cv2.fillPoly(layer, [shifted], color, cv2.LINE_AA, _SHIFT)
     cv2.addWeighted(layer, alpha, roi, 1.0 - alpha, 0.0, dst=roi)
+
+
+def dashed_polyline(
+    img: np.ndarray,
+    pts_fx: np.ndarray,
+    closed: bool,
+    color: tuple[int, int, int],
+    thickness: int = 1,
+    dash_px: float = DASH_PX,
+) -> None:
+    """A dashed polyline through fixed-point points (n, 2): dashes and gaps of ``dash_px``
+    (px) along each edge, drawn in one OpenCV call."""
+    pts = pts_fx.astype(float)
+    if closed:
+        pts = np.vstack([pts, pts[:1]])
+    dashes = []
+    period = 2.0 * dash_px * _ONE
+    for a, b in itertools.pairwise(pts):
+        length = float(np.hypot(*(b - a)))
+        if length <= 0.0:
+            continue
+        starts = np.arange(0.0, length, period)
+        ends = np.minimum(starts + 0.5 * period, length)
+        d = (b - a) / length
+        seg = np.stack([a + starts[:, None] * d, a + ends[:, None] * d], axis=1)
+        dashes.append(np.round(seg).astype(np.int32))
+    if dashes:
+        cv2.polylines(
+            img, list(np.concatenate(dashes)), False, color, thickness, cv2.LINE_AA, _SHIFT
+        )
 
 
 # ----------------------------------------------------------------------------------------------
@@ -276,6 +414,8 @@ class Renderer:
         self._map_key: tuple[object, ...] | None = None
         self._map_bg: np.ndarray | None = None
         self._map_view: _MapView | None = None
+        self._wall_polys: list[tuple[np.ndarray, tuple[int, int, int]]] = []
+        self._wall_lines: list[_WallLine] = []
         self._grid_m = 1.0
         # The camera panel: image scaled to fit the panel, letterboxed.
         W, H = self.camera.width_px, self.camera.height_px
@@ -289,7 +429,7 @@ class Renderer:
     # -- the interface PersonFollowEnv calls ---------------------------------------------------
 
     def reset(self) -> None:
-        """Forget the trails (a new episode starts)."""
+        """Forget the trails and who was followed (a new episode starts)."""
         self.robot_trail.clear()
         self.target_trail.clear()
 
@@ -306,11 +446,60 @@ class Renderer:
         if self.robot_trail.n == 0:
             # env.reset clears the trails without recording: start them at the reset pose.
             self.record(env)
+        seen = self._project_people(env)
         frame = np.empty((FRAME_HEIGHT_PX, FRAME_WIDTH_PX, 3), dtype=np.uint8)
-        self._draw_map(env, frame[:, :PANEL_W_PX])
-        self._draw_camera(env, frame[:, PANEL_W_PX:])
+        self._draw_map(env, seen, frame[:, :PANEL_W_PX])
+        self._draw_camera(env, seen, frame[:, PANEL_W_PX:])
         cv2.line(frame, (PANEL_W_PX, 0), (PANEL_W_PX, FRAME_HEIGHT_PX - 1), (0, 0, 0), 2)
         return frame
+
+    # -- shared by both panels -----------------------------------------------------------------
+
+    def _project_people(self, env: PersonFollowEnv) -> list[_Seen | None]:
+        """Every person's true body box in the image (clipped, px) and the share of it inside
+        the image, as the core computes them before the line of sight; None when no part of
+        the body is in the image."""
+        fs, prm = env.sim.fstate[0], env.sim.params[0]
+        W, H = float(prm[P_IMG_W]), float(prm[P_IMG_H])
+        rx, ry, rth = float(fs[S_X]), float(fs[S_Y]), float(fs[S_TH])
+        out: list[_Seen | None] = []
+        for p in range(int(env.sim.istate[0, I_N_PEOPLE])):
+            px, py, pth = (float(v) for v in env.sim.pstate[0, p, [PS_X, PS_Y, PS_TH]])
+            u1, v1, u2, v2, found = body_box(
+                px,
+                py,
+                pth,
+                float(prm[P_PERSON_W]),
+                float(prm[P_PERSON_D]),
+                float(prm[P_PERSON_H]),
+                rx,
+                ry,
+                rth,
+                prm,
+                P_R00,
+                float(prm[P_FX]),
+                float(prm[P_FY]),
+                float(prm[P_CX]),
+                float(prm[P_CY]),
+                self._scratch,
+            )
+            c1, c2, c3, c4 = max(u1, 0.0), max(v1, 0.0), min(u2, W), min(v2, H)
+            if found and c3 > c1 and c4 > c2:
+                share = (c3 - c1) * (c4 - c2) / ((u2 - u1) * (v2 - v1))
+                out.append(_Seen(math.hypot(px - rx, py - ry), (c1, c2, c3, c4), share))
+            else:
+                out.append(None)
+        return out
+
+    @staticmethod
+    def _target_sight(env: PersonFollowEnv, seen: list[_Seen | None]) -> int:
+        """The target's sight state (``SIGHT_*``), see :func:`sight_state`."""
+        target = seen[0] if seen else None
+        return sight_state(
+            float(env.sim.fstate[0, S_VIS_FRAC]),
+            0.0 if target is None else target.image_share,
+            float(env.sim.params[0, P_MIN_VIS]),  # perception.min_visible_fraction
+        )
 
     # -- map panel -----------------------------------------------------------------------------
 
@@ -346,11 +535,13 @@ class Renderer:
         return float(xmin), float(ymin), float(xmax), float(ymax)
 
     def _map_background(self, env: PersonFollowEnv) -> tuple[np.ndarray, _MapView]:
-        """The cached floor, grid and walls for the current walls and extent."""
+        """The cached floor and grid for the current walls and extent (the walls' shapes in
+        pixels are cached with it, see :meth:`_wall_shapes`)."""
         n_walls = int(env.sim.istate[0, I_N_WALLS])
         walls = env.sim.walls[0, :n_walls]
+        person_h = float(env.sim.params[0, P_PERSON_H])
         bounds = self._world_bounds(env)
-        key = (bounds, walls.tobytes())
+        key = (bounds, walls.tobytes(), person_h)
         if key == self._map_key and self._map_bg is not None and self._map_view is not None:
             return self._map_bg, self._map_view
         xmin, ymin, xmax, ymax = bounds
@@ -376,14 +567,48 @@ class Renderer:
             cv2.line(bg, view.pt(gx, gy0), view.pt(gx, gy1), C_GRID, 1, cv2.LINE_8, _SHIFT)
         for gy in np.arange(gy0, gy1 + step, step):
             cv2.line(bg, view.pt(gx0, gy), view.pt(gx1, gy), C_GRID, 1, cv2.LINE_8, _SHIFT)
-        wall_px = max(2, round(0.1 * view.scale))  # walls are 0.1 m thick in the contacts
-        for x1, y1, x2, y2 in walls[:, :4]:
-            cv2.line(bg, view.pt(x1, y1), view.pt(x2, y2), C_WALL, wall_px, cv2.LINE_AA, _SHIFT)
         bg[:HEADER_PX] = C_BG
+        self._wall_polys, self._wall_lines = self._wall_shapes(view, walls, person_h)
         self._map_key, self._map_bg, self._map_view, self._grid_m = key, bg, view, step
         return bg, view
 
-    def _draw_map(self, env: PersonFollowEnv, panel: np.ndarray) -> None:
+    @staticmethod
+    def _wall_shapes(
+        view: _MapView, walls: np.ndarray, person_h: float
+    ) -> tuple[list[tuple[np.ndarray, tuple[int, int, int]]], list[_WallLine]]:
+        """Walls and obstacles as drawing commands in map pixels: filled outlines and thick
+        segments, shaded by height: at least a person's height (``person_h``, m) dark, since it
+        hides a whole body; lower (furniture) light, since it hides legs only. Closed outlines
+        are filled, except one enclosing all the others (the room: its floor stays clear)."""
+        polys: list[tuple[np.ndarray, tuple[int, int, int]]] = []
+        lines: list[_WallLine] = []
+        if len(walls) == 0:
+            return polys, lines
+        tall = walls[:, W_H] >= person_h
+        lo = np.minimum(walls[:, [0, 1]], walls[:, [2, 3]]).min(axis=0)
+        hi = np.maximum(walls[:, [0, 1]], walls[:, [2, 3]]).max(axis=0)
+        for k0, k1 in wall_loops(walls):
+            loop = walls[k0:k1, :2]
+            encloses_all = np.allclose(loop.min(axis=0), lo, atol=1e-3) and np.allclose(
+                loop.max(axis=0), hi, atol=1e-3
+            )
+            if not encloses_all:
+                polys.append((view.px(loop), C_WALL if tall[k0] else C_LOW))
+        wall_px = max(2, round(0.1 * view.scale))  # walls are 0.1 m thick in the contacts
+        for (x1, y1, x2, y2), is_tall in zip(walls[:, :4], tall, strict=True):
+            color, width = (C_WALL, wall_px) if is_tall else (C_LOW_EDGE, max(1, wall_px // 2))
+            lines.append((view.pt(x1, y1), view.pt(x2, y2), color, width))
+        return polys, lines
+
+    def _draw_walls(self, img: np.ndarray) -> None:
+        """The cached wall shapes; drawn every frame, over the field-of-view wedge, so that
+        obstacles keep their shade wherever the camera looks."""
+        for poly, color in self._wall_polys:
+            cv2.fillPoly(img, [poly], color, cv2.LINE_AA, _SHIFT)
+        for a, b, color, width in self._wall_lines:
+            cv2.line(img, a, b, color, width, cv2.LINE_AA, _SHIFT)
+
+    def _draw_map(self, env: PersonFollowEnv, seen: list[_Seen | None], panel: np.ndarray) -> None:
         bg, view = self._map_background(env)
         # Drawing goes into a contiguous buffer: some OpenCV calls reject strided views.
         img = bg.copy()
@@ -404,26 +629,62 @@ class Renderer:
         wedge_px = view.px(wedge)
         blend_poly(img, wedge_px, C_FRUSTUM, FRUSTUM_ALPHA)
         cv2.polylines(img, [wedge_px], True, (200, 160, 40), 1, cv2.LINE_AA, _SHIFT)
+        self._draw_walls(img)
 
         # Trails under the bodies.
         for trail, color in ((self.target_trail, C_TARGET), (self.robot_trail, C_ROBOT)):
             if trail.n >= 2:
                 cv2.polylines(img, [view.px(trail.points)], False, color, 1, cv2.LINE_AA, _SHIFT)
 
+        # Line of sight from the camera to the target's centre, under the bodies, coloured by
+        # how much of the target is in sight; dashed when it is outside the field of view,
+        # where there is no sight line to speak of.
+        people = env.sim.pstate[0]
+        n_people = int(ist[I_N_PEOPLE])
+        sight = self._target_sight(env, seen)
+        if n_people > 0:
+            tx, ty = float(people[0, PS_X]), float(people[0, PS_Y])
+            a, b = view.pt(camx, camy), view.pt(tx, ty)
+            if sight == SIGHT_OUT_OF_VIEW:
+                dashed_polyline(img, np.array([a, b]), False, C_SIGHT[sight], 1)
+            else:
+                cv2.line(img, a, b, C_SIGHT[sight], 2, cv2.LINE_AA, _SHIFT)
+
         # People: rotated rectangles, ``depth`` along their heading, with a heading tick.
         pw, pd = prm[P_PERSON_W], prm[P_PERSON_D]
-        n_people = int(ist[I_N_PEOPLE])
+        followed = int(ist[I_DETECTED_ID])  # whose detection the perception published
+        labels: list[tuple[str, tuple[int, int], tuple[int, int, int], float]] = []
         for p in range(n_people - 1, -1, -1):  # target last, on top
-            px, py, pth = (float(v) for v in env.sim.pstate[0, p, [PS_X, PS_Y, PS_TH]])
+            px, py, pth = (float(v) for v in people[p, [PS_X, PS_Y, PS_TH]])
             color = C_TARGET if p == 0 else C_OTHER
             poly = view.px(rect_corners(px, py, pth, pd, pw))
             cv2.fillPoly(img, [poly], color, cv2.LINE_AA, _SHIFT)
             cv2.polylines(img, [poly], True, C_PERSON_EDGE, 1, cv2.LINE_AA, _SHIFT)
             tip = (px + (0.5 * pd + 0.15) * math.cos(pth), py + (0.5 * pd + 0.15) * math.sin(pth))
             cv2.line(img, view.pt(px, py), view.pt(*tip), C_PERSON_EDGE, 1, cv2.LINE_AA, _SHIFT)
+            u, v = (q >> _SHIFT for q in view.pt(px, py))
+            # The target's name above, a bystander's below, so the two rarely overlap when
+            # one crosses near the other; a followed bystander is named by its ring's label.
             if p == 0:
-                u, v = view.pt(px, py)
-                put_text(img, "target", ((u >> _SHIFT) + 8, (v >> _SHIFT) - 8), C_TARGET, 0.4)
+                labels.append(("target", (u + 8, v - 8), C_TARGET, 0.4))
+            elif p != followed:
+                labels.append((f"bystander {p}", (u + 8, v + 16), (215, 215, 215), 0.35))
+
+        # The person whose detection the perception took this frame: a ring, green on the
+        # target, red with a label on a bystander (a stolen target).
+        if 0 <= followed < n_people:
+            px, py = float(people[followed, PS_X]), float(people[followed, PS_Y])
+            color = C_DET if followed == 0 else C_STOLEN
+            radius = max(RING_RADIUS_M * view.scale, 9.0)
+            centre = view.pt(px, py)
+            cv2.circle(img, centre, round(radius * _ONE), color, 2, cv2.LINE_AA, _SHIFT)
+            org = ((centre[0] >> _SHIFT) + 8, (centre[1] >> _SHIFT) + round(radius) + 14)
+            if followed == 0:
+                put_text(img, "followed", org, C_DET, 0.4)
+            else:
+                put_text(img, f"followed: bystander {followed}", org, C_TEXT, 0.4, True, C_STOLEN)
+        for text, org, color, scale in labels:  # over the ring, so they stay legible
+            put_text(img, text, org, color, scale)
 
         # Robot: footprint (centred on the wheel axle) and an arrow along its heading.
         poly = view.px(rect_corners(rx, ry, rth, self.foot_l, self.foot_w))
@@ -442,8 +703,8 @@ class Renderer:
         )
         cv2.circle(img, view.pt(camx, camy), 3 * _ONE, (250, 250, 250), -1, cv2.LINE_AA, _SHIFT)
 
-        # Header: time, observation, truth, end reason.
-        reason = int(ist[I_REASON])
+        # Header: time, observation, truth (left); who is followed, the target's visible share
+        # (middle); the end reason (right).
         line1 = f"t {fs[S_T]:5.1f} s   obs d {fs[S_OBS_D]:5.2f} m  offset {fs[S_OBS_O]:+5.0f} px"
         line2 = (
             f"true d {fs[S_TRUE_D]:5.2f} m  offset {fs[S_TRUE_O]:+5.0f} px   "
@@ -451,6 +712,16 @@ class Renderer:
         )
         put_text(img, line1, (8, 16), box=False)
         put_text(img, line2, (8, 34), (200, 200, 200), box=False)
+        if followed == 0:
+            put_text(img, "followed: target", (HEADER_MID_PX, 16), C_DET, box=False)
+        elif followed > 0:
+            text = f"followed: bystander {followed}"
+            put_text(img, text, (HEADER_MID_PX, 16), C_TEXT, box=True, box_color=C_STOLEN)
+        else:
+            put_text(img, "followed: nobody", (HEADER_MID_PX, 16), C_WARN, box=False)
+        vis = f"target visible {100.0 * fs[S_VIS_FRAC]:3.0f} %  ({_SIGHT_WORDS[sight]})"
+        put_text(img, vis, (HEADER_MID_PX, 34), C_SIGHT[sight], box=False)
+        reason = int(ist[I_REASON])
         if reason != REASON_NONE:
             text = f"end: {REASON_NAMES[reason]}"
             (tw, _), _ = cv2.getTextSize(text, _FONT, _FONT_SCALE, 1)
@@ -484,48 +755,47 @@ class Renderer:
             round((self.cam_y0 + self.cam_scale * v) * _ONE),
         )
 
-    def _draw_camera(self, env: PersonFollowEnv, panel: np.ndarray) -> None:
-        fs, ist, prm = env.sim.fstate[0], env.sim.istate[0], env.sim.params[0]
+    def _below_box(self, a: tuple[int, int], b: tuple[int, int]) -> tuple[int, int]:
+        """Where a label under the fixed-point box ``a``-``b`` goes (px): just below it, kept
+        inside the image and above the legend."""
+        x = min(max(a[0] >> _SHIFT, self.cam_x0 + 4), self.cam_x0 + self.cam_w - 190)
+        y = (b[1] >> _SHIFT) + 16
+        return x, min(max(y, self.cam_y0 + 44), self.cam_y0 + self.cam_h - 30)
+
+    def _draw_camera(
+        self, env: PersonFollowEnv, seen: list[_Seen | None], panel: np.ndarray
+    ) -> None:
+        fs, prm = env.sim.fstate[0], env.sim.params[0]
         if self._cam_bg is None:
             self._cam_bg = self._camera_background(prm)
         img = self._cam_bg.copy()
         W, H = float(prm[P_IMG_W]), float(prm[P_IMG_H])
-        fx, fy, cx, cy = float(prm[P_FX]), float(prm[P_FY]), float(prm[P_CX]), float(prm[P_CY])
-        rx, ry, rth = float(fs[S_X]), float(fs[S_Y]), float(fs[S_TH])
+        sight = self._target_sight(env, seen)
 
-        # True body boxes, far to near so nearer bodies cover farther ones.
-        n_people = int(ist[I_N_PEOPLE])
-        boxes = []
-        for p in range(n_people):
-            px, py, pth = (float(v) for v in env.sim.pstate[0, p, [PS_X, PS_Y, PS_TH]])
-            u1, v1, u2, v2, found = body_box(
-                px,
-                py,
-                pth,
-                float(prm[P_PERSON_W]),
-                float(prm[P_PERSON_D]),
-                float(prm[P_PERSON_H]),
-                rx,
-                ry,
-                rth,
-                prm,
-                P_R00,
-                fx,
-                fy,
-                cx,
-                cy,
-                self._scratch,
-            )
-            u1, v1, u2, v2 = max(u1, 0.0), max(v1, 0.0), min(u2, W), min(v2, H)
-            if found and u2 > u1 and v2 > v1:
-                boxes.append((math.hypot(px - rx, py - ry), p, u1, v1, u2, v2))
-        for _, p, u1, v1, u2, v2 in sorted(boxes, reverse=True):
+        # True body boxes, far to near so nearer bodies cover farther ones; labels after all
+        # bodies, so a nearer body does not cover a farther one's label.
+        order = sorted(((s.dist_m, p) for p, s in enumerate(seen) if s is not None), reverse=True)
+        corners_of: dict[int, tuple[int, int]] = {}
+        for _, p in order:
+            u1, v1, u2, v2 = seen[p].box  # type: ignore[union-attr]
             a, b = self._img_pt(u1, v1), self._img_pt(u2, v2)
-            cv2.rectangle(img, a, b, C_BODY, -1, cv2.LINE_8, _SHIFT)
-            cv2.rectangle(img, a, b, C_TRUE_BOX, 1, cv2.LINE_AA, _SHIFT)
-            label = "target (true box)" if p == 0 else f"person {p}"
-            # Inside the box's top, but below the header line when the box reaches the top.
-            y_label = max((a[1] >> _SHIFT) + 16, self.cam_y0 + 44)
+            corners_of[p] = a
+            if p == 0 and sight == SIGHT_HIDDEN:
+                # Nothing of it reaches the camera: only a dashed outline of where it stands.
+                corners = np.array([a, (b[0], a[1]), b, (a[0], b[1])], dtype=np.int32)
+                dashed_polyline(img, corners, True, C_WARN, 2)
+            else:
+                cv2.rectangle(img, a, b, C_BODY, -1, cv2.LINE_8, _SHIFT)
+                cv2.rectangle(img, a, b, C_TRUE_BOX, 1, cv2.LINE_AA, _SHIFT)
+        for _, p in order:
+            a = corners_of[p]
+            if p == 0:
+                label = f"target (true box, {100.0 * fs[S_VIS_FRAC]:.0f} % visible)"
+            else:
+                label = f"bystander {p}"
+            # Inside the box's top, but below the header line when the box reaches the top;
+            # bystanders one row lower than the target, so a crossing does not hide its label.
+            y_label = max((a[1] >> _SHIFT) + 16, self.cam_y0 + 44) + (0 if p == 0 else 20)
             put_text(img, label, ((a[0] >> _SHIFT) + 5, y_label), (225, 225, 225), 0.4)
 
         # The image's centre column, against which the observation's offset is measured.
@@ -533,42 +803,72 @@ class Renderer:
         top, bottom = self._img_pt(u_mid, 0.0), self._img_pt(u_mid, H)
         cv2.line(img, top, bottom, C_CENTRE, 1, cv2.LINE_AA, _SHIFT)
 
+        # The tracker's box (this frame's estimate; the published box lags it by the
+        # latency), dashed so the published box stays readable on top of it.
+        if fs[S_TRK_ON] > 0.0:
+            hw, hh = 0.5 * float(fs[S_TRK_W]), 0.5 * float(fs[S_TRK_H])
+            cu, cvv = float(fs[S_TRK_CX]), float(fs[S_TRK_CY])
+            a, b = self._img_pt(cu - hw, cvv - hh), self._img_pt(cu + hw, cvv + hh)
+            corners = np.array([a, (b[0], a[1]), b, (a[0], b[1])], dtype=np.int32)
+            dashed_polyline(img, corners, True, C_TRACK, 2)
+            lost = int(fs[S_TRK_LOST])
+            label = "track" if lost == 0 else f"track (coasting {lost})"
+            put_text(img, label, self._below_box(a, b), C_TRACK, 0.4)
+
         # The published detection (already delayed by the perception's latency, as the
-        # observation is): box, centre pixel, and the offset as a bar from the centre column.
+        # observation is): box, centre pixel, and the offset as a bar from the centre column;
+        # green when it is the target's, red when a bystander's (a stolen target).
         if fs[S_DETECTED] > 0.0:
+            owner = int(env.sim.istate[0, I_DETECTED_ID])
+            color = C_STOLEN if owner > 0 else C_DET
             x1, y1, x2, y2 = (float(fs[k]) for k in (S_BOX_X1, S_BOX_Y1, S_BOX_X2, S_BOX_Y2))
-            cv2.rectangle(
-                img, self._img_pt(x1, y1), self._img_pt(x2, y2), C_DET, 2, cv2.LINE_AA, _SHIFT
-            )
+            a, b = self._img_pt(x1, y1), self._img_pt(x2, y2)
+            cv2.rectangle(img, a, b, color, 2, cv2.LINE_AA, _SHIFT)
             # Centre pixel as the perception takes it (integer column and row).
             cu, cvv = float(int((x1 + x2) / 2.0)), float(int((y1 + y2) / 2.0))
             centre = self._img_pt(cu, cvv)
-            cv2.line(img, self._img_pt(u_mid, cvv), centre, C_DET, 2, cv2.LINE_AA, _SHIFT)
+            cv2.line(img, self._img_pt(u_mid, cvv), centre, color, 2, cv2.LINE_AA, _SHIFT)
             cv2.drawMarker(
                 img,
                 (centre[0] >> _SHIFT, centre[1] >> _SHIFT),
-                C_DET,
+                color,
                 cv2.MARKER_CROSS,
                 14,
                 2,
                 cv2.LINE_AA,
             )
+            if owner > 0:
+                # Beside the centre marker, mid-height: clear of the boxes' labels at the top.
+                org = (
+                    min((centre[0] >> _SHIFT) + 12, self.cam_x0 + self.cam_w - 190),
+                    (centre[1] >> _SHIFT) - 10,
+                )
+                put_text(img, f"published: bystander {owner}", org, C_TEXT, 0.45, True, C_STOLEN)
+
         # Warnings bottom right, away from the header and the legend.
         x_warn = self.cam_x0 + self.cam_w - 175
         if fs[S_DETECTED] <= 0.0:
             put_text(img, "no detection", (x_warn, self.cam_y0 + self.cam_h - 10), C_WARN, 0.6)
-        if fs[S_IN_FRAME] <= 0.0:
-            put_text(img, "target out of frame", (x_warn, self.cam_y0 + self.cam_h - 36), C_WARN)
+        if sight == SIGHT_HIDDEN:
+            warning = "target hidden"
+        elif sight == SIGHT_OUT_OF_VIEW:
+            warning = "target out of view"
+        elif fs[S_IN_FRAME] <= 0.0:
+            warning = "target too little in sight"  # below the detector's visible share
+        else:
+            warning = ""
+        if warning:
+            put_text(img, warning, (x_warn, self.cam_y0 + self.cam_h - 36), C_WARN)
 
         put_text(
             img,
             f"camera {int(W)}x{int(H)}   obs d {fs[S_OBS_D]:5.2f} m   "
-            f"offset {fs[S_OBS_O]:+5.0f} px",
+            f"offset {fs[S_OBS_O]:+5.0f} px   published {int(prm[P_LATENCY])} frame(s) late",
             (self.cam_x0 + 8, self.cam_y0 + 18),
         )
         put_text(
             img,
-            "grey: true boxes   green: published detection",
+            "grey: true boxes   green/red: published (target/bystander)   cyan: track",
             (self.cam_x0 + 8, self.cam_y0 + self.cam_h - 8),
             (220, 220, 220),
             0.4,

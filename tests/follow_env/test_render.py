@@ -10,6 +10,18 @@ import pytest
 from gymnasium.wrappers import RecordVideo
 
 import follow_env  # noqa: F401  (registers PersonFollow-v0)
+from follow_env.render import (
+    C_STOLEN,
+    FRAME_HEIGHT_PX,
+    FRAME_WIDTH_PX,
+    SIGHT_CLEAR,
+    SIGHT_HIDDEN,
+    SIGHT_OUT_OF_VIEW,
+    SIGHT_PARTLY,
+    sight_state,
+    wall_loops,
+)
+from follow_env.world import box_walls, room_walls
 
 FORWARD = np.array([0.5, 0.0], dtype=np.float32)  # 0.5 m/s straight ahead
 
@@ -79,3 +91,63 @@ def test_record_video_writes_mp4(tmp_path: Path):
     videos = list(folder.glob("*.mp4"))
     assert len(videos) == 1
     assert videos[0].stat().st_size > 0
+
+
+# -- the realistic world: obstacles, bystanders, occlusion, stolen targets ------------------------
+
+
+def follow(obs: np.ndarray) -> np.ndarray:
+    """A simple follower: keep 1 m and turn towards the published box (SI action)."""
+    d, offset = float(obs[0]), float(obs[1])
+    return np.array([1.5 * (d - 1.0), -0.005 * offset], dtype=np.float32)
+
+
+def stolen_pixels(frame: np.ndarray) -> int:
+    """How many pixels are (within a few levels) the colour of a stolen target."""
+    return int(np.all(np.abs(frame.astype(int) - C_STOLEN) <= 6, axis=-1).sum())
+
+
+@pytest.mark.parametrize("scenario", ["crossing", "random_world"])
+def test_world_scenarios_render_at_the_frame_size(scenario: str):
+    e = gym.make("PersonFollow-v0", scenario=scenario, render_mode="rgb_array")
+    obs, _ = e.reset(seed=0)
+    for _ in range(5):
+        obs, *_ = e.step(follow(obs))
+    frame = e.render()
+    assert frame.shape == (FRAME_HEIGHT_PX, FRAME_WIDTH_PX, 3)
+    assert frame.dtype == np.uint8
+    e.close()
+
+
+def test_a_stolen_target_is_drawn_in_red():
+    # Under the first-detection rule the crossing bystander, nearer and larger, steals the
+    # target (seed 0 does so about 3.7 s in).
+    e = gym.make("PersonFollow-v0", scenario="crossing", render_mode="rgb_array")
+    obs, info = e.reset(seed=0)
+    assert info["detected_person"] == 0
+    assert stolen_pixels(e.render()) == 0  # the target is followed: no red marks
+    for _ in range(150):
+        obs, _, terminated, truncated, info = e.step(follow(obs))
+        if info["detected_person"] == 1 or terminated or truncated:
+            break
+    assert info["detected_person"] == 1, "the bystander never stole the target"
+    # The map's ring and "followed: bystander 1" label (a filled red box) at least.
+    assert stolen_pixels(e.render()) > 200
+    e.close()
+
+
+def test_sight_state_reads_the_visible_share():
+    min_vis = 0.3
+    assert sight_state(0.0, 0.0, min_vis) == SIGHT_OUT_OF_VIEW
+    assert sight_state(0.0, 0.8, min_vis) == SIGHT_HIDDEN
+    assert sight_state(0.8, 0.8, min_vis) == SIGHT_CLEAR  # all of it in the image is in sight
+    assert sight_state(0.5, 0.8, min_vis) == SIGHT_PARTLY  # something blocks part of it
+    assert sight_state(0.2, 0.2, min_vis) == SIGHT_PARTLY  # too little to detect
+
+
+def test_wall_loops_finds_closed_outlines_only():
+    room = room_walls(10.0, 8.0)
+    pillar = box_walls(1.0, 2.0, 0.4, 0.4, 0.3, 3.0)
+    partition = np.array([[0.0, -4.0, 0.0, -1.0, 3.0], [0.0, -1.0, 0.0, 0.5, 3.0]])  # open
+    walls = np.vstack([room, partition, pillar])
+    assert wall_loops(walls) == [(0, 4), (6, 10)]
