@@ -496,7 +496,17 @@ def _sight_box(
     half_w, height = 0.5 * prm[P_PERSON_W], prm[P_PERSON_H]
     reach = half_w + _LOS_MARGIN_M
     n_cand = 0
+    # Bounding box of the sight line, grown by the reach: walls outside it cannot be near.
+    bx1, bx2 = min(ox, px) - reach, max(ox, px) + reach
+    by1, by2 = min(oy, py) - reach, max(oy, py) + reach
     for k in range(n_walls):
+        if (
+            max(walls[k, W_X1], walls[k, W_X2]) < bx1
+            or min(walls[k, W_X1], walls[k, W_X2]) > bx2
+            or max(walls[k, W_Y1], walls[k, W_Y2]) < by1
+            or min(walls[k, W_Y1], walls[k, W_Y2]) > by2
+        ):
+            continue
         if (
             n_cand < N_SCRATCH - 24
             and segment_distance(
@@ -684,7 +694,10 @@ def _frame(
                 area = (j3 - j1) * (j4 - j2)
                 # What a re-identification network would see: the person's own appearance
                 # (one number per person and episode) plus noise.
-                app = uniform_at(k_app, p) + prm[P_APP_NOISE] * normal_pair_at(kdet, slot + 4)[0]
+                app = 0.0
+                if prm[P_ASSOC] > 0.0:
+                    z_app = normal_pair_at(kdet, slot + 4)[0]
+                    app = uniform_at(k_app, p) + prm[P_APP_NOISE] * z_app
                 if listed_before(area, best_area):
                     first, b1, b2, b3, b4, best_area, first_app = p, j1, j2, j3, j4, area, app
                 alike = not known or abs(app - fs[S_TRK_APP]) < prm[P_TRK_APP_GATE]
