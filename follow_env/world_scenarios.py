@@ -30,7 +30,13 @@ import numpy as np
 
 from follow_env.layout import N_PW, PW_PAUSE, PW_S, PW_VMAX, PW_X, PW_Y, WALL_FIELDS
 from follow_env.rng import LaneRandom
-from follow_env.scenarios import ScenarioBatch, _cruise, _person_ahead, register_scenario
+from follow_env.scenarios import (
+    ScenarioBatch,
+    _cruise,
+    _person_ahead,
+    polyline_paths,
+    register_scenario,
+)
 from follow_env.world import WALL_HEIGHT_M, box_walls, polygon_walls, room_walls
 
 if TYPE_CHECKING:
@@ -245,34 +251,30 @@ def crossing(rng: LaneRandom, cfg: EnvConfig) -> ScenarioBatch:
     return pack_lanes(np.array(poses), people, [walls] * rng.n)
 
 
-def _bystander_tracks(
-    world: LaneRandom, n_by: int, hx: float, hy: float, cfg: EnvConfig
-) -> list[list[np.ndarray]]:
-    """Bystanders criss-crossing a hall: each walks between random points on opposite sides,
-    several times, at their own pace, starting at their own time."""
+def _bystander_paths(world: LaneRandom, n_by: int, hx: float, hy: float) -> np.ndarray:
+    """Bystanders criss-crossing a hall, for all lanes at once: (n, n_by, 5, N_PW). Each
+    walks four legs between random points on alternate sides of the hall, at their own pace,
+    starting at their own time and turning round (0.5 s) at each side."""
     legs = 4
-    pts = world.uniform(n_by, legs + 1, 2, low=-1.0, high=1.0)
+    pts = world.uniform(n_by, legs + 1, 2, low=-1.0, high=1.0) * np.array([hx, hy])
     pace = world.uniform(n_by, low=0.8, high=1.3)
     delay = world.uniform(n_by, low=0.0, high=4.0)
-    lanes = []
-    for i in range(world.n):
-        lane = []
-        for b in range(n_by):
-            corners = pts[i, b] * np.array([hx, hy])
-            # Alternate sides so every leg crosses the hall.
-            corners[1::2, 0] = -np.sign(corners[0::2, 0][: len(corners[1::2])] + 1e-9) * np.abs(
-                corners[1::2, 0]
-            )
-            lane.append(
-                smooth_path(
-                    corners, pace[i, b], cfg.person.lateral_accel_mps2, pauses={0: delay[i, b]}
-                )
-            )
-        lanes.append(lane)
-    return lanes
+    # Alternate sides so that every leg crosses the hall.
+    side = np.where(pts[..., 0, 0] >= 0.0, 1.0, -1.0)[..., None]
+    pts[..., 0] = np.abs(pts[..., 0]) * side * np.where(np.arange(legs + 1) % 2 == 0, 1.0, -1.0)
+    n = world.n
+    pause = np.full((n, n_by, legs + 1), 0.5)
+    pause[..., 0] = delay
+    pause[..., -1] = 0.0
+    flat = polyline_paths(
+        pts.reshape(n * n_by, legs + 1, 2),
+        np.repeat(pace.reshape(-1, 1), legs + 1, axis=1),
+        pause.reshape(n * n_by, legs + 1),
+    )
+    return flat.reshape(n, n_by, legs + 1, N_PW)
 
 
-@register_scenario("crowd", max_people=5, max_points=512, max_walls=4)
+@register_scenario("crowd", max_people=5, max_points=256, max_walls=4)
 def crowd(rng: LaneRandom, cfg: EnvConfig) -> ScenarioBatch:
     """The person walks about the hall (a 30 s random walk) while four bystanders criss-cross
     it."""
@@ -282,13 +284,20 @@ def crowd(rng: LaneRandom, cfg: EnvConfig) -> ScenarioBatch:
     hx = 0.5 * cfg.scenario.room_length_m - 2.0
     hy = 0.5 * cfg.scenario.room_width_m - 2.0
     world = LaneRandom(rng.keys ^ np.uint64(0xC40D))
-    bystanders = _bystander_tracks(world, 4, hx, hy, cfg)
-    people = []
-    for i in range(rng.n):
-        target = base.paths[i, 0, : base.n_points[i, 0]]
-        people.append([target, *bystanders[i]])
-    walls = [base.walls[i, : base.n_walls[i]] for i in range(rng.n)]
-    return pack_lanes(base.robot_pose, people, walls)
+    bystanders = _bystander_paths(world, 4, hx, hy)
+    n, n_by, m = bystanders.shape[:3]
+    paths = np.zeros((n, 1 + n_by, base.paths.shape[2], N_PW))
+    paths[:, :1] = base.paths
+    paths[:, 1:, :m] = bystanders
+    n_points = np.concatenate([base.n_points, np.full((n, n_by), m)], axis=1)
+    return ScenarioBatch(
+        robot_pose=base.robot_pose,
+        paths=paths,
+        n_points=n_points,
+        n_people=np.full(n, 1 + n_by, dtype=np.int64),
+        walls=base.walls,
+        n_walls=base.n_walls,
+    )
 
 
 @register_scenario("stop_and_go", max_points=64, max_walls=4)
