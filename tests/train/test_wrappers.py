@@ -1,0 +1,208 @@
+"""train/wrappers.py: the VecEnv wrappers between the env and the agent."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import pytest
+from gymnasium import spaces
+from stable_baselines3.common.vec_env import VecEnv
+
+import follow_env
+from train.wrappers import (
+    ConcatVecEnv,
+    VecIncrementalAction,
+    VecObservationAge,
+    VecRescaleAction,
+    VecScaleObservation,
+    VecShapedReward,
+    agent_to_si,
+)
+
+
+class ScriptedVecEnv(VecEnv):
+    """A VecEnv that replays scripted observations, rewards and dones; records actions."""
+
+    def __init__(
+        self,
+        observations: list[list[list[float]]],
+        rewards: list[list[float]] | None = None,
+        dones: list[list[bool]] | None = None,
+        truncated: list[list[bool]] | None = None,
+    ) -> None:
+        self.render_mode = None
+        self.script = np.asarray(observations, dtype=np.float32)  # (steps + 1, lanes, obs)
+        n = self.script.shape[1]
+        steps = len(self.script) - 1
+        self.rewards = np.zeros((steps, n)) if rewards is None else np.asarray(rewards)
+        self.dones = np.zeros((steps, n), bool) if dones is None else np.asarray(dones)
+        self.truncated = np.zeros((steps, n), bool) if truncated is None else np.asarray(truncated)
+        obs_space = spaces.Box(-1000, 1000, shape=self.script.shape[2:], dtype=np.float32)
+        act_space = spaces.Box(
+            np.array([-2.0, -4.0], np.float32), np.array([2.0, 4.0], np.float32), dtype=np.float32
+        )
+        super().__init__(n, obs_space, act_space)
+        self.t = 0
+        self.actions: list[np.ndarray] = []
+
+    def reset(self) -> np.ndarray:
+        self.t = 0
+        return self.script[0].copy()
+
+    def step_async(self, actions: np.ndarray) -> None:
+        self.actions.append(np.array(actions, dtype=np.float64))
+
+    def step_wait(self) -> Any:
+        self.t += 1
+        infos: list[dict[str, Any]] = [{} for _ in range(self.num_envs)]
+        for i in np.flatnonzero(self.dones[self.t - 1]):
+            infos[i]["terminal_observation"] = self.script[self.t, i] + 0.5  # marks "terminal"
+            infos[i]["TimeLimit.truncated"] = bool(self.truncated[self.t - 1, i])
+        rewards = self.rewards[self.t - 1].astype(np.float32)
+        return self.script[self.t].copy(), rewards, self.dones[self.t - 1].copy(), infos
+
+    def close(self) -> None:
+        pass
+
+    def get_attr(self, attr_name: str, indices: Any = None) -> list[Any]:
+        return [getattr(self, attr_name)] * self.num_envs
+
+    def set_attr(self, attr_name: str, value: Any, indices: Any = None) -> None:
+        setattr(self, attr_name, value)
+
+    def env_method(self, method_name: str, *args: Any, indices: Any = None, **kw: Any) -> list:
+        return []
+
+    def env_is_wrapped(self, wrapper_class: type, indices: Any = None) -> list[bool]:
+        return [False] * self.num_envs
+
+
+def constant_obs(steps: int, lanes: int = 1, value: tuple[float, ...] = (1.0, 0.0)) -> list:
+    return [[list(value) for _ in range(lanes)] for _ in range(steps + 1)]
+
+
+def test_agent_to_si_maps_the_unit_box_linearly_and_clips() -> None:
+    low, high = np.array([-2.0, -4.0]), np.array([2.0, 4.0])
+    np.testing.assert_allclose(
+        agent_to_si(np.array([[-1, 1], [0, 0.5], [3, -3]]), low, high), [[-2, 4], [0, 2], [2, -4]]
+    )
+
+
+def test_rescale_action_defaults_to_the_env_box_and_takes_smaller_limits() -> None:
+    env = ScriptedVecEnv(constant_obs(2))
+    wrapped = VecRescaleAction(env, w_max_radps=1.0)
+    assert wrapped.action_space == spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32)
+    wrapped.reset()
+    wrapped.step(np.array([[1.0, -1.0]]))
+    np.testing.assert_allclose(env.actions[-1], [[2.0, -1.0]])
+
+
+def test_rescale_action_rejects_a_limit_beyond_the_env_box() -> None:
+    with pytest.raises(ValueError, match=r"w_max_radps=5.0 is out of range"):
+        VecRescaleAction(ScriptedVecEnv(constant_obs(1)), w_max_radps=5.0)
+
+
+def test_incremental_action_moves_the_command_by_at_most_max_change() -> None:
+    env = ScriptedVecEnv(constant_obs(3))
+    wrapped = VecIncrementalAction(env, max_change=[0.5, 1.0])
+    obs = wrapped.reset()
+    np.testing.assert_allclose(obs, [[1.0, 0.0, 0.0, 0.0]])  # obs + command (at rest)
+    obs, *_ = wrapped.step(np.array([[1.0, -0.5]]))
+    np.testing.assert_allclose(env.actions[-1], [[0.5, -0.5]])
+    np.testing.assert_allclose(obs, [[1.0, 0.0, 0.5, -0.5]])
+    wrapped.step(np.array([[7.0, -7.0]]))  # clipped to one max_change
+    np.testing.assert_allclose(env.actions[-1], [[1.0, -1.5]])
+    wrapped.step(np.array([[1.0, -1.0]]))
+    np.testing.assert_allclose(env.actions[-1], [[1.5, -2.5]])
+
+
+def test_incremental_action_clips_to_the_wrapped_box_and_restarts_at_rest() -> None:
+    dones = [[False], [True], [False]]
+    env = ScriptedVecEnv(constant_obs(3), dones=dones)
+    wrapped = VecIncrementalAction(env, max_change=[1.5, 3.0])
+    wrapped.reset()
+    wrapped.step(np.array([[1.0, 1.0]]))
+    np.testing.assert_allclose(env.actions[-1], [[1.5, 3.0]])
+    obs, _, done, infos = wrapped.step(np.array([[1.0, 1.0]]))
+    np.testing.assert_allclose(env.actions[-1], [[2.0, 4.0]])  # the box is +-2, +-4
+    assert done[0]
+    np.testing.assert_allclose(infos[0]["terminal_observation"], [1.5, 0.5, 2.0, 4.0])
+    np.testing.assert_allclose(obs, [[1.0, 0.0, 0.0, 0.0]])  # the next episode starts at rest
+
+
+def test_incremental_action_keeps_the_robot_at_rest_until_a_distance_reading() -> None:
+    script = [[[0.0, 5.0]], [[0.0, 5.0]], [[1.2, 5.0]], [[1.2, 5.0]]]
+    env = ScriptedVecEnv(script)
+    wrapped = VecIncrementalAction(env, max_change=[0.5, 0.5], reading_index=0)
+    wrapped.reset()
+    wrapped.step(np.array([[1.0, 1.0]]))
+    wrapped.step(np.array([[1.0, 1.0]]))
+    wrapped.step(np.array([[1.0, 1.0]]))
+    np.testing.assert_allclose(np.concatenate(env.actions), [[0, 0], [0, 0], [0.5, 0.5]])
+
+
+def test_observation_age_counts_steps_without_change() -> None:
+    script = [[[1.0, 5.0]], [[1.0, 5.0]], [[1.0, 5.0]], [[1.1, 5.0]], [[1.1, 5.0]]]
+    wrapped = VecObservationAge(ScriptedVecEnv(script), max_age_steps=2)
+    ages = [wrapped.reset()[0, -1]]
+    for _ in range(4):
+        ages.append(wrapped.step(np.zeros((1, 2)))[0][0, -1])
+    np.testing.assert_allclose(ages, [0.0, 0.5, 1.0, 0.0, 0.5])
+
+
+def test_observation_age_starts_at_zero_in_a_new_episode() -> None:
+    script = [[[1.0, 5.0]], [[1.0, 5.0]], [[1.0, 5.0]]]
+    wrapped = VecObservationAge(ScriptedVecEnv(script, dones=[[False], [True]]), max_age_steps=4)
+    wrapped.reset()
+    wrapped.step(np.zeros((1, 2)))
+    obs, _, _, infos = wrapped.step(np.zeros((1, 2)))
+    assert obs[0, -1] == 0.0
+    assert infos[0]["terminal_observation"][-1] == 0.0  # the marked terminal obs is fresh
+
+
+def test_scale_observation_multiplies_each_entry() -> None:
+    wrapped = VecScaleObservation(ScriptedVecEnv(constant_obs(1, value=(2.0, -300.0))), [1, 0.01])
+    np.testing.assert_allclose(wrapped.reset(), [[2.0, -3.0]])
+    with pytest.raises(ValueError, match="one factor per observation entry"):
+        VecScaleObservation(ScriptedVecEnv(constant_obs(1)), [1.0])
+
+
+def test_shaped_reward_floors_shifts_and_charges_command_changes() -> None:
+    rewards = [[-5.0, 0.5], [-5.0, -60.0]]
+    dones = [[False, False], [False, True]]
+    env = ScriptedVecEnv(constant_obs(2, lanes=2), rewards=rewards, dones=dones)
+    wrapped = VecShapedReward(
+        env, reward_floor=-1.0, alive_bonus=1.0, v_rate_weight=2.0, w_rate_weight=0.5
+    )
+    wrapped.reset()
+    _, r, *_ = wrapped.step(np.array([[0.5, 0.0], [0.0, -2.0]]))
+    # lane 0: max(-5, -1) + 1 - 2 * 0.5; lane 1: 0.5 + 1 - 0.5 * 2
+    np.testing.assert_allclose(r, [-1.0, 0.5])
+    _, r, *_ = wrapped.step(np.array([[0.5, 0.0], [0.0, -2.0]]))
+    # lane 1 ends by termination: its -60 (a collision) is not floored
+    np.testing.assert_allclose(r, [0.0, -59.0])
+
+
+def test_shaped_reward_floors_the_last_step_of_a_truncated_episode() -> None:
+    env = ScriptedVecEnv(constant_obs(1), rewards=[[-5.0]], dones=[[True]], truncated=[[True]])
+    wrapped = VecShapedReward(env, reward_floor=-1.0)
+    wrapped.reset()
+    assert wrapped.step(np.zeros((1, 2)))[1][0] == -1.0
+
+
+def test_concat_vec_env_lane_j_replays_its_scenario_seeded_s_plus_j() -> None:
+    parts = [follow_env.make_sb3_vec_env(2, scenario=s) for s in ("straight", "curve")]
+    joined = ConcatVecEnv(parts)
+    joined.seed(100)
+    obs = joined.reset()
+    single = follow_env.make_sb3_vec_env(1, scenario="curve")
+    single.seed(103)  # lane 3 = the second lane of the curve part
+    reference = single.reset()
+    actions = np.tile([[0.5, 0.1]], (4, 1))
+    for _ in range(20):
+        obs, *_ = joined.step(actions)
+        reference, *_ = single.step(actions[:1])
+    np.testing.assert_array_equal(obs[3], reference[0])
+    assert joined.num_envs == 4
+    assert joined.get_attr("render_mode") == [None] * 4

@@ -1,0 +1,236 @@
+"""The run folder: its layout, atomic saves, checkpoints, the held-out evaluation log.
+
+::
+
+    runs/ppo-<timestamp>/
+      config.yaml           the resolved configuration: options, hyperparameters, env spaces
+      model.zip             the final agent (SB3 PPO)
+      vecnormalize.pkl      its observation normalisation statistics (VecNormalize)
+      MODEL_CARD.md         command, seed, versions, training time, scores
+      learning_curve.png    held-out evaluation return and training return over steps
+      evaluations.npz       the EvalCallback log (timesteps, results, ep_lengths)
+      sessions.json         one entry per training session (a resume starts a new one)
+      checkpoints/          ppo_<steps>_steps.zip + ppo_vecnormalize_<steps>_steps.pkl
+      logs/                 progress-<first step>.csv per session, tb/ (TensorBoard events)
+
+Every file is written to a temporary name beside it and renamed into place, so a run killed at
+any moment leaves complete files only; a checkpoint's statistics are written before its model,
+so a model file in ``checkpoints/`` always has its statistics.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import shutil
+import tempfile
+from datetime import datetime
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+from stable_baselines3.common.base_class import BaseAlgorithm
+from stable_baselines3.common.callbacks import CheckpointCallback, EvalCallback
+from stable_baselines3.common.vec_env import VecNormalize
+
+from eval.atomic import atomic_path, atomic_write_text
+
+__all__ = [
+    "CHECKPOINT_PREFIX",
+    "CONFIG",
+    "MODEL",
+    "NORMALIZATION",
+    "AtomicCheckpointCallback",
+    "HeldOutEvalCallback",
+    "new_run_dir",
+    "newest_checkpoint",
+    "read_config",
+    "read_sessions",
+    "save_model",
+    "save_normalization",
+    "write_config",
+    "write_sessions",
+]
+
+CONFIG = "config.yaml"
+MODEL = "model.zip"
+NORMALIZATION = "vecnormalize.pkl"
+CARD = "MODEL_CARD.md"
+CURVE = "learning_curve.png"
+EVALUATIONS = "evaluations.npz"
+SESSIONS = "sessions.json"
+CHECKPOINTS = "checkpoints"
+LOGS = "logs"
+CHECKPOINT_PREFIX = "ppo"
+_CHECKPOINT = re.compile(rf"^{CHECKPOINT_PREFIX}_(\d+)_steps\.zip$")
+
+
+def new_run_dir(root: str | Path = "runs", prefix: str = "ppo") -> Path:
+    """Create and return a new run folder ``root/<prefix>-<timestamp>[-k]``."""
+    root = Path(root)
+    root.mkdir(parents=True, exist_ok=True)
+    stamp = f"{prefix}-{datetime.now():%Y%m%d-%H%M%S}"
+    for k in range(1000):
+        path = root / (stamp if k == 0 else f"{stamp}-{k}")
+        try:
+            path.mkdir()
+        except FileExistsError:
+            continue
+        return path
+    raise FileExistsError(f"{root}: no free run folder name for {stamp}")
+
+
+def write_config(run: Path, config: dict[str, Any]) -> Path:
+    """Write the resolved configuration as ``config.yaml`` (atomically)."""
+    text = yaml.safe_dump(config, sort_keys=False, default_flow_style=None, width=100)
+    return atomic_write_text(run / CONFIG, text)
+
+
+def read_config(path: str | Path) -> dict[str, Any]:
+    """Read a run's ``config.yaml`` (a path to the file or to its folder).
+
+    :raises ValueError: naming the file if it is missing or not a mapping.
+    """
+    path = Path(path)
+    if path.is_dir():
+        path = path / CONFIG
+    try:
+        config = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except OSError as e:
+        raise ValueError(f"{path}: cannot read the run configuration: {e.strerror or e}") from None
+    except yaml.YAMLError as e:
+        raise ValueError(f"{path}: the run configuration is not valid YAML: {e}") from None
+    if not isinstance(config, dict) or "hyperparams" not in config:
+        raise ValueError(f"{path}: not a follow-train run configuration (no 'hyperparams')")
+    return config
+
+
+def read_sessions(run: Path) -> list[dict[str, Any]]:
+    """The training sessions recorded so far (empty for a new run)."""
+    path = run / SESSIONS
+    return json.loads(path.read_text(encoding="utf-8")) if path.exists() else []
+
+
+def write_sessions(run: Path, sessions: list[dict[str, Any]]) -> None:
+    """Record the training sessions (atomically)."""
+    atomic_write_text(run / SESSIONS, json.dumps(sessions, indent=2) + "\n")
+
+
+def save_model(model: BaseAlgorithm, path: Path) -> Path:
+    """``model.save`` to ``path`` atomically (the temporary name keeps the ``.zip`` suffix)."""
+    with atomic_path(path) as tmp:
+        model.save(tmp)
+    return path
+
+
+def save_normalization(venv: VecNormalize | None, path: Path) -> Path | None:
+    """``VecNormalize.save`` to ``path`` atomically; nothing when there is no normalisation."""
+    if venv is None:
+        return None
+    with atomic_path(path) as tmp:
+        venv.save(str(tmp))
+    return path
+
+
+def newest_checkpoint(run: Path) -> tuple[int, Path, Path] | None:
+    """``(steps, model zip, statistics pkl)`` of the newest complete checkpoint, or None.
+
+    A checkpoint is complete when its model file exists (statistics are written first); the
+    statistics path is returned even if the config does not normalise (it then does not exist).
+    """
+    folder = run / CHECKPOINTS
+    found = []
+    for path in folder.glob(f"{CHECKPOINT_PREFIX}_*_steps.zip") if folder.is_dir() else []:
+        match = _CHECKPOINT.match(path.name)
+        if match:
+            found.append((int(match.group(1)), path))
+    if not found:
+        return None
+    steps, model = max(found)
+    return steps, model, folder / f"{CHECKPOINT_PREFIX}_vecnormalize_{steps}_steps.pkl"
+
+
+class AtomicCheckpointCallback(CheckpointCallback):
+    """SB3's ``CheckpointCallback`` (model + VecNormalize), each file written atomically.
+
+    :param save_freq_steps: env steps between checkpoints (all lanes counted).
+    :param run: the run folder; checkpoints go to ``run/checkpoints``.
+    :param n_envs: lanes, to turn env steps into callback calls.
+    """
+
+    def __init__(self, save_freq_steps: int, run: Path, n_envs: int) -> None:
+        super().__init__(
+            save_freq=max(save_freq_steps // n_envs, 1),
+            save_path=str(run / CHECKPOINTS),
+            name_prefix=CHECKPOINT_PREFIX,
+            save_vecnormalize=True,
+        )
+
+    def _on_step(self) -> bool:
+        if self.n_calls % self.save_freq == 0:
+            save_normalization(
+                self.model.get_vec_normalize_env(),
+                Path(self._checkpoint_path("vecnormalize_", extension="pkl")),
+            )
+            save_model(self.model, Path(self._checkpoint_path(extension="zip")))
+        return True
+
+
+class HeldOutEvalCallback(EvalCallback):
+    """SB3's ``EvalCallback`` on the same held-out episodes every time, logged atomically.
+
+    Before each evaluation the eval env is seeded with ``eval_seed`` (lane ``j`` gets
+    ``eval_seed + j``), so the curve compares the agent with itself on identical episodes.
+    ``evaluations.npz`` in the run folder gets the log (SB3's own copy goes to a scratch folder,
+    removed at the end); a resumed run continues the existing log.
+
+    :param eval_env: built like the training env (:func:`train.envs.agent_env`, mode "eval").
+    :param run: the run folder.
+    :param eval_seed: the first held-out seed.
+    :param eval_freq_steps: env steps between evaluations (all training lanes counted).
+    :param n_envs: training lanes, to turn env steps into callback calls.
+    """
+
+    def __init__(
+        self, eval_env: Any, run: Path, eval_seed: int, eval_freq_steps: int, n_envs: int
+    ) -> None:
+        self._scratch = Path(tempfile.mkdtemp(prefix=".eval-scratch-", dir=run))
+        super().__init__(
+            eval_env,
+            n_eval_episodes=eval_env.num_envs,
+            eval_freq=max(eval_freq_steps // n_envs, 1),
+            log_path=str(self._scratch),
+            deterministic=True,
+            verbose=0,
+        )
+        self.run = run
+        self.eval_seed = eval_seed
+        previous = run / EVALUATIONS
+        if previous.exists():
+            with np.load(previous) as log:
+                self.evaluations_timesteps = log["timesteps"].tolist()
+                self.evaluations_results = log["results"].tolist()
+                self.evaluations_length = log["ep_lengths"].tolist()
+
+    def _on_step(self) -> bool:
+        due = self.eval_freq > 0 and self.n_calls % self.eval_freq == 0
+        if due:
+            self.eval_env.seed(self.eval_seed)
+        keep_going = super()._on_step()
+        if due:
+            self.write_log()
+        return keep_going
+
+    def write_log(self) -> None:
+        """Write ``evaluations.npz`` (atomically) from the evaluations so far."""
+        with atomic_path(self.run / EVALUATIONS) as tmp:
+            np.savez(
+                tmp,
+                timesteps=np.asarray(self.evaluations_timesteps, dtype=np.int64),
+                results=np.asarray(self.evaluations_results, dtype=np.float64),
+                ep_lengths=np.asarray(self.evaluations_length, dtype=np.int64),
+            )
+
+    def _on_training_end(self) -> None:
+        shutil.rmtree(self._scratch, ignore_errors=True)
