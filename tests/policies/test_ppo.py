@@ -1,0 +1,165 @@
+"""policies/ppo.py: a trained PPO agent as a Policy, loaded by name or path."""
+
+from __future__ import annotations
+
+import pickle
+import shutil
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+import yaml
+from stable_baselines3.common.vec_env import VecEnvWrapper
+
+from eval.rollout import run_episode
+from policies import Policy, make_policy
+from policies.ppo import DEFAULT_AGENT, AgentLoadError, PPOPolicy
+from train.envs import agent_env, base_env
+from train.run import read_config
+
+
+@pytest.fixture
+def agent_copy(tmp_path: Path) -> Path:
+    """The shipped agent's files in a folder of their own, free to damage."""
+    folder = tmp_path / "agent"
+    folder.mkdir()
+    for name in ("model.zip", "vecnormalize.pkl", "config.yaml"):
+        shutil.copy(DEFAULT_AGENT / name, folder / name)
+    return folder
+
+
+def obs(distance_m: float, offset_px: float) -> np.ndarray:
+    return np.array([distance_m, offset_px], dtype=np.float32)
+
+
+def test_ppo_name_builds_the_shipped_agent() -> None:
+    policy = make_policy("ppo")
+    assert isinstance(policy, Policy)
+    assert policy.name == "ppo"
+
+
+def test_a_run_folder_or_its_zip_is_a_policy_name(agent_copy: Path) -> None:
+    for name in (str(agent_copy), str(agent_copy / "model.zip")):
+        policy = make_policy(name)
+        assert policy.name == name
+        np.testing.assert_array_equal(
+            policy.act(obs(1.4, 30.0)), make_policy("ppo").act(obs(1.4, 30.0))
+        )
+
+
+def test_missing_model_file_is_named(tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match=r"nothing\.zip: model file not found"):
+        make_policy(str(tmp_path / "nothing.zip"))
+    with pytest.raises(ValueError, match="no-such-run: no such agent"):
+        make_policy("runs/no-such-run")
+
+
+def test_corrupt_model_file_fails_clearly_naming_it(agent_copy: Path) -> None:
+    (agent_copy / "model.zip").write_bytes(b"not a zip file at all")
+    with pytest.raises(AgentLoadError, match=r"model\.zip: not a readable stable-baselines3"):
+        make_policy(str(agent_copy))
+
+
+def test_missing_normalisation_statistics_are_named(agent_copy: Path) -> None:
+    (agent_copy / "vecnormalize.pkl").unlink()
+    with pytest.raises(AgentLoadError, match=r"vecnormalize\.pkl: normalisation statistics"):
+        make_policy(str(agent_copy))
+
+
+def test_model_from_another_configuration_is_rejected(agent_copy: Path) -> None:
+    config = yaml.safe_load((agent_copy / "config.yaml").read_text())
+    config["hyperparams"]["frame_stack"] += 1
+    (agent_copy / "config.yaml").write_text(yaml.safe_dump(config))
+    with pytest.raises(AgentLoadError, match=r"model\.zip: expects observations of shape"):
+        make_policy(str(agent_copy))
+
+
+def test_policy_is_deterministic_for_a_seed() -> None:
+    first = run_episode("ppo", "curve", 3).log
+    second = run_episode("ppo", "curve", 3).log
+    columns = ["action_v_mps", "action_w_radps", "obs_offset_px"]
+    np.testing.assert_array_equal(first[columns].to_numpy(), second[columns].to_numpy())
+
+
+def test_reset_forgets_the_previous_episode() -> None:
+    used = make_policy("ppo")
+    for offset_px in (300.0, -200.0, 150.0):
+        used.act(obs(2.5, offset_px))
+    used.reset()
+    fresh = make_policy("ppo")
+    for o in (10.0, 20.0, 25.0):
+        np.testing.assert_array_equal(used.act(obs(1.2, o)), fresh.act(obs(1.2, o)))
+
+
+def test_mirrored_observations_give_mirrored_actions() -> None:
+    right, left = make_policy("ppo"), make_policy("ppo")
+    for d, o in ((1.0, 5.0), (1.3, 40.0), (1.1, 120.0)):
+        v_right, w_right = right.act(obs(d, o))
+        v_left, w_left = left.act(obs(d, -o))
+        assert v_left == v_right
+        assert w_left == -w_right
+
+
+class _RecordActions(VecEnvWrapper):
+    """Records the SI actions reaching the env, rounded to float32 as a Policy returns them."""
+
+    def __init__(self, venv: Any) -> None:
+        super().__init__(venv)
+        self.actions: list[np.ndarray] = []
+
+    def reset(self) -> Any:
+        return self.venv.reset()
+
+    def step_async(self, actions: np.ndarray) -> None:
+        actions = np.asarray(actions, dtype=np.float32)
+        self.actions.append(actions[0].copy())
+        self.venv.step_async(actions)
+
+    def step_wait(self) -> Any:
+        return self.venv.step_wait()
+
+
+@pytest.mark.slow
+def test_policy_acts_as_the_agent_did_in_its_training_env() -> None:
+    # One lane of the training stack (eval mode: frozen statistics), stepped by the model itself,
+    # against the policy in the single env on the same seed: the same SI actions, step by step.
+    config = read_config(DEFAULT_AGENT)
+    policy = PPOPolicy(DEFAULT_AGENT)
+    recorder = _RecordActions(base_env(["curve"], 1, config["args"]["env_config"]))
+    venv = agent_env(
+        recorder, config["hyperparams"], "eval", normalization=DEFAULT_AGENT / "vecnormalize.pkl"
+    )
+    venv.seed(7)
+    agent_obs = venv.reset()
+    for _ in range(60):
+        action, _ = policy._agent.model.predict(agent_obs, deterministic=True)
+        agent_obs, *_ = venv.step(action)
+    episode = run_episode(policy, "curve", 7).log
+    expected = episode[["action_v_mps", "action_w_radps"]].to_numpy()[:60]  # row k: act on obs k
+    np.testing.assert_array_equal(np.array(recorder.actions), expected)
+
+
+def test_shipped_agent_keeps_the_person_in_frame_on_straight() -> None:
+    episode = run_episode("ppo", "straight", 0)
+    assert episode.termination == "walk_over"
+    assert episode.log["in_frame"].all()
+
+
+def test_policy_survives_pickling_by_path() -> None:
+    policy = make_policy("ppo")
+    copy = pickle.loads(pickle.dumps(policy))
+    assert copy.name == "ppo"
+    np.testing.assert_array_equal(copy.act(obs(1.3, 50.0)), make_policy("ppo").act(obs(1.3, 50.0)))
+
+
+@pytest.mark.slow
+def test_names_resolve_in_evaluation_worker_processes() -> None:
+    from eval.rollout import rollout
+
+    names = ["ppo", str(DEFAULT_AGENT)]
+    pooled = rollout(names, ["straight"], [0], workers=2)
+    here = rollout(names, ["straight"], [0], workers=1)
+    for a, b in zip(pooled, here, strict=True):
+        assert a.policy == b.policy
+        np.testing.assert_array_equal(a.log["action_w_radps"], b.log["action_w_radps"])
