@@ -29,9 +29,10 @@ lint: $(STAMP)
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
 
-# The thesis comparison (SPEC.md §1.6): every law x both conditions x 20 seeds, identical
-# rollouts. Prints the table and says where the files went. Override with EVAL_ARGS="...".
-EVAL_ARGS ?= --policies pn,mpn,gsmpn --scenarios straight,curve --episodes 20 --seed 0
+# The thesis comparison (SPEC.md §1.6): every law and the shipped PPO agent x both conditions
+# x 20 seeds, identical rollouts. Prints the table and says where the files went. Override with
+# EVAL_ARGS="...".
+EVAL_ARGS ?= --policies pn,mpn,gsmpn,ppo --scenarios straight,curve --episodes 20 --seed 0
 eval: $(STAMP)
 	$(BIN)/follow-eval run $(EVAL_ARGS) --out runs/eval-$$(date +%Y%m%d-%H%M%S)
 
