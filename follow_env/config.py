@@ -507,7 +507,9 @@ class RewardConfig(_Validated):
 
     target_distance_m: float = param(1.0, 0.3, 10.0, "m", "SPEC §1.5: desired distance 1.0 m")
     alive_bonus: float = param(1.0, 0.0, 100.0, "/step", "choice: reward for following at all")
-    distance_weight: float = param(1.0, 0.0, 100.0, "/m", "choice: |d - d_ref| penalty")
+    distance_weight: float = param(
+        1.0, 0.0, 100.0, "/m", "choice: min(|d - d_ref|, 1 m) penalty (capped, see the env)"
+    )
     offset_weight: float = param(
         1.0, 0.0, 100.0, "/half-width", "choice: |offset| / (width/2) penalty"
     )

@@ -1024,7 +1024,9 @@ def _step_lanes(
         half_w = 0.5 * prm[P_IMG_W]
         reward = (
             prm[P_R_ALIVE]
-            - prm[P_R_DIST] * abs(fs[S_TRUE_D] - prm[P_TARGET_D])
+            # Capped at 1 m: a person far away costs no more than a lost one, so that losing
+            # them on purpose (ending the episode) never beats following badly.
+            - prm[P_R_DIST] * min(abs(fs[S_TRUE_D] - prm[P_TARGET_D]), 1.0)
             - prm[P_R_OFF] * min(abs(fs[S_TRUE_O]) / half_w, 1.0)
             - prm[P_R_ACC] * abs(fs[S_ACCEL])
             - prm[P_R_LOST] * (1.0 - fs[S_IN_FRAME])

@@ -76,7 +76,7 @@ class PersonFollowEnv(gym.Env[np.ndarray, np.ndarray]):
     | 0   | forward speed v | -v_max | v_max    | m/s   |
     | 1   | turn rate w (counter-clockwise positive) | -w_max | w_max | rad/s |
 
-    With the default robot v_max = 1.44 m/s and w_max = 7.2 rad/s. A NaN or infinite action
+    With the default robot v_max = 1.48 m/s and w_max = 7.42 rad/s. A NaN or infinite action
     raises ``ValueError``.
 
     ## Observation Space
@@ -96,7 +96,7 @@ class PersonFollowEnv(gym.Env[np.ndarray, np.ndarray]):
 
     Dense, from ground truth, per step (weights in ``RewardConfig``)::
 
-        r = alive_bonus - distance_weight * |d_true - 1.0 m|
+        r = alive_bonus - distance_weight * min(|d_true - 1.0 m|, 1 m)
             - offset_weight * min(|offset_true| / (width / 2), 1)
             - accel_weight * |robot acceleration|  - lost_penalty * [person not in frame]
             - collision_penalty * [collision]
