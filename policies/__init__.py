@@ -13,7 +13,7 @@ learned agents, all behind one :class:`Policy` protocol and reachable by name::
 Actions are SI with w counter-clockwise positive: a person right of centre gives w < 0.
 """
 
-from policies.base import GuidanceLaw, LawParams, Policy, validate_obs
+from policies.base import GuidanceLaw, LawParams, OffsetRateLaw, Policy, validate_obs
 from policies.gsmpn import GSMPN, GSMPN_THESIS, GSMPN_TUNED, GSMPN_VARIANTS, GSMPNParams
 from policies.mpn import MPN, MPN_THESIS, MPN_TUNED, MPNParams
 from policies.pn import PN, PN_THESIS, PN_TUNED, PNParams
@@ -41,6 +41,7 @@ __all__ = [
     "GuidanceLaw",
     "LawParams",
     "MPNParams",
+    "OffsetRateLaw",
     "PNParams",
     "Policy",
     "PolicyRegistry",

@@ -178,3 +178,21 @@ class GuidanceLaw(ABC):
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}(name={self.name!r}, params={self.params!r})"
+
+
+class OffsetRateLaw(GuidanceLaw):
+    """Base of the laws with a derivative term: remembers the previous offset for
+    ``rate = (o - o_prev) / dt`` (SPEC.md §1.5); the first step after a reset has rate 0."""
+
+    def __init__(self) -> None:
+        self._prev_offset_px: float | None = None
+
+    def reset(self) -> None:
+        """Forget the previous offset, so the next step's rate is 0."""
+        self._prev_offset_px = None
+
+    def _offset_rate(self, offset_px: float, dt_s: float) -> float:
+        """The offset's rate (px/s) since the previous step, remembering this offset."""
+        prev = offset_px if self._prev_offset_px is None else self._prev_offset_px
+        self._prev_offset_px = offset_px
+        return (offset_px - prev) / dt_s

@@ -44,7 +44,7 @@ from dataclasses import dataclass
 from types import MappingProxyType
 from typing import Literal, get_args
 
-from policies.base import GuidanceLaw, LawParams, check_range
+from policies.base import LawParams, OffsetRateLaw, check_range
 from policies.mpn import DISTANCE_FLOOR_M
 
 GSMPNVariant = Literal["default", "listing", "equation"]
@@ -140,7 +140,7 @@ GSMPN_TUNED = GSMPNParams(
 PRESETS = MappingProxyType({"thesis": GSMPN_THESIS, "tuned": GSMPN_TUNED})
 
 
-class GSMPN(GuidanceLaw):
+class GSMPN(OffsetRateLaw):
     """Gain-scheduled MPN: the derivative term fades out when the offset barely moves.
 
     :param params: the gains and variant; defaults to the tuned preset.
@@ -148,18 +148,13 @@ class GSMPN(GuidanceLaw):
     """
 
     def __init__(self, params: GSMPNParams = GSMPN_TUNED, name: str = "gsmpn") -> None:
+        super().__init__()
         self.params: GSMPNParams = params
         self.name = name
-        self._prev_offset_px: float | None = None
-
-    def reset(self) -> None:
-        """Forget the previous offset, so the next step's rate is 0."""
-        self._prev_offset_px = None
 
     def _command(self, distance_m: float, offset_px: float) -> tuple[float, float]:
         p = self.params
-        prev = offset_px if self._prev_offset_px is None else self._prev_offset_px
-        self._prev_offset_px = offset_px
+        rate_px_s = self._offset_rate(offset_px, p.dt_s)  # remembered by every variant
         # SPEC.md §1.5 GS-MPN: V = kv (d - 1.0)
         v_mps = p.kv_per_s * (distance_m - p.d_ref_m)
         if p.variant == "equation":
@@ -172,7 +167,6 @@ class GSMPN(GuidanceLaw):
         else:
             # SPEC.md §1.5, the code listing: rate = (o - o_prev) / dt; kd scheduled on |rate|;
             # w = N kw o / d + kd rate
-            rate_px_s = (offset_px - prev) / p.dt_s
             kd = scheduled_gain(rate_px_s, p.lambda_d, p.a, listing=p.variant == "listing")
             w_law = (
                 p.nav_n * p.kw_rad_per_s_px * offset_px / max(distance_m, DISTANCE_FLOOR_M)

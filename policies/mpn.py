@@ -21,7 +21,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from types import MappingProxyType
 
-from policies.base import GuidanceLaw, LawParams, check_range
+from policies.base import LawParams, OffsetRateLaw, check_range
 
 # Guards the division by d (SPEC.md §1.5 writes a bare "/ d"); see the module docstring.
 DISTANCE_FLOOR_M = 0.1
@@ -71,7 +71,7 @@ MPN_TUNED = MPNParams(
 PRESETS = MappingProxyType({"thesis": MPN_THESIS, "tuned": MPN_TUNED})
 
 
-class MPN(GuidanceLaw):
+class MPN(OffsetRateLaw):
     """Modified proportional navigation: PN plus a derivative term on the offset.
 
     :param params: the gains; defaults to the tuned preset.
@@ -79,21 +79,15 @@ class MPN(GuidanceLaw):
     """
 
     def __init__(self, params: MPNParams = MPN_TUNED, name: str = "mpn") -> None:
+        super().__init__()
         self.params: MPNParams = params
         self.name = name
-        self._prev_offset_px: float | None = None
-
-    def reset(self) -> None:
-        """Forget the previous offset, so the next step's rate is 0."""
-        self._prev_offset_px = None
 
     def _command(self, distance_m: float, offset_px: float) -> tuple[float, float]:
         p = self.params
-        prev = offset_px if self._prev_offset_px is None else self._prev_offset_px
-        self._prev_offset_px = offset_px
+        rate_px_s = self._offset_rate(offset_px, p.dt_s)
         # SPEC.md §1.5 MPN: rate = (o - o_prev) / dt; V = kv (d - 1.0);
         # w = N kw o / d + lambda rate
-        rate_px_s = (offset_px - prev) / p.dt_s
         v_mps = p.kv_per_s * (distance_m - p.d_ref_m)
         w_law = (
             p.nav_n * p.kw_rad_per_s_px * offset_px / max(distance_m, DISTANCE_FLOOR_M)
