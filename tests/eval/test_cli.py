@@ -144,7 +144,10 @@ def test_metrics_on_malformed_row_names_file_and_line(
         (["run", "--episodes", "many"], "--episodes: 'many' is not an integer"),
         (["run", "--workers", "0"], "--workers: 0 is out of range"),
         (["run", "--policies", ","], "--policies is empty"),
-        (["run", "--config", "harsh"], "--config: invalid choice: 'harsh'"),
+        (["run", "--config", "harsh"], "--config: 'harsh' is not a preset"),
+        (["run", "--config", '{"perception": {"miss": 1}}'], "unknown field perception.miss"),
+        (["run", "--config", "[1, 2]"], "must be a mapping of config sections"),
+        (["run", "--config", "missing.yaml"], "cannot read missing.yaml"),
         (["run", "--plot-seed", "99", "--episodes", "2"], "--plot-seed 99 is out of range"),
         (["metrics", "nowhere.csv"], "nowhere.csv: no such file"),
         (["fly"], "invalid choice: 'fly'"),
@@ -156,6 +159,20 @@ def test_bad_arguments_give_one_line_and_exit_2(
 ) -> None:
     assert main(args) == 2
     assert message in one_line_error(capsys)
+
+
+def test_config_takes_section_overrides_as_json_or_a_file(
+    tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
+    overrides = {"perception": {"association": "tracker"}}
+    out = tmp_path / "json"
+    args = ["run", "--policies", "pn", "--scenarios", "straight", "--episodes", "1"]
+    assert main([*args, "--config", json.dumps(overrides), "--out", str(out)]) == 0
+    assert json.loads((out / "summary.json").read_text())["meta"]["config"] == overrides
+    conf = tmp_path / "tracker.yaml"
+    conf.write_text("perception:\n  association: tracker\n")
+    assert main([*args, "--config", str(conf), "--out", str(tmp_path / "yaml")]) == 0
+    capsys.readouterr()
 
 
 def test_existing_run_folder_is_never_overwritten(
