@@ -340,18 +340,37 @@ def params_from_config(cfg: EnvConfig) -> np.ndarray:
 
 
 @njit(cache=True, inline="always")
+def _cross_wall(
+    ox: float, oy: float, dx: float, dy: float, walls: np.ndarray, k: int
+) -> tuple[float, float]:
+    """Where the line ``o + t d`` crosses the line of wall k (seen from above): ``t`` along
+    ``d`` and ``u`` along the wall (0..1 between its ends); ``t = inf`` when they are parallel.
+    """
+    ex, ey = walls[k, W_X2] - walls[k, W_X1], walls[k, W_Y2] - walls[k, W_Y1]
+    den = dx * ey - dy * ex
+    if abs(den) < 1e-12:
+        return np.inf, 0.0
+    ax, ay = walls[k, W_X1] - ox, walls[k, W_Y1] - oy
+    return (ax * ey - ay * ex) / den, (ax * dy - ay * dx) / den
+
+
+@njit(cache=True, inline="always")
 def _depth_ray(
     cu: int,
     cv: int,
     prm: np.ndarray,
-    fs: np.ndarray,
+    ox: float,
+    oy: float,
+    c: float,
+    s: float,
     ps: np.ndarray,
     n_people: int,
     walls: np.ndarray,
     n_walls: int,
 ) -> float:
-    """True depth Zc (m) seen at pixel (cu, cv): the nearest of people, walls and floor along
-    the pixel's ray (SPEC §1.3 back-projection); ``inf`` if the ray hits nothing."""
+    """True depth Zc (m) seen at pixel (cu, cv) by a camera at (ox, oy) on a robot heading
+    th (``c, s = cos th, sin th``): the nearest of people, walls and floor along the pixel's
+    ray (SPEC §1.3 back-projection); ``inf`` if the ray hits nothing."""
     dcx = (cu - prm[P_CX]) / prm[P_FX]
     dcy = (cv - prm[P_CY]) / prm[P_FY]
     # Direction in the robot frame (R d_c with d_c = (dcx, dcy, 1)), so the ray parameter t
@@ -359,22 +378,13 @@ def _depth_ray(
     drx = prm[P_R00] * dcx + prm[P_R01] * dcy + prm[P_R02]
     dry = prm[P_R10] * dcx + prm[P_R11] * dcy + prm[P_R12]
     drz = prm[P_R20] * dcx + prm[P_R21] * dcy + prm[P_R22]
-    c, s = np.cos(fs[S_TH]), np.sin(fs[S_TH])
     dwx, dwy, dwz = c * drx - s * dry, s * drx + c * dry, drz
-    ox = fs[S_X] + c * prm[P_TX] - s * prm[P_TY]
-    oy = fs[S_Y] + s * prm[P_TX] + c * prm[P_TY]
     oz = prm[P_TZ]
     best = np.inf
     if dwz < -1e-12:  # the floor
         best = -oz / dwz
     for k in range(n_walls):
-        ax, ay, bx, by = walls[k, 0], walls[k, 1], walls[k, 2], walls[k, 3]
-        ex, ey = bx - ax, by - ay
-        den = dwx * ey - dwy * ex
-        if abs(den) < 1e-12:
-            continue
-        t = ((ax - ox) * ey - (ay - oy) * ex) / den
-        u = ((ax - ox) * dwy - (ay - oy) * dwx) / den
+        t, u = _cross_wall(ox, oy, dwx, dwy, walls, k)
         if 0.0 < t < best and 0.0 <= u <= 1.0 and oz + t * dwz <= walls[k, W_H]:
             best = t
     hd, hw, hh = 0.5 * prm[P_PERSON_D], 0.5 * prm[P_PERSON_W], prm[P_PERSON_H]
@@ -433,13 +443,7 @@ def _sight_blocked(
     for j in range(n_cand):
         k = int(scratch[24 + j])
         if k >= 0:
-            ex, ey = walls[k, W_X2] - walls[k, W_X1], walls[k, W_Y2] - walls[k, W_Y1]
-            den = dx * ey - dy * ex
-            if den == 0.0:
-                continue
-            ax, ay = walls[k, W_X1] - ox, walls[k, W_Y1] - oy
-            t = (ax * ey - ay * ex) / den
-            u = (ax * dy - ay * dx) / den
+            t, u = _cross_wall(ox, oy, dx, dy, walls, k)
             if 0.0 < t < 1.0 and 0.0 <= u <= 1.0 and oz + t * dz < walls[k, W_H]:
                 return True
         else:
@@ -741,7 +745,7 @@ def _frame(
         cu = min(max(int((b1 + b3) / 2.0), 0), int(W) - 1)
         cv = min(max(int((b2 + b4) / 2.0), 0), int(H) - 1)
         m_cu, m_cv = float(cu), float(cv)
-        z = _depth_ray(cu, cv, prm, fs, ps, n_people, walls, ist[I_N_WALLS])
+        z = _depth_ray(cu, cv, prm, ox, oy, c_th, s_th, ps, n_people, walls, ist[I_N_WALLS])
         kd = keys[STREAM_DEPTH]
         dslot = base + _SLOT_DEPTH
         if z < prm[P_DEPTH_MIN] or z > prm[P_DEPTH_MAX]:
@@ -789,11 +793,8 @@ def _frame(
 
     # Ground truth of the target (person 0): distance from the camera to the body's front,
     # and the pixel column of the body's axis at camera height.
-    c, s = np.cos(rth), np.sin(rth)
-    camx = rx + c * prm[P_TX] - s * prm[P_TY]
-    camy = ry + s * prm[P_TX] + c * prm[P_TY]
-    fs[S_TRUE_D] = np.hypot(ps[0, PS_X] - camx, ps[0, PS_Y] - camy) - 0.5 * prm[P_PERSON_D]
-    xc, _, zc = world_to_camera(ps[0, PS_X], ps[0, PS_Y], prm[P_TZ], rx, ry, c, s, prm, P_R00)
+    fs[S_TRUE_D] = np.hypot(ps[0, PS_X] - ox, ps[0, PS_Y] - oy) - 0.5 * prm[P_PERSON_D]
+    xc, _, zc = world_to_camera(ps[0, PS_X], ps[0, PS_Y], prm[P_TZ], rx, ry, c_th, s_th, prm, P_R00)
     # Beside or behind the camera the offset is capped at one image width, on its side.
     side = W if xc >= 0.0 else -W
     fs[S_TRUE_O] = side
