@@ -1,0 +1,205 @@
+"""Golden rollouts: hashes of full episodes, recorded before a refactor and checked after it.
+
+Every scenario x 3 seeds x {pn, gsmpn, ppo} runs to its end on the single env and on the
+vector env (one lane per seed); each episode is hashed over every observation, reward, flag and
+``info`` value, bit for bit. ``tests/golden/rollouts.json`` holds the hashes the tree produced
+when they were recorded; ``tests/test_golden_rollouts.py`` checks the tree still produces them.
+
+Record anew (only when behaviour changes on purpose, and say why in the commit)::
+
+    .venv/bin/python tests/golden/rollouts.py
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import platform
+import struct
+import sys
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+import follow_env  # noqa: F401  (registers PersonFollow-v0)
+from policies import make_policy
+
+GOLDEN = Path(__file__).with_name("rollouts.json")
+SCENARIOS = (
+    "straight",
+    "curve",
+    "random",
+    "corridor_turn",
+    "doorway",
+    "occlusion",
+    "crossing",
+    "crowd",
+    "stop_and_go",
+    "zigzag",
+    "random_world",
+)
+SEEDS = (0, 1, 2)
+POLICIES = ("pn", "gsmpn", "ppo")
+# Beyond the default preset: every randomisation and push, and the tracker association, so the
+# streams and branches the thesis preset leaves off are covered too.
+EXTRA_CONFIGS: dict[str, Any] = {
+    "randomized": "randomized",
+    "tracker": {"perception": {"association": "tracker"}},
+}
+EXTRA_SCENARIOS = ("straight", "random", "crossing", "crowd")
+# The info keys that existed when the hashes were recorded (new keys may be added later).
+INFO_KEYS = (
+    "time_s",
+    "robot_x_m",
+    "robot_y_m",
+    "robot_theta_rad",
+    "robot_v_mps",
+    "robot_w_radps",
+    "true_distance_m",
+    "true_offset_px",
+    "raw_depth_m",
+    "wheel_target_r_mps",
+    "wheel_target_l_mps",
+    "wheel_measured_r_mps",
+    "wheel_measured_l_mps",
+    "wheel_true_r_radps",
+    "wheel_true_l_radps",
+    "duty_r_pct",
+    "duty_l_pct",
+    "encoder_speed_mps",
+    "accel_mps2",
+    "wall_clearance_m",
+    "person_clearance_m",
+    "person_x_m",
+    "person_y_m",
+    "person_theta_rad",
+    "person_v_mps",
+    "in_frame",
+    "detected",
+    "detected_person",
+    "step",
+    "termination",
+)
+
+
+class EpisodeHash:
+    """Accumulates one episode: every value in a fixed order, floats as IEEE-754 doubles."""
+
+    def __init__(self) -> None:
+        self._h = hashlib.sha256()
+        self.steps = 0
+
+    def _value(self, value: Any) -> None:
+        if isinstance(value, bool | np.bool_):
+            self._h.update(b"T" if value else b"F")
+        elif isinstance(value, int | np.integer):
+            self._h.update(struct.pack("<q", int(value)))
+        elif isinstance(value, float | np.floating):
+            self._h.update(struct.pack("<d", float(value)))
+        elif isinstance(value, str):
+            self._h.update(value.encode() + b"\0")
+        else:
+            raise TypeError(f"cannot hash {value!r}")
+
+    def add(
+        self, obs: np.ndarray, reward: float, terminated: bool, truncated: bool, info: dict
+    ) -> None:
+        self._h.update(np.ascontiguousarray(obs, dtype=np.float32).tobytes())
+        for value in (float(reward), bool(terminated), bool(truncated)):
+            self._value(value)
+        for key in INFO_KEYS:
+            self._value(info[key])
+        self.steps += 1
+
+    def hexdigest(self) -> str:
+        return self._h.hexdigest()
+
+
+def single_env_hash(
+    scenario: str, seed: int, policy: str, config: Any = "thesis"
+) -> tuple[str, int]:
+    """The hash and step count of one episode on the single env."""
+    env = gym.make("PersonFollow-v0", scenario=scenario, config=config)
+    law = make_policy(policy)
+    obs, info = env.reset(seed=seed)
+    law.reset()
+    h = EpisodeHash()
+    h.add(obs, 0.0, False, False, info)
+    done = False
+    while not done:
+        obs, reward, terminated, truncated, info = env.step(law.act(obs))
+        h.add(obs, reward, terminated, truncated, info)
+        done = terminated or truncated
+    env.close()
+    return h.hexdigest(), h.steps
+
+
+def vector_env_hashes(
+    scenario: str, seeds: tuple[int, ...], policy: str, config: Any = "thesis"
+) -> list[str]:
+    """The hash of each lane's first episode on the vector env (lane i seeded seeds[0] + i)."""
+    n = len(seeds)
+    envs = gym.make_vec(
+        "PersonFollow-v0",
+        num_envs=n,
+        vectorization_mode="vector_entry_point",
+        scenario=scenario,
+        config=config,
+    )
+    laws = [make_policy(policy) for _ in range(n)]
+    obs, info = envs.reset(seed=seeds[0])
+    hashes = [EpisodeHash() for _ in range(n)]
+    done = np.zeros(n, dtype=bool)
+
+    def lane_info(i: int) -> dict[str, Any]:
+        return {k: info[k][i] for k in INFO_KEYS}
+
+    for i, law in enumerate(laws):
+        law.reset()
+        hashes[i].add(obs[i], 0.0, False, False, lane_info(i))
+    while not done.all():
+        rest = np.zeros(2, np.float32)  # a finished lane's action is ignored
+        actions = np.stack([rest if done[i] else law.act(obs[i]) for i, law in enumerate(laws)])
+        obs, reward, terminated, truncated, info = envs.step(actions)
+        for i in np.flatnonzero(~done):
+            hashes[i].add(obs[i], reward[i], terminated[i], truncated[i], lane_info(i))
+        done |= terminated | truncated
+    envs.close()
+    return [h.hexdigest() for h in hashes]
+
+
+def cases() -> list[tuple[str, str, str, Any]]:
+    """Every golden (name prefix, scenario, policy, config)."""
+    out = [(f"{s}/{p}", s, p, "thesis") for s in SCENARIOS for p in POLICIES]
+    for label, config in EXTRA_CONFIGS.items():
+        out += [(f"{label}:{s}/pn", s, "pn", config) for s in EXTRA_SCENARIOS]
+    return out
+
+
+def record() -> dict[str, Any]:
+    """Run every golden episode; returns the JSON document."""
+    episodes: dict[str, dict[str, Any]] = {}
+    for prefix, scenario, policy, config in cases():
+        lanes = vector_env_hashes(scenario, SEEDS, policy, config)
+        for seed, lane_hash in zip(SEEDS, lanes, strict=True):
+            digest, steps = single_env_hash(scenario, seed, policy, config)
+            if digest != lane_hash:
+                raise AssertionError(f"{prefix}/{seed}: vector lane != single env")
+            episodes[f"{prefix}/{seed}"] = {"sha256": digest, "steps": steps}
+    return {
+        "recorded_on": {
+            "machine": platform.machine(),
+            "python": platform.python_version(),
+            "numpy": np.__version__,
+        },
+        "info_keys": list(INFO_KEYS),
+        "episodes": episodes,
+    }
+
+
+if __name__ == "__main__":
+    doc = record()
+    GOLDEN.write_text(json.dumps(doc, indent=1, sort_keys=True) + "\n")
+    print(f"wrote {len(doc['episodes'])} episode hashes to {GOLDEN}", file=sys.stderr)
