@@ -1,28 +1,130 @@
-"""Wheel drive, one 10 ms tick at a time: encoder, PID, DC motor (SPEC §1.1, §1.2).
+"""Wheels: the DC gear-motor, the quadrature encoder and the wheel speed PID (SPEC §1.1, §1.2).
 
-Each function handles one wheel and is compiled with numba; the core's kernel calls them for
-every wheel of every lane inside each control step. They are also importable on their own so
-the tests can check each model in isolation.
+Their configuration sections (:class:`MotorConfig`, :class:`EncoderConfig`, :class:`PIDConfig`)
+and their compiled models, one wheel and one 10 ms tick at a time: every wheeled platform runs
+:func:`wheel_tick` for each of its wheels inside its control step. Each model is importable on
+its own so the tests can check it in isolation.
 """
 
 from __future__ import annotations
 
-import numpy as np
-from numba import njit
+from dataclasses import dataclass
 
-__all__ = ["encoder_count", "encoder_speed", "lag_factor", "motor_step", "pid_step", "wheel_tick"]
+import numpy as np
+
+from follow_env.sim.config import Validated, param
+from follow_env.sim.jit import njit
+
+__all__ = [
+    "EncoderConfig",
+    "MotorConfig",
+    "PIDConfig",
+    "encoder_count",
+    "encoder_speed",
+    "lag_factor",
+    "motor_step",
+    "pid_step",
+    "wheel_tick",
+]
+
+
+@dataclass(frozen=True)
+class MotorConfig(Validated):
+    """DC gear-motor model, one per wheel: first-order lag from duty to speed, with friction.
+
+    Steady-state wheel speed for duty ``u`` (%): ``no_load * sign(u) * (|u| - friction) /
+    (100 - friction)`` when ``|u| > friction``, else 0; a stopped wheel stays stopped while
+    ``|u| < stall_duty_pct`` (static friction; SPEC §2 reports such stalls on hardware).
+    """
+
+    no_load_speed_radps: float = param(
+        20.0, 1.0, 200.0, "rad/s", "choice: ~190 rpm at the wheel, i.e. 1.5 m/s with 75 mm wheels"
+    )
+    time_constant_s: float = param(
+        0.08, 0.001, 2.0, "s", "choice: mechanical lag of a loaded gear-motor", lo_open=True
+    )
+    friction_duty_pct: float = param(
+        4.0, 0.0, 50.0, "%", "choice: Coulomb friction expressed as the duty it eats"
+    )
+    stall_duty_pct: float = param(
+        8.0, 0.0, 50.0, "%", "choice: static friction; SPEC §2 observes stalls at low duty"
+    )
+    max_duty_pct: float = param(
+        99.0, 1.0, 100.0, "%", "SPEC §1.1: the gate driver cannot hold 100 %"
+    )
+    gain_spread: float = param(
+        0.02, 0.0, 0.5, "", "choice: std of a per-episode, per-motor gain factor (SPEC §2 P_i)"
+    )
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if self.stall_duty_pct < self.friction_duty_pct:
+            raise ValueError(
+                f"MotorConfig.stall_duty_pct={self.stall_duty_pct!r} is out of range: must be "
+                f">= friction_duty_pct ({self.friction_duty_pct} %)"
+            )
+        if self.max_duty_pct <= self.friction_duty_pct:
+            raise ValueError(
+                f"MotorConfig.max_duty_pct={self.max_duty_pct!r} is out of range: must be "
+                f"> friction_duty_pct ({self.friction_duty_pct} %)"
+            )
+
+
+@dataclass(frozen=True)
+class EncoderConfig(Validated):
+    """Quadrature wheel encoder and the firmware's speed estimate (SPEC §1.1)."""
+
+    ppr: int = param(2048, 1, 1_000_000, "pulses/rev", "SPEC §1.1: AMT102-V", integer=True)
+    quadrature: int = param(4, 1, 4, "counts/pulse", "SPEC §1.1: counted in 4x mode", integer=True)
+    sample_period_s: float = param(
+        0.01, 0.0005, 0.1, "s", "SPEC §1.1: firmware estimates speed every 10 ms"
+    )
+    speed_quantum_mps: float = param(
+        0.001,
+        0.0,
+        0.1,
+        "m/s",
+        "SPEC §1.1: speed sent as an int16 in mm/s (truncated); 0 disables the quantisation",
+    )
+
+    @property
+    def counts_per_rev(self) -> int:
+        """Encoder counts per wheel revolution (``ppr * quadrature``)."""
+        return self.ppr * self.quadrature
+
+
+@dataclass(frozen=True)
+class PIDConfig(Validated):
+    """Wheel speed PID with the low-pass filtered derivative of SPEC §1.2.
+
+    Input: target minus measured linear wheel speed (m/s); output: duty (%). The thesis gives no
+    gains; the defaults are tuned here (``tests/follow_env/test_drive.py`` shows the step
+    response settles within 0.3 s without sustained oscillation).
+    """
+
+    kp: float = param(120.0, 0.0, 1e4, "%/(m/s)", "choice: tuned, see class docstring")
+    ki: float = param(1500.0, 0.0, 1e5, "%/m", "choice: tuned, see class docstring")
+    kd: float = param(0.5, 0.0, 1e3, "%·s/(m/s)", "choice: tuned, see class docstring")
+    tau_s: float = param(0.01, 0.0, 1.0, "s", "SPEC §1.2: derivative low-pass time constant")
+    anti_windup: str = param(
+        "clamp",
+        doc="choice: stop integrating while the duty is saturated and the error "
+        "pushes further into saturation ('none' disables it)",
+        choices=("clamp", "none"),
+    )
+
 
 # Below this speed (rad/s) a wheel whose duty cannot overcome static friction is held at rest.
 _STICTION_SPEED_RADPS = 0.2
 
 
-@njit(cache=True, inline="always")
+@njit(inline="always")
 def encoder_count(angle_rad: float, counts_per_rev: float) -> int:
     """Integer quadrature count for a wheel angle (counts in 4x mode, floor quantisation)."""
     return int(np.floor(angle_rad * (counts_per_rev / (2.0 * np.pi))))
 
 
-@njit(cache=True, inline="always")
+@njit(inline="always")
 def encoder_speed(
     count: int,
     prev_count: int,
@@ -45,7 +147,7 @@ def encoder_speed(
     return vel
 
 
-@njit(cache=True, inline="always")
+@njit(inline="always")
 def pid_step(
     error: float,
     prev_error: float,
@@ -88,7 +190,7 @@ def lag_factor(tau_s: float, dt_s: float) -> float:
     return float(1.0 - np.exp(-dt_s / tau_s))
 
 
-@njit(cache=True, inline="always")
+@njit(inline="always")
 def motor_step(
     omega_radps: float,
     duty_pct: float,
@@ -119,7 +221,7 @@ def motor_step(
     return omega_radps + (target - omega_radps) * alpha
 
 
-@njit(cache=True, inline="always")
+@njit(inline="always")
 def wheel_tick(
     target_mps: float,
     measured_mps: float,

@@ -1,5 +1,6 @@
-"""``rgb_array`` frames of :class:`~follow_env.env.PersonFollowEnv`: a top-down map beside the
-robot's camera view, drawn with OpenCV (headless: no window is ever opened).
+"""``rgb_array`` frames of PersonFollow-v0: a top-down map beside the robot's camera view,
+drawn with OpenCV (headless: no window is ever opened; ``render_mode="human"`` shows the frames
+in a window of :mod:`follow_env.sim.window`).
 
 Left panel (map): the room's walls and obstacles fitted to the panel, shaded by height (walls
 and pillars at least as tall as a person dark: they hide a whole body; lower furniture light:
@@ -19,72 +20,41 @@ centre column), the tracker's box dashed in cyan when a track exists, and warnin
 detection", "target hidden", ...). Obstacles are not drawn in the camera view: the line of sight
 on the map and the target's visible share say what they hide.
 
-Everything is read from lane 0 of ``env.sim``; nothing here changes the simulation. Colours are
+Everything is read from a lane's live records through :class:`Lane`, a typed view; nothing here
+changes the simulation. Colours are
 written as RGB because the frame is returned as RGB and OpenCV's drawing does not care about the
 channel order.
 """
 
 from __future__ import annotations
 
-import itertools
 import math
 from typing import TYPE_CHECKING, NamedTuple
 
 import cv2
 import numpy as np
 
-from follow_env.camera import Camera, body_box
-from follow_env.config import EnvConfig
-from follow_env.layout import (
-    I_DETECTED_ID,
-    I_N_PEOPLE,
-    I_N_WALLS,
-    I_REASON,
-    P_CX,
-    P_CY,
-    P_FX,
-    P_FY,
-    P_IMG_H,
-    P_IMG_W,
-    P_LATENCY,
-    P_MIN_VIS,
-    P_PERSON_D,
-    P_PERSON_H,
-    P_PERSON_W,
-    P_R00,
-    P_TX,
-    P_TY,
-    PS_TH,
-    PS_X,
-    PS_Y,
-    REASON_NAMES,
-    REASON_NONE,
-    S_BOX_X1,
-    S_BOX_X2,
-    S_BOX_Y1,
-    S_BOX_Y2,
-    S_DETECTED,
-    S_IN_FRAME,
-    S_OBS_D,
-    S_OBS_O,
-    S_T,
-    S_TH,
-    S_TRK_CX,
-    S_TRK_CY,
-    S_TRK_H,
-    S_TRK_LOST,
-    S_TRK_ON,
-    S_TRK_W,
-    S_TRUE_D,
-    S_TRUE_O,
-    S_VIS_FRAC,
-    S_X,
-    S_Y,
-    W_H,
+from follow_env.sensors.camera import Camera, body_box
+from follow_env.sim.drawing import (
+    FONT,
+    FONT_SCALE,
+    ONE,
+    SHIFT,
+    MapView,
+    Trail,
+    blend_poly,
+    dashed_polyline,
+    fit_view,
+    grid_step_m,
+    put_text,
+    rect_corners,
 )
+from follow_env.tasks.person_follow.spec import REASON_NONE, SPEC
+from follow_env.world.geometry import WALL, wall_loops
 
 if TYPE_CHECKING:
-    from follow_env.env import PersonFollowEnv
+    from follow_env.sim.runner import LaneView
+    from follow_env.tasks.person_follow.config import EnvConfig
 
 __all__ = [
     "C_STOLEN",
@@ -110,15 +80,10 @@ HEADER_MID_PX = 236  # column of the header's middle block (who is followed, vis
 # Drawing constants.
 FRUSTUM_LENGTH_M = 4.0  # how far the field-of-view wedge reaches on the map
 FRUSTUM_ALPHA = 0.35
-MIN_GRID_PX = 8.0  # coarser grid when 1 m would be closer than this on screen
 VIEW_PAD_M = 2.0  # room around people and trails when there are no walls to fit
 MIN_VIEW_M = 8.0
 RING_RADIUS_M = 0.45  # the "followed" ring round a person on the map
-DASH_PX = 6.0  # dash and gap length of dashed lines
 
-# Sub-pixel drawing: OpenCV takes fixed-point coordinates with this many fractional bits.
-_SHIFT = 4
-_ONE = 1 << _SHIFT
 
 # Colours (RGB).
 C_BG = (40, 42, 48)
@@ -145,8 +110,6 @@ C_WARN = (235, 60, 50)
 # Line of sight to the target, by sight state (index = SIGHT_*).
 C_SIGHT = ((40, 170, 60), (245, 150, 0), (235, 60, 50), (140, 140, 140))
 
-_FONT = cv2.FONT_HERSHEY_SIMPLEX
-_FONT_SCALE = 0.45
 
 # How much of the target the camera sees (see sight_state).
 SIGHT_CLEAR = 0
@@ -159,53 +122,6 @@ _SIGHT_WORDS = ("in sight", "partly hidden", "hidden", "out of view")
 _WallLine = tuple[tuple[int, int], tuple[int, int], tuple[int, int, int], int]
 
 
-# ----------------------------------------------------------------------------------------------
-# Small helpers
-# ----------------------------------------------------------------------------------------------
-
-
-class _Trail:
-    """A growing (n, 2) float array of positions (m); appends are amortised O(1)."""
-
-    def __init__(self, capacity: int = 256) -> None:
-        self._buf = np.empty((capacity, 2))
-        self.n = 0
-
-    def clear(self) -> None:
-        self.n = 0
-
-    def append(self, x: float, y: float) -> None:
-        if self.n == len(self._buf):
-            self._buf = np.concatenate([self._buf, np.empty_like(self._buf)])
-        self._buf[self.n] = x, y
-        self.n += 1
-
-    @property
-    def points(self) -> np.ndarray:
-        """The recorded positions, oldest first (a view, m)."""
-        return self._buf[: self.n]
-
-
-class _MapView:
-    """World metres -> map pixels: x to the right, y up (the image's rows grow downwards)."""
-
-    def __init__(self, scale: float, ox: float, oy: float) -> None:
-        self.scale = scale  # px per m
-        self.ox, self.oy = ox, oy  # px of the world origin
-
-    def px(self, xy: np.ndarray) -> np.ndarray:
-        """Fixed-point int32 pixel coordinates (``_SHIFT`` fractional bits) of (..., 2) m."""
-        xy = np.asarray(xy, dtype=float)
-        out = np.empty(xy.shape, dtype=np.int32)
-        out[..., 0] = np.round((self.ox + self.scale * xy[..., 0]) * _ONE)
-        out[..., 1] = np.round((self.oy - self.scale * xy[..., 1]) * _ONE)
-        return out
-
-    def pt(self, x: float, y: float) -> tuple[int, int]:
-        """One point as a fixed-point tuple (for ``cv2.line`` / ``cv2.circle``)."""
-        return (round((self.ox + self.scale * x) * _ONE), round((self.oy - self.scale * y) * _ONE))
-
-
 class _Seen(NamedTuple):
     """One person as the camera would see them with nothing in the way."""
 
@@ -214,42 +130,12 @@ class _Seen(NamedTuple):
     image_share: float  # share of the body's box inside the image (0 when not in view)
 
 
-def fit_view(
-    xmin: float, ymin: float, xmax: float, ymax: float, x0: int, y0: int, w: int, h: int
-) -> _MapView:
-    """The largest uniform scale showing ``[xmin, xmax] x [ymin, ymax]`` (m) centred in the
-    pixel rectangle at ``(x0, y0)`` of size ``w x h`` (px)."""
-    span_x, span_y = max(xmax - xmin, 1e-6), max(ymax - ymin, 1e-6)
-    scale = min(w / span_x, h / span_y)
-    ox = x0 + 0.5 * w - scale * 0.5 * (xmin + xmax)
-    oy = y0 + 0.5 * h + scale * 0.5 * (ymin + ymax)
-    return _MapView(scale, ox, oy)
-
-
-def grid_step_m(scale_px_per_m: float) -> float:
-    """The metre grid's spacing (m): 1 m unless that is too dense to read on screen."""
-    for step in (1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0):
-        if step * scale_px_per_m >= MIN_GRID_PX:
-            return step
-    return 200.0
-
-
-def rect_corners(x: float, y: float, th: float, length: float, width: float) -> np.ndarray:
-    """Corners (4, 2) (m) of a rectangle centred at ``(x, y)``, ``length`` along heading ``th``
-    (rad) and ``width`` across it, in drawing order."""
-    c, s = math.cos(th), math.sin(th)
-    hl, hw = 0.5 * length, 0.5 * width
-    local = np.array([[hl, hw], [-hl, hw], [-hl, -hw], [hl, -hw]])
-    rot = np.array([[c, -s], [s, c]])
-    return local @ rot.T + (x, y)
-
-
-def camera_edge_azimuths(params: np.ndarray) -> tuple[float, float]:
+def camera_edge_azimuths(cam: np.void) -> tuple[float, float]:
     """Azimuths (rad, robot frame, CCW from forward) of the image's left and right edge
     columns at the principal row: the horizontal field of view, with the camera's yaw and the
     principal point taken into account (the pitch only shifts where the wedge is seen)."""
-    R = params[P_R00 : P_R00 + 9].reshape(3, 3)
-    fx, cx, width = params[P_FX], params[P_CX], params[P_IMG_W]
+    R = np.asarray(cam["R"]).reshape(3, 3)
+    fx, cx, width = float(cam["fx"]), float(cam["cx"]), float(cam["img_w"])
     out = []
     for u in (0.0, width):
         d = R @ np.array([(u - cx) / fx, 0.0, 1.0])
@@ -257,10 +143,10 @@ def camera_edge_azimuths(params: np.ndarray) -> tuple[float, float]:
     return out[0], out[1]
 
 
-def horizon_row(params: np.ndarray) -> float:
+def horizon_row(cam: np.void) -> float:
     """Image row (px, may lie outside the image) where the level floor meets the sky: the
     projection of a horizontal direction along the optical axis's heading."""
-    R = params[P_R00 : P_R00 + 9].reshape(3, 3)
+    R = np.asarray(cam["R"]).reshape(3, 3)
     ax, ay = R[0, 2], R[1, 2]
     n = math.hypot(ax, ay)
     if n < 1e-9:  # looking straight up or down: no horizon in view
@@ -268,35 +154,13 @@ def horizon_row(params: np.ndarray) -> float:
     d_cam = R.T @ np.array([ax / n, ay / n, 0.0])
     if d_cam[2] <= 1e-9:
         return -1e9
-    return float(params[P_FY] * d_cam[1] / d_cam[2] + params[P_CY])
-
-
-def wall_loops(walls: np.ndarray, tol_m: float = 1e-6) -> list[tuple[int, int]]:
-    """Runs ``[start, end)`` of wall segments (rows ``x1, y1, x2, y2, ...``, m) that form
-    closed outlines: at least three segments listed head to tail whose last end meets the
-    first start, as :func:`follow_env.world.polygon_walls` and ``box_walls`` write them.
-    Open chains (a corridor's side, a partition) are not loops."""
-    loops = []
-    n, k = len(walls), 0
-    while k < n:
-        j = k
-        while (
-            j + 1 < n
-            and abs(walls[j, 2] - walls[j + 1, 0]) <= tol_m
-            and abs(walls[j, 3] - walls[j + 1, 1]) <= tol_m
-        ):
-            j += 1
-        closed = abs(walls[j, 2] - walls[k, 0]) <= tol_m and abs(walls[j, 3] - walls[k, 1]) <= tol_m
-        if j - k >= 2 and closed:
-            loops.append((k, j + 1))
-        k = j + 1
-    return loops
+    return float(cam["fy"] * d_cam[1] / d_cam[2] + cam["cy"])
 
 
 def sight_state(vis_frac: float, image_share: float, min_visible: float) -> int:
     """How much of the target the camera sees, for the line of sight's colour.
 
-    :param vis_frac: the target's visible share the core computed (``S_VIS_FRAC``): the share
+    :param vis_frac: the target's visible share the core computed (``vis_frac``): the share
         of the body's box inside the image times the share of it not blocked by obstacles or
         people (line of sight).
     :param image_share: the share of the body's box inside the image with nothing in the way
@@ -318,82 +182,62 @@ def sight_state(vis_frac: float, image_share: float, min_visible: float) -> int:
     return SIGHT_CLEAR
 
 
-def put_text(
-    img: np.ndarray,
-    text: str,
-    org: tuple[int, int],
-    color: tuple[int, int, int] = C_TEXT,
-    scale: float = _FONT_SCALE,
-    box: bool = True,
-    box_color: tuple[int, int, int] = C_BG,
-) -> None:
-    """Text whose baseline starts at ``org`` (px), on a filled box (``box_color``, dark unless
-    told) so it reads on any background.
-
-    A box rather than a thick dark outline: OpenCV 5's fonts widen with thickness, so an
-    outline drawn thicker does not line up with the text."""
-    if box:
-        (tw, th), base = cv2.getTextSize(text, _FONT, scale, 1)
-        x, y = org
-        cv2.rectangle(img, (x - 3, y - th - 3), (x + tw + 3, y + base), box_color, -1)
-    cv2.putText(img, text, org, _FONT, scale, color, 1, cv2.LINE_AA)
-
-
-def blend_poly(
-    img: np.ndarray, poly_fx: np.ndarray, color: tuple[int, int, int], alpha: float
-) -> None:
-    """Fill a fixed-point polygon (n, 2) translucently; blends only its bounding box, which
-    keeps this cheap whatever the panel size."""
-    h, w = img.shape[:2]
-    x1, y1 = (poly_fx.min(axis=0) >> _SHIFT) - 1
-    x2, y2 = (poly_fx.max(axis=0) >> _SHIFT) + 2
-    x1, y1, x2, y2 = max(int(x1), 0), max(int(y1), 0), min(int(x2), w), min(int(y2), h)
-    if x2 <= x1 or y2 <= y1:
-        return
-    roi = img[y1:y2, x1:x2]
-    layer = roi.copy()
-    shifted = poly_fx - np.array([x1 * _ONE, y1 * _ONE], dtype=np.int32)
-    cv2.fillPoly(layer, [shifted], color, cv2.LINE_AA, _SHIFT)
-    cv2.addWeighted(layer, alpha, roi, 1.0 - alpha, 0.0, dst=roi)
-
-
-def dashed_polyline(
-    img: np.ndarray,
-    pts_fx: np.ndarray,
-    closed: bool,
-    color: tuple[int, int, int],
-    thickness: int = 1,
-    dash_px: float = DASH_PX,
-) -> None:
-    """A dashed polyline through fixed-point points (n, 2): dashes and gaps of ``dash_px``
-    (px) along each edge, drawn in one OpenCV call."""
-    pts = pts_fx.astype(float)
-    if closed:
-        pts = np.vstack([pts, pts[:1]])
-    dashes = []
-    period = 2.0 * dash_px * _ONE
-    for a, b in itertools.pairwise(pts):
-        length = float(np.hypot(*(b - a)))
-        if length <= 0.0:
-            continue
-        starts = np.arange(0.0, length, period)
-        ends = np.minimum(starts + 0.5 * period, length)
-        d = (b - a) / length
-        seg = np.stack([a + starts[:, None] * d, a + ends[:, None] * d], axis=1)
-        dashes.append(np.round(seg).astype(np.int32))
-    if dashes:
-        cv2.polylines(
-            img, list(np.concatenate(dashes)), False, color, thickness, cv2.LINE_AA, _SHIFT
-        )
-
-
 # ----------------------------------------------------------------------------------------------
 # Renderer
 # ----------------------------------------------------------------------------------------------
 
 
+_W = WALL.columns()
+
+
+class Lane:
+    """One lane as the renderer reads it: a typed view of the runner's live records
+    (:class:`~follow_env.sim.runner.LaneView`), read once per frame."""
+
+    def __init__(self, view: LaneView) -> None:
+        prm, st = view.params, view.state
+        tp, ts = prm["task"], st["task"]
+        det = ts["detector"]
+        body = st["body"]
+        self.camera = tp["camera"]
+        self.t = float(st["episode"]["t"])
+        self.reason = int(st["episode"]["reason"])
+        self.x, self.y, self.th = float(body["x"]), float(body["y"]), float(body["th"])
+        self.obs_d, self.obs_o = float(ts["obs_d"]), float(ts["obs_o"])
+        self.true_d, self.true_o = float(ts["true_d"]), float(ts["true_o"])
+        self.vis_frac = float(ts["vis_frac"])
+        self.in_frame = bool(ts["in_frame"] > 0.0)
+        self.detected = bool(ts["detected"] > 0.0)
+        self.followed = int(ts["detected_id"])  # whose detection the perception published
+        self.box = tuple(float(v) for v in ts["box"])
+        self.track_on = bool(det["trk_on"] > 0.0)
+        self.track = tuple(float(det[k]) for k in ("trk_cx", "trk_cy", "trk_w", "trk_h"))
+        self.track_lost = int(det["trk_lost"])
+        self.latency = int(tp["detector"]["latency"])
+        self.min_visible = float(tp["detector"]["min_vis"])  # perception.min_visible_fraction
+        self.person_w, self.person_d, self.person_h = (
+            float(tp["person_w"]),
+            float(tp["person_d"]),
+            float(tp["person_h"]),
+        )
+        self.people = view.world[0][: int(ts["n_people"])]
+        n_walls = int(ts["n_walls"])
+        # The walls as plain rows x1, y1, x2, y2, h (their records' fields, in order).
+        self.walls = view.world[2][:n_walls].view(np.float64).reshape(n_walls, len(_W))
+
+    @property
+    def n_people(self) -> int:
+        """People in the lane (the target first)."""
+        return len(self.people)
+
+    def person(self, p: int) -> tuple[float, float, float]:
+        """Person ``p``'s position (m) and heading (rad)."""
+        q = self.people[p]
+        return float(q["x"]), float(q["y"]), float(q["th"])
+
+
 class Renderer:
-    """Draws ``rgb_array`` frames of a :class:`~follow_env.env.PersonFollowEnv`.
+    """Draws ``rgb_array`` frames of a :class:`~follow_env.tasks.person_follow.env.PersonFollowEnv`.
 
     The frame is always ``FRAME_HEIGHT_PX x FRAME_WIDTH_PX x 3`` (480 x 1280) uint8 RGB, so a
     video of an episode has one size whatever happens in it.
@@ -405,15 +249,15 @@ class Renderer:
         self.config = config
         self.camera = Camera.from_config(config.camera)
         self._scratch = np.zeros(24)  # body_box works in caller-owned memory
-        self.foot_l = config.robot.footprint_length_m
-        self.foot_w = config.robot.footprint_width_m
-        self.robot_trail = _Trail()
-        self.target_trail = _Trail()
+        self.foot_l = config.platform.footprint_length_m
+        self.foot_w = config.platform.footprint_width_m
+        self.robot_trail = Trail()
+        self.target_trail = Trail()
         # The map background (floor, grid, walls) only changes with the walls or the view;
         # it is drawn once per key and copied each frame.
         self._map_key: tuple[object, ...] | None = None
         self._map_bg: np.ndarray | None = None
-        self._map_view: _MapView | None = None
+        self._map_view: MapView | None = None
         self._wall_polys: list[tuple[np.ndarray, tuple[int, int, int]]] = []
         self._wall_lines: list[_WallLine] = []
         self._grid_m = 1.0
@@ -433,54 +277,55 @@ class Renderer:
         self.robot_trail.clear()
         self.target_trail.clear()
 
-    def record(self, env: PersonFollowEnv) -> None:
-        """Append the robot's and the target's current positions (m) to the trails."""
-        fs = env.sim.fstate[0]
-        self.robot_trail.append(fs[S_X], fs[S_Y])
-        person = env.sim.pstate[0, 0]
-        self.target_trail.append(person[PS_X], person[PS_Y])
+    def record(self, view: LaneView) -> None:
+        """Append the robot's and the target's current positions (m) to the trails (the env
+        calls this every step whether or not a frame is drawn)."""
+        body, target = view.state["body"], view.world[0][0]
+        self.robot_trail.append(float(body["x"]), float(body["y"]))
+        self.target_trail.append(float(target["x"]), float(target["y"]))
 
-    def draw(self, env: PersonFollowEnv) -> np.ndarray:
+    def draw(self, view: LaneView) -> np.ndarray:
         """The current frame: an RGB uint8 array (480, 1280, 3), C-contiguous, newly allocated
         (callers such as ``RecordVideo`` keep every frame)."""
         if self.robot_trail.n == 0:
-            # env.reset clears the trails without recording: start them at the reset pose.
-            self.record(env)
-        seen = self._project_people(env)
+            self.record(view)
+        lane = Lane(view)
+        seen = self._project_people(lane)
         frame = np.empty((FRAME_HEIGHT_PX, FRAME_WIDTH_PX, 3), dtype=np.uint8)
-        self._draw_map(env, seen, frame[:, :PANEL_W_PX])
-        self._draw_camera(env, seen, frame[:, PANEL_W_PX:])
+        self._draw_map(lane, seen, frame[:, :PANEL_W_PX])
+        self._draw_camera(lane, seen, frame[:, PANEL_W_PX:])
         cv2.line(frame, (PANEL_W_PX, 0), (PANEL_W_PX, FRAME_HEIGHT_PX - 1), (0, 0, 0), 2)
         return frame
 
     # -- shared by both panels -----------------------------------------------------------------
 
-    def _project_people(self, env: PersonFollowEnv) -> list[_Seen | None]:
+    def _project_people(self, lane: Lane) -> list[_Seen | None]:
         """Every person's true body box in the image (clipped, px) and the share of it inside
         the image, as the core computes them before the line of sight; None when no part of
         the body is in the image."""
-        fs, prm = env.sim.fstate[0], env.sim.params[0]
-        W, H = float(prm[P_IMG_W]), float(prm[P_IMG_H])
-        rx, ry, rth = float(fs[S_X]), float(fs[S_Y]), float(fs[S_TH])
+        cam = lane.camera
+        W, H = float(cam["img_w"]), float(cam["img_h"])
+        rx, ry, rth = lane.x, lane.y, lane.th
+        R, T = np.asarray(cam["R"]), np.asarray(cam["T"])
         out: list[_Seen | None] = []
-        for p in range(int(env.sim.istate[0, I_N_PEOPLE])):
-            px, py, pth = (float(v) for v in env.sim.pstate[0, p, [PS_X, PS_Y, PS_TH]])
+        for p in range(lane.n_people):
+            px, py, pth = lane.person(p)
             u1, v1, u2, v2, found = body_box(
                 px,
                 py,
                 pth,
-                float(prm[P_PERSON_W]),
-                float(prm[P_PERSON_D]),
-                float(prm[P_PERSON_H]),
+                lane.person_w,
+                lane.person_d,
+                lane.person_h,
                 rx,
                 ry,
                 rth,
-                prm,
-                P_R00,
-                float(prm[P_FX]),
-                float(prm[P_FY]),
-                float(prm[P_CX]),
-                float(prm[P_CY]),
+                R,
+                T,
+                float(cam["fx"]),
+                float(cam["fy"]),
+                float(cam["cx"]),
+                float(cam["cy"]),
                 self._scratch,
             )
             c1, c2, c3, c4 = max(u1, 0.0), max(v1, 0.0), min(u2, W), min(v2, H)
@@ -492,36 +337,27 @@ class Renderer:
         return out
 
     @staticmethod
-    def _target_sight(env: PersonFollowEnv, seen: list[_Seen | None]) -> int:
+    def _target_sight(lane: Lane, seen: list[_Seen | None]) -> int:
         """The target's sight state (``SIGHT_*``), see :func:`sight_state`."""
         target = seen[0] if seen else None
         return sight_state(
-            float(env.sim.fstate[0, S_VIS_FRAC]),
-            0.0 if target is None else target.image_share,
-            float(env.sim.params[0, P_MIN_VIS]),  # perception.min_visible_fraction
+            lane.vis_frac, 0.0 if target is None else target.image_share, lane.min_visible
         )
 
     # -- map panel -----------------------------------------------------------------------------
 
-    def _world_bounds(self, env: PersonFollowEnv) -> tuple[float, float, float, float]:
+    def _world_bounds(self, lane: Lane) -> tuple[float, float, float, float]:
         """Extent (m) the map shows: the walls when there are any; otherwise the people and
         trails, padded and snapped to whole metres so the view (and its cached background)
         changes only now and then."""
-        ist = env.sim.istate[0]
-        n_walls = int(ist[I_N_WALLS])
-        if n_walls > 0:
-            w = env.sim.walls[0, :n_walls]
-            xs, ys = np.concatenate([w[:, 0], w[:, 2]]), np.concatenate([w[:, 1], w[:, 3]])
+        if len(lane.walls) > 0:
+            w = lane.walls
+            xs = np.concatenate([w[:, _W.x1], w[:, _W.x2]])
+            ys = np.concatenate([w[:, _W.y1], w[:, _W.y2]])
             pad = 0.3
         else:
-            n_people = int(ist[I_N_PEOPLE])
-            pts = np.concatenate(
-                [
-                    self.robot_trail.points,
-                    self.target_trail.points,
-                    env.sim.pstate[0, :n_people][:, [PS_X, PS_Y]],
-                ]
-            )
+            people = np.column_stack([lane.people["x"], lane.people["y"]])
+            pts = np.concatenate([self.robot_trail.points, self.target_trail.points, people])
             xs, ys = pts[:, 0], pts[:, 1]
             pad = VIEW_PAD_M
         xmin, xmax = math.floor(xs.min() - pad), math.ceil(xs.max() + pad)
@@ -534,13 +370,11 @@ class Renderer:
             ymin, ymax = c - 0.5 * MIN_VIEW_M, c + 0.5 * MIN_VIEW_M
         return float(xmin), float(ymin), float(xmax), float(ymax)
 
-    def _map_background(self, env: PersonFollowEnv) -> tuple[np.ndarray, _MapView]:
+    def _map_background(self, lane: Lane) -> tuple[np.ndarray, MapView]:
         """The cached floor and grid for the current walls and extent (the walls' shapes in
         pixels are cached with it, see :meth:`_wall_shapes`)."""
-        n_walls = int(env.sim.istate[0, I_N_WALLS])
-        walls = env.sim.walls[0, :n_walls]
-        person_h = float(env.sim.params[0, P_PERSON_H])
-        bounds = self._world_bounds(env)
+        walls, person_h = lane.walls, lane.person_h
+        bounds = self._world_bounds(lane)
         key = (bounds, walls.tobytes(), person_h)
         if key == self._map_key and self._map_bg is not None and self._map_view is not None:
             return self._map_bg, self._map_view
@@ -564,9 +398,9 @@ class Renderer:
         gy0 = math.floor((view.oy - FRAME_HEIGHT_PX) / view.scale / step) * step
         gy1 = view.oy / view.scale
         for gx in np.arange(gx0, gx1 + step, step):
-            cv2.line(bg, view.pt(gx, gy0), view.pt(gx, gy1), C_GRID, 1, cv2.LINE_8, _SHIFT)
+            cv2.line(bg, view.pt(gx, gy0), view.pt(gx, gy1), C_GRID, 1, cv2.LINE_8, SHIFT)
         for gy in np.arange(gy0, gy1 + step, step):
-            cv2.line(bg, view.pt(gx0, gy), view.pt(gx1, gy), C_GRID, 1, cv2.LINE_8, _SHIFT)
+            cv2.line(bg, view.pt(gx0, gy), view.pt(gx1, gy), C_GRID, 1, cv2.LINE_8, SHIFT)
         bg[:HEADER_PX] = C_BG
         self._wall_polys, self._wall_lines = self._wall_shapes(view, walls, person_h)
         self._map_key, self._map_bg, self._map_view, self._grid_m = key, bg, view, step
@@ -574,7 +408,7 @@ class Renderer:
 
     @staticmethod
     def _wall_shapes(
-        view: _MapView, walls: np.ndarray, person_h: float
+        view: MapView, walls: np.ndarray, person_h: float
     ) -> tuple[list[tuple[np.ndarray, tuple[int, int, int]]], list[_WallLine]]:
         """Walls and obstacles as drawing commands in map pixels: filled outlines and thick
         segments, shaded by height: at least a person's height (``person_h``, m) dark, since it
@@ -584,18 +418,19 @@ class Renderer:
         lines: list[_WallLine] = []
         if len(walls) == 0:
             return polys, lines
-        tall = walls[:, W_H] >= person_h
-        lo = np.minimum(walls[:, [0, 1]], walls[:, [2, 3]]).min(axis=0)
-        hi = np.maximum(walls[:, [0, 1]], walls[:, [2, 3]]).max(axis=0)
+        tall = walls[:, _W.h] >= person_h
+        lo = np.minimum(walls[:, [_W.x1, _W.y1]], walls[:, [_W.x2, _W.y2]]).min(axis=0)
+        hi = np.maximum(walls[:, [_W.x1, _W.y1]], walls[:, [_W.x2, _W.y2]]).max(axis=0)
         for k0, k1 in wall_loops(walls):
-            loop = walls[k0:k1, :2]
+            loop = walls[k0:k1][:, [_W.x1, _W.y1]]
             encloses_all = np.allclose(loop.min(axis=0), lo, atol=1e-3) and np.allclose(
                 loop.max(axis=0), hi, atol=1e-3
             )
             if not encloses_all:
                 polys.append((view.px(loop), C_WALL if tall[k0] else C_LOW))
         wall_px = max(2, round(0.1 * view.scale))  # walls are 0.1 m thick in the contacts
-        for (x1, y1, x2, y2), is_tall in zip(walls[:, :4], tall, strict=True):
+        ends = walls[:, [_W.x1, _W.y1, _W.x2, _W.y2]]
+        for (x1, y1, x2, y2), is_tall in zip(ends, tall, strict=True):
             color, width = (C_WALL, wall_px) if is_tall else (C_LOW_EDGE, max(1, wall_px // 2))
             lines.append((view.pt(x1, y1), view.pt(x2, y2), color, width))
         return polys, lines
@@ -604,22 +439,22 @@ class Renderer:
         """The cached wall shapes; drawn every frame, over the field-of-view wedge, so that
         obstacles keep their shade wherever the camera looks."""
         for poly, color in self._wall_polys:
-            cv2.fillPoly(img, [poly], color, cv2.LINE_AA, _SHIFT)
+            cv2.fillPoly(img, [poly], color, cv2.LINE_AA, SHIFT)
         for a, b, color, width in self._wall_lines:
-            cv2.line(img, a, b, color, width, cv2.LINE_AA, _SHIFT)
+            cv2.line(img, a, b, color, width, cv2.LINE_AA, SHIFT)
 
-    def _draw_map(self, env: PersonFollowEnv, seen: list[_Seen | None], panel: np.ndarray) -> None:
-        bg, view = self._map_background(env)
+    def _draw_map(self, lane: Lane, seen: list[_Seen | None], panel: np.ndarray) -> None:
+        bg, view = self._map_background(lane)
         # Drawing goes into a contiguous buffer: some OpenCV calls reject strided views.
         img = bg.copy()
-        fs, ist, prm = env.sim.fstate[0], env.sim.istate[0], env.sim.params[0]
-        rx, ry, rth = float(fs[S_X]), float(fs[S_Y]), float(fs[S_TH])
+        rx, ry, rth = lane.x, lane.y, lane.th
         c, s = math.cos(rth), math.sin(rth)
 
         # Field of view: a wedge from the camera's position on the robot.
-        camx = rx + c * prm[P_TX] - s * prm[P_TY]
-        camy = ry + s * prm[P_TX] + c * prm[P_TY]
-        az_l, az_r = camera_edge_azimuths(prm)
+        tx_cam, ty_cam = float(lane.camera["T"][0]), float(lane.camera["T"][1])
+        camx = rx + c * tx_cam - s * ty_cam
+        camy = ry + s * tx_cam + c * ty_cam
+        az_l, az_r = camera_edge_azimuths(lane.camera)
         sweep = (az_r - az_l + math.pi) % (2.0 * math.pi) - math.pi
         angles = rth + az_l + sweep * np.linspace(0.0, 1.0, 16)
         wedge = np.empty((len(angles) + 1, 2))
@@ -628,41 +463,40 @@ class Renderer:
         wedge[1:, 1] = camy + FRUSTUM_LENGTH_M * np.sin(angles)
         wedge_px = view.px(wedge)
         blend_poly(img, wedge_px, C_FRUSTUM, FRUSTUM_ALPHA)
-        cv2.polylines(img, [wedge_px], True, (200, 160, 40), 1, cv2.LINE_AA, _SHIFT)
+        cv2.polylines(img, [wedge_px], True, (200, 160, 40), 1, cv2.LINE_AA, SHIFT)
         self._draw_walls(img)
 
         # Trails under the bodies.
         for trail, color in ((self.target_trail, C_TARGET), (self.robot_trail, C_ROBOT)):
             if trail.n >= 2:
-                cv2.polylines(img, [view.px(trail.points)], False, color, 1, cv2.LINE_AA, _SHIFT)
+                cv2.polylines(img, [view.px(trail.points)], False, color, 1, cv2.LINE_AA, SHIFT)
 
         # Line of sight from the camera to the target's centre, under the bodies, coloured by
         # how much of the target is in sight; dashed when it is outside the field of view,
         # where there is no sight line to speak of.
-        people = env.sim.pstate[0]
-        n_people = int(ist[I_N_PEOPLE])
-        sight = self._target_sight(env, seen)
+        n_people = lane.n_people
+        sight = self._target_sight(lane, seen)
         if n_people > 0:
-            tx, ty = float(people[0, PS_X]), float(people[0, PS_Y])
+            tx, ty, _ = lane.person(0)
             a, b = view.pt(camx, camy), view.pt(tx, ty)
             if sight == SIGHT_OUT_OF_VIEW:
                 dashed_polyline(img, np.array([a, b]), False, C_SIGHT[sight], 1)
             else:
-                cv2.line(img, a, b, C_SIGHT[sight], 2, cv2.LINE_AA, _SHIFT)
+                cv2.line(img, a, b, C_SIGHT[sight], 2, cv2.LINE_AA, SHIFT)
 
         # People: rotated rectangles, ``depth`` along their heading, with a heading tick.
-        pw, pd = prm[P_PERSON_W], prm[P_PERSON_D]
-        followed = int(ist[I_DETECTED_ID])  # whose detection the perception published
+        pw, pd = lane.person_w, lane.person_d
+        followed = lane.followed
         labels: list[tuple[str, tuple[int, int], tuple[int, int, int], float]] = []
         for p in range(n_people - 1, -1, -1):  # target last, on top
-            px, py, pth = (float(v) for v in people[p, [PS_X, PS_Y, PS_TH]])
+            px, py, pth = lane.person(p)
             color = C_TARGET if p == 0 else C_OTHER
             poly = view.px(rect_corners(px, py, pth, pd, pw))
-            cv2.fillPoly(img, [poly], color, cv2.LINE_AA, _SHIFT)
-            cv2.polylines(img, [poly], True, C_PERSON_EDGE, 1, cv2.LINE_AA, _SHIFT)
+            cv2.fillPoly(img, [poly], color, cv2.LINE_AA, SHIFT)
+            cv2.polylines(img, [poly], True, C_PERSON_EDGE, 1, cv2.LINE_AA, SHIFT)
             tip = (px + (0.5 * pd + 0.15) * math.cos(pth), py + (0.5 * pd + 0.15) * math.sin(pth))
-            cv2.line(img, view.pt(px, py), view.pt(*tip), C_PERSON_EDGE, 1, cv2.LINE_AA, _SHIFT)
-            u, v = (q >> _SHIFT for q in view.pt(px, py))
+            cv2.line(img, view.pt(px, py), view.pt(*tip), C_PERSON_EDGE, 1, cv2.LINE_AA, SHIFT)
+            u, v = (q >> SHIFT for q in view.pt(px, py))
             # The target's name above, a bystander's below, so the two rarely overlap when
             # one crosses near the other; a followed bystander is named by its ring's label.
             if p == 0:
@@ -673,12 +507,12 @@ class Renderer:
         # The person whose detection the perception took this frame: a ring, green on the
         # target, red with a label on a bystander (a stolen target).
         if 0 <= followed < n_people:
-            px, py = float(people[followed, PS_X]), float(people[followed, PS_Y])
+            px, py, _ = lane.person(followed)
             color = C_DET if followed == 0 else C_STOLEN
             radius = max(RING_RADIUS_M * view.scale, 9.0)
             centre = view.pt(px, py)
-            cv2.circle(img, centre, round(radius * _ONE), color, 2, cv2.LINE_AA, _SHIFT)
-            org = ((centre[0] >> _SHIFT) + 8, (centre[1] >> _SHIFT) + round(radius) + 14)
+            cv2.circle(img, centre, round(radius * ONE), color, 2, cv2.LINE_AA, SHIFT)
+            org = ((centre[0] >> SHIFT) + 8, (centre[1] >> SHIFT) + round(radius) + 14)
             if followed == 0:
                 put_text(img, "followed", org, C_DET, 0.4)
             else:
@@ -688,8 +522,8 @@ class Renderer:
 
         # Robot: footprint (centred on the wheel axle) and an arrow along its heading.
         poly = view.px(rect_corners(rx, ry, rth, self.foot_l, self.foot_w))
-        cv2.fillPoly(img, [poly], C_ROBOT, cv2.LINE_AA, _SHIFT)
-        cv2.polylines(img, [poly], True, C_ROBOT_EDGE, 1, cv2.LINE_AA, _SHIFT)
+        cv2.fillPoly(img, [poly], C_ROBOT, cv2.LINE_AA, SHIFT)
+        cv2.polylines(img, [poly], True, C_ROBOT_EDGE, 1, cv2.LINE_AA, SHIFT)
         reach = 0.5 * self.foot_l + 0.3
         cv2.arrowedLine(
             img,
@@ -698,17 +532,16 @@ class Renderer:
             C_ROBOT_EDGE,
             2,
             cv2.LINE_AA,
-            _SHIFT,
+            SHIFT,
             0.3,
         )
-        cv2.circle(img, view.pt(camx, camy), 3 * _ONE, (250, 250, 250), -1, cv2.LINE_AA, _SHIFT)
+        cv2.circle(img, view.pt(camx, camy), 3 * ONE, (250, 250, 250), -1, cv2.LINE_AA, SHIFT)
 
         # Header: time, observation, truth (left); who is followed, the target's visible share
         # (middle); the end reason (right).
-        line1 = f"t {fs[S_T]:5.1f} s   obs d {fs[S_OBS_D]:5.2f} m  offset {fs[S_OBS_O]:+5.0f} px"
+        line1 = f"t {lane.t:5.1f} s   obs d {lane.obs_d:5.2f} m  offset {lane.obs_o:+5.0f} px"
         line2 = (
-            f"true d {fs[S_TRUE_D]:5.2f} m  offset {fs[S_TRUE_O]:+5.0f} px   "
-            f"grid {self._grid_m:g} m"
+            f"true d {lane.true_d:5.2f} m  offset {lane.true_o:+5.0f} px   grid {self._grid_m:g} m"
         )
         put_text(img, line1, (8, 16), box=False)
         put_text(img, line2, (8, 34), (200, 200, 200), box=False)
@@ -719,23 +552,22 @@ class Renderer:
             put_text(img, text, (HEADER_MID_PX, 16), C_TEXT, box=True, box_color=C_STOLEN)
         else:
             put_text(img, "followed: nobody", (HEADER_MID_PX, 16), C_WARN, box=False)
-        vis = f"target visible {100.0 * fs[S_VIS_FRAC]:3.0f} %  ({_SIGHT_WORDS[sight]})"
+        vis = f"target visible {100.0 * lane.vis_frac:3.0f} %  ({_SIGHT_WORDS[sight]})"
         put_text(img, vis, (HEADER_MID_PX, 34), C_SIGHT[sight], box=False)
-        reason = int(ist[I_REASON])
-        if reason != REASON_NONE:
-            text = f"end: {REASON_NAMES[reason]}"
-            (tw, _), _ = cv2.getTextSize(text, _FONT, _FONT_SCALE, 1)
+        if lane.reason != REASON_NONE:
+            text = f"end: {SPEC.terminations[lane.reason]}"
+            (tw, _), _ = cv2.getTextSize(text, FONT, FONT_SCALE, 1)
             put_text(img, text, (PANEL_W_PX - tw - 10, 16), C_WARN, box=False)
         panel[:] = img
 
     # -- camera panel --------------------------------------------------------------------------
 
-    def _camera_background(self, prm: np.ndarray) -> np.ndarray:
+    def _camera_background(self, cam: np.void) -> np.ndarray:
         """Letterbox, sky and a floor darkening towards the robot (a depth cue), drawn once:
         the camera is fixed on the robot, so the horizon never moves in the image."""
         bg = np.empty((FRAME_HEIGHT_PX, PANEL_W_PX, 3), dtype=np.uint8)
         bg[:] = C_BG
-        h_row = horizon_row(prm) * self.cam_scale  # in the scaled image
+        h_row = horizon_row(cam) * self.cam_scale  # in the scaled image
         rows = np.arange(self.cam_h, dtype=float)
         below = np.clip((rows - h_row) / max(self.cam_h - h_row, 1.0), 0.0, 1.0)
         far, near = np.array([185.0, 175.0, 160.0]), np.array([130.0, 118.0, 100.0])
@@ -751,26 +583,23 @@ class Renderer:
     def _img_pt(self, u: float, v: float) -> tuple[int, int]:
         """Image pixel (px) -> fixed-point panel coordinates."""
         return (
-            round((self.cam_x0 + self.cam_scale * u) * _ONE),
-            round((self.cam_y0 + self.cam_scale * v) * _ONE),
+            round((self.cam_x0 + self.cam_scale * u) * ONE),
+            round((self.cam_y0 + self.cam_scale * v) * ONE),
         )
 
     def _below_box(self, a: tuple[int, int], b: tuple[int, int]) -> tuple[int, int]:
         """Where a label under the fixed-point box ``a``-``b`` goes (px): just below it, kept
         inside the image and above the legend."""
-        x = min(max(a[0] >> _SHIFT, self.cam_x0 + 4), self.cam_x0 + self.cam_w - 190)
-        y = (b[1] >> _SHIFT) + 16
+        x = min(max(a[0] >> SHIFT, self.cam_x0 + 4), self.cam_x0 + self.cam_w - 190)
+        y = (b[1] >> SHIFT) + 16
         return x, min(max(y, self.cam_y0 + 44), self.cam_y0 + self.cam_h - 30)
 
-    def _draw_camera(
-        self, env: PersonFollowEnv, seen: list[_Seen | None], panel: np.ndarray
-    ) -> None:
-        fs, prm = env.sim.fstate[0], env.sim.params[0]
+    def _draw_camera(self, lane: Lane, seen: list[_Seen | None], panel: np.ndarray) -> None:
         if self._cam_bg is None:
-            self._cam_bg = self._camera_background(prm)
+            self._cam_bg = self._camera_background(lane.camera)
         img = self._cam_bg.copy()
-        W, H = float(prm[P_IMG_W]), float(prm[P_IMG_H])
-        sight = self._target_sight(env, seen)
+        W, H = float(lane.camera["img_w"]), float(lane.camera["img_h"])
+        sight = self._target_sight(lane, seen)
 
         # True body boxes, far to near so nearer bodies cover farther ones; labels after all
         # bodies, so a nearer body does not cover a farther one's label.
@@ -785,52 +614,52 @@ class Renderer:
                 corners = np.array([a, (b[0], a[1]), b, (a[0], b[1])], dtype=np.int32)
                 dashed_polyline(img, corners, True, C_WARN, 2)
             else:
-                cv2.rectangle(img, a, b, C_BODY, -1, cv2.LINE_8, _SHIFT)
-                cv2.rectangle(img, a, b, C_TRUE_BOX, 1, cv2.LINE_AA, _SHIFT)
+                cv2.rectangle(img, a, b, C_BODY, -1, cv2.LINE_8, SHIFT)
+                cv2.rectangle(img, a, b, C_TRUE_BOX, 1, cv2.LINE_AA, SHIFT)
         for _, p in order:
             a = corners_of[p]
             if p == 0:
-                label = f"target (true box, {100.0 * fs[S_VIS_FRAC]:.0f} % visible)"
+                label = f"target (true box, {100.0 * lane.vis_frac:.0f} % visible)"
             else:
                 label = f"bystander {p}"
             # Inside the box's top, but below the header line when the box reaches the top;
             # bystanders one row lower than the target, so a crossing does not hide its label.
-            y_label = max((a[1] >> _SHIFT) + 16, self.cam_y0 + 44) + (0 if p == 0 else 20)
-            put_text(img, label, ((a[0] >> _SHIFT) + 5, y_label), (225, 225, 225), 0.4)
+            y_label = max((a[1] >> SHIFT) + 16, self.cam_y0 + 44) + (0 if p == 0 else 20)
+            put_text(img, label, ((a[0] >> SHIFT) + 5, y_label), (225, 225, 225), 0.4)
 
         # The image's centre column, against which the observation's offset is measured.
         u_mid = float(int(W) // 2)
         top, bottom = self._img_pt(u_mid, 0.0), self._img_pt(u_mid, H)
-        cv2.line(img, top, bottom, C_CENTRE, 1, cv2.LINE_AA, _SHIFT)
+        cv2.line(img, top, bottom, C_CENTRE, 1, cv2.LINE_AA, SHIFT)
 
         # The tracker's box (this frame's estimate; the published box lags it by the
         # latency), dashed so the published box stays readable on top of it.
-        if fs[S_TRK_ON] > 0.0:
-            hw, hh = 0.5 * float(fs[S_TRK_W]), 0.5 * float(fs[S_TRK_H])
-            cu, cvv = float(fs[S_TRK_CX]), float(fs[S_TRK_CY])
+        if lane.track_on:
+            cu, cvv, tw, th = lane.track
+            hw, hh = 0.5 * tw, 0.5 * th
             a, b = self._img_pt(cu - hw, cvv - hh), self._img_pt(cu + hw, cvv + hh)
             corners = np.array([a, (b[0], a[1]), b, (a[0], b[1])], dtype=np.int32)
             dashed_polyline(img, corners, True, C_TRACK, 2)
-            lost = int(fs[S_TRK_LOST])
+            lost = lane.track_lost
             label = "track" if lost == 0 else f"track (coasting {lost})"
             put_text(img, label, self._below_box(a, b), C_TRACK, 0.4)
 
         # The published detection (already delayed by the perception's latency, as the
         # observation is): box, centre pixel, and the offset as a bar from the centre column;
         # green when it is the target's, red when a bystander's (a stolen target).
-        if fs[S_DETECTED] > 0.0:
-            owner = int(env.sim.istate[0, I_DETECTED_ID])
+        if lane.detected:
+            owner = lane.followed
             color = C_STOLEN if owner > 0 else C_DET
-            x1, y1, x2, y2 = (float(fs[k]) for k in (S_BOX_X1, S_BOX_Y1, S_BOX_X2, S_BOX_Y2))
+            x1, y1, x2, y2 = lane.box
             a, b = self._img_pt(x1, y1), self._img_pt(x2, y2)
-            cv2.rectangle(img, a, b, color, 2, cv2.LINE_AA, _SHIFT)
+            cv2.rectangle(img, a, b, color, 2, cv2.LINE_AA, SHIFT)
             # Centre pixel as the perception takes it (integer column and row).
             cu, cvv = float(int((x1 + x2) / 2.0)), float(int((y1 + y2) / 2.0))
             centre = self._img_pt(cu, cvv)
-            cv2.line(img, self._img_pt(u_mid, cvv), centre, color, 2, cv2.LINE_AA, _SHIFT)
+            cv2.line(img, self._img_pt(u_mid, cvv), centre, color, 2, cv2.LINE_AA, SHIFT)
             cv2.drawMarker(
                 img,
-                (centre[0] >> _SHIFT, centre[1] >> _SHIFT),
+                (centre[0] >> SHIFT, centre[1] >> SHIFT),
                 color,
                 cv2.MARKER_CROSS,
                 14,
@@ -840,20 +669,20 @@ class Renderer:
             if owner > 0:
                 # Beside the centre marker, mid-height: clear of the boxes' labels at the top.
                 org = (
-                    min((centre[0] >> _SHIFT) + 12, self.cam_x0 + self.cam_w - 190),
-                    (centre[1] >> _SHIFT) - 10,
+                    min((centre[0] >> SHIFT) + 12, self.cam_x0 + self.cam_w - 190),
+                    (centre[1] >> SHIFT) - 10,
                 )
                 put_text(img, f"published: bystander {owner}", org, C_TEXT, 0.45, True, C_STOLEN)
 
         # Warnings bottom right, away from the header and the legend.
         x_warn = self.cam_x0 + self.cam_w - 175
-        if fs[S_DETECTED] <= 0.0:
+        if not lane.detected:
             put_text(img, "no detection", (x_warn, self.cam_y0 + self.cam_h - 10), C_WARN, 0.6)
         if sight == SIGHT_HIDDEN:
             warning = "target hidden"
         elif sight == SIGHT_OUT_OF_VIEW:
             warning = "target out of view"
-        elif fs[S_IN_FRAME] <= 0.0:
+        elif not lane.in_frame:
             warning = "target too little in sight"  # below the detector's visible share
         else:
             warning = ""
@@ -862,8 +691,8 @@ class Renderer:
 
         put_text(
             img,
-            f"camera {int(W)}x{int(H)}   obs d {fs[S_OBS_D]:5.2f} m   "
-            f"offset {fs[S_OBS_O]:+5.0f} px   published {int(prm[P_LATENCY])} frame(s) late",
+            f"camera {int(W)}x{int(H)}   obs d {lane.obs_d:5.2f} m   "
+            f"offset {lane.obs_o:+5.0f} px   published {lane.latency} frame(s) late",
             (self.cam_x0 + 8, self.cam_y0 + 18),
         )
         put_text(

@@ -1,4 +1,9 @@
-"""The world's geometry: walls held in a pymunk space, and the compiled contact tests.
+"""The world's geometry: walls and obstacles, the compiled distance tests, pymunk as reference.
+
+Walls and obstacles are segments with a height (:data:`WALL`: ``x1, y1, x2, y2, h``), held per
+lane as records; :func:`room_walls`, :func:`box_walls` and :func:`polygon_walls` build them as
+plain ``(n, 5)`` float arrays in that field order (:func:`as_wall_records` views them as
+records without a copy).
 
 pymunk holds the room (static segments with a thickness) and the robot's footprint (a box on a
 kinematic body); :meth:`World.robot_touches_wall` asks pymunk whether they touch. The batched
@@ -11,9 +16,51 @@ from __future__ import annotations
 
 import numpy as np
 import pymunk
-from numba import njit
 
-__all__ = ["WALL_RADIUS_M", "World", "rect_rect_distance", "rect_segment_distance", "room_walls"]
+from follow_env.sim.jit import njit
+from follow_env.sim.schema import Block, f8
+
+__all__ = [
+    "WALL",
+    "WALL_HEIGHT_M",
+    "WALL_RADIUS_M",
+    "World",
+    "as_wall_records",
+    "box_walls",
+    "point_segment_distance",
+    "polygon_walls",
+    "rect_rect_distance",
+    "rect_segment_distance",
+    "room_walls",
+    "segment_distance",
+    "wall_loops",
+]
+
+WALL = Block(
+    "wall",
+    "a wall or obstacle side: a segment seen from above, and its height",
+    [
+        f8("x1", "m", "first end, x (world frame)"),
+        f8("y1", "m", "first end, y"),
+        f8("x2", "m", "second end, x"),
+        f8("y2", "m", "second end, y"),
+        f8("h", "m", "height: walls and pillars are tall (hide people), furniture low"),
+    ],
+)
+WALL_FIELDS = len(WALL.fields)
+_COLUMNS = WALL.columns()
+
+
+def as_wall_records(walls: np.ndarray) -> np.ndarray:
+    """A float array ``(..., 5)`` of walls (``x1, y1, x2, y2, h``) as :data:`WALL` records
+    ``(...)``, sharing its memory."""
+    arr = np.ascontiguousarray(walls, dtype=np.float64)
+    if arr.shape[-1] != WALL_FIELDS:
+        raise ValueError(
+            f"walls must have {WALL_FIELDS} columns (x1, y1, x2, y2, h), got {arr.shape}"
+        )
+    return arr.view(WALL.dtype)[..., 0]
+
 
 WALL_RADIUS_M = 0.05
 """Half the thickness of a wall segment (m): pymunk's segment radius."""
@@ -51,7 +98,33 @@ def box_walls(
     return polygon_walls([(cx + a * c - b * s, cy + a * s + b * c) for a, b in local], height_m)
 
 
-@njit(cache=True, inline="always")
+def wall_loops(walls: np.ndarray, tol_m: float = 1e-6) -> list[tuple[int, int]]:
+    """Runs ``[start, end)`` of wall segments (rows of :data:`WALL`'s fields, m) that form
+    closed outlines: at least three segments listed head to tail whose last end meets the
+    first start, as :func:`polygon_walls` and :func:`box_walls` write them. Open chains (a
+    corridor's side, a partition) are not loops."""
+    c = _COLUMNS
+    loops = []
+    n, k = len(walls), 0
+    while k < n:
+        j = k
+        while (
+            j + 1 < n
+            and abs(walls[j, c.x2] - walls[j + 1, c.x1]) <= tol_m
+            and abs(walls[j, c.y2] - walls[j + 1, c.y1]) <= tol_m
+        ):
+            j += 1
+        closed = (
+            abs(walls[j, c.x2] - walls[k, c.x1]) <= tol_m
+            and abs(walls[j, c.y2] - walls[k, c.y1]) <= tol_m
+        )
+        if j - k >= 2 and closed:
+            loops.append((k, j + 1))
+        k = j + 1
+    return loops
+
+
+@njit(inline="always")
 def _point_segment_distance(
     px: float, py: float, ax: float, ay: float, bx: float, by: float
 ) -> float:
@@ -63,7 +136,7 @@ def _point_segment_distance(
     return np.sqrt(ex * ex + ey * ey)
 
 
-@njit(cache=True, inline="always")
+@njit(inline="always")
 def segment_distance(
     a1x: float, a1y: float, a2x: float, a2y: float, b1x: float, b1y: float, b2x: float, b2y: float
 ) -> float:
@@ -86,7 +159,7 @@ def segment_distance(
     )
 
 
-@njit(cache=True, inline="always")
+@njit(inline="always")
 def point_segment_distance(
     px: float, py: float, ax: float, ay: float, bx: float, by: float
 ) -> float:
@@ -94,14 +167,14 @@ def point_segment_distance(
     return _point_segment_distance(px, py, ax, ay, bx, by)
 
 
-@njit(cache=True, inline="always")
+@njit(inline="always")
 def _point_box_distance(x: float, y: float, hl: float, hw: float) -> float:
     """Distance from (x, y) to the axis-aligned box |x| <= hl, |y| <= hw (0 inside)."""
     ex, ey = max(abs(x) - hl, 0.0), max(abs(y) - hw, 0.0)
     return np.sqrt(ex * ex + ey * ey)
 
 
-@njit(cache=True, inline="always")
+@njit(inline="always")
 def _segment_crosses_box(x1: float, y1: float, x2: float, y2: float, hl: float, hw: float) -> bool:
     """Does the segment meet the axis-aligned box? (Liang-Barsky clipping.)"""
     dx, dy = x2 - x1, y2 - y1
@@ -129,7 +202,7 @@ def _segment_crosses_box(x1: float, y1: float, x2: float, y2: float, hl: float, 
     return True
 
 
-@njit(cache=True, inline="always")
+@njit(inline="always")
 def _segment_box_distance(
     x1: float, y1: float, x2: float, y2: float, hl: float, hw: float
 ) -> float:
@@ -148,14 +221,14 @@ def _segment_box_distance(
     return best
 
 
-@njit(cache=True, inline="always")
+@njit(inline="always")
 def _to_frame(x: float, y: float, cx: float, cy: float, c: float, s: float) -> tuple[float, float]:
     """World point into the frame centred at (cx, cy) with x axis (c, s)."""
     dx, dy = x - cx, y - cy
     return c * dx + s * dy, -s * dx + c * dy
 
 
-@njit(cache=True, inline="always")
+@njit(inline="always")
 def rect_segment_distance(
     cx: float,
     cy: float,
@@ -175,7 +248,7 @@ def rect_segment_distance(
     return _segment_box_distance(ax, ay, bx, by, 0.5 * length, 0.5 * width)
 
 
-@njit(cache=True, inline="always")
+@njit(inline="always")
 def rect_rect_distance(
     c1x: float,
     c1y: float,

@@ -39,7 +39,7 @@ would run away (acceptances would make acceptance likelier), so ``alpha`` must e
 The update runs only inside the transition test, i.e. for uphill children: a downhill child is
 accepted outright and a colliding one never reaches the test, and neither changes T.
 
-**Randomness** comes from :func:`follow_env.rng.uniform_at` with the caller's key, so the same
+**Randomness** comes from :func:`follow_env.sim.rng.uniform_at` with the caller's key, so the same
 key always grows the same tree. Iteration ``i`` reads counters ``counter0 + 4 i + slot``: slot
 0 the goal-bias coin, 1 and 2 the sample's x and y, 3 the transition test's draw
 (:data:`COUNTERS_PER_ITER`; a caller sharing a stream reserves :func:`counters_needed`).
@@ -59,12 +59,12 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from numba import njit
 from numpy.typing import ArrayLike
 from scipy import ndimage
 
-from follow_env.config import _Validated, param
-from follow_env.rng import uniform_at
+from follow_env.sim.config import Validated, param
+from follow_env.sim.jit import njit
+from follow_env.sim.rng import uniform_at
 
 __all__ = [
     "COUNTERS_PER_ITER",
@@ -312,7 +312,7 @@ def cost_map_from_obstacles(
 # --- compiled geometry -------------------------------------------------------------------------
 
 
-@njit(cache=True, inline="always")
+@njit(inline="always")
 def _cell(x: float, y: float, x0: float, y0: float, res: float, ny: int, nx: int) -> tuple:
     """Cell (ix, iy) holding (x, y), or (-1, -1) outside the grid."""
     gx = (x - x0) / res
@@ -322,7 +322,7 @@ def _cell(x: float, y: float, x0: float, y0: float, res: float, ny: int, nx: int
     return int(gx), int(gy)
 
 
-@njit(cache=True)
+@njit
 def _trace(
     cost: np.ndarray,
     occ: np.ndarray,
@@ -373,7 +373,7 @@ def _trace(
 # --- the transition test and the temperature rule (SPEC §3) -------------------------------------
 
 
-@njit(cache=True)
+@njit
 def transition_probability(
     child_cost: float, parent_cost: float, distance_m: float, K: float, T: float
 ) -> float:
@@ -394,7 +394,7 @@ def transition_probability(
     return np.exp(-dC / (K * T))
 
 
-@njit(cache=True)
+@njit
 def update_temperature(
     T: float, n_fail: int, accepted: bool, alpha: float, n_fail_max: int
 ) -> tuple[float, int]:
@@ -421,7 +421,7 @@ def update_temperature(
 # --- the planner loop --------------------------------------------------------------------------
 
 
-@njit(cache=True)
+@njit
 def _grow_tree(
     cost: np.ndarray,
     occ: np.ndarray,
@@ -543,7 +543,7 @@ def _grow_tree(
     return nodes[:n], parent[:n], goal_i, it, T, stats, log[:n_log]
 
 
-@njit(cache=True)
+@njit
 def _branch(nodes: np.ndarray, parent: np.ndarray, leaf: int) -> np.ndarray:
     """Points from the root to ``leaf`` along the tree: (k, 2)."""
     k = 0
@@ -562,7 +562,7 @@ def _branch(nodes: np.ndarray, parent: np.ndarray, leaf: int) -> np.ndarray:
 # --- post-processing ---------------------------------------------------------------------------
 
 
-@njit(cache=True)
+@njit
 def _shortcut(
     path: np.ndarray,
     cost: np.ndarray,
@@ -599,7 +599,7 @@ def _shortcut(
     return out[:m]
 
 
-@njit(cache=True)
+@njit
 def _chaikin(
     path: np.ndarray,
     cost: np.ndarray,
@@ -639,7 +639,7 @@ def _chaikin(
     return out[:m]
 
 
-@njit(cache=True)
+@njit
 def _resample(
     path: np.ndarray,
     spacing: float,
@@ -695,7 +695,7 @@ def _resample(
 
 
 @dataclass(frozen=True)
-class TRRTParams(_Validated):
+class TRRTParams(Validated):
     """Parameters of the T-RRT planner (SPEC §3) and of its post-processing.
 
     The spec gives the algorithm only; every value here is a choice, tuned so that a path

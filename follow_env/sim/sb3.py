@@ -1,4 +1,4 @@
-"""The batched core as a stable-baselines3 ``VecEnv``.
+"""The runner of any task as a stable-baselines3 ``VecEnv``.
 
 SB3 does not take a Gymnasium ``VectorEnv``; this adapter speaks SB3's protocol over the same
 core: same-step autoreset, ``reset()`` returning observations only, ``step_wait()`` returning
@@ -21,41 +21,46 @@ import numpy as np
 from stable_baselines3.common.vec_env import VecEnv
 from stable_baselines3.common.vec_env.base_vec_env import VecEnvIndices, VecEnvStepReturn
 
-from follow_env.config import EnvConfig
-from follow_env.core import BatchedSim
-from follow_env.env import resolve_config
-from follow_env.info import batch_info, make_spaces, observations
-from follow_env.layout import I_REASON, REASON_NAMES, S_REWARD, S_TERM, S_TRUNC
+from follow_env.sim.checks import is_integer, out_of_range
+from follow_env.sim.faces import action_array
+from follow_env.sim.runner import BatchedSim
 
-__all__ = ["PersonFollowSB3VecEnv", "make_sb3_vec_env"]
+__all__ = ["TaskSB3VecEnv"]
 
 
-class PersonFollowSB3VecEnv(VecEnv):
-    """``num_envs`` PersonFollow robots as one SB3 ``VecEnv`` (see the module docstring).
+class TaskSB3VecEnv(VecEnv):
+    """``num_envs`` lanes of a task as one SB3 ``VecEnv`` (see the module docstring).
 
+    :param task: the task model (e.g. ``follow_env.tasks.person_follow.task.TASK``).
     :param num_envs: number of lanes.
-    :param full_info: put every key of :data:`follow_env.INFO_KEYS` in every lane's info dict
-        each step (costs about a microsecond per key and lane); by default the dicts hold only
-        what SB3 needs at episode ends, plus ``termination``.
-    :param env_kwargs: the single env's keyword arguments (``config``, ``scenario``, sections).
+    :param full_info: put every info key in every lane's info dict each step (costs about a
+        microsecond per key and lane); by default the dicts hold only what SB3 needs at episode
+        ends, plus ``termination``.
+    :param env_kwargs: the single env's keyword arguments (``config``, shorthands, sections).
     """
 
-    def __init__(self, num_envs: int, full_info: bool = False, **env_kwargs: Any) -> None:
-        if isinstance(num_envs, bool) or not isinstance(num_envs, int) or num_envs < 1:
-            raise ValueError(f"num_envs={num_envs!r} is out of range: must be an integer >= 1")
+    def __init__(
+        self, task: Any, num_envs: int, full_info: bool = False, **env_kwargs: Any
+    ) -> None:
+        if not is_integer(num_envs) or num_envs < 1:
+            raise out_of_range("num_envs", num_envs, "an integer >= 1")
         render_mode = env_kwargs.pop("render_mode", None)
         if render_mode is not None:
-            raise ValueError(
-                f"render_mode={render_mode!r} is out of range: the SB3 adapter does not render; "
-                "use gym.make('PersonFollow-v0', render_mode='rgb_array') for videos"
+            raise out_of_range(
+                "render_mode",
+                render_mode,
+                f"None: the SB3 adapter does not render; use gym.make({task.spec.env_id!r}, "
+                "render_mode='rgb_array') for videos",
             )
-        self.config: EnvConfig = resolve_config(**env_kwargs)
+        self.task = task
+        self.config = task.resolve_config(**env_kwargs)
         self.render_mode = None
         self.full_info = full_info
-        self.sim = BatchedSim(self.config, num_envs)
-        self._actions = np.zeros((num_envs, 2))
-        obs_space, act_space = make_spaces(self.config)
-        super().__init__(num_envs, obs_space, act_space)
+        self.sim = BatchedSim(task, self.config, int(num_envs))
+        obs_space, act_space = task.spaces(self.config, self.sim.platform)
+        self._actions = np.zeros((int(num_envs), act_space.shape[0]))
+        self._action_names = "[" + ", ".join(a.name for a in self.sim.platform.actions) + "]"
+        super().__init__(int(num_envs), obs_space, act_space)
 
     # -- SB3 VecEnv API -----------------------------------------------------------------------
 
@@ -67,27 +72,25 @@ class PersonFollowSB3VecEnv(VecEnv):
         self.sim.reset_lanes(np.arange(self.num_envs))
         self._reset_seeds()
         self._reset_options()
-        return observations(self.sim)
+        return self.task.observations(self.sim)
 
     def step_async(self, actions: np.ndarray) -> None:
-        """Take ``[v_mps, w_radps]`` for every lane, shape (num_envs, 2)."""
-        a = np.asarray(actions, dtype=np.float64).reshape(self.num_envs, 2)
-        bad = ~np.isfinite(a).all(axis=1)
-        if bad.any():
-            raise ValueError(
-                f"actions of lanes {np.flatnonzero(bad).tolist()} are out of range: must be finite"
-            )
-        self._actions[:] = a
+        """Take the platform's action for every lane, shape (num_envs, action size); a flat
+        array of num_envs x action size is accepted too (SB3's policies reshape freely)."""
+        a = np.asarray(actions)
+        if a.size == self._actions.size:
+            a = a.reshape(self._actions.shape)
+        self._actions[:] = action_array(a, self._actions.shape, self._action_names)
 
     def step_wait(self) -> VecEnvStepReturn:
         """Step all lanes; finished lanes are reset at once (SB3's same-step autoreset)."""
         self.sim.step(self._actions)
-        fs = self.sim.fstate
-        rewards = fs[:, S_REWARD].astype(np.float32)
-        terminated = fs[:, S_TERM] > 0.0
-        truncated = fs[:, S_TRUNC] > 0.0
+        ep = self.sim.episode
+        rewards = ep["reward"].astype(np.float32)
+        terminated = ep["terminated"] > 0.0
+        truncated = ep["truncated"] > 0.0
         dones = terminated | truncated
-        obs = observations(self.sim)
+        obs = self.task.observations(self.sim)
         infos = self._infos()
         if dones.any():
             lanes = np.flatnonzero(dones)
@@ -95,7 +98,7 @@ class PersonFollowSB3VecEnv(VecEnv):
                 infos[i]["terminal_observation"] = obs[i].copy()
                 infos[i]["TimeLimit.truncated"] = bool(truncated[i] and not terminated[i])
             self.sim.reset_lanes(lanes)
-            obs = observations(self.sim)
+            obs = self.task.observations(self.sim)
         return obs, rewards, dones, infos
 
     def close(self) -> None:
@@ -132,19 +135,10 @@ class PersonFollowSB3VecEnv(VecEnv):
 
     def _infos(self) -> list[dict[str, Any]]:
         if not self.full_info:
-            reasons = self.sim.istate[:, I_REASON]
-            return [{"termination": REASON_NAMES[r]} if r else {} for r in reasons.tolist()]
-        batch = batch_info(self.sim)
+            names = self.task.spec.terminations
+            reasons = self.sim.episode["reason"]
+            return [{"termination": names[r]} if r else {} for r in reasons.tolist()]
+        batch = self.task.batch_info(self.sim)
         columns = {k: v.tolist() for k, v in batch.items()}
         keys = list(columns)
         return [dict(zip(keys, row, strict=True)) for row in zip(*columns.values(), strict=True)]
-
-
-def make_sb3_vec_env(num_envs: int, **env_kwargs: Any) -> PersonFollowSB3VecEnv:
-    """An SB3 ``VecEnv`` of ``num_envs`` PersonFollow robots over the batched core.
-
-    ``env_kwargs`` are the single env's (``config``, ``scenario``, config sections) plus
-    ``full_info``. Wrap it as usual: ``VecMonitor(make_sb3_vec_env(16))``,
-    ``VecNormalize(...)``.
-    """
-    return PersonFollowSB3VecEnv(num_envs, **env_kwargs)

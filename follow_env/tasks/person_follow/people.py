@@ -15,30 +15,44 @@ motion depends on nothing the policy does, so every policy meets the same people
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
-from follow_env.layout import (
-    PS_DONE,
-    PS_FORCE,
-    PS_LAT,
-    PS_LATV,
-    PS_NPTS,
-    PS_PAUSE,
-    PS_S,
-    PS_SEG,
-    PS_SLOW,
-    PS_TH,
-    PS_V,
-    PS_X,
-    PS_Y,
-    PW_PAUSE,
-    PW_S,
-    PW_VMAX,
-    PW_X,
-    PW_Y,
+from follow_env.sim.jit import njit
+from follow_env.sim.schema import Block, f8, i8
+
+__all__ = ["PERSON", "WAYPOINT", "person_reset", "person_step", "social_forces"]
+
+PERSON = Block(
+    "person",
+    "one walker: where on its path, how fast, and its sideways step off the path",
+    [
+        f8("s", "m", "arc length walked along the path"),
+        f8("v", "m/s", "walking speed"),
+        i8("seg", "", "index of the leg being walked"),
+        f8("pause", "s", "time left standing still at a waypoint"),
+        f8("x", "m", "position, x (world frame)"),
+        f8("y", "m", "position, y"),
+        f8("th", "rad", "heading (the direction of the leg walked)"),
+        f8("done", "", "1 once the path's end is reached"),
+        i8("npts", "", "waypoints of the path in use"),
+        f8("lat", "m", "sideways offset from the path (left positive)"),
+        f8("latv", "m/s", "rate of the sideways offset"),
+        f8("force", "m/s^2", "sideways social force"),
+        f8("slow", "", "share of the allowed speed (someone ahead)"),
+    ],
 )
 
-__all__ = ["person_reset", "person_step", "social_forces"]
+WAYPOINT = Block(
+    "waypoint",
+    "a path waypoint; the fields in this order are the columns scenarios build paths with",
+    [
+        f8("x", "m", "position, x"),
+        f8("y", "m", "position, y"),
+        f8("s", "m", "arc length from the path's start"),
+        f8("vmax", "m/s", "speed cap of the leg that starts here"),
+        f8("pause", "s", "time to stand still on arrival"),
+    ],
+)
+N_PW = len(WAYPOINT.fields)
 
 # A person closing on a stop never walks slower than this, so they always arrive (m/s).
 _CREEP_MPS = 0.05
@@ -55,88 +69,90 @@ _MEET_AHEAD_M = 3.0
 _MEET_HALF_WIDTH_M = 0.6
 
 
-@njit(cache=True, inline="always")
+@njit(inline="always")
 def _place(ps: np.ndarray, path: np.ndarray) -> None:
     """Set position and heading from the arc length and leg index."""
-    n = int(ps[PS_NPTS])
-    k = int(ps[PS_SEG])
+    n = int(ps.npts)
+    k = int(ps.seg)
     if k >= n - 1:
         k = n - 2
-    seg_len = path[k + 1, PW_S] - path[k, PW_S]
-    t = 0.0 if seg_len <= 0.0 else (ps[PS_S] - path[k, PW_S]) / seg_len
+    seg_len = path[k + 1].s - path[k].s
+    t = 0.0 if seg_len <= 0.0 else (ps.s - path[k].s) / seg_len
     t = min(max(t, 0.0), 1.0)
-    dx = path[k + 1, PW_X] - path[k, PW_X]
-    dy = path[k + 1, PW_Y] - path[k, PW_Y]
+    dx = path[k + 1].x - path[k].x
+    dy = path[k + 1].y - path[k].y
     if dx != 0.0 or dy != 0.0:
-        ps[PS_TH] = np.arctan2(dy, dx)
+        ps.th = np.arctan2(dy, dx)
     # Off the path by the lateral offset, to the walker's left when positive.
-    lat = ps[PS_LAT]
-    ps[PS_X] = path[k, PW_X] + t * dx - lat * np.sin(ps[PS_TH])
-    ps[PS_Y] = path[k, PW_Y] + t * dy + lat * np.cos(ps[PS_TH])
+    lat = ps.lat
+    ps.x = path[k].x + t * dx - lat * np.sin(ps.th)
+    ps.y = path[k].y + t * dy + lat * np.cos(ps.th)
 
 
-@njit(cache=True)
+@njit
 def person_reset(ps: np.ndarray, path: np.ndarray, n_points: int) -> None:
     """Put a person at rest at the start of ``path`` (``n_points`` >= 2 waypoints used)."""
-    ps[:] = 0.0
-    ps[PS_SLOW] = 1.0
-    ps[PS_NPTS] = n_points
-    ps[PS_PAUSE] = path[0, PW_PAUSE]
+    ps.s = ps.v = ps.pause = ps.x = ps.y = ps.th = ps.done = 0.0
+    ps.lat = ps.latv = ps.force = 0.0
+    ps.seg = 0
+    ps.slow = 1.0
+    ps.npts = n_points
+    ps.pause = path[0].pause
     _place(ps, path)
 
 
-@njit(cache=True, inline="always")
+@njit(inline="always")
 def person_step(ps: np.ndarray, path: np.ndarray, accel: float, decel: float, dt: float) -> None:
     """Advance one person by ``dt`` seconds along its path (state ``ps`` updated in place)."""
-    n = int(ps[PS_NPTS])
-    if ps[PS_DONE] > 0.0:
-        ps[PS_V] = 0.0
+    n = int(ps.npts)
+    if ps.done > 0.0:
+        ps.v = 0.0
         return
-    if ps[PS_PAUSE] > 0.0:
-        ps[PS_PAUSE] = max(ps[PS_PAUSE] - dt, 0.0)
-        ps[PS_V] = 0.0
+    if ps.pause > 0.0:
+        ps.pause = max(ps.pause - dt, 0.0)
+        ps.v = 0.0
         return
-    k = int(ps[PS_SEG])
-    s = ps[PS_S]
-    v = ps[PS_V]
+    k = int(ps.seg)
+    s = ps.s
+    v = ps.v
     # Speed allowed now: this leg's cap, and for every later waypoint the speed from which we
     # can still brake to its cap (0 at a pause or the end) over the distance left.
-    allowed = path[k, PW_VMAX]
+    allowed = path[k].vmax
     ad = decel * dt
     for j in range(k + 1, n):
-        dist = path[j, PW_S] - s
+        dist = path[j].s - s
         if 2.0 * decel * dist >= allowed * allowed:
             break  # too far to bind, and so is every waypoint after it
-        cap = 0.0 if (j == n - 1 or path[j, PW_PAUSE] > 0.0) else path[j, PW_VMAX]
+        cap = 0.0 if (j == n - 1 or path[j].pause > 0.0) else path[j].vmax
         # Fastest speed now from which braking at `decel` still meets `cap` at the waypoint,
         # counting this step's travel: v^2 = cap^2 + 2 decel (dist - v dt).
         disc = ad * ad + cap * cap + 2.0 * decel * max(dist, 0.0)
         allowed = min(allowed, -ad + np.sqrt(disc))
-    allowed = max(allowed * ps[PS_SLOW], _CREEP_MPS)
+    allowed = max(allowed * ps.slow, _CREEP_MPS)
     v = min(v + accel * dt, allowed)
     # The sideways offset: social force against a damped spring back to the path.
-    ps[PS_LATV] += (ps[PS_FORCE] - _LAT_K * ps[PS_LAT] - _LAT_C * ps[PS_LATV]) * dt
-    ps[PS_LAT] = min(max(ps[PS_LAT] + ps[PS_LATV] * dt, -_LAT_MAX_M), _LAT_MAX_M)
+    ps.latv += (ps.force - _LAT_K * ps.lat - _LAT_C * ps.latv) * dt
+    ps.lat = min(max(ps.lat + ps.latv * dt, -_LAT_MAX_M), _LAT_MAX_M)
     s += v * dt
-    while k < n - 1 and s >= path[k + 1, PW_S]:
+    while k < n - 1 and s >= path[k + 1].s:
         k += 1
         if k == n - 1:
-            s = path[k, PW_S]
+            s = path[k].s
             v = 0.0
-            ps[PS_DONE] = 1.0
+            ps.done = 1.0
             break
-        if path[k, PW_PAUSE] > 0.0:
-            s = path[k, PW_S]
+        if path[k].pause > 0.0:
+            s = path[k].s
             v = 0.0
-            ps[PS_PAUSE] = path[k, PW_PAUSE]
+            ps.pause = path[k].pause
             break
-    ps[PS_S], ps[PS_V], ps[PS_SEG] = s, v, k
+    ps.s, ps.v, ps.seg = s, v, k
     _place(ps, path)
 
 
-@njit(cache=True, inline="always")
+@njit(inline="always")
 def social_forces(ps: np.ndarray, n_people: int, radius: float, strength: float) -> None:
-    """Each person's sideways social force (``PS_FORCE``, m/s^2) and speed share (``PS_SLOW``)
+    """Each person's sideways social force (``force``, m/s^2) and speed share (``slow``)
     from everyone's positions at the start of the step, so the order of people is irrelevant.
 
     Another person closer than ``radius`` pushes with ``strength (1 - d / radius)`` along the
@@ -146,18 +162,18 @@ def social_forces(ps: np.ndarray, n_people: int, radius: float, strength: float)
     """
     for p in range(n_people):
         force, slow = 0.0, 1.0
-        c, s = np.cos(ps[p, PS_TH]), np.sin(ps[p, PS_TH])
+        c, s = np.cos(ps[p].th), np.sin(ps[p].th)
         for q in range(n_people):
             if q == p:
                 continue
-            dx, dy = ps[q, PS_X] - ps[p, PS_X], ps[q, PS_Y] - ps[p, PS_Y]
+            dx, dy = ps[q].x - ps[p].x, ps[q].y - ps[p].y
             d = np.sqrt(dx * dx + dy * dy)
             if d == 0.0:
                 continue
             ahead, left = c * dx + s * dy, -s * dx + c * dy
             push = strength * max(1.0 - d / radius, 0.0)
             force -= push * left / d
-            facing = c * np.cos(ps[q, PS_TH]) + s * np.sin(ps[q, PS_TH])
+            facing = c * np.cos(ps[q].th) + s * np.sin(ps[q].th)
             if facing < -0.5 and 0.0 < ahead < _MEET_AHEAD_M and abs(left) < _MEET_HALF_WIDTH_M:
                 force -= strength  # someone coming the other way: keep to the right, early
             # Walking behind someone who goes the same way: slow down (one crossing the path
@@ -166,5 +182,5 @@ def social_forces(ps: np.ndarray, n_people: int, radius: float, strength: float)
             if same_way and 0.0 < ahead < radius and abs(left) < _AHEAD_HALF_WIDTH_M:
                 gap = (ahead - _AHEAD_HALF_WIDTH_M) / max(radius - _AHEAD_HALF_WIDTH_M, 1e-6)
                 slow = min(slow, max(gap, _SLOW_MIN))
-        ps[p, PS_FORCE] = force
-        ps[p, PS_SLOW] = slow
+        ps[p].force = force
+        ps[p].slow = slow

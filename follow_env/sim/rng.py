@@ -1,40 +1,23 @@
 """Counter-based random numbers, keyed by per-episode ``SeedSequence`` streams.
 
 Every random draw of an episode is a pure function of ``(stream key, counter)``: the key comes
-from the episode's ``numpy.random.SeedSequence`` (one key per stream: person path, detector,
-depth noise, motor variation), the counter from *when* the draw happens (control-step index and
-a fixed slot), never from what the robot did. So two policies run on the same seed meet the same
-person and the same sensor noise, draw for draw, and a lane of the batched core needs no random
-state besides its keys. The generator is SplitMix64's finaliser applied twice (key and counter
-mixed separately), the construction behind counter-based generators such as Random123.
+from the episode's ``numpy.random.SeedSequence`` (one key per stream, see
+:mod:`follow_env.sim.streams`, which also allocates every counter), the counter from *when* the
+draw happens (control-step index and a fixed slot), never from what the robot did. So two
+policies run on the same seed meet the same person and the same sensor noise, draw for draw, and
+a lane of the batched core needs no random state besides its keys. The generator is
+SplitMix64's finaliser applied twice (key and counter mixed separately), the construction behind
+counter-based generators such as Random123.
 """
 
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
-__all__ = [
-    "N_STREAMS",
-    "STREAM_DEPTH",
-    "STREAM_DETECTOR",
-    "STREAM_MOTOR",
-    "STREAM_PERSON",
-    "LaneRandom",
-    "LaneSeeds",
-    "episode_keys",
-    "normal_at",
-    "normal_pair_at",
-    "uniform_at",
-]
+from follow_env.sim.jit import njit
+from follow_env.sim.streams import EPISODE_COUNTER0, N_STREAMS, Allocation
 
-STREAM_PERSON = 0
-STREAM_DETECTOR = 1
-STREAM_DEPTH = 2
-STREAM_MOTOR = 3
-STREAM_WORLD = 4  # maps, obstacles and bystanders of a scenario
-STREAM_RANDOMIZE = 5  # domain randomisation and disturbances
-N_STREAMS = 6
+__all__ = ["LaneRandom", "LaneSeeds", "episode_keys", "normal_at", "normal_pair_at", "uniform_at"]
 
 _U = np.uint64
 _C1 = _U(0xBF58476D1CE4E5B9)
@@ -47,21 +30,21 @@ _INV_2_53 = 1.0 / 9007199254740992.0
 _NORMAL_DOMAIN = _U(0xD1B54A32D192ED03)
 
 
-@njit(cache=True, inline="always")
+@njit(inline="always")
 def _mix64(z: np.uint64) -> np.uint64:
     z = (z ^ (z >> _U(30))) * _C1
     z = (z ^ (z >> _U(27))) * _C2
     return z ^ (z >> _U(31))
 
 
-@njit(cache=True, inline="always")
+@njit(inline="always")
 def uniform_at(key: np.uint64, counter: int) -> float:
     """Uniform draw in [0, 1) for ``counter`` of the stream ``key`` (53-bit resolution)."""
     h = _mix64(key ^ _mix64(_U(counter) * _GOLDEN + _ONE))
     return float(h >> _U(11)) * _INV_2_53
 
 
-@njit(cache=True, inline="always")
+@njit(inline="always")
 def normal_at(key: np.uint64, counter: int) -> float:
     """Standard normal draw for ``counter`` (Box-Muller on two draws of the normal domain)."""
     k = key ^ _NORMAL_DOMAIN
@@ -70,7 +53,7 @@ def normal_at(key: np.uint64, counter: int) -> float:
     return np.sqrt(-2.0 * np.log(u1)) * np.cos(2.0 * np.pi * u2)
 
 
-@njit(cache=True, inline="always")
+@njit(inline="always")
 def normal_pair_at(key: np.uint64, counter: int) -> tuple[float, float]:
     """Two independent standard normal draws for ``counter`` (both outputs of one Box-Muller
     transform; the first equals :func:`normal_at` of the same counter)."""
@@ -81,7 +64,7 @@ def normal_pair_at(key: np.uint64, counter: int) -> tuple[float, float]:
     return r * np.cos(2.0 * np.pi * u2), r * np.sin(2.0 * np.pi * u2)
 
 
-@njit(cache=True)
+@njit
 def _uniform_block(keys: np.ndarray, counter0: int, n: int) -> np.ndarray:
     out = np.empty((keys.shape[0], n))
     for i in range(keys.shape[0]):
@@ -90,7 +73,7 @@ def _uniform_block(keys: np.ndarray, counter0: int, n: int) -> np.ndarray:
     return out
 
 
-@njit(cache=True)
+@njit
 def _normal_block(keys: np.ndarray, counter0: int, n: int) -> np.ndarray:
     out = np.empty((keys.shape[0], n))
     for i in range(keys.shape[0]):
@@ -112,18 +95,18 @@ class LaneRandom:
     """Draws for a batch of lanes, each from its own stream: the numpy face of the generator.
 
     Scenario functions use it to build paths for many lanes in one vectorised call while every
-    lane's draws depend on its own key only. Each call advances a shared counter, so the n-th
+    lane's draws depend on its own key only. Each call advances a shared counter (from
+    ``EPISODE_COUNTER0``: the per-step draws of the kernel use the counters below), so the n-th
     call of a scenario function reads the same numbers for a lane whatever the batch holds.
+    ``at=`` reads the counters of a declared :class:`~follow_env.sim.streams.Allocation`
+    instead, so components that share a stream never depend on each other's draws.
 
     :param keys: one key per lane, shape (n,), dtype uint64.
     """
 
-    # Counters below this belong to the per-step draws of the kernel; scenario draws start here.
-    _COUNTER0 = 1 << 40
-
     def __init__(self, keys: np.ndarray) -> None:
         self.keys = np.ascontiguousarray(keys, dtype=np.uint64)
-        self._counter = self._COUNTER0
+        self._counter = EPISODE_COUNTER0
 
     @property
     def n(self) -> int:
@@ -137,16 +120,25 @@ class LaneRandom:
         self._counter += count
         return c
 
-    def uniform(self, *shape: int, low: float = 0.0, high: float = 1.0) -> np.ndarray:
+    def _first(self, size: int, at: Allocation | None) -> int:
+        if at is None:
+            return self.reserve(size)
+        if at.count is not None and size > at.count:
+            raise ValueError(f"{size} draws exceed allocation {at.name!r} ({at.count})")
+        return at.start
+
+    def uniform(
+        self, *shape: int, low: float = 0.0, high: float = 1.0, at: Allocation | None = None
+    ) -> np.ndarray:
         """Uniform draws in [low, high), shape (n, *shape)."""
         size = int(np.prod(shape)) if shape else 1
-        u = _uniform_block(self.keys, self.reserve(size), size)
+        u = _uniform_block(self.keys, self._first(size, at), size)
         return (low + (high - low) * u).reshape((self.n, *shape))
 
-    def normal(self, *shape: int, scale: float = 1.0) -> np.ndarray:
+    def normal(self, *shape: int, scale: float = 1.0, at: Allocation | None = None) -> np.ndarray:
         """Normal draws with standard deviation ``scale``, shape (n, *shape)."""
         size = int(np.prod(shape)) if shape else 1
-        z = _normal_block(self.keys, self.reserve(size), size)
+        z = _normal_block(self.keys, self._first(size, at), size)
         return (scale * z).reshape((self.n, *shape))
 
 
@@ -170,7 +162,7 @@ _POOL = 4
 _MAX_WORDS = 8  # seeds below 2**256
 
 
-@njit(cache=True, inline="always")
+@njit(inline="always")
 def _hashmix(value: np.uint64, hash_const: np.uint64) -> tuple[np.uint64, np.uint64]:
     value = (value ^ hash_const) & _M32
     hash_const = (hash_const * _MULT_A) & _M32
@@ -178,13 +170,13 @@ def _hashmix(value: np.uint64, hash_const: np.uint64) -> tuple[np.uint64, np.uin
     return value ^ (value >> _XSHIFT), hash_const
 
 
-@njit(cache=True, inline="always")
+@njit(inline="always")
 def _mix(x: np.uint64, y: np.uint64) -> np.uint64:
     r = ((_MIX_L * x) - (_MIX_R * y)) & _M32
     return r ^ (r >> _XSHIFT)
 
 
-@njit(cache=True)
+@njit
 def _spawned_keys(
     words: np.ndarray, n_words: np.ndarray, episode: np.ndarray, out: np.ndarray
 ) -> None:

@@ -6,8 +6,8 @@ drive through, bystanders who cross in front and can steal the target (the robot
 first detection, SPEC §1.4), stops and sharp turns. Every one starts as the thesis does: the
 robot at rest, the person 1 m in front of the camera and centred.
 
-Each lane's layout comes from its own streams (``STREAM_PERSON`` for the target's pace and
-path, ``STREAM_WORLD`` for the map and bystanders), never from the robot's actions.
+Each lane's layout comes from its own streams (the person's for the target's pace and path,
+``rng.world`` for the map and bystanders), never from the robot's actions.
 
 | name | what happens |
 |---|---|
@@ -28,21 +28,40 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from follow_env.layout import N_PW, PW_PAUSE, PW_S, PW_VMAX, PW_X, PW_Y, WALL_FIELDS
-from follow_env.rng import LaneRandom
-from follow_env.scenarios import (
+from follow_env.sim import streams
+from follow_env.sim.rng import LaneRandom
+from follow_env.tasks.person_follow.people import N_PW
+from follow_env.tasks.person_follow.scenarios import (
+    PW,
+    SCENARIOS,
     ScenarioBatch,
-    _cruise,
-    _person_ahead,
+    ScenarioRandom,
+    cruise_speeds,
+    pack_lanes,
+    person_ahead,
     polyline_paths,
     register_scenario,
+    room_size,
 )
-from follow_env.world import WALL_HEIGHT_M, box_walls, polygon_walls, room_walls
+from follow_env.world.geometry import WALL_HEIGHT_M, box_walls, polygon_walls, room_walls
 
 if TYPE_CHECKING:
-    from follow_env.config import EnvConfig
+    from follow_env.tasks.person_follow.config import EnvConfig
 
-__all__ = ["pack_lanes", "smooth_path"]
+__all__ = ["smooth_path"]
+
+# Keys of the scenarios whose maps and bystanders were drawn from the person's stream with a
+# fixed twist before the world stream existed; declared in the randomness table so that their
+# recorded episodes stay the same.
+CROSSING_KEY = streams.domain(
+    "scenario.crossing", streams.PERSON, 0x5151, "crossing: the bystander's draws"
+)
+CROWD_KEY = streams.domain("scenario.crowd", streams.PERSON, 0xC40D, "crowd: the bystanders' draws")
+RANDOM_WORLD_KEY = streams.domain(
+    "scenario.random_world", streams.PERSON, 0x3D3D, "random_world: the map and bystanders"
+)
+for _key in (CROSSING_KEY, CROWD_KEY, RANDOM_WORLD_KEY):
+    streams.per_episode(f"{_key.name}.draws", _key, 0, None, doc=_key.doc)
 
 _STEP_M = 0.25  # waypoint spacing along bends (m)
 _FURNITURE_HEIGHT_M = 0.9  # tables and cabinets: they hide legs, not heads (m)
@@ -103,55 +122,27 @@ def smooth_path(
     keep = np.r_[True, np.linalg.norm(np.diff(xy, axis=0), axis=1) > 1e-6]
     xy, caps_a, stops_a = xy[keep], np.array(caps)[keep], np.array(stops)[keep]
     out = np.zeros((len(xy), N_PW))
-    out[:, PW_X], out[:, PW_Y] = xy[:, 0], xy[:, 1]
-    out[1:, PW_S] = np.cumsum(np.linalg.norm(np.diff(xy, axis=0), axis=1))
-    out[:, PW_VMAX] = caps_a
-    out[:, PW_PAUSE] = stops_a
+    out[:, PW.x], out[:, PW.y] = xy[:, 0], xy[:, 1]
+    out[1:, PW.s] = np.cumsum(np.linalg.norm(np.diff(xy, axis=0), axis=1))
+    out[:, PW.vmax] = caps_a
+    out[:, PW.pause] = stops_a
     return out
-
-
-def pack_lanes(
-    poses: np.ndarray, people: list[list[np.ndarray]], walls: list[np.ndarray]
-) -> ScenarioBatch:
-    """Pad per-lane lists of paths ((m, N_PW) each, target first) and walls ((k, 5)) into a
-    ScenarioBatch."""
-    n = len(people)
-    n_people = np.array([len(p) for p in people], dtype=np.int64)
-    max_pts = max(len(path) for lane in people for path in lane)
-    paths = np.zeros((n, int(n_people.max()), max_pts, N_PW))
-    n_points = np.zeros((n, int(n_people.max())), dtype=np.int64)
-    for i, lane in enumerate(people):
-        for j, path in enumerate(lane):
-            paths[i, j, : len(path)] = path
-            n_points[i, j] = len(path)
-    n_walls = np.array([len(w) for w in walls], dtype=np.int64)
-    wall_arr = np.zeros((n, int(n_walls.max()), WALL_FIELDS))
-    for i, w in enumerate(walls):
-        wall_arr[i, : len(w)] = w
-    return ScenarioBatch(
-        robot_pose=np.asarray(poses, dtype=float),
-        paths=paths,
-        n_points=n_points,
-        n_people=n_people,
-        walls=wall_arr,
-        n_walls=n_walls,
-    )
 
 
 def _start(cfg: EnvConfig, x: float, y: float, heading: float) -> tuple[np.ndarray, np.ndarray]:
     """Robot pose and the person's start 1 m in front of its camera (SPEC §1.6)."""
     pose = np.array([[x, y, heading]])
-    return pose[0], _person_ahead(cfg, pose)[0]
+    return pose[0], person_ahead(cfg, pose)[0]
 
 
 def _lat(cfg: EnvConfig) -> float:
     return cfg.person.lateral_accel_mps2
 
 
-@register_scenario("corridor_turn", max_points=128, max_walls=8)
-def corridor_turn(rng: LaneRandom, cfg: EnvConfig) -> ScenarioBatch:
+@register_scenario("corridor_turn", max_points=128, max_walls=8, room=None)
+def corridor_turn(rng: ScenarioRandom, cfg: EnvConfig) -> ScenarioBatch:
     """An L-shaped corridor 2.4 m wide: 8 m along x, a left turn, 8 m along y."""
-    cruise = _cruise(rng, cfg)
+    cruise = cruise_speeds(rng, cfg)
     shift = rng.uniform(low=-0.3, high=0.3)  # where in the corridor the person walks
     half = 1.2
     outer = [(-11.0, -half), (half, -half), (half, 9.0)]
@@ -172,10 +163,10 @@ def corridor_turn(rng: LaneRandom, cfg: EnvConfig) -> ScenarioBatch:
     return pack_lanes(np.array(poses), people, [walls] * rng.n)
 
 
-@register_scenario("doorway", max_points=128, max_walls=12)
-def doorway(rng: LaneRandom, cfg: EnvConfig) -> ScenarioBatch:
+@register_scenario("doorway", max_points=128, max_walls=12, room=None)
+def doorway(rng: ScenarioRandom, cfg: EnvConfig) -> ScenarioBatch:
     """Two 9 x 10 m rooms joined by a 1 m door; the person walks through and turns away."""
-    cruise = _cruise(rng, cfg)
+    cruise = cruise_speeds(rng, cfg)
     side = np.where(rng.uniform() < 0.5, -1.0, 1.0)
     door = 0.5
     walls = np.vstack(
@@ -193,13 +184,13 @@ def doorway(rng: LaneRandom, cfg: EnvConfig) -> ScenarioBatch:
     return pack_lanes(np.array(poses), people, [walls] * rng.n)
 
 
-@register_scenario("occlusion", max_points=128, max_walls=8)
-def occlusion(rng: LaneRandom, cfg: EnvConfig) -> ScenarioBatch:
+@register_scenario("occlusion", max_points=128, max_walls=8, room=(16.0, 12.0))
+def occlusion(rng: ScenarioRandom, cfg: EnvConfig) -> ScenarioBatch:
     """The person walks round the robot at arm's length (an arc of ~1.45 m radius about the
     robot's start) and passes behind a slim column standing 0.8 m from the robot, which hides
     them for a moment; then they walk off. A follower that keeps its distance mostly turns on
     the spot here, so the column hides the person without standing in the robot's way."""
-    cruise = _cruise(rng, cfg)
+    cruise = cruise_speeds(rng, cfg)
     side = np.where(rng.uniform() < 0.5, -1.0, 1.0)  # round to the left or the right
     where = rng.uniform(low=math.radians(55.0), high=math.radians(80.0))
     walls_all, poses, people = [], [], []
@@ -210,7 +201,9 @@ def occlusion(rng: LaneRandom, cfg: EnvConfig) -> ScenarioBatch:
         ang = side[i] * where[i]
         column = (cx + 0.8 * math.cos(ang), cy + 0.8 * math.sin(ang))
         walls_all.append(
-            np.vstack([room_walls(16.0, 12.0), box_walls(*column, 0.3, 0.3, 0.0, WALL_HEIGHT_M)])
+            np.vstack(
+                [room_walls(*room_size(cfg)), box_walls(*column, 0.3, 0.3, 0.0, WALL_HEIGHT_M)]
+            )
         )
         arc = np.linspace(0.0, side[i] * math.radians(150.0), 40)
         pts = np.column_stack([cx + radius * np.cos(arc), cy + radius * np.sin(arc)])
@@ -222,17 +215,19 @@ def occlusion(rng: LaneRandom, cfg: EnvConfig) -> ScenarioBatch:
     return pack_lanes(np.array(poses), people, walls_all)
 
 
-@register_scenario("crossing", max_people=2, max_points=64, max_walls=4)
-def crossing(rng: LaneRandom, cfg: EnvConfig) -> ScenarioBatch:
+@register_scenario(
+    "crossing", max_people=2, max_points=64, max_walls=4, room=(24.0, 12.0), world=CROSSING_KEY
+)
+def crossing(rng: ScenarioRandom, cfg: EnvConfig) -> ScenarioBatch:
     """The thesis' straight walk while a bystander crosses between the robot and the person,
     4-5 s into it, just in front of the person (0.45 m before their centre), so that it is
     nearer the camera and its larger box comes first in the detector's list."""
-    cruise = _cruise(rng, cfg)
-    world = LaneRandom(rng.keys ^ np.uint64(0x5151))  # the bystander's own draws
+    cruise = cruise_speeds(rng, cfg)
+    world = rng.world  # the bystander's own draws
     t_cross = world.uniform(low=4.0, high=5.0)
     v_by = world.uniform(low=1.0, high=1.4)
     from_side = np.where(world.uniform() < 0.5, -1.0, 1.0)
-    walls = room_walls(24.0, 12.0)
+    walls = room_walls(*room_size(cfg))
     accel = cfg.person.accel_mps2
     poses, people = [], []
     for i in range(rng.n):
@@ -274,16 +269,15 @@ def _bystander_paths(world: LaneRandom, n_by: int, hx: float, hy: float) -> np.n
     return flat.reshape(n, n_by, legs + 1, N_PW)
 
 
-@register_scenario("crowd", max_people=5, max_points=256, max_walls=4)
-def crowd(rng: LaneRandom, cfg: EnvConfig) -> ScenarioBatch:
+@register_scenario("crowd", max_people=5, max_points=256, max_walls=4, world=CROWD_KEY)
+def crowd(rng: ScenarioRandom, cfg: EnvConfig) -> ScenarioBatch:
     """The person walks about the hall (a 30 s random walk) while four bystanders criss-cross
     it."""
-    from follow_env.scenarios import SCENARIOS
-
     base = SCENARIOS["random"].fn(rng, cfg.replace(scenario={"random_duration_s": 30.0}))
-    hx = 0.5 * cfg.scenario.room_length_m - 2.0
-    hy = 0.5 * cfg.scenario.room_width_m - 2.0
-    world = LaneRandom(rng.keys ^ np.uint64(0xC40D))
+    length, width = room_size(cfg)
+    hx = 0.5 * length - 2.0
+    hy = 0.5 * width - 2.0
+    world = rng.world
     bystanders = _bystander_paths(world, 4, hx, hy)
     n, n_by, m = bystanders.shape[:3]
     paths = np.zeros((n, 1 + n_by, base.paths.shape[2], N_PW))
@@ -300,14 +294,14 @@ def crowd(rng: LaneRandom, cfg: EnvConfig) -> ScenarioBatch:
     )
 
 
-@register_scenario("stop_and_go", max_points=64, max_walls=4)
-def stop_and_go(rng: LaneRandom, cfg: EnvConfig) -> ScenarioBatch:
+@register_scenario("stop_and_go", max_points=64, max_walls=4, room=(24.0, 10.0))
+def stop_and_go(rng: ScenarioRandom, cfg: EnvConfig) -> ScenarioBatch:
     """14 m straight on, stopping for 1-3 s every 2-3 m, each stretch at its own pace."""
-    cruise = _cruise(rng, cfg)
+    cruise = cruise_speeds(rng, cfg)
     gaps = rng.uniform(6, low=2.0, high=3.0)
     stops = rng.uniform(6, low=1.0, high=3.0)
     pace = rng.uniform(8, low=0.6, high=1.4)
-    walls = room_walls(24.0, 10.0)
+    walls = room_walls(*room_size(cfg))
     poses, people = [], []
     for i in range(rng.n):
         pose, p0 = _start(cfg, -10.5, 0.0, 0.0)
@@ -321,12 +315,12 @@ def stop_and_go(rng: LaneRandom, cfg: EnvConfig) -> ScenarioBatch:
     return pack_lanes(np.array(poses), people, [walls] * rng.n)
 
 
-@register_scenario("zigzag", max_points=128, max_walls=4)
-def zigzag(rng: LaneRandom, cfg: EnvConfig) -> ScenarioBatch:
+@register_scenario("zigzag", max_points=128, max_walls=4, room=(24.0, 12.0))
+def zigzag(rng: ScenarioRandom, cfg: EnvConfig) -> ScenarioBatch:
     """Six 2 m legs turning alternately 60 deg left and right, after a 1.5 m straight start."""
-    cruise = _cruise(rng, cfg)
+    cruise = cruise_speeds(rng, cfg)
     first_left = rng.uniform() < 0.5
-    walls = room_walls(24.0, 12.0)
+    walls = room_walls(*room_size(cfg))
     poses, people = [], []
     for i in range(rng.n):
         pose, p0 = _start(cfg, -10.0, 0.0, 0.0)
@@ -370,17 +364,17 @@ def _planned_path(
     delay: float = 0.0,
 ) -> np.ndarray | None:
     """A T-RRT path (SPEC §3) from start to goal as walkable waypoints, or None."""
-    from follow_env.trrt import plan
+    from follow_env.world.trrt import plan
 
     result = plan(cost_map, start, goal, key)  # type: ignore[arg-type]
     if not result.success:
         return None
     xy = result.path
     out = np.zeros((len(xy), N_PW))
-    out[:, PW_X], out[:, PW_Y] = xy[:, 0], xy[:, 1]
-    out[1:, PW_S] = np.cumsum(np.linalg.norm(np.diff(xy, axis=0), axis=1))
-    out[:, PW_VMAX] = _curvature_caps(xy, cruise, cfg.person.lateral_accel_mps2)
-    out[0, PW_PAUSE] = delay
+    out[:, PW.x], out[:, PW.y] = xy[:, 0], xy[:, 1]
+    out[1:, PW.s] = np.cumsum(np.linalg.norm(np.diff(xy, axis=0), axis=1))
+    out[:, PW.vmax] = _curvature_caps(xy, cruise, cfg.person.lateral_accel_mps2)
+    out[0, PW.pause] = delay
     return out
 
 
@@ -394,16 +388,18 @@ _RW_MAX_BYSTANDERS = 3
     max_people=1 + _RW_MAX_BYSTANDERS,
     max_points=256,
     max_walls=4 + 4 * _RW_MAX_OBSTACLES + 2,
+    room=None,
+    world=RANDOM_WORLD_KEY,
 )
-def random_world(rng: LaneRandom, cfg: EnvConfig) -> ScenarioBatch:
+def random_world(rng: ScenarioRandom, cfg: EnvConfig) -> ScenarioBatch:
     """A random map per seed: a 20 x 14 m hall with 3-10 pillars and pieces of furniture, and
     in half the maps a partition with a 1.2 m door; the person's walk to a far goal and up to
     three bystanders' walks are planned through it with T-RRT (SPEC §3), keeping 0.45 m from
     obstacles so that the robot behind fits too."""
-    from follow_env.trrt import cost_map_from_obstacles
+    from follow_env.world.trrt import cost_map_from_obstacles
 
-    world = LaneRandom(rng.keys ^ np.uint64(0x3D3D))
-    cruise = _cruise(rng, cfg)
+    world = rng.world
+    cruise = cruise_speeds(rng, cfg)
     hx, hy = 0.5 * _RW_LENGTH_M, 0.5 * _RW_WIDTH_M
     n_obs = (3 + np.floor(world.uniform() * (_RW_MAX_OBSTACLES - 2))).astype(int)
     obs = world.uniform(_RW_MAX_OBSTACLES, 6)  # x, y, size a, size b, yaw, kind

@@ -1,0 +1,218 @@
+"""What every platform shares: the body's state, the parameters every base has, the protocol.
+
+A platform is one module (``diff_drive.py``, later ``mecanum.py``) that defines its config
+sections, its parameter and state blocks, its action, and two compiled functions the kernel of
+every task calls for each lane (:mod:`follow_env.sim.compose`):
+
+* ``reset(prm, st, body)``: the lane starts an episode at rest (state already zeroed);
+* ``drive(prm, st, body, action, keys, step)``: one control step: the action through the
+  platform's inverse kinematics, the inner wheel loop, and the pose (``body``).
+
+``body`` is the record every platform writes and every task and sensor reads (:data:`BODY`):
+the pose and twist in SI, and the speed and acceleration *as the robot measures them*
+(encoder-based), which is what the reference robot logged.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
+
+import numpy as np
+
+from follow_env.sim import streams
+from follow_env.sim.config import Sections
+from follow_env.sim.jit import njit
+from follow_env.sim.rng import LaneRandom, uniform_at
+from follow_env.sim.schema import Block, Field, f8
+
+__all__ = [
+    "BASE_PARAMS",
+    "BODY",
+    "ENCODER_NOISE",
+    "FRICTION",
+    "GEOMETRY_ERROR",
+    "MOTOR_GAINS",
+    "PUSH",
+    "ActionField",
+    "Platform",
+    "PlatformConfig",
+    "push_velocity",
+]
+
+BODY = Block(
+    "body",
+    "the robot's pose and twist (world frame, SI), and its speed as its encoders measure it",
+    [
+        f8("x", "m", "position of the axle centre, x"),
+        f8("y", "m", "position of the axle centre, y"),
+        f8("th", "rad", "heading, counter-clockwise from +x, in (-pi, pi]"),
+        f8("v", "m/s", "forward speed (true)"),
+        f8("w", "rad/s", "turn rate, counter-clockwise positive (true)"),
+        f8("v_meas", "m/s", "forward speed from the encoders, as the robot computes it"),
+        f8("v_meas_prev", "m/s", "v_meas one control step earlier"),
+        f8("accel", "m/s^2", "finite difference of v_meas over the control step"),
+        f8("push_vx", "m/s", "a push (randomisation) this control step, x"),
+        f8("push_vy", "m/s", "a push this control step, y"),
+    ],
+)
+
+
+def base_param_fields() -> list[Field]:
+    """The parameters every platform has (first in its parameter block)."""
+    return [
+        f8(
+            "foot_l",
+            "m",
+            "footprint length along the heading",
+            source="platform.footprint_length_m",
+        ),
+        f8("foot_w", "m", "footprint width", source="platform.footprint_width_m"),
+        f8("dt", "s", "control period", source="episode.control_dt_s"),
+        f8(
+            "push_p", "/step", "chance of a push per control step", source="randomization.push_prob"
+        ),
+        f8(
+            "push_v",
+            "m/s",
+            "push speed for one control step",
+            source="randomization.push_speed_mps",
+        ),
+    ]
+
+
+BASE_PARAMS = Block("platform_base", "parameters every platform has", base_param_fields())
+
+# Draws every platform may make, in the one randomness table (follow_env.sim.streams).
+GEOMETRY_ERROR = streams.per_episode(
+    "platform.geometry_error",
+    streams.RANDOMIZE,
+    0,
+    2,
+    space="normal",
+    doc="real/assumed ratios of the drive geometry (wheel radius, track width)",
+)
+FRICTION = streams.per_episode(
+    "platform.friction",
+    streams.RANDOMIZE,
+    8,
+    1,
+    space="uniform",
+    doc="motor friction and stall duty scale",
+)
+MOTOR_GAINS = streams.per_episode(
+    "platform.motor_gains",
+    streams.MOTOR,
+    0,
+    8,
+    space="normal",
+    doc="one gain factor per motor (manufacturing spread), motor i at offset i",
+)
+PUSH = streams.per_step(
+    "platform.push",
+    streams.RANDOMIZE,
+    0,
+    2,
+    space="uniform",
+    doc="whether the robot is pushed this step, and the push's direction",
+)
+ENCODER_NOISE_KEY = streams.domain(
+    "encoder_noise", streams.RANDOMIZE, 0xA0761D6478BD642F, "extra encoder counts per tick"
+)
+ENCODER_NOISE = streams.per_step(
+    "platform.encoder_noise",
+    ENCODER_NOISE_KEY,
+    0,
+    4096,
+    stride=4096,
+    space="normal",
+    doc="one normal pair per 10 ms tick (counter step * 4096 + tick)",
+)
+ENCODER_NOISE_CONST = np.uint64(ENCODER_NOISE_KEY.constant)
+_RANDOMIZE = streams.RANDOMIZE.index
+_PUSH_STRIDE = PUSH.stride
+
+
+@njit(inline="always")
+def push_velocity(push_p: float, push_v: float, keys: np.ndarray, step: int) -> tuple[float, float]:
+    """A push (randomisation): with chance ``push_p`` per step the robot is shoved at
+    ``push_v`` (m/s) in a random direction for this control step; ``(0, 0)`` otherwise."""
+    krand = keys[_RANDOMIZE]
+    if push_p > 0.0 and uniform_at(krand, step * _PUSH_STRIDE) < push_p:
+        ang = 2.0 * np.pi * uniform_at(krand, step * _PUSH_STRIDE + 1)
+        return push_v * np.cos(ang), push_v * np.sin(ang)
+    return 0.0, 0.0
+
+
+@dataclass(frozen=True)
+class PlatformConfig(Sections):
+    """Base of a platform's configuration: its sections (geometry, motors, encoders, ...).
+
+    Subclasses set ``NAME`` and provide the geometry every task needs.
+    """
+
+    NAME: ClassVar[str] = ""
+
+    @property
+    def footprint_length_m(self) -> float:  # pragma: no cover - each platform overrides
+        raise NotImplementedError
+
+    @property
+    def footprint_width_m(self) -> float:  # pragma: no cover - each platform overrides
+        raise NotImplementedError
+
+    def check_control_period(self, control_dt_s: float) -> None:
+        """Raise ``ValueError`` if the platform cannot run at this control period."""
+
+
+@dataclass(frozen=True)
+class ActionField:
+    """One entry of a platform's action: name (with unit), unit, meaning."""
+
+    name: str
+    unit: str
+    doc: str
+
+
+@dataclass(frozen=True)
+class Platform:
+    """A registered platform: what the runner, the env faces and the tasks need of it.
+
+    :param name: registry name (``"diff_drive"``).
+    :param config: its config class (the default instance is ``config()``).
+    :param params: its parameter block (begins with :func:`base_param_fields`).
+    :param state: its state block.
+    :param actions: the action's entries, in order.
+    :param module: the module holding the compiled ``reset`` and ``drive``.
+    :param action_high: the action bound of each entry (symmetric) for a config.
+    :param randomize: per-episode draws into the lanes' parameter records
+        ``(params, lanes, cfg, keys)``.
+    :param info: ``(info key, state field, index or None, doc)`` the envs report.
+    :param doc: one line for docs and errors.
+    """
+
+    name: str
+    config: type[PlatformConfig]
+    params: Block
+    state: Block
+    actions: tuple[ActionField, ...]
+    module: str
+    action_high: Callable[[Any], np.ndarray]
+    randomize: Callable[[np.ndarray, np.ndarray, Any, np.ndarray], None]
+    info: Sequence[tuple[str, str, int | None, str]] = field(default_factory=tuple)
+    doc: str = ""
+
+    @property
+    def action_size(self) -> int:
+        """Entries of the action."""
+        return len(self.actions)
+
+
+def motor_gains(keys: np.ndarray, n_motors: int, spread: float) -> np.ndarray:
+    """Per-episode gain factors ``(len(keys), n_motors)``: ``1 + spread z`` clipped to
+    [0.5, 1.5] (SPEC §2's motor ratios P_i)."""
+    gains = 1.0 + LaneRandom(keys[:, streams.MOTOR.index]).normal(
+        n_motors, scale=spread, at=MOTOR_GAINS
+    )
+    return np.clip(gains, 0.5, 1.5)

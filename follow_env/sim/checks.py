@@ -1,0 +1,106 @@
+"""The one range-error helper: every "value out of range" message of the project comes from here.
+
+Configuration fields, guidance-law parameters, the planner's parameters and the learned agent's
+feature settings all report a bad value the same way, naming the owner, the field, the value and
+what is allowed::
+
+    PIDConfig.kp=-1.0 is out of range: must be [0, 10000] %/(m/s)
+
+numpy integer and floating scalars are accepted wherever Python numbers are (sweeps build values
+with ``np.linspace``); :func:`as_number` turns them into Python numbers.
+"""
+
+from __future__ import annotations
+
+import math
+from numbers import Integral, Real
+
+__all__ = ["as_number", "check_number", "is_integer", "is_real", "out_of_range", "range_text"]
+
+
+def out_of_range(where: str, value: object, rule: str) -> ValueError:
+    """The error for ``where`` (e.g. ``"PIDConfig.kp"``) holding ``value``, which must be ``rule``.
+
+    :param where: owner and field, as the user names them.
+    :param value: the rejected value (shown with ``repr``).
+    :param rule: what is allowed, e.g. ``"[0, 1]"`` or ``"one of 'clamp', 'none'"``.
+    """
+    return ValueError(f"{where}={value!r} is out of range: must be {rule}")
+
+
+def is_real(value: object) -> bool:
+    """A real number (Python or numpy int/float), not a bool."""
+    return isinstance(value, Real) and not isinstance(value, bool)
+
+
+def is_integer(value: object) -> bool:
+    """An integer (Python or numpy), not a bool."""
+    return isinstance(value, Integral) and not isinstance(value, bool)
+
+
+def as_number(value: object) -> object:
+    """numpy scalars as Python ``int``/``float``; anything else unchanged."""
+    if is_integer(value):
+        return int(value)  # type: ignore[call-overload]
+    if is_real(value):
+        return float(value)  # type: ignore[arg-type]
+    return value
+
+
+def range_text(
+    lo: float | None,
+    hi: float | None,
+    *,
+    unit: str = "",
+    lo_open: bool = False,
+    hi_open: bool = False,
+    integer: bool = False,
+) -> str:
+    """``[lo, hi] unit`` in interval notation (``-inf``/``inf`` for a missing bound)."""
+    left = "(" if lo_open else "["
+    right = ")" if hi_open else "]"
+    lo_s = "-inf" if lo is None else f"{lo:g}"
+    hi_s = "inf" if hi is None else f"{hi:g}"
+    kind = "an integer in " if integer else ""
+    return f"{kind}{left}{lo_s}, {hi_s}{right}" + (f" {unit}" if unit else "")
+
+
+def check_number(
+    where: str,
+    value: object,
+    lo: float | None = None,
+    hi: float | None = None,
+    *,
+    unit: str = "",
+    lo_open: bool = False,
+    hi_open: bool = False,
+    integer: bool = False,
+    optional: bool = False,
+) -> int | float | None:
+    """Check a number against its range; returns it as a Python number.
+
+    :param where: owner and field for the message, e.g. ``"PNParams.kv"``.
+    :param value: the value to check (a Python or numpy number).
+    :param lo: lowest allowed value (``None``: unbounded below).
+    :param hi: highest allowed value (``None``: unbounded above).
+    :param unit: unit shown in the message.
+    :param lo_open: ``lo`` itself is not allowed.
+    :param hi_open: ``hi`` itself is not allowed.
+    :param integer: the value must be an integer.
+    :param optional: ``None`` is allowed too (and returned as is).
+    :raises ValueError: from :func:`out_of_range` when the value is not allowed.
+    """
+    if optional and value is None:
+        return None
+    rule = range_text(lo, hi, unit=unit, lo_open=lo_open, hi_open=hi_open, integer=integer)
+    if optional:
+        rule = f"None or {rule}"
+    ok = is_integer(value) if integer else is_real(value)
+    if ok:
+        number = float(value)  # type: ignore[arg-type]
+        ok = math.isfinite(number)
+        ok = ok and (lo is None or number > lo or (number == lo and not lo_open))
+        ok = ok and (hi is None or number < hi or (number == hi and not hi_open))
+    if not ok:
+        raise out_of_range(where, value, rule)
+    return as_number(value)  # type: ignore[return-value]

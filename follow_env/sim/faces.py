@@ -1,0 +1,354 @@
+"""The Gymnasium faces of any task: the single env (one lane) and the native vector env.
+
+No physics lives here: both step the runner (:mod:`follow_env.sim.runner`), so lane ``i`` of the
+vector env after ``reset(seed=s)`` is bit-for-bit the single env after ``reset(seed=s + i)``,
+through every autoreset. A task's env classes subclass :class:`TaskEnv` and
+:class:`TaskVectorEnv`, set ``task`` (its model) and write their manual in the docstring; the
+task model supplies the configuration, the spaces, the observations, the info and the renderer.
+"""
+
+from __future__ import annotations
+
+from typing import Any, ClassVar
+
+import gymnasium as gym
+import numpy as np
+from gymnasium.error import ResetNeeded
+from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.vector.utils import batch_space
+
+from follow_env.sim.checks import is_integer, out_of_range
+from follow_env.sim.runner import BatchedSim
+
+__all__ = ["TaskEnv", "TaskVectorEnv", "action_array", "lane_seeds"]
+
+RENDER_MODES = ["rgb_array", "human"]
+
+
+def lane_seeds(num_envs: int, seed: int | list[int | None] | None) -> list[int | None]:
+    """Root seed of every lane: an int ``s`` gives lane ``i`` the seed ``s + i`` (Gymnasium's
+    convention), a list gives one seed per lane, ``None`` fresh OS entropy."""
+    if seed is None:
+        seeds: list[int | None] = [None] * num_envs
+    elif is_integer(seed):
+        seeds = [int(seed) + i for i in range(num_envs)]  # type: ignore[arg-type]
+    else:
+        seeds = list(seed)  # type: ignore[arg-type]
+        if len(seeds) != num_envs:
+            raise ValueError(
+                f"seed has {len(seeds)} entries: must be an int, None, or a list of "
+                f"num_envs={num_envs} seeds"
+            )
+    return seeds
+
+
+def action_array(action: Any, shape: tuple[int, ...], names: str) -> np.ndarray:
+    """``action`` as a float64 array of exactly ``shape``, finite; ``ValueError`` naming the
+    expected and the received shape (or the bad entries) otherwise."""
+    try:
+        arr = np.asarray(action, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(
+            f"action={action!r} is out of range: must be an array of shape {shape} {names}"
+        ) from None
+    if arr.shape != shape:
+        raise ValueError(f"action has shape {arr.shape}: must be {shape} {names} (got {action!r})")
+    if not np.isfinite(arr).all():
+        if arr.ndim == 2:
+            bad = np.flatnonzero(~np.isfinite(arr).all(axis=1)).tolist()
+            raise ValueError(f"actions of lanes {bad} are out of range: must be finite")
+        raise ValueError(f"action={action!r} is out of range: must be finite {names}")
+    return arr
+
+
+def _check_render_mode(cls: type, render_mode: str | None) -> None:
+    if render_mode is not None and render_mode not in cls.metadata["render_modes"]:
+        raise out_of_range(
+            "render_mode",
+            render_mode,
+            "None or one of " + ", ".join(repr(m) for m in cls.metadata["render_modes"]),
+        )
+
+
+class TaskEnv(gym.Env[np.ndarray, np.ndarray]):
+    """One lane of the runner as a Gymnasium env (the base of every task's single env).
+
+    :param config: a preset name, a config object, or a dict of section overrides.
+    :param render_mode: ``"rgb_array"``, ``"human"`` (a window) or ``None``.
+    :param kwargs: the task's shorthands (e.g. ``scenario=``) and config sections.
+    """
+
+    task: ClassVar[Any]
+    metadata: ClassVar[dict[str, Any]] = {"render_modes": RENDER_MODES, "render_fps": 10}
+
+    def __init__(self, config: Any = None, render_mode: str | None = None, **kwargs: Any) -> None:
+        self.config = self.task.resolve_config(config, **kwargs)
+        _check_render_mode(type(self), render_mode)
+        self.render_mode = render_mode
+        self.sim = BatchedSim(self.task, self.config, 1)
+        self.observation_space, self.action_space = self.task.spaces(self.config, self.sim.platform)
+        self._action_names = "[" + ", ".join(a.name for a in self.sim.platform.actions) + "]"
+        self._action = np.zeros((1, self.action_space.shape[0]))
+        self._lane = np.zeros(1, dtype=np.int64)
+        self._renderer: Any = None
+        self._window: Any = None
+        self._needs_reset = True
+
+    # -- Gymnasium API -------------------------------------------------------------------------
+
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[np.ndarray, dict[str, Any]]:
+        """Start an episode. ``seed`` seeds the episode streams; later resets without a seed
+        continue from it (each episode spawns the next child ``SeedSequence``)."""
+        super().reset(seed=seed)
+        if options:
+            raise ValueError(f"options={options!r} is out of range: this env takes no options")
+        self.sim.reset_lanes(self._lane, None if seed is None else [seed])
+        self._needs_reset = False
+        if self.render_mode is not None:
+            self._ensure_renderer().reset()
+            self._renderer.record(self.sim.lane(0))
+            if self.render_mode == "human":
+                self.render()
+        return self._obs(), self._info()
+
+    def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        """Apply ``action`` (the platform's, in SI) for one control step."""
+        if self._needs_reset:
+            raise ResetNeeded("call reset() before step()")
+        self._action[0] = action_array(action, self.action_space.shape, self._action_names)
+        self.sim.step(self._action)
+        ep = self.sim.episode[0]
+        terminated, truncated = bool(ep["terminated"]), bool(ep["truncated"])
+        if self._renderer is not None:
+            self._renderer.record(self.sim.lane(0))
+            if self.render_mode == "human":
+                self.render()
+        return self._obs(), float(ep["reward"]), terminated, truncated, self._info()
+
+    def render(self) -> np.ndarray | None:
+        """``rgb_array``: the frame (H x W x 3 uint8). ``human``: shows it in a window."""
+        if self.render_mode is None:
+            gym.logger.warn("render() called without a render_mode; returning None")
+            return None
+        frame = self._ensure_renderer().draw(self.sim.lane(0))
+        if self.render_mode == "human":
+            from follow_env.sim.window import Window
+
+            if self._window is None:
+                self._window = Window(type(self).__name__, frame.shape[1], frame.shape[0])
+            self._window.show(frame, self.metadata["render_fps"])
+            return None
+        return frame
+
+    def close(self) -> None:
+        """Release the renderer and the window."""
+        self._renderer = None
+        if self._window is not None:
+            self._window.close()
+            self._window = None
+        self.sim.close()
+
+    # -- helpers --------------------------------------------------------------------------------
+
+    def _ensure_renderer(self) -> Any:
+        if self._renderer is None:
+            self._renderer = self.task.renderer(self.config)
+            self._renderer.record(self.sim.lane(0))
+        return self._renderer
+
+    def _obs(self) -> np.ndarray:
+        return self.task.observations(self.sim)[0]
+
+    def _info(self) -> dict[str, Any]:
+        return self.task.lane_info(self.sim, 0)
+
+
+class TaskVectorEnv(VectorEnv):
+    """``num_envs`` independent lanes of the runner as a Gymnasium ``VectorEnv``.
+
+    Takes every keyword argument of the task's single env plus ``autoreset_mode``
+    (``AutoresetMode.NEXT_STEP``, the default, ``SAME_STEP`` or ``DISABLED``), declared in
+    ``metadata["autoreset_mode"]`` and followed exactly as Gymnasium's ``SyncVectorEnv`` does:
+
+    * ``NEXT_STEP``: the step after a lane ends resets it (its action is ignored) and returns
+      the new first observation with reward 0 and both flags False.
+    * ``SAME_STEP``: a lane that ends is reset within the same step; the returned observation
+      is the new episode's, the final one is in ``info["final_obs"]`` and its info in
+      ``info["final_info"]`` (with masks ``_final_obs`` and ``_final_info``).
+    * ``DISABLED``: ended lanes must be reset with ``reset(options={"reset_mask": mask})``.
+
+    Seeding: ``reset(seed=s)`` gives lane ``i`` the seed stream of ``s + i`` (a list gives one
+    seed per lane), so lane ``i`` replays the single env reset with ``seed=s + i``. ``info`` is
+    Gymnasium's dict of arrays with ``_key`` masks.
+    """
+
+    task: ClassVar[Any]
+
+    def __init__(
+        self,
+        num_envs: int = 1,
+        config: Any = None,
+        render_mode: str | None = None,
+        autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
+        **kwargs: Any,
+    ) -> None:
+        if not is_integer(num_envs) or num_envs < 1:
+            raise out_of_range("num_envs", num_envs, "an integer >= 1")
+        try:
+            mode = AutoresetMode(autoreset_mode)
+        except ValueError:
+            raise out_of_range(
+                "autoreset_mode",
+                autoreset_mode,
+                "one of " + ", ".join(m.name for m in AutoresetMode),
+            ) from None
+        if render_mode not in (None, "rgb_array"):
+            raise out_of_range("render_mode", render_mode, "None or 'rgb_array'")
+        self.config = self.task.resolve_config(config, **kwargs)
+        self.num_envs = int(num_envs)
+        self.render_mode = render_mode
+        self.autoreset_mode = mode
+        self.metadata = {"render_modes": ["rgb_array"], "render_fps": 10, "autoreset_mode": mode}
+        self.sim = BatchedSim(self.task, self.config, self.num_envs)
+        self.single_observation_space, self.single_action_space = self.task.spaces(
+            self.config, self.sim.platform
+        )
+        self.observation_space = batch_space(self.single_observation_space, self.num_envs)
+        self.action_space = batch_space(self.single_action_space, self.num_envs)
+        self._action_names = "[" + ", ".join(a.name for a in self.sim.platform.actions) + "]"
+        self._autoreset = np.zeros(self.num_envs, dtype=np.bool_)
+        self._actions = np.zeros((self.num_envs, self.single_action_space.shape[0]))
+        self._mask = np.ones(self.num_envs, dtype=np.bool_)
+        self._renderers: list[Any] = []
+
+    # -- Gymnasium API ------------------------------------------------------------------------
+
+    def reset(
+        self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[np.ndarray, dict[str, Any]]:
+        """Reset all lanes, or those in ``options["reset_mask"]`` (bool array of num_envs)."""
+        options = dict(options or {})
+        mask = options.pop("reset_mask", None)
+        if options:
+            raise ValueError(f"options={options!r} is out of range: only 'reset_mask' is taken")
+        if mask is None:
+            mask = np.ones(self.num_envs, dtype=np.bool_)
+        elif (
+            not isinstance(mask, np.ndarray)
+            or mask.shape != (self.num_envs,)
+            or mask.dtype != np.bool_
+            or not mask.any()
+        ):
+            raise ValueError(
+                f"options['reset_mask']={mask!r} is out of range: must be a bool numpy array "
+                f"of shape ({self.num_envs},) with at least one True"
+            )
+        lanes = np.flatnonzero(mask)
+        seeds = None if seed is None else [lane_seeds(self.num_envs, seed)[i] for i in lanes]
+        self._reset_lanes(lanes, seeds)
+        self._autoreset[lanes] = False
+        info = self._info()
+        if not mask.all():
+            # Only the reset lanes report an info, as in SyncVectorEnv.
+            for key in list(info):
+                if not key.startswith("_"):
+                    info["_" + key] = mask
+        return self.task.observations(self.sim), info
+
+    def step(
+        self, actions: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+        """Step every lane with its row of ``actions`` (num_envs, action size)."""
+        self._actions[:] = action_array(actions, self._actions.shape, self._action_names)
+        ep = self.sim.episode
+        if self.autoreset_mode == AutoresetMode.NEXT_STEP:
+            restart = self._autoreset.copy()
+            if restart.all():
+                self._reset_lanes(np.arange(self.num_envs))
+            else:
+                self.sim.step(self._actions, ~restart if restart.any() else None)
+                if restart.any():
+                    self._reset_lanes(np.flatnonzero(restart))
+        elif self.autoreset_mode == AutoresetMode.DISABLED:
+            if self._autoreset.any():
+                raise ValueError(
+                    f"lanes {np.flatnonzero(self._autoreset).tolist()} ended and were not reset: "
+                    "with AutoresetMode.DISABLED call reset(options={'reset_mask': ...}) first"
+                )
+            self.sim.step(self._actions)
+        else:  # SAME_STEP
+            self.sim.step(self._actions)
+            ended = (ep["terminated"] > 0.0) | (ep["truncated"] > 0.0)
+            if ended.any():
+                lanes = np.flatnonzero(ended)
+                final_obs = np.full(self.num_envs, None, dtype=object)
+                obs_now = self.task.observations(self.sim)
+                for i in lanes:
+                    final_obs[i] = obs_now[i]
+                final_info = self._info(mask=ended)
+                reward = ep["reward"].copy()
+                terminated = ep["terminated"] > 0.0
+                truncated = ep["truncated"] > 0.0
+                self._reset_lanes(lanes)
+                info = self._info()
+                info.update(
+                    {
+                        "final_obs": final_obs,
+                        "_final_obs": ended,
+                        "final_info": final_info,
+                        "_final_info": ended,
+                    }
+                )
+                self._render_record()
+                return self.task.observations(self.sim), reward, terminated, truncated, info
+        terminated = ep["terminated"] > 0.0
+        truncated = ep["truncated"] > 0.0
+        if self.autoreset_mode != AutoresetMode.SAME_STEP:
+            self._autoreset = terminated | truncated
+        self._render_record()
+        obs = self.task.observations(self.sim)
+        return obs, ep["reward"].copy(), terminated, truncated, self._info()
+
+    def render(self) -> tuple[np.ndarray, ...] | None:
+        """One ``rgb_array`` frame per lane (as ``SyncVectorEnv`` returns them)."""
+        if self.render_mode is None:
+            gym.logger.warn("render() called without a render_mode; returning None")
+            return None
+        self._ensure_renderers()
+        return tuple(r.draw(self.sim.lane(i)) for i, r in enumerate(self._renderers))
+
+    def close_extras(self, **kwargs: Any) -> None:
+        """Stop the runner's worker threads and drop the renderers."""
+        self.sim.close()
+        self._renderers = []
+
+    # -- helpers ------------------------------------------------------------------------------
+
+    def _reset_lanes(self, lanes: np.ndarray, seeds: list[int | None] | None = None) -> None:
+        """Start each lane's next episode (with new root seeds if given)."""
+        self.sim.reset_lanes(lanes, seeds)
+        if self.render_mode is not None:
+            self._ensure_renderers()
+            for i in lanes:
+                self._renderers[i].reset()
+                self._renderers[i].record(self.sim.lane(int(i)))
+
+    def _info(self, mask: np.ndarray | None = None) -> dict[str, Any]:
+        """Dict-of-arrays info for all lanes, with ``_key`` masks (``mask`` or all lanes)."""
+        info: dict[str, Any] = self.task.batch_info(self.sim)
+        m = self._mask if mask is None else mask
+        for key in list(info):
+            info["_" + key] = m
+        return info
+
+    def _ensure_renderers(self) -> None:
+        if not self._renderers:
+            self._renderers = [self.task.renderer(self.config) for _ in range(self.num_envs)]
+            for i, renderer in enumerate(self._renderers):
+                renderer.record(self.sim.lane(i))
+
+    def _render_record(self) -> None:
+        for i, renderer in enumerate(self._renderers):
+            renderer.record(self.sim.lane(i))

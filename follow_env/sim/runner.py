@@ -1,0 +1,209 @@
+"""The batched lane runner: N lanes of one (platform, task) pair, stepped by one kernel.
+
+All state lives in a few arrays with one entry per lane: ``params`` and ``state`` are arrays of
+records (:mod:`follow_env.sim.schema`) whose blocks are the platform's and the task's, plus the
+robot's body and the episode's counters; ``world`` is the task's tuple of per-lane arrays (e.g.
+people, paths, walls); ``keys`` are the lanes' random stream keys. One call of the pair's
+compiled kernel (:mod:`follow_env.sim.compose`) advances every lane by one control step; from
+:data:`PARALLEL_MIN_LANES` lanes on the lanes are split into one block per core, each stepped
+on its own thread (the kernel releases the GIL). The single env is one lane; the vector env and
+the SB3 adapter are the same runner with N lanes, so they cannot drift apart.
+"""
+
+from __future__ import annotations
+
+import os
+from concurrent.futures import ThreadPoolExecutor
+from typing import Any, Protocol
+
+import numpy as np
+
+from follow_env.platforms import get_platform
+from follow_env.platforms.base import BODY, Platform
+from follow_env.sim import compose
+from follow_env.sim.checks import out_of_range
+from follow_env.sim.jit import compile_notice
+from follow_env.sim.rng import LaneSeeds
+from follow_env.sim.schema import Block, f8, i8
+from follow_env.sim.streams import N_STREAMS
+
+__all__ = ["EPISODE", "PARALLEL_MIN_LANES", "BatchedSim", "LaneView", "TaskModel"]
+
+EPISODE = Block(
+    "episode",
+    "the episode's counters and this step's outcome, written by the task's kernel",
+    [
+        i8("step", "steps", "control steps taken"),
+        f8("t", "s", "episode time"),
+        f8("reward", "", "this step's reward"),
+        f8("terminated", "", "1 when the episode ended in a terminal state"),
+        f8("truncated", "", "1 when the episode was cut short"),
+        i8("reason", "", "why the episode ended (the task's termination codes; 0: not ended)"),
+    ],
+)
+
+PARALLEL_MIN_LANES = 256
+"""From this many lanes on, the runner steps blocks of lanes on one thread per core."""
+
+
+class TaskModel(Protocol):
+    """What the runner needs of a task (see ``follow_env.tasks.person_follow.task``)."""
+
+    name: str
+    kernel_module: str
+    params: Block
+    state: Block
+
+    def check(self, cfg: Any) -> None:
+        """Refuse a configuration the task cannot run (naming the field)."""
+
+    def world(self, cfg: Any, num_lanes: int) -> tuple[np.ndarray, ...]:
+        """The task's per-lane arrays, zeroed."""
+
+    def prepare_reset(self, sim: BatchedSim, lanes: np.ndarray, keys: np.ndarray) -> np.ndarray:
+        """Write the new episodes' world into ``sim`` (the lanes' state is zeroed); return the
+        robots' start poses ``(len(lanes), 3)``."""
+
+
+class LaneView:
+    """One lane's live records: ``params``, ``state`` (numpy records) and ``world`` (the
+    lane's entry of each world array). Reading them always shows the current step."""
+
+    def __init__(self, sim: BatchedSim, lane: int) -> None:
+        self.lane = lane
+        self.cfg = sim.cfg
+        self.params = sim.params[lane]
+        self.state = sim.state[lane]
+        self.world = tuple(w[lane] for w in sim.world)
+
+
+class BatchedSim:
+    """N lanes of the simulation, each running its own episode.
+
+    :param task: the task model (its blocks, world arrays and resets).
+    :param cfg: the configuration shared by all lanes (its ``platform`` names the platform).
+    :param num_lanes: N.
+    """
+
+    def __init__(self, task: TaskModel, cfg: Any, num_lanes: int) -> None:
+        if (
+            isinstance(num_lanes, bool)
+            or not isinstance(num_lanes, int | np.integer)
+            or num_lanes < 1
+        ):
+            raise out_of_range("num_lanes", num_lanes, "an integer >= 1")
+        num_lanes = int(num_lanes)
+        self.task = task
+        self.cfg = cfg
+        self.n = num_lanes
+        self.platform: Platform = get_platform(cfg.platform.NAME)
+        task.check(cfg)
+        self.params_dtype = np.dtype(
+            [("platform", self.platform.params.dtype), ("task", task.params.dtype)], align=True
+        )
+        self.state_dtype = np.dtype(
+            [
+                ("body", BODY.dtype),
+                ("episode", EPISODE.dtype),
+                ("platform", self.platform.state.dtype),
+                ("task", task.state.dtype),
+            ],
+            align=True,
+        )
+        self.base_params = np.zeros((), self.params_dtype)
+        self.platform.params.fill(self.base_params["platform"], cfg)
+        task.params.fill(self.base_params["task"], cfg)
+        self.params = np.empty(num_lanes, self.params_dtype)
+        self.params[:] = self.base_params
+        self.state = np.zeros(num_lanes, self.state_dtype)
+        self.world = task.world(cfg, num_lanes)
+        self.keys = np.zeros((num_lanes, N_STREAMS), dtype=np.uint64)
+        self.seeds = LaneSeeds(num_lanes)
+        self._all = np.ones(num_lanes, dtype=np.bool_)
+        kernels = compose.kernels(
+            task.name, task.kernel_module, self.platform.name, self.platform.module
+        )
+        self._step_kernel, self._reset_kernel = kernels.step_lanes, kernels.reset_lanes
+        compile_notice([self._step_kernel, self._reset_kernel])
+        workers = min(os.cpu_count() or 1, max(1, num_lanes // (PARALLEL_MIN_LANES // 2)))
+        self._pool: ThreadPoolExecutor | None = None
+        self._blocks: list[tuple[int, int]] = []
+        if num_lanes >= PARALLEL_MIN_LANES and workers > 1:
+            edges = np.linspace(0, num_lanes, workers + 1).astype(int)
+            self._blocks = list(zip(edges[:-1].tolist(), edges[1:].tolist(), strict=True))
+            self._pool = ThreadPoolExecutor(workers - 1, thread_name_prefix="personfollow")
+
+    # -- lanes ----------------------------------------------------------------------------------
+
+    @property
+    def body(self) -> np.ndarray:
+        """Every lane's body record (pose, twist, measured speed)."""
+        return self.state["body"]
+
+    @property
+    def episode(self) -> np.ndarray:
+        """Every lane's episode record (step, time, reward, flags, reason)."""
+        return self.state["episode"]
+
+    def lane(self, i: int) -> LaneView:
+        """A live view of lane ``i`` (for renderers and tests)."""
+        return LaneView(self, i)
+
+    def reset_lanes(self, lanes: np.ndarray, seeds: list[int | None] | None = None) -> None:
+        """Start the next episode of each of ``lanes``.
+
+        :param lanes: lane indices.
+        :param seeds: new root seeds for these lanes (an int, or ``None`` for OS entropy,
+            each); without it every lane goes on to its next episode (see
+            :class:`~follow_env.sim.rng.LaneSeeds`).
+        """
+        lanes = np.asarray(lanes, dtype=np.int64)
+        if seeds is not None:
+            self.seeds.seed(lanes, list(seeds))
+        keys = self.seeds.next_keys(lanes)
+        self.keys[lanes] = keys
+        self.state[lanes] = np.zeros(lanes.size, self.state_dtype)
+        self.params[lanes] = self.base_params
+        self.platform.randomize(
+            self.params["platform"], self.base_params["platform"], lanes, self.cfg, keys
+        )
+        pose = self.task.prepare_reset(self, lanes, keys)
+        self._reset_kernel(
+            lanes,
+            np.ascontiguousarray(pose, dtype=np.float64),
+            self.params,
+            self.state,
+            self.world,
+            self.keys,
+        )
+
+    def step(self, actions: np.ndarray, active: np.ndarray | None = None) -> None:
+        """Advance the lanes by one control step; ``actions`` is (N, action size) float64;
+        ``active`` (N,) bool selects the lanes to step (default: all)."""
+        mask = self._all if active is None else active
+        if self._pool is None:
+            self._step_kernel(self.params, self.state, self.world, self.keys, actions, mask)
+            return
+
+        def block(lo: int, hi: int) -> None:
+            self._step_kernel(
+                self.params[lo:hi],
+                self.state[lo:hi],
+                tuple(w[lo:hi] for w in self.world),
+                self.keys[lo:hi],
+                actions[lo:hi],
+                mask[lo:hi],
+            )
+
+        # One block of lanes per core; the kernel releases the GIL, and this thread takes the
+        # first block itself rather than wait idle.
+        jobs = [self._pool.submit(block, lo, hi) for lo, hi in self._blocks[1:]]
+        block(*self._blocks[0])
+        for job in jobs:
+            job.result()
+
+    def close(self) -> None:
+        """Stop the worker threads (if any)."""
+        if self._pool is not None:
+            self._pool.shutdown()
+            self._pool = None

@@ -1,0 +1,317 @@
+"""PersonFollow as the runner sees it: its blocks, world arrays, resets, observations and info.
+
+The compiled part is in :mod:`.kernel` (with :mod:`.perception` and :mod:`.reward`); this module
+is the numpy side: the task's parameter and state blocks (the camera's, the detector's and the
+depth stream's nested inside), the per-lane world (people, their paths, walls), what a reset
+does before the kernel runs (the scenario, the sensors' randomisation), and how observations and
+the ``info`` dict are read from the state.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+
+from follow_env.platforms import get_platform
+from follow_env.platforms.base import Platform, PlatformConfig
+from follow_env.sensors import camera, depth, detector
+from follow_env.sensors.detector import PEOPLE_MAX
+from follow_env.sim.checks import out_of_range
+from follow_env.sim.runner import BatchedSim
+from follow_env.sim.schema import Block, f8, i8, nested
+from follow_env.tasks.person_follow import reward
+from follow_env.tasks.person_follow.config import PRESETS, THESIS, EnvConfig
+from follow_env.tasks.person_follow.people import PERSON, WAYPOINT
+from follow_env.tasks.person_follow.scenarios import ScenarioSpec, get_scenario
+from follow_env.tasks.person_follow.spec import SPEC, observation_bounds
+from follow_env.world.geometry import WALL, WALL_RADIUS_M
+
+__all__ = ["PARAMS", "STATE", "TASK", "PersonFollowTask"]
+
+N_OCCLUDERS = 64
+"""Most occluders listed for one sight line."""
+
+PARAMS = Block(
+    "person_follow_params",
+    "the camera, the detector, depth, the people, the reward and the episode",
+    [
+        nested("camera", camera.PARAMS),
+        nested("detector", detector.PARAMS),
+        nested("depth", depth.PARAMS),
+        nested("reward", reward.PARAMS),
+        f8("person_h", "m", "body height", source="person.height_m"),
+        f8("person_w", "m", "body width", source="person.width_m"),
+        f8("person_d", "m", "body depth", source="person.depth_m"),
+        f8("person_accel", "m/s^2", "walking acceleration", source="person.accel_mps2"),
+        f8("person_decel", "m/s^2", "walking deceleration", source="person.decel_mps2"),
+        f8("social_radius", "m", "people step aside within this", source="person.social_radius_m"),
+        f8(
+            "social_strength",
+            "m/s^2",
+            "social force strength",
+            source="person.social_strength_mps2",
+        ),
+        f8("dt", "s", "control period", source="episode.control_dt_s"),
+        f8("max_steps", "steps", "episode step cap", source="episode.max_steps"),
+        f8("lost_timeout", "s", "lost after this long undetected", source="episode.lost_timeout_s"),
+        f8(
+            "clearance",
+            "m",
+            "closer to the target is a collision",
+            source="episode.person_clearance_m",
+        ),
+        f8(
+            "settle",
+            "s",
+            "the episode runs on this long after the walk",
+            source="scenario.settle_s",
+        ),
+        f8("wall_radius", "m", "half a wall's thickness", source=lambda c: WALL_RADIUS_M),
+    ],
+)
+
+STATE = Block(
+    "person_follow_state",
+    "what the perception publishes, the ground truth, and the people and walls in use",
+    [
+        nested("detector", detector.STATE),
+        nested("filter", depth.STATE),
+        f8("obs_d", "m", "published distance (observation 0)"),
+        f8("obs_o", "px", "published offset (observation 1)"),
+        f8("detected", "", "1: this step's observation is a fresh detection"),
+        i8("detected_id", "", "whose detection is published (-1: none)"),
+        f8("raw_depth", "m", "unfiltered depth of the published detection"),
+        f8("box", "px", "published box u1, v1, u2, v2", shape=(4,)),
+        f8("lost_t", "s", "time since the last published detection"),
+        f8("true_d", "m", "camera to the front of the target's body"),
+        f8("true_o", "px", "image column of the target's axis - width // 2"),
+        f8("in_frame", "", "1: enough of the target in the image and in sight"),
+        f8("vis_frac", "", "the target's visible share"),
+        f8("walk_end_t", "s", "when the target's walk ended (-1: not yet)"),
+        f8("clear_wall", "m", "footprint to the nearest wall"),
+        f8("clear_person", "m", "footprint to the target"),
+        f8(
+            "reward_terms",
+            "",
+            "this step's reward terms (reward.TERMS)",
+            shape=(len(reward.TERMS),),
+        ),
+        i8("n_people", "", "people in the lane (the target first)"),
+        i8("n_walls", "", "wall segments in the lane"),
+        i8("n_points", "", "waypoints of each person's path", shape=(PEOPLE_MAX,)),
+        f8("corners", "", "scratch: a body's 8 corners in the camera frame", shape=(24,)),
+        i8("occluders", "", "scratch: occluders listed for a sight line", shape=(N_OCCLUDERS,)),
+    ],
+)
+
+# info keys read straight from a state field: (key, path into the lane's state record).
+_STATE_INFO: dict[str, tuple[str, ...]] = {
+    "time_s": ("episode", "t"),
+    "robot_x_m": ("body", "x"),
+    "robot_y_m": ("body", "y"),
+    "robot_theta_rad": ("body", "th"),
+    "robot_v_mps": ("body", "v"),
+    "robot_w_radps": ("body", "w"),
+    "true_distance_m": ("task", "true_d"),
+    "true_offset_px": ("task", "true_o"),
+    "raw_depth_m": ("task", "raw_depth"),
+    "encoder_speed_mps": ("body", "v_meas"),
+    "accel_mps2": ("body", "accel"),
+    "wall_clearance_m": ("task", "clear_wall"),
+    "person_clearance_m": ("task", "clear_person"),
+}
+# ... from the target person's record.
+_PERSON_INFO = {"person_x_m": "x", "person_y_m": "y", "person_theta_rad": "th", "person_v_mps": "v"}
+_REASONS = np.array(SPEC.terminations, dtype=object)
+
+
+class PersonFollowTask:
+    """The person-following task (SPEC §1) for the runner and the env faces."""
+
+    name = SPEC.name
+    spec = SPEC
+    kernel_module = "follow_env.tasks.person_follow.kernel"
+    params = PARAMS
+    state = STATE
+    config_class = EnvConfig
+    presets = PRESETS
+    default_config = THESIS
+
+    # -- configuration -------------------------------------------------------------------------
+
+    def resolve_config(
+        self,
+        config: EnvConfig | str | dict[str, Any] | None = None,
+        scenario: str | None = None,
+        platform: str | PlatformConfig | None = None,
+        **overrides: Any,
+    ) -> EnvConfig:
+        """Build an :class:`EnvConfig` from ``gym.make`` keyword arguments.
+
+        :param config: a preset name (``"thesis"``, ``"ideal"``, ``"noisy"``, ``"randomized"``),
+            an ``EnvConfig``, or a mapping of section overrides applied to the ``thesis`` preset.
+        :param scenario: shorthand for ``scenario={"name": ...}``.
+        :param platform: a platform name (its default configuration) or a platform config
+            object; sections of the platform may still be overridden (``robot={...}``).
+        :param overrides: sections (``perception={...}``) or ``section__field=value`` pairs.
+        """
+        if config is None:
+            cfg = THESIS
+        elif isinstance(config, EnvConfig):
+            cfg = config
+        elif isinstance(config, str):
+            if config not in PRESETS:
+                raise out_of_range(
+                    "config",
+                    config,
+                    "one of " + ", ".join(repr(p) for p in PRESETS) + " or an EnvConfig",
+                )
+            cfg = PRESETS[config]
+        elif isinstance(config, dict):
+            cfg = EnvConfig.from_overrides(THESIS, config)
+        else:
+            raise out_of_range("config", config, "a preset name, an EnvConfig or a dict")
+        flat: dict[str, Any] = {}
+        if platform is not None:
+            if isinstance(platform, str):
+                platform = get_platform(platform).config()
+            flat["platform"] = platform
+        for key, value in overrides.items():
+            flat[key.replace("__", ".")] = value
+        if scenario is not None:
+            flat["scenario.name"] = scenario
+        return EnvConfig.from_overrides(cfg, flat) if flat else cfg
+
+    def spaces(self, cfg: EnvConfig, platform: Platform) -> tuple[spaces.Box, spaces.Box]:
+        """``(observation_space, action_space)`` of one robot, float32: ``[distance_m,
+        offset_px]`` and the platform's action, bounded by what it can do."""
+        low, high = observation_bounds(cfg.camera.width_px, cfg.camera.depth_max_m)
+        observation = spaces.Box(
+            np.array(low, np.float32), np.array(high, np.float32), dtype=np.float32
+        )
+        top = platform.action_high(cfg).astype(np.float32)
+        return observation, spaces.Box(-top, top, dtype=np.float32)
+
+    def renderer(self, cfg: EnvConfig) -> Any:
+        """A renderer of this task's frames (OpenCV, headless)."""
+        from follow_env.tasks.person_follow.render import Renderer
+
+        return Renderer(cfg)
+
+    def scenario(self, cfg: EnvConfig) -> ScenarioSpec:
+        """The configured scenario (``ValueError`` naming the field when unknown)."""
+        return get_scenario(cfg.scenario.name)
+
+    def check(self, cfg: EnvConfig) -> None:
+        """Refuse what the configured scenario cannot use, and too many people."""
+        spec = self.scenario(cfg)
+        spec.check(cfg)
+        if spec.max_people > PEOPLE_MAX:
+            raise ValueError(
+                f"scenario {spec.name!r} declares {spec.max_people} people; the detector "
+                f"tracks at most {PEOPLE_MAX}"
+            )
+
+    def info_keys(self, platform: Platform) -> tuple[str, ...]:
+        """Every key of the ``info`` dict on ``platform``."""
+        return SPEC.info_keys(tuple(key for key, *_ in platform.info))
+
+    # -- the runner's side -----------------------------------------------------------------------
+
+    def world(self, cfg: EnvConfig, num_lanes: int) -> tuple[np.ndarray, ...]:
+        """``(people, paths, walls)``: records per lane, sized by the scenario."""
+        spec = self.scenario(cfg)
+        return (
+            PERSON.zeros(num_lanes, spec.max_people),
+            WAYPOINT.zeros(num_lanes, spec.max_people, spec.points_for(cfg)),
+            WALL.zeros(num_lanes, spec.max_walls),
+        )
+
+    def prepare_reset(self, sim: BatchedSim, lanes: np.ndarray, keys: np.ndarray) -> np.ndarray:
+        """Run the scenario for ``lanes``, write their people's paths and walls, draw the
+        sensors' per-episode randomisation; return the robots' start poses."""
+        spec = self.scenario(sim.cfg)
+        batch = spec.fn(spec.random(keys), sim.cfg)
+        _, paths, walls = sim.world
+        n_people_max, n_pts, n_w = batch.paths.shape[1], batch.paths.shape[2], batch.walls.shape[1]
+        if n_people_max > paths.shape[1] or n_pts > paths.shape[2] or n_w > walls.shape[1]:
+            raise ValueError(
+                f"scenario {spec.name!r} returned {n_people_max} people x {n_pts} points "
+                f"and {n_w} walls, more than it registered"
+            )
+        # Scenario arrays are plain floats whose columns are the records' fields.
+        flat_paths = paths.view(np.float64).reshape(*paths.shape, -1)
+        flat_walls = walls.view(np.float64).reshape(*walls.shape, -1)
+        flat_paths[lanes] = 0.0
+        flat_paths[lanes, :n_people_max, :n_pts] = batch.paths
+        flat_walls[lanes] = 0.0
+        flat_walls[lanes, :n_w] = batch.walls
+        ts = sim.state["task"]
+        ts["n_people"][lanes] = batch.n_people
+        ts["n_walls"][lanes] = batch.n_walls
+        n_points = np.zeros((lanes.size, PEOPLE_MAX), dtype=np.int64)
+        n_points[:, : batch.n_points.shape[1]] = batch.n_points
+        ts["n_points"][lanes] = n_points
+        prm, base = sim.params["task"], sim.base_params["task"]
+        camera.randomize(prm["camera"], lanes, sim.cfg, keys)
+        detector.randomize(prm["detector"], base["detector"], lanes, sim.cfg, keys)
+        depth.randomize(prm["depth"], base["depth"], lanes, sim.cfg, keys)
+        return batch.robot_pose
+
+    # -- what the env faces read ---------------------------------------------------------------
+
+    def observations(self, sim: BatchedSim) -> np.ndarray:
+        """The published observations of every lane, ``(N, 2)`` float32."""
+        ts = sim.state["task"]
+        return np.stack([ts["obs_d"], ts["obs_o"]], axis=1).astype(np.float32)
+
+    def lane_info(self, sim: BatchedSim, lane: int) -> dict[str, Any]:
+        """The ``info`` dict of one lane, as Python scalars."""
+        st = sim.state[lane]
+        info: dict[str, Any] = {}
+        for key, path in _STATE_INFO.items():
+            info[key] = float(st[path[0]][path[1]])
+        for key, field, index, _ in sim.platform.info:
+            value = st["platform"][field]
+            info[key] = float(value if index is None else value[index])
+        target = sim.world[0][lane, 0]
+        for key, field in _PERSON_INFO.items():
+            info[key] = float(target[field])
+        ts = st["task"]
+        info["in_frame"] = bool(ts["in_frame"])
+        info["detected"] = bool(ts["detected"])
+        info["detected_person"] = int(ts["detected_id"])
+        info["step"] = int(st["episode"]["step"])
+        info["termination"] = SPEC.terminations[int(st["episode"]["reason"])]
+        return {k: info[k] for k in self.info_keys(sim.platform)}
+
+    def batch_info(self, sim: BatchedSim, lanes: np.ndarray | None = None) -> dict[str, np.ndarray]:
+        """The ``info`` of many lanes as Gymnasium's dict of arrays (all lanes, or those in
+        ``lanes``), without the ``_key`` masks."""
+        state = sim.state if lanes is None else sim.state[lanes]
+        target = sim.world[0][:, 0] if lanes is None else sim.world[0][lanes, 0]
+        info: dict[str, np.ndarray] = {}
+        for key, path in _STATE_INFO.items():
+            info[key] = state[path[0]][path[1]].copy()
+        for key, field, index, _ in sim.platform.info:
+            value = state["platform"][field]
+            info[key] = (value if index is None else value[:, index]).copy()
+        for key, field in _PERSON_INFO.items():
+            info[key] = target[field].copy()
+        ts = state["task"]
+        info["in_frame"] = ts["in_frame"] > 0.0
+        info["detected"] = ts["detected"] > 0.0
+        info["detected_person"] = ts["detected_id"].copy()
+        info["step"] = state["episode"]["step"].copy()
+        info["termination"] = _REASONS[state["episode"]["reason"]]
+        return {k: info[k] for k in self.info_keys(sim.platform)}
+
+    def termination(self, sim: BatchedSim, lane: int) -> str:
+        """Why lane ``lane``'s episode ended (``""`` while it runs)."""
+        return SPEC.terminations[int(sim.episode["reason"][lane])]
+
+
+TASK = PersonFollowTask()
+"""The task model the env faces use."""
