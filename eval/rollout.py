@@ -1,4 +1,4 @@
-"""Identical rollouts: every policy on the same scenario x seed grid.
+"""Identical rollouts: every policy on the same scenario x seed grid, on the batched core.
 
 ``rollout(policies, scenarios, seeds)`` runs each policy for one episode per (scenario, seed)
 pair and returns the step logs. The environment draws every random number from the episode's
@@ -8,15 +8,22 @@ same path with the same detector misses, jitter and depth noise. Differences bet
 a table then come from the policies alone, and policies can be compared pair-wise on the same
 seeds (:mod:`eval.stats`).
 
-Episodes run in this process or in a process pool (``workers``); either way the results are
-identical and come back in grid order (policy, then scenario, then seed).
+The episodes of one (policy, scenario, config) run together as the lanes of one batched core
+(:func:`run_batch`): lane ``i`` seeded ``s_i`` is bit-for-bit the single env reset with
+``seed=s_i``, and a policy that acts for many lanes at once (``act_batch``) gives each lane the
+action it would give that episode alone (a policy without it gets one copy per lane). So the
+step logs are exactly those of one-by-one episodes, only faster. Work is generated lazily, one
+batch of at most :data:`BATCH_LANES` seeds at a time, and runs in this process or in a process
+pool (``workers``); either way the results are identical and come back in grid order (policy,
+then scenario, then seed).
 """
 
 from __future__ import annotations
 
+import copy
 import math
 import os
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from multiprocessing import get_context
@@ -26,18 +33,31 @@ import gymnasium as gym
 import numpy as np
 import pandas as pd
 
-import follow_env
 from eval.steplog import COLUMNS
-from policies import Policy, make_policy
+from follow_env.platforms import get_platform
+from follow_env.sim.runner import BatchedSim
+from follow_env.tasks.person_follow import ENV_ID
+from follow_env.tasks.person_follow.task import TASK
+from policies import BatchPolicy, Policy, make_policy
 
-__all__ = ["Episode", "auto_workers", "rollout", "run_episode"]
+__all__ = [
+    "BATCH_LANES",
+    "MAX_EPISODES",
+    "Episode",
+    "auto_workers",
+    "rollout",
+    "run_batch",
+    "run_episode",
+]
 
 PolicySpec = str | Policy
-EnvConfigSpec = str | Mapping[str, Any] | follow_env.EnvConfig
+EnvConfigSpec = str | Mapping[str, Any] | Any
 Reducer = Callable[["Episode"], Any]
 
 # Step-log columns copied from ``info`` under the same name (see eval.steplog.COLUMNS).
-_INFO_COLUMNS = tuple(c for c in COLUMNS if c in follow_env.INFO_KEYS and c != "termination")
+_INFO_COLUMNS = tuple(
+    c for c in COLUMNS if c in TASK.info_keys(get_platform("diff_drive")) and c != "termination"
+)
 # Booleans in info become 0/1 in the log, as a robot's CSV would hold them.
 _FLAG_COLUMNS = ("detected", "in_frame")
 
@@ -70,23 +90,27 @@ class Episode:
 
     @property
     def termination(self) -> str:
-        """Why the episode ended (``follow_env.INFO_KEYS`` "termination")."""
+        """Why the episode ended (the info key "termination")."""
         return str(self.log["termination"].iloc[-1])
 
 
 _ENV_CACHE: dict[tuple[str, str], gym.Env] = {}
 
+#: Most seeds run as the lanes of one batch (bounds the memory of the step logs in flight).
+BATCH_LANES = 256
+#: Most episodes one grid may hold (policies x scenarios x seeds): beyond this a run is refused
+#: before any work, rather than allowed to exhaust memory.
+MAX_EPISODES = 1_000_000
+
 
 def _env(scenario: str, config: EnvConfigSpec, render: bool) -> gym.Env:
     """One env per (scenario, config) per process: gym.make costs more than an episode."""
     if render:
-        return gym.make(
-            "PersonFollow-v0", scenario=scenario, config=config, render_mode="rgb_array"
-        )
+        return gym.make(ENV_ID, scenario=scenario, config=config, render_mode="rgb_array")
     key = (scenario, repr(config))
     env = _ENV_CACHE.get(key)
     if env is None:
-        env = _ENV_CACHE[key] = gym.make("PersonFollow-v0", scenario=scenario, config=config)
+        env = _ENV_CACHE[key] = gym.make(ENV_ID, scenario=scenario, config=config)
     return env
 
 
@@ -102,7 +126,8 @@ def run_episode(
     config: EnvConfigSpec = "thesis",
     on_frame: Callable[[np.ndarray], None] | None = None,
 ) -> Episode:
-    """Run one episode and return its step log.
+    """Run one episode on the single env and return its step log (the same log as lane
+    ``seed`` of :func:`run_batch`; this path also renders, for videos).
 
     :param policy: a policy name (``make_policy``) or a :class:`~policies.Policy`; it is reset
         before the first step.
@@ -135,28 +160,123 @@ def run_episode(
     finally:
         if on_frame is not None:
             env.close()
+    obs_arr = np.asarray(observations, dtype=np.float64)
+    act_arr = np.asarray(actions, dtype=np.float64).reshape(-1, 2)
+    columns = {k: [inf[k] for inf in infos] for k in (*_INFO_COLUMNS, "termination")}
     return Episode(
         law.name,
         scenario,
         int(seed),
-        _step_log(law.name, scenario, seed, observations, actions, infos, rewards),
+        _step_log(law.name, scenario, seed, obs_arr, act_arr, columns, rewards),
     )
+
+
+class _Actor:
+    """Actions for n lanes: the policy's own ``act_batch`` (one object, per-lane memory), or
+    one copy of the policy per lane for a policy that acts for one robot only."""
+
+    def __init__(self, spec: PolicySpec, n: int) -> None:
+        first = _policy(spec)
+        self.name = first.name
+        if isinstance(first, BatchPolicy):
+            self.batch: BatchPolicy | None = first
+            first.reset_batch(n)
+            self.lanes: list[Policy] = []
+        else:
+            self.batch = None
+            # A name builds fresh copies; an object is copied so lanes never share memory.
+            self.lanes = [first] + [
+                make_policy(spec) if isinstance(spec, str) else copy.deepcopy(first)
+                for _ in range(n - 1)
+            ]
+            for law in self.lanes:
+                law.reset()
+
+    def act(self, obs: np.ndarray, active: np.ndarray) -> np.ndarray:
+        if self.batch is not None:
+            return np.asarray(self.batch.act_batch(obs), dtype=np.float32)
+        out = np.zeros((len(obs), 2), dtype=np.float32)
+        for i in np.flatnonzero(active):
+            out[i] = np.asarray(self.lanes[i].act(obs[i]), dtype=np.float32)
+        return out
+
+
+def run_batch(
+    policy: PolicySpec, scenario: str, seeds: Sequence[int], *, config: EnvConfigSpec = "thesis"
+) -> list[Episode]:
+    """Run one episode per seed, the seeds as the lanes of one batched core; returns the step
+    logs in seed order, each identical to :func:`run_episode` of that seed (module docstring).
+
+    :param policy: a policy name or a :class:`~policies.Policy` (a policy with ``act_batch``
+        acts for all lanes; another is copied once per lane).
+    :param scenario: a registered scenario name.
+    :param seeds: the episodes' seeds.
+    :param config: the env configuration, as for :func:`run_episode`.
+    """
+    n = len(seeds)
+    cfg = TASK.resolve_config(config, scenario=scenario)
+    sim = BatchedSim(TASK, cfg, n)
+    try:
+        sim.reset_lanes(np.arange(n), [int(s) for s in seeds])
+        actor = _Actor(policy, n)
+        active = np.ones(n, dtype=bool)
+        ended_at = np.zeros(n, dtype=np.int64)  # the step each lane's episode ended at
+        observations = [TASK.observations(sim)]
+        infos = [TASK.batch_info(sim)]
+        actions: list[np.ndarray] = []
+        rewards: list[np.ndarray] = []
+        step = 0
+        while active.any():
+            action = actor.act(observations[-1], active)
+            sim.step(action.astype(np.float64), active)
+            step += 1
+            actions.append(action)
+            observations.append(TASK.observations(sim))
+            infos.append(TASK.batch_info(sim))
+            rewards.append(sim.episode["reward"].copy())
+            ep = sim.episode
+            ended = active & ((ep["terminated"] > 0.0) | (ep["truncated"] > 0.0))
+            ended_at[ended] = step
+            active &= ~ended
+    finally:
+        sim.close()
+    obs_all = np.stack(observations).astype(np.float64)  # (steps + 1, n, 2)
+    act_all = np.stack(actions).astype(np.float64)  # (steps, n, 2)
+    rew_all = np.stack(rewards)  # (steps, n)
+    keys = (*_INFO_COLUMNS, "termination")
+    info_all = {k: np.stack([inf[k] for inf in infos]) for k in keys}  # (steps + 1, n)
+    episodes = []
+    for i, seed in enumerate(seeds):
+        last = int(ended_at[i])
+        columns = {k: v[: last + 1, i] for k, v in info_all.items()}
+        rewards_i = [math.nan, *rew_all[:last, i].tolist()]
+        log = _step_log(
+            actor.name,
+            scenario,
+            seed,
+            obs_all[: last + 1, i],
+            act_all[:last, i],
+            columns,
+            rewards_i,
+        )
+        episodes.append(Episode(actor.name, scenario, int(seed), log))
+    return episodes
 
 
 def _step_log(
     policy: str,
     scenario: str,
     seed: int,
-    observations: list[np.ndarray],
-    actions: list[np.ndarray],
-    infos: list[dict[str, Any]],
+    obs: np.ndarray,
+    actions: np.ndarray,
+    info: dict[str, Any],
     rewards: list[float],
 ) -> pd.DataFrame:
-    n = len(infos)
-    obs = np.asarray(observations, dtype=np.float64)
+    """One episode's step log: rows of observations ``(n, 2)``, actions ``(n - 1, 2)`` (the
+    final row has none), info columns of length n, rewards (NaN in the reset row)."""
+    n = len(obs)
     act = np.full((n, 2), np.nan)
-    act[: len(actions)] = np.asarray(actions, dtype=np.float64).reshape(-1, 2)
-    info = pd.DataFrame.from_records(infos)
+    act[: len(actions)] = actions
     data: dict[str, Any] = {
         "policy": policy,
         "scenario": scenario,
@@ -165,13 +285,15 @@ def _step_log(
         "obs_offset_px": obs[:, 1],
         "action_v_mps": act[:, 0],
         "action_w_radps": act[:, 1],
-        "reward": rewards,
+        "reward": np.asarray(rewards, dtype=np.float64),
     }
     for column in _INFO_COLUMNS:
-        values = info[column]
+        values = np.asarray(info[column])
         data[column] = values.astype(np.int64) if column in _FLAG_COLUMNS else values
     # termination is only ever set in the final row; earlier rows are blank in the CSV.
-    data["termination"] = info["termination"].where(info.index == n - 1, "")
+    termination = np.full(n, "", dtype=object)
+    termination[-1] = info["termination"][-1]
+    data["termination"] = termination
     return pd.DataFrame(data, columns=list(COLUMNS))
 
 
@@ -186,10 +308,10 @@ def auto_workers(episodes: int) -> int:
     return max(1, min(cores, episodes // _EPISODES_PER_WORKER_START))
 
 
-def _run_task(task: tuple[PolicySpec, str, int, EnvConfigSpec, Reducer | None]) -> Any:
-    policy, scenario, seed, config, reduce = task
-    episode = run_episode(policy, scenario, seed, config=config)
-    return episode if reduce is None else reduce(episode)
+def _run_task(task: tuple[PolicySpec, str, tuple[int, ...], EnvConfigSpec, Reducer | None]) -> Any:
+    policy, scenario, seeds, config, reduce = task
+    episodes = run_batch(policy, scenario, seeds, config=config)
+    return episodes if reduce is None else [reduce(e) for e in episodes]
 
 
 def rollout(
@@ -205,9 +327,8 @@ def rollout(
     """Run every policy on every (scenario, seed) pair: identical rollouts.
 
     :param policies: policy names (``make_policy``; every tool's way of naming them) or
-        :class:`~policies.Policy` objects. A fresh policy is built (or the object reset) for
-        every episode, so episodes never share memory.
-    :param scenarios: registered scenario names (``follow_env.SCENARIOS``).
+        :class:`~policies.Policy` objects. Episodes never share a policy's memory.
+    :param scenarios: registered scenario names.
     :param seeds: the seeds; seed ``s`` gives the same person and noise to every policy.
     :param config: the env configuration, as for :func:`run_episode`.
     :param workers: processes to use; 1 runs here, None picks :func:`auto_workers`.
@@ -217,35 +338,67 @@ def rollout(
         episode then never holds thousands of step logs). Must be picklable for a pool (a
         module-level function).
     :returns: the episodes (or their reductions) in grid order: policy, scenario, seed.
-    :raises ValueError: for an unknown policy or scenario, an empty grid, a non-integer seed, or
-        workers < 1, before any episode runs.
+    :raises ValueError: for an unknown policy or scenario, an empty or too large grid, a
+        non-integer seed, or workers < 1, before any episode runs.
     """
-    tasks = [(*t, reduce) for t in _tasks(policies, scenarios, seeds, config)]
+    _check_grid(policies, scenarios, seeds)
+    total = len(policies) * len(scenarios) * len(seeds)
     if workers is None:
-        workers = auto_workers(len(tasks))
+        workers = auto_workers(total)
     if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
         raise ValueError(f"workers={workers!r} is out of range: must be an integer >= 1")
+    tasks = _tasks(policies, scenarios, seeds, config, reduce, workers)
     from tqdm import tqdm
 
-    bar = tqdm(total=len(tasks), desc="episodes", unit="ep", disable=None if progress else True)
+    bar = tqdm(total=total, desc="episodes", unit="ep", disable=None if progress else True)
+    results: list[Any] = []
     try:
         if workers == 1:
-            episodes = []
             for task in tasks:
-                episodes.append(_run_task(task))
-                bar.update()
-            return episodes
-        chunk = max(1, math.ceil(len(tasks) / (4 * workers)))
+                results.extend(_run_task(task))
+                bar.update(len(task[2]))
+            return results
         # spawn, not fork: a forked child of a process with live threads (tqdm's monitor, BLAS
         # pools) can deadlock; spawned workers load the cached kernels in about 2 s.
         with ProcessPoolExecutor(workers, mp_context=get_context("spawn")) as pool:
-            episodes = []
-            for episode in pool.map(_run_task, tasks, chunksize=chunk):
-                episodes.append(episode)
-                bar.update()
-            return episodes
+            for chunk in pool.map(_run_task, tasks):
+                results.extend(chunk)
+                bar.update(len(chunk))
+            return results
     finally:
         bar.close()
+
+
+def _check_grid(
+    policies: Sequence[PolicySpec], scenarios: Sequence[str], seeds: Sequence[int]
+) -> None:
+    if isinstance(policies, str) or isinstance(scenarios, str):
+        raise ValueError("policies and scenarios must be sequences of names, not one string")
+    for name, items in (("policies", policies), ("scenarios", scenarios), ("seeds", seeds)):
+        if len(items) == 0:
+            raise ValueError(f"{name} is empty: give at least one")
+    total = len(policies) * len(scenarios) * len(seeds)
+    if total > MAX_EPISODES:
+        raise ValueError(
+            f"the grid holds {total:,} episodes ({len(policies)} policies x {len(scenarios)} "
+            f"scenarios x {len(seeds)} seeds): at most {MAX_EPISODES:,} are run at once"
+        )
+    for spec in policies:
+        if isinstance(spec, str):
+            make_policy(spec)  # raises ValueError listing the known names
+        elif not isinstance(spec, Policy):
+            raise ValueError(f"policy {spec!r} is neither a policy name nor a Policy")
+    known = TASK.variants()
+    for scenario in scenarios:
+        if scenario not in known:
+            raise ValueError(f"unknown scenario {scenario!r}; known scenarios: {', '.join(known)}")
+    if isinstance(seeds, range):
+        if seeds.start < 0 or seeds.step < 1:
+            raise ValueError(f"seeds={seeds!r} is out of range: must count up from >= 0")
+        return
+    for seed in seeds:
+        if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
+            raise ValueError(f"seed={seed!r} is out of range: must be an integer >= 0")
 
 
 def _tasks(
@@ -253,22 +406,17 @@ def _tasks(
     scenarios: Sequence[str],
     seeds: Sequence[int],
     config: EnvConfigSpec,
-) -> list[tuple[PolicySpec, str, int, EnvConfigSpec]]:
-    if isinstance(policies, str) or isinstance(scenarios, str):
-        raise ValueError("policies and scenarios must be sequences of names, not one string")
-    for name, items in (("policies", policies), ("scenarios", scenarios), ("seeds", seeds)):
-        if len(items) == 0:
-            raise ValueError(f"{name} is empty: give at least one")
-    for spec in policies:
-        if isinstance(spec, str):
-            make_policy(spec)  # raises ValueError listing the known names
-        elif not isinstance(spec, Policy):
-            raise ValueError(f"policy {spec!r} is neither a policy name nor a Policy")
-    known = sorted(follow_env.SCENARIOS)
-    for scenario in scenarios:
-        if scenario not in follow_env.SCENARIOS:
-            raise ValueError(f"unknown scenario {scenario!r}; known scenarios: {', '.join(known)}")
-    for seed in seeds:
-        if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
-            raise ValueError(f"seed={seed!r} is out of range: must be an integer >= 0")
-    return [(p, s, int(seed), config) for p in policies for s in scenarios for seed in seeds]
+    reduce: Reducer | None,
+    workers: int,
+) -> Iterator[tuple[PolicySpec, str, tuple[int, ...], EnvConfigSpec, Reducer | None]]:
+    """The work units in grid order, made as they are taken: (policy, scenario, a chunk of at
+    most :data:`BATCH_LANES` seeds, config, reducer). With a pool the chunks are smaller, so
+    that every worker gets several."""
+    size = BATCH_LANES
+    if workers > 1:
+        size = max(1, min(BATCH_LANES, math.ceil(len(seeds) / (2 * workers))))
+    for p in policies:
+        for s in scenarios:
+            for start in range(0, len(seeds), size):
+                chunk = tuple(int(x) for x in seeds[start : start + size])
+                yield p, s, chunk, config, reduce

@@ -1,6 +1,6 @@
 """Everything that maps an observation ``[distance_m, offset_px]`` to an action ``[v, w]``.
 
-The classical guidance laws of SPEC.md §1.5 (PN, MPN, GS-MPN and its variants) and, later,
+The classical guidance laws of SPEC §1.5 (PN, MPN, GS-MPN and its variants) and, later,
 learned agents, all behind one :class:`Policy` protocol and reachable by name::
 
     >>> import numpy as np
@@ -13,7 +13,15 @@ learned agents, all behind one :class:`Policy` protocol and reachable by name::
 Actions are SI with w counter-clockwise positive: a person right of centre gives w < 0.
 """
 
-from policies.base import GuidanceLaw, LawParams, OffsetRateLaw, Policy, validate_obs
+from policies.base import (
+    BatchPolicy,
+    GuidanceLaw,
+    LawParams,
+    OffsetRateLaw,
+    Policy,
+    validate_obs,
+    validate_obs_batch,
+)
 from policies.gsmpn import GSMPN, GSMPN_THESIS, GSMPN_TUNED, GSMPN_VARIANTS, GSMPNParams
 from policies.mpn import MPN, MPN_THESIS, MPN_TUNED, MPNParams
 from policies.pn import PN, PN_THESIS, PN_TUNED, PNParams
@@ -37,6 +45,7 @@ __all__ = [
     "PN",
     "PN_THESIS",
     "PN_TUNED",
+    "BatchPolicy",
     "GSMPNParams",
     "GuidanceLaw",
     "LawParams",
@@ -51,4 +60,5 @@ __all__ = [
     "register_policy",
     "register_resolver",
     "validate_obs",
+    "validate_obs_batch",
 ]

@@ -1,7 +1,11 @@
 """The contract every policy keeps, and the shared parts of the guidance laws.
 
+Policies see the task only through its spec (:mod:`follow_env.tasks.person_follow.spec`: names
+and units, no simulation import), which gives the observation's size; nothing here imports the
+simulator, training code, torch or stable-baselines3.
+
 ## Observation
-float32 array, shape (2,) (SPEC.md §1.4, step 5):
+float32 array, shape (2,) (SPEC §1.4, step 5):
 
 | index | name       | unit | meaning                                                      |
 |-------|------------|------|--------------------------------------------------------------|
@@ -9,7 +13,7 @@ float32 array, shape (2,) (SPEC.md §1.4, step 5):
 | 1     | offset_px  | px   | box centre minus image centre; > 0 means right of centre     |
 
 ## Before the first reading
-``distance_m <= 0`` means the perception has not measured the person yet (SPEC.md §1.4: the
+``distance_m <= 0`` means the perception has not measured the person yet (SPEC §1.4: the
 distance filter starts from nothing, and invalid depth reads as 0). The reference robot did not
 move before its first detection, so every guidance law then commands a zero action and leaves
 its memory untouched; without this, ``V = kv (0 - 1.0)`` would drive backwards at full speed.
@@ -22,7 +26,7 @@ float32 array, shape (2,), SI:
 | 0     | v_mps   | m/s   | forward speed                          |
 | 1     | w_radps | rad/s | yaw rate, counter-clockwise positive   |
 
-## Sign convention (SPEC.md §1.5 "Sign")
+## Sign convention (SPEC §1.5 "Sign")
 Image u grows to the right and w is counter-clockwise positive, so a person right of centre
 (offset_px > 0) needs a clockwise turn: w < 0. The thesis hid this sign in its motor wiring; each
 law here applies it with one commented minus sign.
@@ -30,17 +34,21 @@ law here applies it with one commented minus sign.
 
 from __future__ import annotations
 
-import math
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
-from numbers import Real
-from typing import Protocol, runtime_checkable
+from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 from numpy.typing import ArrayLike
 
-# A distance at or below this means "no valid reading yet" (SPEC.md §1.4: invalid depth is 0).
+from follow_env.sim.checks import check_number
+from follow_env.tasks.person_follow.spec import SPEC
+
+# A distance at or below this means "no valid reading yet" (SPEC §1.4: invalid depth is 0).
 NO_READING_M = 0.0
+OBS_SIZE = SPEC.observation_size
+"""Entries of an observation (the task spec's)."""
+OBS_NAMES = "[" + ", ".join(SPEC.observation_names) + "]"
 
 
 @runtime_checkable
@@ -64,6 +72,24 @@ class Policy(Protocol):
         ...
 
 
+@runtime_checkable
+class BatchPolicy(Policy, Protocol):
+    """A policy that also acts for many robots at once, each with its own memory.
+
+    ``reset_batch(n)`` starts ``n`` episodes; ``act_batch(obs[n, k]) -> actions[n, m]`` then
+    gives each lane exactly the action :meth:`Policy.act` would give that lane's episode alone
+    (evaluation relies on it: batched and one-by-one rollouts are bit-identical).
+    """
+
+    def reset_batch(self, n: int) -> None:
+        """Start ``n`` lanes' episodes (forget every lane's memory)."""
+        ...
+
+    def act_batch(self, obs: np.ndarray) -> np.ndarray:
+        """Actions ``(n, m)`` float32 for observations ``(n, k)``."""
+        ...
+
+
 def validate_obs(obs: ArrayLike) -> tuple[float, float]:
     """Check an observation and return it as ``(distance_m, offset_px)`` Python floats.
 
@@ -71,13 +97,27 @@ def validate_obs(obs: ArrayLike) -> tuple[float, float]:
     :raises ValueError: on a wrong shape or a NaN/inf entry.
     """
     arr = np.asarray(obs, dtype=np.float64)
-    if arr.shape != (2,):
-        raise ValueError(
-            f"obs must have shape (2,) = [distance_m, offset_px], got shape {arr.shape}"
-        )
+    if arr.shape != (OBS_SIZE,):
+        raise ValueError(f"obs must have shape ({OBS_SIZE},) = {OBS_NAMES}, got shape {arr.shape}")
     if not np.all(np.isfinite(arr)):
-        raise ValueError(f"obs must be finite, got [distance_m, offset_px] = {arr.tolist()}")
+        raise ValueError(f"obs must be finite, got {OBS_NAMES} = {arr.tolist()}")
     return float(arr[0]), float(arr[1])
+
+
+def validate_obs_batch(obs: ArrayLike) -> np.ndarray:
+    """Check a batch of observations ``(n, k)``; returns it as float64.
+
+    :raises ValueError: on a wrong shape or a NaN/inf entry (naming the lanes).
+    """
+    arr = np.asarray(obs, dtype=np.float64)
+    if arr.ndim != 2 or arr.shape[1] != OBS_SIZE:
+        raise ValueError(
+            f"obs must have shape (n, {OBS_SIZE}) = rows of {OBS_NAMES}, got shape {arr.shape}"
+        )
+    bad = ~np.isfinite(arr).all(axis=1)
+    if bad.any():
+        raise ValueError(f"obs of lanes {np.flatnonzero(bad).tolist()} must be finite")
+    return arr
 
 
 def make_action(
@@ -113,19 +153,15 @@ def check_range(
     :param ge: inclusive lower bound, if any.
     :param optional: None is also allowed.
     """
-    value = getattr(owner, field)
-    if optional and value is None:
-        return
-    bounds = [f"> {gt:g}"] if gt is not None else []
-    bounds += [f">= {ge:g}"] if ge is not None else []
-    rule = " and ".join(bounds) or "finite"
-    if optional:
-        rule = f"None or {rule}"
-    ok = isinstance(value, Real) and not isinstance(value, bool) and math.isfinite(value)
-    ok = ok and (gt is None or value > gt) and (ge is None or value >= ge)
-    if not ok:
-        where = f"{type(owner).__name__}.{field}={value!r}"
-        raise ValueError(f"{where} is out of range: must be {rule} (a finite number)")
+    lo = gt if gt is not None else ge
+    check_number(
+        f"{type(owner).__name__}.{field}",
+        getattr(owner, field),
+        lo,
+        None,
+        lo_open=gt is not None,
+        optional=optional,
+    )
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -176,13 +212,44 @@ class GuidanceLaw(ABC):
     def _command(self, distance_m: float, offset_px: float) -> tuple[float, float]:
         """Return ``(v [m/s], w [rad/s, counter-clockwise positive])`` before clipping."""
 
+    # -- many lanes at once: the same scalar law per lane, each with its own memory ---------
+
+    def _memory(self) -> Any:
+        """What the law remembers between steps (restored per lane by :meth:`act_batch`)."""
+        return None
+
+    def _set_memory(self, memory: Any) -> None:  # noqa: B027 - memoryless laws keep none
+        """Restore what :meth:`_memory` returned."""
+
+    def reset_batch(self, n: int) -> None:
+        """Start ``n`` lanes' episodes: every lane's memory as after :meth:`reset`."""
+        self.reset()
+        self._lanes = [self._memory() for _ in range(n)]
+
+    def act_batch(self, obs: np.ndarray) -> np.ndarray:
+        """Actions ``(n, 2)`` float32 for observations ``(n, 2)``: :meth:`act` for each lane
+        with that lane's memory, so each lane's actions equal a run of its episode alone (the
+        scalar arithmetic is reused, not re-derived in numpy, for bitwise equality)."""
+        rows = validate_obs_batch(obs)
+        lanes = getattr(self, "_lanes", None)
+        if lanes is None or len(lanes) != len(rows):
+            raise ValueError(
+                f"act_batch got {len(rows)} observations: call reset_batch({len(rows)}) first"
+            )
+        out = np.empty((len(rows), 2), dtype=np.float32)
+        for i, row in enumerate(rows):
+            self._set_memory(lanes[i])
+            out[i] = self.act(row)
+            lanes[i] = self._memory()
+        return out
+
     def __repr__(self) -> str:
         return f"{type(self).__name__}(name={self.name!r}, params={self.params!r})"
 
 
 class OffsetRateLaw(GuidanceLaw):
     """Base of the laws with a derivative term: remembers the previous offset for
-    ``rate = (o - o_prev) / dt`` (SPEC.md §1.5); the first step after a reset has rate 0."""
+    ``rate = (o - o_prev) / dt`` (SPEC §1.5); the first step after a reset has rate 0."""
 
     def __init__(self) -> None:
         self._prev_offset_px: float | None = None
@@ -190,6 +257,12 @@ class OffsetRateLaw(GuidanceLaw):
     def reset(self) -> None:
         """Forget the previous offset, so the next step's rate is 0."""
         self._prev_offset_px = None
+
+    def _memory(self) -> float | None:
+        return self._prev_offset_px
+
+    def _set_memory(self, memory: float | None) -> None:
+        self._prev_offset_px = memory
 
     def _offset_rate(self, offset_px: float, dt_s: float) -> float:
         """The offset's rate (px/s) since the previous step, remembering this offset."""

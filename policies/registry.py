@@ -13,15 +13,15 @@ Each :func:`make_policy` call builds a fresh policy, so laws never share memory.
 
 Learned agents: ``ppo`` is the shipped PPO agent (``policies/agents/ppo``), and a path (a run
 folder of ``follow-train``, its ``model.zip``, or a checkpoint ``.zip``) loads that agent under
-the path as its name (:mod:`policies.ppo`).
+the path as its name (:mod:`policies.learned.ppo`).
 
 ## Extending
 - A new law: one module with a :class:`~policies.base.GuidanceLaw` subclass and its ``PRESETS``,
   plus one ``register_law(...)`` line at the bottom of this file.
 - A learned agent: ``register_policy("ppo", factory)``, where the factory imports
-  torch/stable-baselines3 and loads the model only when called (:mod:`policies.ppo`).
+  torch/stable-baselines3 and loads the model only when called (:mod:`policies.learned.ppo`).
 - A filesystem path (``runs/x/model.zip`` or a run folder): ``register_resolver(resolver)``;
-  :func:`policies.ppo.resolve_path` is registered and loads PPO agents.
+  :func:`policies.learned.ppo.resolve_path` is registered and loads PPO agents.
   Names not registered exactly are offered to each resolver in turn; a resolver returns a policy
   for names it understands and None for the rest.
 """
@@ -33,8 +33,9 @@ from dataclasses import replace
 from functools import partial
 from typing import TypeVar
 
-from policies import gsmpn, mpn, pn, ppo
+from policies import gsmpn, mpn, pn
 from policies.base import Policy
+from policies.learned import ppo
 
 PolicyFactory = Callable[[], Policy]
 PolicyResolver = Callable[[str], Policy | None]
@@ -159,6 +160,6 @@ for _variant in gsmpn.GSMPN_VARIANTS:
         {preset: replace(p, variant=_variant) for preset, p in gsmpn.PRESETS.items()},
     )
 # Learned agents: the shipped PPO agent by name, any other by its path (a run folder or a .zip).
-# policies.ppo loads torch and stable-baselines3 only when an agent is built.
+# policies.learned.ppo loads torch and stable-baselines3 only when an agent is built.
 register_policy("ppo", ppo.load_default)
 register_resolver(ppo.resolve_path)

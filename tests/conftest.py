@@ -2,9 +2,19 @@
 
 from __future__ import annotations
 
+import os
 import warnings
 
 import pytest
+from hypothesis import settings
+
+# The first call of a compiled function compiles it (or loads it from the cache): no deadline,
+# or a property test would fail on whichever example happened to come first.
+settings.register_profile("personfollow", deadline=None)
+settings.load_profile("personfollow")
+
+# render_mode="human" opens its pygame window on SDL's dummy driver: no screen needed.
+os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
 
 import follow_env  # noqa: F401  (registers PersonFollow-v0)
 

@@ -59,6 +59,24 @@ def _ppo_arguments() -> set[str]:
     return names - {"self", "policy", "env", "tensorboard_log", "verbose", "seed", "device"}
 
 
+def sole_section(path: str | Path) -> str:
+    """The env id of a hyperparameter file with one section (the usual case).
+
+    :raises ConfigError: if the file is unreadable or has several sections (name one).
+    """
+    path = Path(path)
+    try:
+        document = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except OSError as e:
+        raise ConfigError(f"{path}: cannot read hyperparameters: {e.strerror or e}") from None
+    except yaml.YAMLError as e:
+        raise ConfigError(f"{path}: not valid YAML: {e}") from None
+    if not isinstance(document, dict) or len(document) != 1:
+        found = ", ".join(map(str, document)) if isinstance(document, dict) else "nothing"
+        raise ConfigError(f"{path}: one section expected (found: {found}); give --env-id")
+    return str(next(iter(document)))
+
+
 def load_hyperparams(path: str | Path, env_id: str) -> Hyperparams:
     """Read the hyperparameters for ``env_id`` from an rl-zoo3-style YAML file and check them.
 

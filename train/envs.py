@@ -1,15 +1,16 @@
 """The agent's environment: the batched core, the configured wrappers, normalisation, stacking.
 
-One function builds the wrapper stack for training, for the ``EvalCallback`` and for inference
-(:mod:`policies.ppo`), so the agent sees the same observations everywhere::
+One function builds the wrapper stack for training and for the ``EvalCallback``; the policy at
+inference runs the same feature code without SB3 (:mod:`policies.learned`)::
 
     ConcatVecEnv (one batched core per scenario)       base_env()
-      -> VecMonitor                                     train and eval: the env's own returns
-      -> vec_env_wrapper entries of the config, in order (training-only ones skipped at inference)
+      -> VecMonitor                                     the env's own returns
+      -> vec_env_wrapper entries of the config, in order
       -> VecNormalize                                   if the config says ``normalize``
       -> VecFrameStack(frame_stack)
 
 This is rl-zoo3's order (``vec_env_wrapper``, then ``VecNormalize``, then ``VecFrameStack``).
+The env id names the task (``PersonFollow-v0``), whose variants (scenarios) share the lanes.
 """
 
 from __future__ import annotations
@@ -20,32 +21,40 @@ from typing import Any, Literal
 
 from stable_baselines3.common.vec_env import VecEnv, VecFrameStack, VecMonitor, VecNormalize
 
-import follow_env
+from follow_env.sim.sb3 import TaskSB3VecEnv
+from follow_env.tasks import task_for_env
 from train.config import Hyperparams, import_object, wrapper_specs
 from train.wrappers import ConcatVecEnv
 
 __all__ = ["Mode", "agent_env", "base_env"]
 
-Mode = Literal["train", "eval", "inference"]
+Mode = Literal["train", "eval"]
 
 
-def base_env(scenarios: Sequence[str], lanes_per_scenario: int, config: Any = "thesis") -> VecEnv:
+def base_env(
+    scenarios: Sequence[str],
+    lanes_per_scenario: int,
+    config: Any = "thesis",
+    env_id: str = "PersonFollow-v0",
+) -> VecEnv:
     """``lanes_per_scenario`` robots on each scenario, as one VecEnv (lanes grouped by scenario).
 
-    :param scenarios: registered scenario names.
+    :param scenarios: the task's variant names (PersonFollow's scenarios).
     :param lanes_per_scenario: lanes of each scenario's batched core.
     :param config: the env configuration (``gym.make``'s ``config``: a preset name or a dict).
+    :param env_id: the Gymnasium id that names the task.
     :raises ValueError: for an unknown scenario (naming the known ones) or a bad lane count.
     """
+    task = task_for_env(env_id)
     if not scenarios:
         raise ValueError("scenarios is empty: give at least one")
+    known = task.variants()
     for name in scenarios:
-        if name not in follow_env.SCENARIOS:
-            known = ", ".join(sorted(follow_env.SCENARIOS))
-            raise ValueError(f"unknown scenario {name!r}; known scenarios: {known}")
+        if name not in known:
+            raise ValueError(f"unknown scenario {name!r}; known scenarios: {', '.join(known)}")
     return ConcatVecEnv(
         [
-            follow_env.make_sb3_vec_env(lanes_per_scenario, scenario=name, config=config)
+            TaskSB3VecEnv(task, lanes_per_scenario, config=config, **{task.variant_key: name})
             for name in scenarios
         ]
     )
@@ -56,21 +65,15 @@ def agent_env(
 ) -> VecEnv:
     """Wrap ``venv`` as the agent sees it (module docstring).
 
-    :param venv: the env below every wrapper (:func:`base_env`, or one fed by a policy).
+    :param venv: the env below every wrapper (:func:`base_env`).
     :param hp: checked hyperparameters (:func:`train.config.parse_hyperparams`).
-    :param mode: ``"train"`` (normalisation statistics update), ``"eval"`` (frozen statistics,
-        raw rewards; the ``EvalCallback`` copies the statistics from the training env) or
-        ``"inference"`` (no monitor, no training-only wrappers, statistics from a file).
-    :param normalization: a ``VecNormalize`` pickle to start from (resume) or to use
-        (inference; required then when the config normalises).
+    :param mode: ``"train"`` (normalisation statistics update) or ``"eval"`` (frozen statistics,
+        raw rewards; the ``EvalCallback`` copies the statistics from the training env).
+    :param normalization: a ``VecNormalize`` pickle to start from (resume).
     """
-    if mode != "inference":
-        venv = VecMonitor(venv)
+    venv = VecMonitor(venv)
     for name, kwargs in wrapper_specs(hp["vec_env_wrapper"]):
-        wrapper = import_object(name)
-        if mode == "inference" and getattr(wrapper, "training_only", False):
-            continue
-        venv = wrapper(venv, **kwargs)
+        venv = import_object(name)(venv, **kwargs)
     if hp["normalize"]:
         if normalization is not None:
             venv = VecNormalize.load(str(normalization), venv)

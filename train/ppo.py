@@ -32,8 +32,8 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any, NoReturn
 
-import follow_env
 from eval.atomic import atomic_write_text
+from follow_env.tasks import task_for_env
 from train.config import (
     ConfigError,
     Hyperparams,
@@ -41,6 +41,7 @@ from train.config import (
     parse_hyperparams,
     policy_class,
     schedule,
+    sole_section,
 )
 
 __all__ = ["Args", "main", "train"]
@@ -48,7 +49,6 @@ __all__ = ["Args", "main", "train"]
 PROG = "follow-train"
 USAGE_ERROR = 2
 DEFAULT_HYPERPARAMS = Path(__file__).parent / "configs" / "ppo.yaml"
-ENV_ID = "PersonFollow-v0"
 # The files that make an agent (what --export copies and policies.ppo loads).
 AGENT_FILES = ("model.zip", "vecnormalize.pkl", "config.yaml", "MODEL_CARD.md")
 EXPORT_EXTRAS = ("learning_curve.png",)
@@ -59,8 +59,8 @@ class Args:
     """Every option of a run (``follow-train --help`` has the same list)."""
 
     hyperparams: Path = DEFAULT_HYPERPARAMS  # rl-zoo3-style YAML, keyed by env id
-    env_id: str = ENV_ID
-    scenarios: tuple[str, ...] = field(default_factory=lambda: tuple(sorted(follow_env.SCENARIOS)))
+    env_id: str | None = None  # the YAML section, and the task; default: the file's only section
+    scenarios: tuple[str, ...] = ()  # the task's variants (scenarios) to train on; () = all
     env_config: str = "thesis"  # the env preset the agent trains and is evaluated on
     seed: int = 10_000  # training lanes start from seed + j
     eval_seed: int = 5_000  # held-out lanes start from eval_seed + j
@@ -114,6 +114,7 @@ def train(args: Args, command: str = PROG) -> Path:
             raise ValueError(f"{run / runs.CHECKPOINTS}: no checkpoint to resume from")
         start_step, model_path, stats_path = checkpoint
     else:
+        args = _with_defaults(args)
         hp = load_hyperparams(args.hyperparams, args.env_id)
         hp |= {k: v for k in ("n_timesteps", "n_envs") if (v := getattr(args, k)) is not None}
         _check_args(args, hp)
@@ -123,9 +124,11 @@ def train(args: Args, command: str = PROG) -> Path:
             raise ValueError(f"{run} already exists and is not empty; use --resume to continue it")
         start_step, model_path, stats_path = 0, None, None
     lanes = hp["n_envs"] // len(args.scenarios)
-    venv = agent_env(base_env(args.scenarios, lanes, args.env_config), hp, "train",
+    venv = agent_env(base_env(args.scenarios, lanes, args.env_config, args.env_id), hp, "train",
                      normalization=stats_path if hp["normalize"] else None)  # fmt: skip
-    eval_env = agent_env(base_env(args.scenarios, args.eval_episodes, args.env_config), hp, "eval")
+    eval_env = agent_env(
+        base_env(args.scenarios, args.eval_episodes, args.env_config, args.env_id), hp, "eval"
+    )
     if model_path is not None:
         model = PPO.load(model_path, env=venv, device="cpu")
         model.set_random_seed(args.seed + start_step)  # new episodes, still >= args.seed
@@ -202,16 +205,25 @@ def train(args: Args, command: str = PROG) -> Path:
 _ZOO_ONLY = ("n_envs", "n_timesteps", "normalize", "frame_stack", "vec_env_wrapper", "policy")
 
 
+def _with_defaults(args: Args) -> Args:
+    """``args`` with the env id (the hyperparameter file's only section) and the scenarios (all
+    of the task's) filled in where they were left to their defaults."""
+    env_id = args.env_id or sole_section(args.hyperparams)
+    scenarios = args.scenarios or tuple(task_for_env(env_id).variants())
+    return dataclasses.replace(args, env_id=env_id, scenarios=scenarios)
+
+
 def _check_args(args: Args, hp: Hyperparams) -> None:
-    known = sorted(follow_env.SCENARIOS)
+    task = task_for_env(args.env_id)
+    known = task.variants()
     for name in args.scenarios:
-        if name not in follow_env.SCENARIOS:
+        if name not in known:
             raise ValueError(f"--scenarios: unknown scenario {name!r}; known: {', '.join(known)}")
     if len(set(args.scenarios)) != len(args.scenarios) or not args.scenarios:
         raise ValueError("--scenarios must name each scenario once, at least one")
-    if args.env_config not in follow_env.PRESETS:
+    if args.env_config not in task.presets:
         raise ValueError(
-            f"--env-config {args.env_config!r} is not a preset: {', '.join(follow_env.PRESETS)}"
+            f"--env-config {args.env_config!r} is not a preset: {', '.join(task.presets)}"
         )
     if hp["n_envs"] % len(args.scenarios):
         raise ValueError(
@@ -326,7 +338,7 @@ def build_parser() -> argparse.ArgumentParser:
     d = Args()
     p = _Parser(prog=PROG, description="Train PPO on PersonFollow-v0 (stable-baselines3).")
     p.add_argument("--hyperparams", type=Path, help=f"YAML file (default: {d.hyperparams})")
-    p.add_argument("--env-id", help=f"section of the YAML file (default: {d.env_id})")
+    p.add_argument("--env-id", help="section of the YAML file (default: its only one)")
     p.add_argument("--scenarios", help="comma-separated scenarios (default: all registered)")
     p.add_argument("--env-config", help=f"env preset (default: {d.env_config})")
     p.add_argument("--seed", type=int, help=f"training lanes start from seed + j ({d.seed})")

@@ -1,7 +1,10 @@
 """VecEnv wrappers between the batched env and PPO, and a VecEnv of several scenarios.
 
 Each wrapper is an SB3 ``VecEnvWrapper``, listed by name under ``vec_env_wrapper`` in
-``train/configs/ppo.yaml`` (so rl-zoo3 can build the same stack); innermost first:
+``train/configs/ppo.yaml`` (so rl-zoo3 can build the same stack). All but the reward shaping are
+thin wrappers of the agent's own feature pipeline (:mod:`policies.learned.features`), which the
+policy runs at inference: one implementation, so the agent sees the same thing in both.
+Innermost first:
 
 - :class:`VecRescaleAction`: the agent acts in ``[-1, 1]``, mapped linearly onto SI speeds. PPO
   explores with one standard deviation for both outputs, so the range should be the useful one:
@@ -39,6 +42,17 @@ from gymnasium import spaces
 from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
 from stable_baselines3.common.vec_env.base_vec_env import VecEnvIndices, VecEnvObs, VecEnvStepReturn
 
+from follow_env.sim.checks import check_number
+from policies.learned.features import (
+    Box,
+    Feature,
+    IncrementalAction,
+    ObservationAge,
+    RescaleAction,
+    ScaleObservation,
+    agent_to_si,
+)
+
 __all__ = [
     "ConcatVecEnv",
     "VecIncrementalAction",
@@ -49,249 +63,72 @@ __all__ = [
     "agent_to_si",
 ]
 
-
-def agent_to_si(action: np.ndarray, low: np.ndarray, high: np.ndarray) -> np.ndarray:
-    """Map an agent action in ``[-1, 1]`` (clipped first) linearly onto ``[low, high]``.
-
-    :param action: shape (..., 2), agent units.
-    :param low: the SI box's lower bounds, e.g. ``[-1.44 m/s, -7.2 rad/s]``.
-    :param high: the SI box's upper bounds.
-    """
-    a = np.clip(np.asarray(action, dtype=np.float64), -1.0, 1.0)
-    return low + (a + 1.0) * 0.5 * (high - low)
+# agent_to_si is re-exported: it lives with the features.
 
 
-class VecRescaleAction(VecEnvWrapper):
-    """The agent acts in ``[-1, 1]^2``; the wrapped env receives SI actions (module docstring).
+class _FeatureWrapper(VecEnvWrapper):
+    """A step of the agent's feature pipeline (:mod:`policies.learned.features`) as an SB3
+    ``VecEnvWrapper``: the same code the policy runs at inference, wrapped for training."""
 
-    ``[-1, 1]`` maps linearly onto ``[-v_max_mps, v_max_mps] x [-w_max_radps, w_max_radps]``,
-    by default the env's whole action box. A smaller range than the platform's is a choice about
-    the agent, not the robot: every unit of the agent's output then means a useful command, and
-    PPO's exploration noise (one standard deviation for both outputs) is scaled to match.
+    feature_class: type[Feature]
 
-    :param venv: a VecEnv with a bounded, symmetric ``Box(2,)`` action space (the env's SI box).
-    :param v_max_mps: the agent's largest speed [m/s]; None or at most the env's bound.
-    :param w_max_radps: the agent's largest turn rate [rad/s]; None or at most the env's bound.
-    """
-
-    def __init__(
-        self, venv: VecEnv, v_max_mps: float | None = None, w_max_radps: float | None = None
-    ) -> None:
-        box = venv.action_space
-        if (
-            not isinstance(box, spaces.Box)
-            or box.shape != (2,)
-            or not np.all(np.isfinite([box.low, box.high]))
-            or not np.allclose(box.low, -box.high)
-        ):
-            raise ValueError(f"VecRescaleAction needs a bounded symmetric Box(2,), got {box}")
-        high = box.high.astype(np.float64).copy()
-        for k, (name, value) in enumerate((("v_max_mps", v_max_mps), ("w_max_radps", w_max_radps))):
-            if value is None:
-                continue
-            if not (isinstance(value, int | float) and 0 < value <= high[k]):
-                raise ValueError(
-                    f"VecRescaleAction.{name}={value!r} is out of range: must be in "
-                    f"(0, {high[k]:g}] (the env's bound)"
-                )
-            high[k] = float(value)
-        self.si_low, self.si_high = -high, high
-        agent_box = spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32)
-        super().__init__(venv, action_space=agent_box)
-
-    def step_async(self, actions: np.ndarray) -> None:
-        self.venv.step_async(agent_to_si(actions, self.si_low, self.si_high))
-
-    def reset(self) -> VecEnvObs:
-        return self.venv.reset()
-
-    def step_wait(self) -> VecEnvStepReturn:
-        return self.venv.step_wait()
-
-
-class VecObservationAge(VecEnvWrapper):
-    """Observation ``[obs..., age]``: how many steps the observation has not changed, scaled.
-
-    The perception holds its last values while the detector sees nothing (SPEC.md §1.4), so a
-    repeated observation is stale, not a person standing still in the image: the filtered depth
-    of a fresh detection never repeats to the last bit. ``age = min(k, max_age_steps) /
-    max_age_steps``, where ``k`` is the number of steps since the observation last changed (0 on
-    a fresh one). It uses only what the robot publishes, so the real robot can compute it too;
-    without it an agent cannot tell a 0.3 s gap from a 3 s one and keeps turning towards where
-    the person was.
-
-    :param venv: a VecEnv with a ``Box`` observation space.
-    :param max_age_steps: where the age saturates at 1 (30 steps = the env's 3 s lost timeout).
-    """
-
-    def __init__(self, venv: VecEnv, max_age_steps: int = 30) -> None:
-        obs_box = venv.observation_space
-        if not isinstance(obs_box, spaces.Box) or len(obs_box.shape) != 1:
-            raise ValueError("VecObservationAge needs a flat Box observation space")
-        is_int = isinstance(max_age_steps, int) and not isinstance(max_age_steps, bool)
-        if not is_int or max_age_steps < 1:
-            raise ValueError(
-                f"VecObservationAge.max_age_steps={max_age_steps!r} is out of range: must be >= 1"
-            )
-        self.max_age_steps = max_age_steps
-        observation_space = spaces.Box(
-            low=np.append(obs_box.low, 0.0).astype(np.float32),
-            high=np.append(obs_box.high, 1.0).astype(np.float32),
-            dtype=np.float32,
-        )
-        super().__init__(venv, observation_space=observation_space)
-        self._last = np.zeros((venv.num_envs, *obs_box.shape), dtype=np.float32)
-        self._age = np.zeros(venv.num_envs, dtype=np.int64)
-
-    def reset(self) -> VecEnvObs:
-        obs = np.asarray(self.venv.reset(), dtype=np.float32)
-        self._last = obs.copy()
-        self._age[:] = 0
-        return self._join(obs, self._age)
-
-    def step_wait(self) -> VecEnvStepReturn:
-        obs, rewards, dones, infos = self.venv.step_wait()
-        obs = np.asarray(obs, dtype=np.float32)
-        age = np.where(np.all(obs == self._last, axis=1), self._age + 1, 0)
-        for i in np.flatnonzero(dones):
-            if "terminal_observation" in infos[i]:
-                terminal = np.asarray(infos[i]["terminal_observation"], dtype=np.float32)
-                stale = np.array_equal(terminal, self._last[i])
-                infos[i]["terminal_observation"] = self._join(
-                    terminal[None], np.array([self._age[i] + 1 if stale else 0])
-                )[0]
-        age[dones] = 0  # the lanes that ended were reset: obs is a new episode's first
-        self._last = obs.copy()
-        self._age = age
-        return self._join(obs, age), rewards, dones, infos
-
-    def _join(self, obs: np.ndarray, age: np.ndarray) -> np.ndarray:
-        scaled = np.minimum(age, self.max_age_steps) / self.max_age_steps
-        return np.concatenate([obs, scaled[:, None].astype(np.float32)], axis=1)
-
-
-class VecScaleObservation(VecEnvWrapper):
-    """Observation ``obs * scale``, entry by entry: a fixed normalisation that keeps 0 at 0.
-
-    ``VecNormalize`` shifts every entry by its running mean; a mirror-symmetric policy
-    (:mod:`train.mirror`) needs the offset and the turn command to stay signed around 0, so they
-    are scaled instead (e.g. the offset by 1/100 px).
-
-    :param venv: a VecEnv with a flat ``Box`` observation space.
-    :param scale: one positive factor per observation entry.
-    """
-
-    def __init__(self, venv: VecEnv, scale: Sequence[float] = ()) -> None:
-        obs_box = venv.observation_space
-        factors = np.asarray(scale, dtype=np.float64)
-        if not isinstance(obs_box, spaces.Box) or factors.shape != obs_box.shape:
-            raise ValueError(
-                f"VecScaleObservation.scale={list(scale)!r} must have one factor per "
-                f"observation entry {obs_box.shape}"
-            )
-        if not np.all(np.isfinite(factors) & (factors > 0)):
-            raise ValueError(f"VecScaleObservation.scale={list(scale)!r} must be positive")
-        self.scale = factors.astype(np.float32)
-        observation_space = spaces.Box(
-            (obs_box.low * self.scale).astype(np.float32),
-            (obs_box.high * self.scale).astype(np.float32),
-            dtype=np.float32,
-        )
-        super().__init__(venv, observation_space=observation_space)
-
-    def reset(self) -> VecEnvObs:
-        return np.asarray(self.venv.reset(), dtype=np.float32) * self.scale
-
-    def step_wait(self) -> VecEnvStepReturn:
-        obs, rewards, dones, infos = self.venv.step_wait()
-        for i in np.flatnonzero(dones):
-            if "terminal_observation" in infos[i]:
-                terminal = np.asarray(infos[i]["terminal_observation"], dtype=np.float32)
-                infos[i]["terminal_observation"] = terminal * self.scale
-        return np.asarray(obs, dtype=np.float32) * self.scale, rewards, dones, infos
-
-
-class VecIncrementalAction(VecEnvWrapper):
-    """The agent changes the command by at most ``max_change`` a step; observation gets the command.
-
-    The wrapped env receives the command ``u_t = clip(u_{t-1} + max_change * clip(a_t, -1, 1))``
-    (clipped to the wrapped action space), starting from ``u = 0`` (the robot at rest) at every
-    reset. The observation is ``[obs..., u_{t-1}...]``, the command in force when the observation
-    was taken, so the agent knows what it is changing. Smoothness is then built in: the
-    commanded acceleration can never exceed ``max_change / dt``, and PPO's exploration noise
-    becomes a random walk of the command instead of a new random command every 0.1 s.
-
-    :param venv: a VecEnv with ``Box`` observation and action spaces (here the ``[-1, 1]``
-        space of :class:`VecRescaleAction`).
-    :param max_change: the largest change per step of each action component, in the units of
-        the wrapped action space, e.g. ``[0.1, 0.1]``.
-    :param reading_index: the observation entry holding the distance, or None. While it is
-        <= 0 (follow_env: no distance reading yet) the command does not change, so the robot
-        stays at rest until it first measures the person, as the reference robot and every
-        guidance law do (``policies.base``).
-    """
-
-    def __init__(
-        self,
-        venv: VecEnv,
-        max_change: Sequence[float] = (0.1, 0.1),
-        reading_index: int | None = None,
-    ) -> None:
+    def __init__(self, venv: VecEnv, **kwargs: Any) -> None:
         obs_box, act_box = venv.observation_space, venv.action_space
         if not (isinstance(obs_box, spaces.Box) and isinstance(act_box, spaces.Box)):
-            raise ValueError("VecIncrementalAction needs Box observation and action spaces")
-        change = np.asarray(max_change, dtype=np.float64)
-        if change.shape != act_box.shape or not np.all(np.isfinite(change) & (change > 0)):
-            raise ValueError(
-                f"VecIncrementalAction.max_change={list(max_change)!r} is out of range: must "
-                f"be {act_box.shape[0]} positive numbers"
-            )
-        self.max_change = change
-        self.reading_index = reading_index
-        self._low = act_box.low.astype(np.float64)
-        self._high = act_box.high.astype(np.float64)
-        observation_space = spaces.Box(
-            low=np.concatenate([obs_box.low, act_box.low]).astype(np.float32),
-            high=np.concatenate([obs_box.high, act_box.high]).astype(np.float32),
-            dtype=np.float32,
+            raise ValueError(f"{type(self).__name__} needs Box observation and action spaces")
+        if len(obs_box.shape) != 1:
+            raise ValueError(f"{type(self).__name__} needs a flat Box observation space")
+        self.feature = self.feature_class(**kwargs)
+        obs, act = self.feature.bind(
+            Box(obs_box.low, obs_box.high), Box(act_box.low, act_box.high), venv.num_envs
         )
-        agent_box = spaces.Box(-1.0, 1.0, shape=act_box.shape, dtype=np.float32)
-        super().__init__(venv, observation_space=observation_space, action_space=agent_box)
-        self._command = np.zeros((venv.num_envs, act_box.shape[0]))
-        self._reading = np.ones(venv.num_envs, dtype=bool)
+        super().__init__(
+            venv,
+            observation_space=spaces.Box(obs.low, obs.high, dtype=np.float32),
+            action_space=spaces.Box(act.low, act.high, dtype=np.float32),
+        )
 
     def reset(self) -> VecEnvObs:
-        self._command[:] = 0.0
-        obs = self.venv.reset()
-        self._note_reading(obs)
-        return self._join(obs, self._command)
+        return self.feature.start(self.venv.reset())
 
     def step_async(self, actions: np.ndarray) -> None:
-        a = np.clip(np.asarray(actions, dtype=np.float64).reshape(self._command.shape), -1, 1)
-        a[~self._reading] = 0.0
-        self._command = np.clip(self._command + self.max_change * a, self._low, self._high)
-        self.venv.step_async(self._command.astype(np.float32))
-
-    def _note_reading(self, obs: np.ndarray) -> None:
-        if self.reading_index is not None:
-            self._reading = np.asarray(obs)[:, self.reading_index] > 0
+        self.venv.step_async(self.feature.act(actions))
 
     def step_wait(self) -> VecEnvStepReturn:
         obs, rewards, dones, infos = self.venv.step_wait()
-        self._note_reading(obs)
         for i in np.flatnonzero(dones):
             if "terminal_observation" in infos[i]:
-                infos[i]["terminal_observation"] = self._join(
-                    infos[i]["terminal_observation"], self._command[i]
+                infos[i]["terminal_observation"] = self.feature.terminal(
+                    infos[i]["terminal_observation"], i
                 )
-        self._command[dones] = 0.0
-        return self._join(obs, self._command), rewards, dones, infos
+        return self.feature.observe(obs, np.asarray(dones, dtype=bool)), rewards, dones, infos
 
-    @staticmethod
-    def _join(obs: np.ndarray, command: np.ndarray) -> np.ndarray:
-        return np.concatenate(
-            [np.asarray(obs, dtype=np.float32), command.astype(np.float32)], axis=-1
-        )
+
+class VecRescaleAction(_FeatureWrapper):
+    """:class:`policies.learned.features.RescaleAction`: the agent acts in ``[-1, 1]``, mapped
+    onto SI speeds (``v_max_mps``, ``w_max_radps``: the agent's range, at most the env's)."""
+
+    feature_class = RescaleAction
+
+
+class VecObservationAge(_FeatureWrapper):
+    """:class:`policies.learned.features.ObservationAge`: appends how long the observation has
+    been held (``max_age_steps``)."""
+
+    feature_class = ObservationAge
+
+
+class VecScaleObservation(_FeatureWrapper):
+    """:class:`policies.learned.features.ScaleObservation`: ``obs * scale``."""
+
+    feature_class = ScaleObservation
+
+
+class VecIncrementalAction(_FeatureWrapper):
+    """:class:`policies.learned.features.IncrementalAction`: the agent changes the command by at
+    most ``max_change`` a step and sees the command in force."""
+
+    feature_class = IncrementalAction
 
 
 class VecShapedReward(VecEnvWrapper):
@@ -338,17 +175,15 @@ class VecShapedReward(VecEnvWrapper):
         w_rate_weight: float = 0.0,
         offset_weight: float = 0.0,
     ) -> None:
-        numbers = {"alive_bonus": alive_bonus, "v_rate_weight": v_rate_weight}
-        numbers |= {"w_rate_weight": w_rate_weight, "offset_weight": offset_weight}
-        if reward_floor is not None:
-            numbers["reward_floor"] = reward_floor
-        for name, value in numbers.items():
-            ok = isinstance(value, int | float) and not isinstance(value, bool)
-            if not (ok and np.isfinite(value) and (value >= 0 or not name.endswith("weight"))):
-                raise ValueError(
-                    f"VecShapedReward.{name}={value!r} is out of range: must be a finite number"
-                    + (" >= 0" if name.endswith("weight") else "")
-                )
+        for name, value in (
+            ("alive_bonus", alive_bonus),
+            ("v_rate_weight", v_rate_weight),
+            ("w_rate_weight", w_rate_weight),
+            ("offset_weight", offset_weight),
+            ("reward_floor", reward_floor),
+        ):
+            lo = 0.0 if name.endswith("weight") else None
+            check_number(f"VecShapedReward.{name}", value, lo, optional=name == "reward_floor")
         act_box = venv.action_space
         if not isinstance(act_box, spaces.Box) or act_box.shape != (2,):
             raise ValueError(f"VecShapedReward needs a Box(2,) action space, got {act_box}")

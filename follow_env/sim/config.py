@@ -25,7 +25,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
-from follow_env.sim.checks import as_number, check_number, is_real, out_of_range, range_text
+from follow_env.sim.checks import as_number, check_number, out_of_range, range_text
 
 __all__ = ["Sections", "Validated", "field_spec", "param"]
 
@@ -91,7 +91,7 @@ def _check_field(owner: object, f: dataclasses.Field[Any], value: object) -> obj
         if value not in meta["choices"]:
             raise out_of_range(where, value, rule_text(meta))
         return value
-    if isinstance(f.default, str) or (f.default is None and not is_real(value)):
+    if isinstance(f.default, str):
         if not isinstance(value, str):
             raise out_of_range(where, value, "a string")
         return value  # free-form text (e.g. a registry name): checked by whoever uses it
@@ -174,6 +174,17 @@ class Sections:
     def sections(self) -> dict[str, Any]:
         """Section name -> its current value."""
         return {name: getattr(self, name) for name in self.section_names()}
+
+    def leaf_sections(self) -> dict[str, Any]:
+        """Every section holding fields, by the name users give it (a nested tree's sections
+        under their own names, e.g. ``robot`` for ``platform.robot``)."""
+        out: dict[str, Any] = {}
+        for name, value in self.sections().items():
+            if isinstance(value, Sections):
+                out.update(value.leaf_sections())
+            else:
+                out[name] = value
+        return out
 
     def replace(self, **sections: Any) -> Any:
         """A copy with whole sections replaced or updated from mappings of field values."""

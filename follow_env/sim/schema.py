@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["Block", "Field", "f8", "i8", "nested", "zeros"]
+__all__ = ["Block", "Field", "f8", "float_column", "i8", "nested", "zeros"]
 
 Source = str | Callable[[Any], Any] | None
 
@@ -148,6 +148,22 @@ def _resolve(source: Source, cfg: Any) -> Any:
     if isinstance(value, bool):
         return float(value)
     return value
+
+
+def float_column(dtype: np.dtype, path: Sequence[str], index: int = 0) -> int:
+    """Where a float64 field (``path`` through nested blocks; entry ``index`` of an array field)
+    sits in a record of ``dtype`` seen as a row of float64 words (``arr.view(np.float64)``):
+    lets code that reads many fields of many lanes gather them in one indexing operation."""
+    offset = 0
+    current = dtype
+    for name in path:
+        sub, off = current.fields[name][:2]
+        offset += off
+        current = sub
+    base = current.base if current.shape else current
+    if base != np.dtype(np.float64) or offset % 8 or dtype.itemsize % 8:
+        raise ValueError(f"{'.'.join(path)} is not a float64 field on a float64 boundary")
+    return offset // 8 + index
 
 
 def zeros(dtype: np.dtype, *shape: int) -> np.ndarray:

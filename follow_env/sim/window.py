@@ -26,6 +26,7 @@ class Window:
     """A window of ``width`` x ``height`` px titled ``title`` that shows RGB frames."""
 
     def __init__(self, title: str, width: int, height: int) -> None:
+        os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
         try:
             import pygame
         except ImportError:

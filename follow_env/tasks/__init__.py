@@ -13,7 +13,7 @@ import importlib
 import pkgutil
 from typing import Any
 
-__all__ = ["available_tasks", "get_task", "register_envs"]
+__all__ = ["available_tasks", "get_task", "register_envs", "task_for_env"]
 
 
 def _packages() -> list[str]:
@@ -36,6 +36,21 @@ def register_envs() -> None:
                 # No max_episode_steps: the kernel ends episodes itself, so the single env and
                 # the batched core truncate at exactly the same step.
                 gymnasium.register(id=env_id, **kwargs)
+
+
+def task_for_env(env_id: str) -> Any:
+    """The task model behind a Gymnasium id (``"PersonFollow-v0"``); ``ValueError`` listing
+    the known ids otherwise."""
+    known = []
+    for name in _packages():
+        package = importlib.import_module(f"{__name__}.{name}")
+        envs = getattr(package, "ENVS", {})
+        if env_id in envs:
+            return get_task(name)
+        known += list(envs)
+    raise ValueError(
+        f"env_id={env_id!r} is out of range: must be one of " + ", ".join(map(repr, known))
+    )
 
 
 def get_task(name: str) -> Any:

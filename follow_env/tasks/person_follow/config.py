@@ -16,6 +16,7 @@ allow; the default), :data:`IDEAL` (perfect sensing, for debugging and tests), :
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import ClassVar
 
 from follow_env.platforms.base import PlatformConfig
 from follow_env.platforms.diff_drive import DiffDriveConfig
@@ -204,7 +205,7 @@ class EpisodeConfig(Validated):
 class EnvConfig(Sections):
     """Everything one simulated robot, its sensors and its task need."""
 
-    NESTED = "platform"
+    NESTED: ClassVar[str | None] = "platform"
 
     platform: PlatformConfig = field(default_factory=DiffDriveConfig)
     camera: CameraConfig = field(default_factory=CameraConfig)

@@ -19,7 +19,7 @@ import numpy as np
 from follow_env.sim.jit import njit
 from follow_env.sim.schema import Block, f8, i8
 
-__all__ = ["PERSON", "WAYPOINT", "person_reset", "person_step", "social_forces"]
+__all__ = ["PERSON", "WAYPOINT", "as_waypoints", "person_reset", "person_step", "social_forces"]
 
 PERSON = Block(
     "person",
@@ -53,6 +53,16 @@ WAYPOINT = Block(
     ],
 )
 N_PW = len(WAYPOINT.fields)
+
+
+def as_waypoints(paths: np.ndarray) -> np.ndarray:
+    """Float paths ``(..., N_PW)`` (the columns of :data:`WAYPOINT`'s fields, as scenarios
+    build them) as waypoint records ``(...)``, sharing their memory."""
+    arr = np.ascontiguousarray(paths, dtype=np.float64)
+    if arr.shape[-1] != N_PW:
+        raise ValueError(f"paths must have {N_PW} columns (x, y, s, vmax, pause), got {arr.shape}")
+    return arr.view(WAYPOINT.dtype)[..., 0]
+
 
 # A person closing on a stop never walks slower than this, so they always arrive (m/s).
 _CREEP_MPS = 0.05

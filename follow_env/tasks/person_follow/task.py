@@ -9,7 +9,7 @@ the ``info`` dict are read from the state.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from gymnasium import spaces
@@ -20,7 +20,7 @@ from follow_env.sensors import camera, depth, detector
 from follow_env.sensors.detector import PEOPLE_MAX
 from follow_env.sim.checks import out_of_range
 from follow_env.sim.runner import BatchedSim
-from follow_env.sim.schema import Block, f8, i8, nested
+from follow_env.sim.schema import Block, f8, float_column, i8, nested
 from follow_env.tasks.person_follow import reward
 from follow_env.tasks.person_follow.config import PRESETS, THESIS, EnvConfig
 from follow_env.tasks.person_follow.people import PERSON, WAYPOINT
@@ -28,7 +28,7 @@ from follow_env.tasks.person_follow.scenarios import ScenarioSpec, get_scenario
 from follow_env.tasks.person_follow.spec import SPEC, observation_bounds
 from follow_env.world.geometry import WALL, WALL_RADIUS_M
 
-__all__ = ["PARAMS", "STATE", "TASK", "PersonFollowTask"]
+__all__ = ["PARAMS", "STATE", "TASK", "PersonFollowTask", "batched_sim"]
 
 N_OCCLUDERS = 64
 """Most occluders listed for one sight line."""
@@ -127,8 +127,23 @@ _PERSON_INFO = {"person_x_m": "x", "person_y_m": "y", "person_theta_rad": "th", 
 _REASONS = np.array(SPEC.terminations, dtype=object)
 
 
+def _words(records: np.ndarray) -> np.ndarray:
+    """Records ``(N, ...)`` seen as float64 words, one row per lane (no copy)."""
+    return records.view(np.float64).reshape(records.shape[0], -1)
+
+
+class _InfoColumns(NamedTuple):
+    names: tuple[str, ...]
+    cols: np.ndarray
+    person_names: tuple[str, ...]
+    person_cols: np.ndarray
+
+
 class PersonFollowTask:
     """The person-following task (SPEC §1) for the runner and the env faces."""
+
+    def __init__(self) -> None:
+        self._column_cache: dict[tuple[Any, ...], _InfoColumns] = {}
 
     name = SPEC.name
     spec = SPEC
@@ -193,6 +208,15 @@ class PersonFollowTask:
         )
         top = platform.action_high(cfg).astype(np.float32)
         return observation, spaces.Box(-top, top, dtype=np.float32)
+
+    def variants(self) -> list[str]:
+        """The task's registered variants (here: scenarios), which training spreads lanes over
+        and evaluation tabulates (``variant_key`` is their ``gym.make`` keyword)."""
+        from follow_env.tasks.person_follow.scenarios import SCENARIOS
+
+        return sorted(SCENARIOS)
+
+    variant_key = "scenario"
 
     def renderer(self, cfg: EnvConfig) -> Any:
         """A renderer of this task's frames (OpenCV, headless)."""
@@ -267,18 +291,34 @@ class PersonFollowTask:
         ts = sim.state["task"]
         return np.stack([ts["obs_d"], ts["obs_o"]], axis=1).astype(np.float32)
 
+    def _columns(self, sim: BatchedSim) -> _InfoColumns:
+        """Where every float info value sits in a lane's records seen as float64 words
+        (generated from the blocks, once per composed layout)."""
+        key = (sim.state_dtype, sim.world[0].dtype, sim.platform.name)
+        columns = self._column_cache.get(key)
+        if columns is None:
+            names, cols = [], []
+            for name, path in _STATE_INFO.items():
+                names.append(name)
+                cols.append(float_column(sim.state_dtype, path))
+            for name, field, index, _ in sim.platform.info:
+                names.append(name)
+                cols.append(float_column(sim.state_dtype, ("platform", field), index or 0))
+            person = [float_column(sim.world[0].dtype, (f,)) for f in _PERSON_INFO.values()]
+            columns = _InfoColumns(
+                tuple(names), np.array(cols), tuple(_PERSON_INFO), np.array(person)
+            )
+            self._column_cache[key] = columns
+        return columns
+
     def lane_info(self, sim: BatchedSim, lane: int) -> dict[str, Any]:
         """The ``info`` dict of one lane, as Python scalars."""
+        c = self._columns(sim)
+        words = _words(sim.state[lane : lane + 1])[0]
+        info = dict(zip(c.names, words[c.cols].tolist(), strict=True))
+        people = _words(sim.world[0][lane : lane + 1])[0]
+        info.update(zip(c.person_names, people[c.person_cols].tolist(), strict=True))
         st = sim.state[lane]
-        info: dict[str, Any] = {}
-        for key, path in _STATE_INFO.items():
-            info[key] = float(st[path[0]][path[1]])
-        for key, field, index, _ in sim.platform.info:
-            value = st["platform"][field]
-            info[key] = float(value if index is None else value[index])
-        target = sim.world[0][lane, 0]
-        for key, field in _PERSON_INFO.items():
-            info[key] = float(target[field])
         ts = st["task"]
         info["in_frame"] = bool(ts["in_frame"])
         info["detected"] = bool(ts["detected"])
@@ -290,16 +330,15 @@ class PersonFollowTask:
     def batch_info(self, sim: BatchedSim, lanes: np.ndarray | None = None) -> dict[str, np.ndarray]:
         """The ``info`` of many lanes as Gymnasium's dict of arrays (all lanes, or those in
         ``lanes``), without the ``_key`` masks."""
-        state = sim.state if lanes is None else sim.state[lanes]
-        target = sim.world[0][:, 0] if lanes is None else sim.world[0][lanes, 0]
-        info: dict[str, np.ndarray] = {}
-        for key, path in _STATE_INFO.items():
-            info[key] = state[path[0]][path[1]].copy()
-        for key, field, index, _ in sim.platform.info:
-            value = state["platform"][field]
-            info[key] = (value if index is None else value[:, index]).copy()
-        for key, field in _PERSON_INFO.items():
-            info[key] = target[field].copy()
+        c = self._columns(sim)
+        sel = slice(None) if lanes is None else lanes
+        # One fresh (keys, lanes) block whose rows are the entries: gathering rows of the
+        # transposed view is much faster than transposing a gathered copy at 4096 lanes.
+        floats = _words(sim.state)[sel].T[c.cols]
+        info: dict[str, np.ndarray] = dict(zip(c.names, floats, strict=True))
+        person = _words(sim.world[0])[sel].T[c.person_cols]
+        info.update(zip(c.person_names, person, strict=True))
+        state = sim.state[sel]
         ts = state["task"]
         info["in_frame"] = ts["in_frame"] > 0.0
         info["detected"] = ts["detected"] > 0.0
@@ -315,3 +354,8 @@ class PersonFollowTask:
 
 TASK = PersonFollowTask()
 """The task model the env faces use."""
+
+
+def batched_sim(cfg: EnvConfig, num_lanes: int) -> BatchedSim:
+    """A runner of ``num_lanes`` person-following lanes under ``cfg`` (for tools and tests)."""
+    return BatchedSim(TASK, cfg, num_lanes)

@@ -169,8 +169,7 @@ def register_scenario(
     and ``world``."""
 
     def deco(fn: ScenarioFn) -> ScenarioFn:
-        known = SCENARIOS.get(name)
-        if known is not None and known.fn.__qualname__ != fn.__qualname__:
+        if name in SCENARIOS:
             raise ValueError(f"scenario {name!r} is registered already")
         SCENARIOS[name] = ScenarioSpec(name, fn, max_people, max_points, max_walls, room, world)
         return fn

@@ -6,7 +6,7 @@ import numpy as np
 from hypothesis import given
 from hypothesis import strategies as st
 
-from follow_env.kinematics import DiffDrive, diff_drive_fk, diff_drive_ik, euler_pose_step
+from follow_env.platforms.diff_drive import DiffDrive, diff_drive_fk, diff_drive_ik, euler_pose_step
 
 speeds = st.floats(-3.0, 3.0, allow_nan=False)
 

@@ -7,68 +7,53 @@ import dataclasses
 import numpy as np
 import pytest
 
-from follow_env.config import NOISY, RANDOMIZED, THESIS, RandomizationConfig
-from follow_env.core import BatchedSim, params_from_config
-from follow_env.layout import (
-    P_DEPTH_K,
-    P_FRIC_DUTY,
-    P_JIT_C,
-    P_LATENCY,
-    P_MISS_P,
-    P_R00,
-    P_R22,
-    P_STALL_DUTY,
-    P_TRACK,
-    P_TRACK_TRUE,
-    P_WHEEL_R,
-    P_WHEEL_R_TRUE,
-    S_PUSH_VX,
-    S_PUSH_VY,
-    S_VMEAS_R,
-    S_X,
-    S_Y,
-)
+from follow_env.sim.runner import BatchedSim
+from follow_env.tasks.person_follow.config import NOISY, RANDOMIZED, THESIS, RandomizationConfig
+from follow_env.tasks.person_follow.task import batched_sim
 
 N = 400
 
 
 def _sim(cfg: object, n: int = N, seed0: int = 0) -> BatchedSim:
-    sim = BatchedSim(cfg, n)  # type: ignore[arg-type]
+    sim = batched_sim(cfg, n)  # type: ignore[arg-type]
     sim.reset_lanes(np.arange(n), list(range(seed0, seed0 + n)))
     return sim
 
 
 def test_randomisation_is_off_by_default() -> None:
     sim = _sim(THESIS, n=8)
-    base = params_from_config(THESIS)
-    assert np.all(sim.params[:, P_WHEEL_R_TRUE] == base[P_WHEEL_R])
-    assert np.all(sim.params[:, P_TRACK_TRUE] == base[P_TRACK])
-    assert np.all(sim.params[:, P_R00 : P_R22 + 1] == base[P_R00 : P_R22 + 1])
-    assert np.all(sim.params[:, P_LATENCY] == base[P_LATENCY])
+    base = batched_sim(THESIS, 1).base_params
+    assert np.all(sim.params["platform"]["wheel_r_true"] == base["platform"]["wheel_r"])
+    assert np.all(sim.params["platform"]["track_true"] == base["platform"]["track"])
+    assert np.all(sim.params["task"]["camera"]["R"] == base["task"]["camera"]["R"])
+    assert np.all(sim.params["task"]["detector"]["latency"] == base["task"]["detector"]["latency"])
 
 
 def test_randomised_values_stay_in_their_documented_ranges() -> None:
     rc = RANDOMIZED.randomization
     sim = _sim(RANDOMIZED)
-    base = params_from_config(RANDOMIZED)
-    ratio = sim.params[:, P_WHEEL_R_TRUE] / base[P_WHEEL_R]
+    base = batched_sim(RANDOMIZED, 1).base_params
+    ratio = sim.params["platform"]["wheel_r_true"] / base["platform"]["wheel_r"]
     assert np.all((ratio >= 0.5) & (ratio <= 1.5))
     assert abs(np.std(ratio) - rc.wheel_radius_error) < 0.005
-    track = sim.params[:, P_TRACK_TRUE] / base[P_TRACK]
+    track = sim.params["platform"]["track_true"] / base["platform"]["track"]
     assert abs(np.std(track) - rc.track_width_error) < 0.006
-    latency = sim.params[:, P_LATENCY]
+    latency = sim.params["task"]["detector"]["latency"]
     assert set(np.unique(latency)) == set(range(NOISY.perception.latency_frames, 4))
-    depth = sim.params[:, P_DEPTH_K] / base[P_DEPTH_K]
+    depth = sim.params["task"]["depth"]["depth_k"] / base["task"]["depth"]["depth_k"]
     assert np.all((depth >= 1.0) & (depth <= rc.depth_noise_scale_max))
-    fric = sim.params[:, P_FRIC_DUTY] / base[P_FRIC_DUTY]
+    fric = sim.params["platform"]["fric"] / base["platform"]["fric"]
     assert np.all((fric >= 1 - rc.friction_spread) & (fric <= 1 + rc.friction_spread))
-    assert np.allclose(sim.params[:, P_STALL_DUTY] / base[P_STALL_DUTY], fric)
-    level = sim.params[:, P_JIT_C] / base[P_JIT_C]
+    assert np.allclose(sim.params["platform"]["stall"] / base["platform"]["stall"], fric)
+    level = sim.params["task"]["detector"]["jit_c"] / base["task"]["detector"]["jit_c"]
     spread = rc.detector_level_spread
     assert np.all((level >= 1 - spread) & (level <= 1 + spread))
-    assert np.all((sim.params[:, P_MISS_P] >= 0.0) & (sim.params[:, P_MISS_P] <= 1.0))
+    assert np.all(
+        (sim.params["task"]["detector"]["miss_p"] >= 0.0)
+        & (sim.params["task"]["detector"]["miss_p"] <= 1.0)
+    )
     # Camera tilt: the rotation differs per lane, and stays a rotation.
-    rot = sim.params[:, P_R00 : P_R22 + 1].reshape(-1, 3, 3)
+    rot = sim.params["task"]["camera"]["R"].reshape(-1, 3, 3)
     assert np.allclose(rot @ rot.transpose(0, 2, 1), np.eye(3), atol=1e-12)
     assert np.ptp(rot[:, 2, 2]) > 0.0
 
@@ -86,8 +71,12 @@ def test_switching_one_randomisation_on_leaves_the_others_draws_alone() -> None:
         randomization={"wheel_radius_error": 0.05, "latency_frames_max": 3}
     )
     a, b = _sim(only_wheels, n=16), _sim(wheels_and_latency, n=16)
-    assert np.array_equal(a.params[:, P_WHEEL_R_TRUE], b.params[:, P_WHEEL_R_TRUE])
-    assert not np.array_equal(a.params[:, P_LATENCY], b.params[:, P_LATENCY])
+    assert np.array_equal(
+        a.params["platform"]["wheel_r_true"], b.params["platform"]["wheel_r_true"]
+    )
+    assert not np.array_equal(
+        a.params["task"]["detector"]["latency"], b.params["task"]["detector"]["latency"]
+    )
 
 
 def test_pushes_move_the_robot_and_do_not_depend_on_the_actions() -> None:
@@ -96,10 +85,12 @@ def test_pushes_move_the_robot_and_do_not_depend_on_the_actions() -> None:
     for _ in range(5):
         still.step(np.zeros((4, 2)))
         moving.step(np.tile([0.3, 0.5], (4, 1)))
-        push = still.fstate[:, [S_PUSH_VX, S_PUSH_VY]]
+        push = np.stack([still.body["push_vx"], still.body["push_vy"]], axis=1)
         assert np.allclose(np.hypot(push[:, 0], push[:, 1]), 0.4)
-        assert np.array_equal(push, moving.fstate[:, [S_PUSH_VX, S_PUSH_VY]])
-    displaced = np.hypot(still.fstate[:, S_X] - (-10.0), still.fstate[:, S_Y])
+        assert np.array_equal(
+            push, np.stack([moving.body["push_vx"], moving.body["push_vy"]], axis=1)
+        )
+    displaced = np.hypot(still.body["x"] - (-10.0), still.body["y"])
     assert np.all(displaced > 0.0)
 
 
@@ -112,8 +103,8 @@ def test_encoder_noise_shows_in_the_speed_of_a_wheel_at_rest() -> None:
     for _ in range(30):
         quiet.step(np.zeros((1, 2)))
         noisy.step(np.zeros((1, 2)))
-        speeds_quiet.append(quiet.fstate[0, S_VMEAS_R])
-        speeds_noisy.append(noisy.fstate[0, S_VMEAS_R])
+        speeds_quiet.append(quiet.state["platform"]["meas"][0, 0])
+        speeds_noisy.append(noisy.state["platform"]["meas"][0, 0])
     assert np.all(np.array(speeds_quiet) == 0.0)
     assert np.std(speeds_noisy) > 0.005  # a few counts per 10 ms are several mm/s
 

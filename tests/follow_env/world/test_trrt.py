@@ -9,8 +9,8 @@ import math
 import numpy as np
 import pytest
 
-from follow_env.rng import uniform_at
-from follow_env.trrt import (
+from follow_env.sim.rng import uniform_at
+from follow_env.world.trrt import (
     COUNTERS_PER_ITER,
     CostMap,
     PlanResult,

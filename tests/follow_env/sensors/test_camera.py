@@ -8,10 +8,7 @@ import numpy as np
 from hypothesis import given
 from hypothesis import strategies as st
 
-from follow_env.camera import Camera, back_project, body_box, project
-from follow_env.config import THESIS, CameraConfig
-from follow_env.core import params_from_config
-from follow_env.layout import P_R00
+from follow_env.sensors.camera import Camera, CameraConfig, back_project, body_box, project
 
 CAM = Camera.from_config(CameraConfig())
 
@@ -66,7 +63,6 @@ def test_pitch_down_moves_the_horizon_up_in_the_image() -> None:
 def _box(
     px: float, py: float, rx: float = 0.0, ry: float = 0.0, rth: float = 0.0, pth: float = 0.0
 ) -> tuple[float, float, float, float, bool]:
-    prm = params_from_config(THESIS)
     return body_box(
         px,
         py,
@@ -77,8 +73,8 @@ def _box(
         rx,
         ry,
         rth,
-        prm,
-        P_R00,
+        CAM.R.ravel(),
+        CAM.T,
         CAM.fx,
         CAM.fy,
         CAM.cx,

@@ -11,9 +11,18 @@ import pytest
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
-from follow_env.config import _SECTIONS, THESIS, EnvConfig
-from follow_env.core import BatchedSim
-from follow_env.layout import N_FSTATE, S_OBS_D, S_OBS_O, S_REWARD
+from follow_env.tasks.person_follow.config import THESIS, EnvConfig
+from follow_env.tasks.person_follow.task import batched_sim
+
+_SECTIONS = {name: type(section) for name, section in THESIS.leaf_sections().items()}
+
+
+def _float_fields(arr: np.ndarray) -> list[np.ndarray]:
+    """Every float field of a structured array, nested blocks included."""
+    if arr.dtype.names is None:
+        return [arr] if arr.dtype.kind == "f" else []
+    return [leaf for name in arr.dtype.names for leaf in _float_fields(arr[name])]
+
 
 # Sections whose every field is drawn from its whole declared range. Scenario and episode keep
 # their defaults (a walk must fit its room; max_steps is kept small below).
@@ -58,15 +67,16 @@ def configs(draw: st.DrawFn) -> EnvConfig:
 def test_valid_configs_with_random_actions_never_give_nan(
     cfg: EnvConfig, seed: int, action_seed: int
 ) -> None:
-    sim = BatchedSim(cfg, 2)
+    sim = batched_sim(cfg, 2)
     sim.reset_lanes(np.arange(2), [seed, seed + 1])
     rng = np.random.default_rng(action_seed)
     for _ in range(40):
-        a = rng.uniform(-1, 1, (2, 2)) * [cfg.max_speed_mps * 1.5, cfg.max_turn_rate_radps * 1.5]
-        sim.step(a)
-        assert sim.fstate.shape == (2, N_FSTATE)
-        assert np.isfinite(sim.fstate[:, [S_OBS_D, S_OBS_O, S_REWARD]]).all()
-        assert np.isfinite(sim.fstate).all()
+        top = [cfg.platform.max_speed_mps * 1.5, cfg.platform.max_turn_rate_radps * 1.5]
+        sim.step(rng.uniform(-1, 1, (2, 2)) * top)
+        ts = sim.state["task"]
+        assert np.isfinite([ts["obs_d"], ts["obs_o"], sim.episode["reward"]]).all()
+        for values in _float_fields(sim.state):
+            assert np.isfinite(values).all()
 
 
 def _bad_value(meta: Any, data: st.DataObject) -> Any:

@@ -4,10 +4,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from follow_env.config import THESIS
-from follow_env.core import BatchedSim
-from follow_env.drive import encoder_count, encoder_speed, lag_factor, motor_step, pid_step
-from follow_env.layout import S_DUTY_R, S_OMEGA_R, S_VMEAS_R
+from follow_env.platforms.wheels import (
+    encoder_count,
+    encoder_speed,
+    lag_factor,
+    motor_step,
+    pid_step,
+)
+from follow_env.tasks.person_follow.config import THESIS
+from follow_env.tasks.person_follow.task import batched_sim
 
 CPR = 2048 * 4
 ALPHA = lag_factor(0.08, 0.01)  # tau 80 ms over a 10 ms tick
@@ -98,13 +103,13 @@ def test_motor_speed_saturates_at_the_duty_limit() -> None:
 def _wheel_step_response(target_mps: float) -> tuple[np.ndarray, np.ndarray]:
     """Right wheel's true linear speed and duty every 10 ms after a step in the target."""
     cfg = THESIS.replace(episode={"control_dt_s": 0.01}, motor={"gain_spread": 0.0})
-    sim = BatchedSim(cfg, 1)
+    sim = batched_sim(cfg, 1)
     sim.reset_lanes(np.zeros(1, dtype=np.int64), [0])
     speed, duty = [], []
     for _ in range(150):
         sim.step(np.array([[target_mps, 0.0]]))
-        speed.append(sim.fstate[0, S_OMEGA_R] * cfg.robot.wheel_radius_m)
-        duty.append(sim.fstate[0, S_DUTY_R])
+        speed.append(sim.state["platform"]["omega"][0, 0] * cfg.robot.wheel_radius_m)
+        duty.append(sim.state["platform"]["duty"][0, 0])
     return np.array(speed), np.array(duty)
 
 
@@ -126,9 +131,9 @@ def test_default_pid_has_no_sustained_oscillation() -> None:
 
 def test_measured_speed_tracks_true_speed_within_quantisation() -> None:
     cfg = THESIS.replace(motor={"gain_spread": 0.0})
-    sim = BatchedSim(cfg, 1)
+    sim = batched_sim(cfg, 1)
     sim.reset_lanes(np.zeros(1, dtype=np.int64), [0])
     for _ in range(10):
         sim.step(np.array([[0.5, 0.0]]))
-    true = sim.fstate[0, S_OMEGA_R] * cfg.robot.wheel_radius_m
-    assert abs(sim.fstate[0, S_VMEAS_R] - true) < 0.02
+    true = sim.state["platform"]["omega"][0, 0] * cfg.robot.wheel_radius_m
+    assert abs(sim.state["platform"]["meas"][0, 0] - true) < 0.02

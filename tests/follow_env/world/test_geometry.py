@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from follow_env.world import (
+from follow_env.world.geometry import (
     WALL_RADIUS_M,
     World,
     rect_rect_distance,

@@ -7,18 +7,14 @@ import math
 
 import pytest
 
-from follow_env.config import (
-    _SECTIONS,
-    IDEAL,
-    PRESETS,
-    THESIS,
-    CameraConfig,
-    EnvConfig,
-    MotorConfig,
-    PerceptionConfig,
-    RobotConfig,
-    field_spec,
-)
+from follow_env.platforms.diff_drive import RobotConfig
+from follow_env.platforms.wheels import MotorConfig
+from follow_env.sensors.camera import CameraConfig
+from follow_env.sensors.detector import PerceptionConfig
+from follow_env.sim.config import field_spec
+from follow_env.tasks.person_follow.config import IDEAL, PRESETS, THESIS, EnvConfig
+
+_SECTIONS = {name: type(section) for name, section in THESIS.leaf_sections().items()}
 
 
 def _ranged_fields() -> list[tuple[type, str]]:
@@ -86,6 +82,7 @@ def test_configs_are_frozen() -> None:
 
 def test_derived_platform_limits() -> None:
     # 20 rad/s * 0.075 m * (99 - 4) / (100 - 4)
-    assert math.isclose(THESIS.max_wheel_speed_mps, 20 * 0.075 * 95 / 96)
-    assert math.isclose(THESIS.max_turn_rate_radps, 2 * THESIS.max_wheel_speed_mps / 0.4)
-    assert THESIS.sub_steps == 10
+    platform = THESIS.platform
+    assert math.isclose(platform.max_wheel_speed_mps, 20 * 0.075 * 95 / 96)
+    assert math.isclose(platform.max_turn_rate_radps, 2 * platform.max_wheel_speed_mps / 0.4)
+    assert platform.sub_steps(THESIS.episode.control_dt_s) == 10

@@ -9,8 +9,7 @@ from gymnasium.utils.env_checker import check_env as gym_check_env
 from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
 import follow_env
-from follow_env.env import INFO_KEYS
-from follow_env.layout import I_BURST0, P_MISS_P
+from follow_env import INFO_KEYS
 
 
 def _run(env: gym.Env, actions: np.ndarray, seed: int) -> dict[str, list]:
@@ -21,7 +20,7 @@ def _run(env: gym.Env, actions: np.ndarray, seed: int) -> dict[str, list]:
         log["obs"].append(obs)
         log["reward"].append(r)
         log["person"].append((info["person_x_m"], info["person_y_m"]))
-        log["burst"].append(int(env.unwrapped.sim.istate[0, I_BURST0]))
+        log["burst"].append(int(env.unwrapped.sim.state["task"]["detector"]["burst"][0, 0]))
         if te or tr:
             break
     return log
@@ -39,8 +38,8 @@ def test_spaces_are_float32_boxes_of_shape_2_in_si_units() -> None:
     assert env.action_space.shape == (2,)
     assert env.action_space.dtype == np.float32
     cfg = env.unwrapped.config
-    assert np.isclose(env.action_space.high[0], cfg.max_speed_mps)
-    assert np.isclose(env.action_space.high[1], 2 * cfg.max_wheel_speed_mps / 0.4)
+    assert np.isclose(env.action_space.high[0], cfg.platform.max_speed_mps)
+    assert np.isclose(env.action_space.high[1], 2 * cfg.platform.max_wheel_speed_mps / 0.4)
     assert env.observation_space.low[1] == -320
     assert env.observation_space.high[1] == 319
 
@@ -124,7 +123,8 @@ def test_reset_without_seed_continues_the_seeded_sequence() -> None:
 def test_missed_detections_hold_the_observation() -> None:
     env = gym.make("PersonFollow-v0", config="ideal")
     obs0, _ = env.reset(seed=0)
-    env.unwrapped.sim.params[0, P_MISS_P] = 1.0  # from now on the detector misses every frame
+    # From now on the detector misses every frame.
+    env.unwrapped.sim.params["task"]["detector"]["miss_p"][0] = 1.0
     for _ in range(10):
         obs, _, te, _, info = env.step(np.array([0.0, 0.5], dtype=np.float32))
         assert not te
@@ -223,3 +223,55 @@ def test_kwargs_map_onto_the_config() -> None:
 def test_bad_kwargs_raise_value_error_naming_them(kwargs: dict, match: str) -> None:
     with pytest.raises(ValueError, match=match):
         gym.make("PersonFollow-v0", **kwargs)
+
+
+# -- bad actions (a regression test for each shape that used to slip through) ----------------
+
+
+@pytest.mark.parametrize(
+    "action",
+    [
+        np.zeros(3, dtype=np.float32),  # an extra value was ignored
+        np.zeros(1, dtype=np.float32),
+        np.zeros((2, 1), dtype=np.float32),
+        0.5,
+        None,
+        {"v": 0.5, "w": 0.0},
+        "fast",
+    ],
+    ids=["3", "1", "2x1", "scalar", "None", "dict", "str"],
+)
+def test_an_action_of_the_wrong_shape_raises_naming_both_shapes(action: object) -> None:
+    env = gym.make("PersonFollow-v0").unwrapped
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match=r"\(2,\)"):
+        env.step(action)
+
+
+def test_a_list_action_of_the_right_shape_is_taken() -> None:
+    env = gym.make("PersonFollow-v0").unwrapped
+    env.reset(seed=0)
+    obs, *_ = env.step([0.5, 0.0])
+    assert obs.shape == (2,)
+
+
+def test_the_unwrapped_env_refuses_step_before_reset() -> None:
+    env = gym.make("PersonFollow-v0").unwrapped
+    with pytest.raises(gym.error.ResetNeeded):
+        env.step(np.zeros(2, dtype=np.float32))
+
+
+@pytest.mark.parametrize(
+    "kwargs",
+    [{"episode__max_steps": np.int64(3)}, {"camera__vfov_deg": np.float32(40.0)}],
+    ids=["int64", "float32"],
+)
+def test_numpy_scalars_are_taken_as_config_values(kwargs: dict) -> None:
+    env = gym.make("PersonFollow-v0", **kwargs).unwrapped
+    ((section_field, value),) = kwargs.items()
+    section, field = section_field.split("__")
+    stored = getattr(getattr(env.config, section), field)
+    assert stored == value
+    assert type(stored) in (int, float)  # stored as a Python number
+    env.reset(seed=0)
+    env.step(np.zeros(2, dtype=np.float32))

@@ -7,16 +7,22 @@ import math
 import numpy as np
 import pytest
 
-from follow_env.config import THESIS
-from follow_env.layout import PW_S, PW_VMAX, PW_X, PW_Y
-from follow_env.rng import LaneRandom, episode_keys
-from follow_env.scenarios import SCENARIOS, ScenarioBatch, register_scenario
+from follow_env.sim.rng import episode_keys
+from follow_env.tasks.person_follow.config import THESIS
+from follow_env.tasks.person_follow.scenarios import (
+    PW,
+    SCENARIOS,
+    ScenarioBatch,
+    ScenarioRandom,
+    register_scenario,
+    room_size,
+)
 
 
 def _batch(name: str, n: int = 4, **scenario: object) -> ScenarioBatch:
     cfg = THESIS.replace(scenario={"name": name, **scenario})
-    keys = np.stack([episode_keys(np.random.SeedSequence(s))[0] for s in range(n)])
-    return SCENARIOS[name].fn(LaneRandom(keys), cfg)
+    keys = np.stack([episode_keys(np.random.SeedSequence(s)) for s in range(n)])
+    return SCENARIOS[name].fn(SCENARIOS[name].random(keys), cfg)
 
 
 def test_the_built_in_scenarios_are_registered() -> None:
@@ -26,7 +32,7 @@ def test_the_built_in_scenarios_are_registered() -> None:
 @pytest.mark.parametrize("name", ["straight", "curve"])
 def test_the_thesis_scenarios_start_the_person_1_m_ahead_of_the_camera(name: str) -> None:
     b = _batch(name)
-    start = b.paths[:, 0, 0, [PW_X, PW_Y]]
+    start = b.paths[:, 0, 0, [PW.x, PW.y]]
     cam_x = b.robot_pose[:, 0] + THESIS.camera.mount_x_m * np.cos(b.robot_pose[:, 2])
     ahead = start[:, 0] - cam_x - 0.5 * THESIS.person.depth_m
     assert np.allclose(ahead, 1.0)
@@ -37,13 +43,13 @@ def test_the_thesis_scenarios_start_the_person_1_m_ahead_of_the_camera(name: str
 def test_the_thesis_walk_is_10_m_long(name: str) -> None:
     b = _batch(name)
     n = b.n_points[0, 0]
-    assert np.allclose(b.paths[:, 0, n - 1, PW_S], 10.0, atol=1e-3)  # chords of the arc
+    assert np.allclose(b.paths[:, 0, n - 1, PW.s], 10.0, atol=1e-3)  # chords of the arc
 
 
 def test_curve_is_one_arc_of_the_configured_turn() -> None:
     b = _batch("curve", n=1)
     n = b.n_points[0, 0]
-    pts = b.paths[0, 0, :n, :2]
+    pts = b.paths[0, 0, :n][:, [PW.x, PW.y]]
     d = np.diff(pts, axis=0)
     heading = np.unwrap(np.arctan2(d[:, 1], d[:, 0]))
     assert math.isclose(heading[-1] - heading[0], math.radians(90.0), abs_tol=0.05)
@@ -53,7 +59,7 @@ def test_curve_is_one_arc_of_the_configured_turn() -> None:
 
 
 def test_cruise_pace_is_drawn_per_episode_within_the_spread() -> None:
-    v = _batch("straight", n=50).paths[:, 0, 0, PW_VMAX]
+    v = _batch("straight", n=50).paths[:, 0, 0, PW.vmax]
     assert np.all((v >= 0.9) & (v <= 1.1))
     assert np.ptp(v) > 0.05
 
@@ -61,10 +67,11 @@ def test_cruise_pace_is_drawn_per_episode_within_the_spread() -> None:
 def test_random_walk_stays_inside_the_room_and_is_deterministic_per_seed() -> None:
     a, b = _batch("random", n=16), _batch("random", n=16)
     assert np.array_equal(a.paths, b.paths)
-    hx, hy = THESIS.scenario.room_length_m / 2, THESIS.scenario.room_width_m / 2
+    length, width = room_size(THESIS.replace(scenario={"name": "random"}))
+    hx, hy = length / 2, width / 2
     for i in range(16):
         n = a.n_points[i, 0]
-        pts = a.paths[i, 0, :n, :2]
+        pts = a.paths[i, 0, :n][:, [PW.x, PW.y]]
         assert np.all(np.abs(pts[:, 0]) < hx - 0.5)
         assert np.all(np.abs(pts[:, 1]) < hy - 0.5)
     assert not np.array_equal(a.paths[0], a.paths[1])
@@ -77,10 +84,10 @@ def test_a_walk_that_does_not_fit_the_room_is_refused() -> None:
 
 def test_a_new_scenario_is_one_registered_function() -> None:
     @register_scenario("test-standstill", max_points=2)
-    def standstill(rng: LaneRandom, cfg: object) -> ScenarioBatch:
+    def standstill(rng: ScenarioRandom, cfg: object) -> ScenarioBatch:
         b = SCENARIOS["straight"].fn(rng, cfg)  # type: ignore[arg-type]
-        b.paths[..., 1, :2] = b.paths[..., 0, :2] + np.array([0.01, 0.0])
-        b.paths[..., 1, PW_S] = 0.01
+        b.paths[..., 1, [PW.x, PW.y]] = b.paths[..., 0, [PW.x, PW.y]] + np.array([0.01, 0.0])
+        b.paths[..., 1, PW.s] = 0.01
         return b
 
     try:

@@ -6,8 +6,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from follow_env.rng import (
-    N_STREAMS,
+from follow_env.sim.rng import (
     LaneRandom,
     LaneSeeds,
     episode_keys,
@@ -15,6 +14,7 @@ from follow_env.rng import (
     normal_pair_at,
     uniform_at,
 )
+from follow_env.sim.streams import N_STREAMS
 
 
 def test_draws_are_pure_functions_of_key_and_counter() -> None:

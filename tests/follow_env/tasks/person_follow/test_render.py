@@ -1,4 +1,4 @@
-"""The ``rgb_array`` renderer of PersonFollow-v0 (follow_env/render.py)."""
+"""The renderer of PersonFollow-v0 (follow_env/tasks/person_follow/render*.py)."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import pytest
 from gymnasium.wrappers import RecordVideo
 
 import follow_env  # noqa: F401  (registers PersonFollow-v0)
-from follow_env.render import (
+from follow_env.tasks.person_follow.render import (
     C_STOLEN,
     FRAME_HEIGHT_PX,
     FRAME_WIDTH_PX,
@@ -19,9 +19,8 @@ from follow_env.render import (
     SIGHT_OUT_OF_VIEW,
     SIGHT_PARTLY,
     sight_state,
-    wall_loops,
 )
-from follow_env.world import box_walls, room_walls
+from follow_env.world.geometry import box_walls, room_walls, wall_loops
 
 FORWARD = np.array([0.5, 0.0], dtype=np.float32)  # 0.5 m/s straight ahead
 

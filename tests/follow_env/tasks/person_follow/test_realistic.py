@@ -8,27 +8,22 @@ import gymnasium as gym
 import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
+from numba import njit
 
-from follow_env.config import IDEAL, THESIS
-from follow_env.core import _APPEARANCE_DOMAIN, BatchedSim
-from follow_env.layout import (
-    I_N_WALLS,
-    N_PSTATE,
-    PS_X,
-    PS_Y,
-    PW_X,
-    PW_Y,
-    S_BOX_Y2,
-    S_DETECTED,
-    S_IN_FRAME,
-    S_VIS_FRAC,
-    S_X,
-    W_H,
+from follow_env.sensors.detector import APPEARANCE_KEY
+from follow_env.sim.rng import LaneSeeds, uniform_at
+from follow_env.sim.runner import BatchedSim
+from follow_env.tasks.person_follow.config import IDEAL, THESIS
+from follow_env.tasks.person_follow.people import (
+    PERSON,
+    as_waypoints,
+    person_reset,
+    person_step,
+    social_forces,
 )
-from follow_env.person import person_reset, person_step, social_forces
-from follow_env.rng import STREAM_DETECTOR, LaneSeeds, uniform_at
-from follow_env.scenarios import SCENARIOS, polyline_paths
-from follow_env.world import point_segment_distance
+from follow_env.tasks.person_follow.scenarios import SCENARIOS, polyline_paths
+from follow_env.tasks.person_follow.task import batched_sim
+from follow_env.world.geometry import point_segment_distance
 
 WORLD_SCENARIOS = [
     "corridor_turn",
@@ -54,13 +49,14 @@ def _wall_sim(height_m: float, robot_x: float = -7.0) -> BatchedSim:
     """The doorway scenario (room to spare for extra walls) with perfect sensing, the robot
     moved to ``robot_x`` and one more wall of ``height_m`` standing across the gap between
     camera and person."""
-    sim = BatchedSim(IDEAL.replace(scenario={"name": "doorway"}), 1)
+    sim = batched_sim(IDEAL.replace(scenario={"name": "doorway"}), 1)
     sim.reset_lanes(np.zeros(1, dtype=np.int64), [0])
-    sim.fstate[0, S_X] = robot_x
-    k = sim.istate[0, I_N_WALLS]
+    sim.body["x"][0] = robot_x
+    n_walls = sim.state["task"]["n_walls"]
+    k = n_walls[0]
     # Camera at x = -6.8, the person's front at x = -5.8: the wall stands at x = -6.3.
-    sim.walls[0, k] = [-6.3, -1.0, -6.3, 1.0, height_m]
-    sim.istate[0, I_N_WALLS] = k + 1
+    sim.world[2][0, k] = (-6.3, -1.0, -6.3, 1.0, height_m)
+    n_walls[0] = k + 1
     sim.step(np.zeros((1, 2)))
     return sim
 
@@ -81,20 +77,21 @@ def test_every_world_scenario_starts_as_the_thesis_does(name: str) -> None:
 
 @pytest.mark.parametrize("name", WORLD_SCENARIOS)
 def test_world_scenarios_are_deterministic_per_seed(name: str) -> None:
-    a = BatchedSim(THESIS.replace(scenario={"name": name}), 2)
-    b = BatchedSim(THESIS.replace(scenario={"name": name}), 2)
+    a = batched_sim(THESIS.replace(scenario={"name": name}), 2)
+    b = batched_sim(THESIS.replace(scenario={"name": name}), 2)
     a.reset_lanes(np.arange(2), [4, 5])
     b.reset_lanes(np.arange(2), [4, 5])
-    assert np.array_equal(a.paths, b.paths)
-    assert np.array_equal(a.walls, b.walls)
-    assert np.array_equal(a.fstate, b.fstate)
+    for x, y in zip(a.world, b.world, strict=True):  # people, their paths, walls
+        assert np.array_equal(x, y)
+    assert np.array_equal(a.state, b.state)
 
 
 def test_a_wall_between_camera_and_person_hides_them() -> None:
     sim = _wall_sim(3.0)
-    assert sim.fstate[0, S_VIS_FRAC] == 0.0
-    assert sim.fstate[0, S_IN_FRAME] == 0.0
-    assert sim.fstate[0, S_DETECTED] == 0.0
+    ts = sim.state["task"]
+    assert ts["vis_frac"][0] == 0.0
+    assert ts["in_frame"][0] == 0.0
+    assert ts["detected"][0] == 0.0
 
 
 def test_a_low_obstacle_clips_the_box_to_the_part_in_sight() -> None:
@@ -102,9 +99,10 @@ def test_a_low_obstacle_clips_the_box_to_the_part_in_sight() -> None:
     # between hides its lower part.
     open_view = _wall_sim(0.0, robot_x=-8.3)  # a wall of no height hides nothing
     low = _wall_sim(0.6, robot_x=-8.3)
-    assert low.fstate[0, S_DETECTED] == 1.0
-    assert low.fstate[0, S_VIS_FRAC] < open_view.fstate[0, S_VIS_FRAC]
-    assert low.fstate[0, S_BOX_Y2] < open_view.fstate[0, S_BOX_Y2] - 20  # the bottom is cut
+    low_s, open_s = low.state["task"][0], open_view.state["task"][0]
+    assert low_s["detected"] == 1.0
+    assert low_s["vis_frac"] < open_s["vis_frac"]
+    assert low_s["box"][3] < open_s["box"][3] - 20  # the bottom is cut
 
 
 def _stolen_frames(association: str, seed: int) -> tuple[int, str]:
@@ -122,7 +120,8 @@ def _looks(seed: int) -> tuple[float, float]:
     """The appearance values of the target and the bystander in episode 0 of ``seed``."""
     seeds = LaneSeeds(1)
     seeds.seed(np.zeros(1, dtype=np.int64), [seed])
-    key = seeds.next_keys(np.zeros(1, dtype=np.int64))[0, STREAM_DETECTOR] ^ _APPEARANCE_DOMAIN
+    keys = seeds.next_keys(np.zeros(1, dtype=np.int64))[0]
+    key = keys[APPEARANCE_KEY.stream.index] ^ np.uint64(APPEARANCE_KEY.constant)
     return uniform_at(key, 0), uniform_at(key, 1)
 
 
@@ -142,8 +141,9 @@ def test_driving_into_an_obstacle_terminates_with_the_reason() -> None:
     env = gym.make("PersonFollow-v0", scenario="occlusion", config="ideal")
     env.reset(seed=1)
     sim = env.unwrapped.sim
-    column = sim.walls[0, 4:8, :4].reshape(-1, 2).mean(axis=0)  # the column's centre
-    bearing = np.arctan2(column[1] - sim.fstate[0, 1], column[0] - sim.fstate[0, 0])
+    sides = sim.world[2][0, 4:8]  # the column's four sides
+    column = (np.r_[sides["x1"], sides["x2"]].mean(), np.r_[sides["y1"], sides["y2"]].mean())
+    bearing = np.arctan2(column[1] - sim.body["y"][0], column[0] - sim.body["x"][0])
     info: dict[str, Any] = {}
     for _ in range(100):  # face the column, then drive into it
         heading_err = (bearing - info.get("robot_theta_rad", 0.0) + np.pi) % (2 * np.pi) - np.pi
@@ -155,38 +155,45 @@ def test_driving_into_an_obstacle_terminates_with_the_reason() -> None:
     assert info["termination"] == "collision_wall"
 
 
+@njit
+def _walk_towards_each_other(people: np.ndarray, paths: np.ndarray, steps: int) -> float:
+    for p in range(2):
+        person_reset(people[p], paths[p], 2)
+    closest = np.inf
+    for _ in range(steps):
+        social_forces(people, 2, 0.7, 1.5)
+        for p in range(2):
+            person_step(people[p], paths[p], 0.5, 0.8, 0.1)
+        closest = min(closest, np.hypot(people[0].x - people[1].x, people[0].y - people[1].y))
+    return closest
+
+
 def test_people_step_aside_for_each_other() -> None:
     # Two people walking head-on along the same line.
-    ps = np.zeros((2, N_PSTATE))
-    paths = [
-        polyline_paths(np.array([[[-5.0, 0.0], [5.0, 0.0]]]), np.full((1, 2), 1.0))[0],
-        polyline_paths(np.array([[[5.0, 0.0], [-5.0, 0.0]]]), np.full((1, 2), 1.0))[0],
-    ]
-    for p in range(2):
-        person_reset(ps[p], paths[p], 2)
-    closest = np.inf
-    for _ in range(150):
-        social_forces(ps, 2, 0.7, 1.5)
-        for p in range(2):
-            person_step(ps[p], paths[p], 0.5, 0.8, 0.1)
-        closest = min(closest, np.hypot(*(ps[0, [PS_X, PS_Y]] - ps[1, [PS_X, PS_Y]])))
+    ends = np.array([[[-5.0, 0.0], [5.0, 0.0]], [[5.0, 0.0], [-5.0, 0.0]]])
+    paths = as_waypoints(polyline_paths(ends, np.full((2, 2), 1.0)))
+    people = PERSON.zeros(2)
+    closest = _walk_towards_each_other(people, paths, 150)
     assert closest > 0.3  # they passed each other with a gap
-    assert ps[0, PS_X] > 4.0  # and both got where they were going
-    assert ps[1, PS_X] < -4.0
+    assert people["x"][0] > 4.0  # and both got where they were going
+    assert people["x"][1] < -4.0
 
 
 def test_random_world_paths_keep_clear_of_obstacles() -> None:
     cfg = THESIS.replace(scenario={"name": "random_world"})
-    sim = BatchedSim(cfg, 6)
+    sim = batched_sim(cfg, 6)
     sim.reset_lanes(np.arange(6), list(range(6)))
+    _, paths, walls_all = sim.world
     for lane in range(6):
-        walls = sim.walls[lane, : sim.istate[lane, I_N_WALLS]]
-        path = sim.paths[lane, 0]
-        pts = path[path[:, PW_X] != 0.0][:, [PW_X, PW_Y]]
-        for x, y in pts:
-            clearance = min(point_segment_distance(x, y, *w[:4]) for w in walls)
+        walls = walls_all[lane, : sim.state["task"]["n_walls"][lane]]
+        path = paths[lane, 0]
+        for q in path[path["x"] != 0.0]:
+            clearance = min(
+                point_segment_distance(q["x"], q["y"], w["x1"], w["y1"], w["x2"], w["y2"])
+                for w in walls
+            )
             assert clearance > 0.3
-    assert (sim.walls[:, :, W_H] == 0.9).any()  # some maps have low furniture
+    assert (walls_all["h"] == 0.9).any()  # some maps have low furniture
 
 
 def test_world_scenarios_are_registered_with_array_sizes() -> None:

@@ -1,0 +1,410 @@
+"""How a learned agent sees the env: its feature pipeline, numpy only, batched over lanes.
+
+Each step is a small class with its own per-lane memory. Observations flow outwards (env to
+agent), actions inwards (agent to env), innermost step first, in the order of the agent's
+``vec_env_wrapper`` list (then observation normalisation and frame stacking, rl-zoo3's order):
+
+- :class:`RescaleAction`: the agent acts in ``[-1, 1]``, mapped linearly onto SI speeds; the
+  range is the useful one (``w_max_radps`` 2 rad/s covers every turn rate the tuned laws command
+  in any scenario), not the platform's 7.4 rad/s, which would make most of the agent's range and
+  most of its exploration spin the person out of view.
+- :class:`ObservationAge`: appends how long the observation has been held (the perception
+  repeats its last values while the detector sees nothing), so the agent can tell a fresh offset
+  from a stale one.
+- :class:`ScaleObservation`: fixed scaling that keeps signed entries centred on 0 (needed by the
+  mirror-symmetric policy, :mod:`policies.learned.mirror`).
+- :class:`IncrementalAction`: the agent changes the command by at most a set step and sees the
+  command in force: smooth by construction, and the missing robot state (its own speed command)
+  becomes part of the observation.
+- :class:`NormalizeObservation`: ``VecNormalize``'s observation normalisation with frozen
+  statistics (when the agent was trained with it).
+- :class:`FrameStack`: the last ``n`` observations side by side, as ``VecFrameStack`` does: the
+  raw observation is not Markov (a frame of detector latency, held values, the robot's own speed
+  unobserved).
+
+The arithmetic is exactly that of the training wrappers (they call these classes), so an agent's
+actions are bitwise the same in training, in an env, and on a robot. :class:`Pipeline` chains
+the steps for inference.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from follow_env.sim.checks import check_number, is_integer, out_of_range
+
+__all__ = [
+    "FEATURES",
+    "Box",
+    "FrameStack",
+    "IncrementalAction",
+    "NormalizeObservation",
+    "ObservationAge",
+    "Pipeline",
+    "RescaleAction",
+    "ScaleObservation",
+    "agent_to_si",
+]
+
+
+class Box:
+    """A box of float32 bounds (what a step sees of the spaces around it; numpy only).
+
+    :param low: lower bounds. :param high: upper bounds.
+    """
+
+    def __init__(
+        self, low: Sequence[float] | np.ndarray, high: Sequence[float] | np.ndarray
+    ) -> None:
+        self.low = np.asarray(low, dtype=np.float32)
+        self.high = np.asarray(high, dtype=np.float32)
+        if self.low.shape != self.high.shape or self.low.ndim != 1:
+            raise ValueError(
+                f"a Box needs matching flat bounds, got {self.low.shape}, {self.high.shape}"
+            )
+
+    @property
+    def shape(self) -> tuple[int, ...]:
+        """The box's shape."""
+        return self.low.shape
+
+    def __repr__(self) -> str:
+        return f"Box(low={self.low.tolist()}, high={self.high.tolist()})"
+
+
+def agent_to_si(action: np.ndarray, low: np.ndarray, high: np.ndarray) -> np.ndarray:
+    """Map an agent action in ``[-1, 1]`` (clipped first) linearly onto ``[low, high]``.
+
+    :param action: shape (..., 2), agent units.
+    :param low: the SI box's lower bounds, e.g. ``[-1.44 m/s, -7.2 rad/s]``.
+    :param high: the SI box's upper bounds.
+    """
+    a = np.clip(np.asarray(action, dtype=np.float64), -1.0, 1.0)
+    return low + (a + 1.0) * 0.5 * (high - low)
+
+
+class Feature:
+    """One step of the pipeline (see the module docstring). The defaults pass things through.
+
+    :meth:`bind` is called once with the boxes seen from inside (the env's side) and returns
+    the boxes seen from outside; :meth:`start` begins every lane's episode; :meth:`observe`
+    follows a step (lanes flagged in ``done`` have just been reset: their observation is a new
+    episode's first); :meth:`act` turns the outer action into the inner one.
+    """
+
+    training_only = False
+
+    def bind(self, obs: Box, act: Box, n: int) -> tuple[Box, Box]:
+        """Remember the inner boxes and the lane count; return the outer boxes."""
+        return obs, act
+
+    def start(self, obs: np.ndarray) -> np.ndarray:
+        """Every lane starts an episode with observation ``obs`` (n, k)."""
+        return self.observe(obs, np.zeros(len(obs), dtype=bool))
+
+    def observe(self, obs: np.ndarray, done: np.ndarray) -> np.ndarray:
+        """The outer observation after a step."""
+        return obs
+
+    def terminal(self, obs: np.ndarray, lane: int) -> np.ndarray:
+        """The outer view of lane ``lane``'s final observation (SB3's ``terminal_observation``),
+        taken before :meth:`observe` of the step that ended it."""
+        return obs
+
+    def act(self, action: np.ndarray) -> np.ndarray:
+        """The inner action for the outer ``action`` (n, m)."""
+        return action
+
+
+class RescaleAction(Feature):
+    """The agent acts in ``[-1, 1]^2``; the env receives SI actions (module docstring).
+
+    ``[-1, 1]`` maps linearly onto ``[-v_max_mps, v_max_mps] x [-w_max_radps, w_max_radps]``, by
+    default the env's whole action box.
+
+    :param v_max_mps: the agent's largest speed [m/s]; None or at most the env's bound.
+    :param w_max_radps: the agent's largest turn rate [rad/s]; None or at most the env's bound.
+    """
+
+    def __init__(self, v_max_mps: float | None = None, w_max_radps: float | None = None) -> None:
+        self.limits = (v_max_mps, w_max_radps)
+
+    def bind(self, obs: Box, act: Box, n: int) -> tuple[Box, Box]:
+        if (
+            act.shape != (2,)
+            or not np.all(np.isfinite([act.low, act.high]))
+            or not np.allclose(act.low, -act.high)
+        ):
+            raise ValueError(f"RescaleAction needs a bounded symmetric Box(2,), got {act}")
+        high = act.high.astype(np.float64).copy()
+        for k, (name, value) in enumerate(
+            zip(("v_max_mps", "w_max_radps"), self.limits, strict=True)
+        ):
+            if value is not None:
+                high[k] = check_number(
+                    f"RescaleAction.{name}", value, 0.0, float(high[k]), lo_open=True
+                )
+        self.si_low, self.si_high = -high, high
+        return obs, Box([-1.0, -1.0], [1.0, 1.0])
+
+    def act(self, action: np.ndarray) -> np.ndarray:
+        return agent_to_si(action, self.si_low, self.si_high)
+
+
+class ObservationAge(Feature):
+    """Observation ``[obs..., age]``: how many steps the observation has not changed, scaled.
+
+    A repeated observation is stale, not a person standing still in the image: the filtered
+    depth of a fresh detection never repeats to the last bit. ``age = min(k, max_age_steps) /
+    max_age_steps``, where ``k`` is the number of steps since the observation last changed (0 on
+    a fresh one). It uses only what the robot publishes, so the real robot can compute it too.
+
+    :param max_age_steps: where the age saturates at 1 (30 steps = the env's 3 s lost timeout).
+    """
+
+    def __init__(self, max_age_steps: int = 30) -> None:
+        if not is_integer(max_age_steps) or max_age_steps < 1:
+            raise out_of_range("ObservationAge.max_age_steps", max_age_steps, "an integer >= 1")
+        self.max_age_steps = int(max_age_steps)
+
+    def bind(self, obs: Box, act: Box, n: int) -> tuple[Box, Box]:
+        self._last = np.zeros((n, *obs.shape), dtype=np.float32)
+        self._age = np.zeros(n, dtype=np.int64)
+        return Box(np.append(obs.low, 0.0), np.append(obs.high, 1.0)), act
+
+    def start(self, obs: np.ndarray) -> np.ndarray:
+        obs = np.asarray(obs, dtype=np.float32)
+        self._last = obs.copy()
+        self._age[:] = 0
+        return self._join(obs, self._age)
+
+    def observe(self, obs: np.ndarray, done: np.ndarray) -> np.ndarray:
+        obs = np.asarray(obs, dtype=np.float32)
+        age = np.where(np.all(obs == self._last, axis=1), self._age + 1, 0)
+        age[done] = 0  # the lanes that ended were reset: obs is a new episode's first
+        self._last = obs.copy()
+        self._age = age
+        return self._join(obs, age)
+
+    def terminal(self, obs: np.ndarray, lane: int) -> np.ndarray:
+        terminal = np.asarray(obs, dtype=np.float32)
+        stale = np.array_equal(terminal, self._last[lane])
+        return self._join(terminal[None], np.array([self._age[lane] + 1 if stale else 0]))[0]
+
+    def _join(self, obs: np.ndarray, age: np.ndarray) -> np.ndarray:
+        scaled = np.minimum(age, self.max_age_steps) / self.max_age_steps
+        return np.concatenate([obs, scaled[:, None].astype(np.float32)], axis=1)
+
+
+class ScaleObservation(Feature):
+    """Observation ``obs * scale``, entry by entry: a fixed normalisation that keeps 0 at 0.
+
+    ``VecNormalize`` shifts every entry by its running mean; a mirror-symmetric policy needs the
+    offset and the turn command to stay signed around 0, so they are scaled instead (e.g. the
+    offset by 1/100 px).
+
+    :param scale: one positive factor per observation entry.
+    """
+
+    def __init__(self, scale: Sequence[float] = ()) -> None:
+        self.factors = np.asarray(scale, dtype=np.float64)
+
+    def bind(self, obs: Box, act: Box, n: int) -> tuple[Box, Box]:
+        if self.factors.shape != obs.shape:
+            raise ValueError(
+                f"ScaleObservation.scale={self.factors.tolist()!r} must have one factor per "
+                f"observation entry {obs.shape}"
+            )
+        if not np.all(np.isfinite(self.factors) & (self.factors > 0)):
+            raise ValueError(f"ScaleObservation.scale={self.factors.tolist()!r} must be positive")
+        self.scale = self.factors.astype(np.float32)
+        return Box(obs.low * self.scale, obs.high * self.scale), act
+
+    def observe(self, obs: np.ndarray, done: np.ndarray) -> np.ndarray:
+        return np.asarray(obs, dtype=np.float32) * self.scale
+
+    def terminal(self, obs: np.ndarray, lane: int) -> np.ndarray:
+        return np.asarray(obs, dtype=np.float32) * self.scale
+
+
+class IncrementalAction(Feature):
+    """The agent changes the command by at most ``max_change`` a step; observation gets the
+    command.
+
+    The inner action is ``u_t = clip(u_{t-1} + max_change * clip(a_t, -1, 1))`` (clipped to the
+    inner action box), from ``u = 0`` (the robot at rest) at every episode start. The observation
+    is ``[obs..., u_{t-1}...]``, the command in force when the observation was taken. The
+    commanded acceleration can never exceed ``max_change / dt``, and PPO's exploration noise
+    becomes a random walk of the command instead of a new random command every 0.1 s.
+
+    :param max_change: the largest change per step of each action entry, in inner units.
+    :param reading_index: the observation entry holding the distance, or None. While it is <= 0
+        (no distance reading yet) the command does not change, so the robot stays at rest until
+        it first measures the person, as the reference robot and every guidance law do.
+    """
+
+    def __init__(
+        self, max_change: Sequence[float] = (0.1, 0.1), reading_index: int | None = None
+    ) -> None:
+        self.change = np.asarray(max_change, dtype=np.float64)
+        self.reading_index = reading_index
+
+    def bind(self, obs: Box, act: Box, n: int) -> tuple[Box, Box]:
+        if self.change.shape != act.shape or not np.all(
+            np.isfinite(self.change) & (self.change > 0)
+        ):
+            raise ValueError(
+                f"IncrementalAction.max_change={self.change.tolist()!r} is out of range: must be "
+                f"{act.shape[0]} positive numbers"
+            )
+        self.max_change = self.change
+        self._low = act.low.astype(np.float64)
+        self._high = act.high.astype(np.float64)
+        self._command = np.zeros((n, act.shape[0]))
+        self._reading = np.ones(n, dtype=bool)
+        outer_obs = Box(np.concatenate([obs.low, act.low]), np.concatenate([obs.high, act.high]))
+        return outer_obs, Box(-np.ones(act.shape), np.ones(act.shape))
+
+    def start(self, obs: np.ndarray) -> np.ndarray:
+        self._command[:] = 0.0
+        self._note_reading(obs)
+        return self._join(obs, self._command)
+
+    def act(self, action: np.ndarray) -> np.ndarray:
+        a = np.clip(np.asarray(action, dtype=np.float64).reshape(self._command.shape), -1, 1)
+        a[~self._reading] = 0.0
+        self._command = np.clip(self._command + self.max_change * a, self._low, self._high)
+        return self._command.astype(np.float32)
+
+    def observe(self, obs: np.ndarray, done: np.ndarray) -> np.ndarray:
+        self._note_reading(obs)
+        self._command[done] = 0.0
+        return self._join(obs, self._command)
+
+    def terminal(self, obs: np.ndarray, lane: int) -> np.ndarray:
+        return self._join(obs, self._command[lane])
+
+    def _note_reading(self, obs: np.ndarray) -> None:
+        if self.reading_index is not None:
+            self._reading = np.asarray(obs)[:, self.reading_index] > 0
+
+    @staticmethod
+    def _join(obs: np.ndarray, command: np.ndarray) -> np.ndarray:
+        return np.concatenate(
+            [np.asarray(obs, dtype=np.float32), command.astype(np.float32)], axis=-1
+        )
+
+
+class NormalizeObservation(Feature):
+    """``(obs - mean) / sqrt(var + epsilon)``, clipped to ``+-clip_obs``, with frozen statistics:
+    ``VecNormalize``'s observation normalisation at inference, term for term.
+
+    :param mean: running mean of each entry. :param var: running variance of each entry.
+    :param epsilon: added to the variance. :param clip_obs: bound of the result.
+    """
+
+    def __init__(self, mean: np.ndarray, var: np.ndarray, epsilon: float, clip_obs: float) -> None:
+        self.mean, self.var = np.asarray(mean), np.asarray(var)
+        self.epsilon, self.clip_obs = epsilon, clip_obs
+
+    def observe(self, obs: np.ndarray, done: np.ndarray) -> np.ndarray:
+        z = np.clip(
+            (obs - self.mean) / np.sqrt(self.var + self.epsilon), -self.clip_obs, self.clip_obs
+        )
+        return z.astype(np.float32)
+
+    terminal = Feature.terminal
+
+
+class FrameStack(Feature):
+    """The last ``n_stack`` observations side by side (oldest first), as ``VecFrameStack`` with
+    the stack on the last axis: zeros before an episode's first observation.
+
+    :param n_stack: frames kept.
+    """
+
+    def __init__(self, n_stack: int) -> None:
+        if not is_integer(n_stack) or n_stack < 1:
+            raise out_of_range("FrameStack.n_stack", n_stack, "an integer >= 1")
+        self.n_stack = int(n_stack)
+
+    def bind(self, obs: Box, act: Box, n: int) -> tuple[Box, Box]:
+        self._k = obs.shape[0]
+        self._stack = np.zeros((n, self._k * self.n_stack), dtype=np.float32)
+        return Box(np.tile(obs.low, self.n_stack), np.tile(obs.high, self.n_stack)), act
+
+    def start(self, obs: np.ndarray) -> np.ndarray:
+        self._stack[...] = 0
+        self._stack[:, -self._k :] = obs
+        return self._stack.copy()
+
+    def observe(self, obs: np.ndarray, done: np.ndarray) -> np.ndarray:
+        self._stack = np.roll(self._stack, shift=-self._k, axis=-1)
+        self._stack[done] = 0
+        self._stack[:, -self._k :] = obs
+        return self._stack.copy()
+
+
+FEATURES: dict[str, type[Feature]] = {
+    "RescaleAction": RescaleAction,
+    "ObservationAge": ObservationAge,
+    "ScaleObservation": ScaleObservation,
+    "IncrementalAction": IncrementalAction,
+}
+"""Feature steps by name (an agent's ``vec_env_wrapper`` entry ``train.wrappers.VecX`` names
+step ``X``)."""
+
+
+class Pipeline:
+    """The steps of an agent's view, innermost first, for ``n`` lanes.
+
+    :param steps: the steps (each used by this pipeline only).
+    :param obs: the env's observation box. :param act: the env's action box.
+    :param n: lanes.
+    """
+
+    def __init__(self, steps: Sequence[Feature], obs: Box, act: Box, n: int) -> None:
+        self.steps = list(steps)
+        self.n = n
+        for step in self.steps:
+            obs, act = step.bind(obs, act, n)
+        self.observation_box, self.action_box = obs, act
+
+    def start(self, obs: np.ndarray) -> np.ndarray:
+        """Every lane starts an episode: the agent's first observation."""
+        for step in self.steps:
+            obs = step.start(obs)
+        return obs
+
+    def observe(self, obs: np.ndarray, done: np.ndarray | None = None) -> np.ndarray:
+        """The agent's observation after a step (``done``: lanes that were just reset)."""
+        flags = np.zeros(len(obs), dtype=bool) if done is None else done
+        for step in self.steps:
+            obs = step.observe(obs, flags)
+        return obs
+
+    def act(self, action: np.ndarray) -> np.ndarray:
+        """The env's action for the agent's ``action`` (outermost step first)."""
+        for step in reversed(self.steps):
+            action = step.act(action)
+        return np.asarray(action)
+
+    @classmethod
+    def from_wrappers(
+        cls, entries: Sequence[tuple[str, dict[str, Any]]], **kw: Any
+    ) -> list[Feature]:
+        """The inference steps of an agent's ``vec_env_wrapper`` list (training-only ones, such
+        as the reward shaping, left out): ``[(name, kwargs), ...]``."""
+        steps: list[Feature] = []
+        for name, kwargs in entries:
+            short = name.rsplit(".", 1)[-1]
+            short = short[3:] if short.startswith("Vec") else short
+            if short == "ShapedReward":
+                continue  # changes rewards only: not part of the agent's view
+            if short not in FEATURES:
+                raise ValueError(f"unknown feature {name!r}; known: {', '.join(FEATURES)}")
+            steps.append(FEATURES[short](**kwargs))
+        return steps

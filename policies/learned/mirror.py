@@ -1,0 +1,116 @@
+"""A mirror-symmetric actor-critic: the agent turns left exactly as it turns right.
+
+The task is symmetric under a left-right reflection: mirror the world, and the person's offset,
+the yaw rate and the turn command change sign while distances and speeds do not. An MLP learns
+that only approximately, and a small bias around zero offset is enough to turn towards the wrong
+side when the person is nearly centred. :class:`MirrorMlpPolicy` builds the symmetry in: with
+``M`` flipping the signs of the mirrored observation entries and ``S`` those of the action,
+
+    mean(x)  = (f(x) + S f(M x)) / 2        so  mean(M x) = S mean(x)
+    value(x) = (g(x) + g(M x)) / 2          so  value(M x) = value(x)
+
+for SB3's MLP ``f`` (policy) and ``g`` (value); the state-independent log-std is symmetric
+already. Mirroring is a sign flip, so the mirrored observation entries must be centred on 0:
+scale them (:class:`policies.learned.features.ScaleObservation`) rather than shift them
+(``VecNormalize``'s ``norm_obs``).
+
+``policy_kwargs``: ``mirror_obs`` (one ``+1``/``-1`` per entry of one frame; it is repeated
+over stacked frames) and ``mirror_action`` (one per action entry), plus any
+``MlpPolicy`` argument.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+import torch
+from stable_baselines3.common.policies import ActorCriticPolicy
+from torch import nn
+
+__all__ = ["MirrorMlpPolicy"]
+
+
+class _MirrorExtractor(nn.Module):
+    """Runs SB3's MLP extractor on ``x`` and ``M x``: both actor latents, the mean critic latent."""
+
+    def __init__(self, inner: nn.Module, obs_sign: torch.Tensor) -> None:
+        super().__init__()
+        self.inner = inner
+        self.register_buffer("obs_sign", obs_sign)
+        self.latent_dim_pi = 2 * inner.latent_dim_pi
+        self.latent_dim_vf = inner.latent_dim_vf
+
+    def forward(self, features: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        return self.forward_actor(features), self.forward_critic(features)
+
+    def forward_actor(self, features: torch.Tensor) -> torch.Tensor:
+        mirrored = features * self.obs_sign
+        return torch.cat(
+            [self.inner.forward_actor(features), self.inner.forward_actor(mirrored)], dim=-1
+        )
+
+    def forward_critic(self, features: torch.Tensor) -> torch.Tensor:
+        mirrored = features * self.obs_sign
+        return 0.5 * (self.inner.forward_critic(features) + self.inner.forward_critic(mirrored))
+
+
+class _MirrorActionNet(nn.Module):
+    """``(A z1 + b + S (A z2 + b)) / 2`` for the two halves of the actor latent."""
+
+    def __init__(self, inner: nn.Module, action_sign: torch.Tensor, half: int) -> None:
+        super().__init__()
+        self.inner = inner
+        self.half = half
+        self.register_buffer("action_sign", action_sign)
+
+    def forward(self, latent: torch.Tensor) -> torch.Tensor:
+        direct = self.inner(latent[..., : self.half])
+        mirrored = self.inner(latent[..., self.half :])
+        return 0.5 * (direct + self.action_sign * mirrored)
+
+
+class MirrorMlpPolicy(ActorCriticPolicy):
+    """SB3's ``MlpPolicy``, symmetrised under a reflection (module docstring).
+
+    :param mirror_obs: the sign of each entry of one observation frame under the reflection.
+    :param mirror_action: the sign of each action entry under the reflection.
+    """
+
+    def __init__(
+        self,
+        *args: Any,
+        mirror_obs: Sequence[float] = (),
+        mirror_action: Sequence[float] = (),
+        **kwargs: Any,
+    ) -> None:
+        self.mirror_obs = [float(s) for s in mirror_obs]
+        self.mirror_action = [float(s) for s in mirror_action]
+        super().__init__(*args, **kwargs)
+
+    def _build(self, lr_schedule: Any) -> None:
+        super()._build(lr_schedule)
+        n_obs = int(np.prod(self.observation_space.shape))
+        n_act = int(np.prod(self.action_space.shape))
+        frame = len(self.mirror_obs)
+        if frame == 0 or n_obs % frame or len(self.mirror_action) != n_act:
+            raise ValueError(
+                f"MirrorMlpPolicy: mirror_obs ({frame} signs) must divide the observation "
+                f"({n_obs} entries) and mirror_action needs {n_act} signs, "
+                f"got {len(self.mirror_action)}"
+            )
+        if not all(s in (-1.0, 1.0) for s in self.mirror_obs + self.mirror_action):
+            raise ValueError("MirrorMlpPolicy: mirror signs must be +1 or -1")
+        obs_sign = torch.tensor(self.mirror_obs * (n_obs // frame), dtype=torch.float32)
+        half = self.mlp_extractor.latent_dim_pi
+        # Wrapping reuses the parameters, so the optimizer built by super()._build still holds
+        # every one of them.
+        self.mlp_extractor = _MirrorExtractor(self.mlp_extractor, obs_sign)
+        action_sign = torch.tensor(self.mirror_action, dtype=torch.float32)
+        self.action_net = _MirrorActionNet(self.action_net, action_sign, half)
+
+    def _get_constructor_parameters(self) -> dict[str, Any]:
+        data = super()._get_constructor_parameters()
+        data.update(mirror_obs=self.mirror_obs, mirror_action=self.mirror_action)
+        return data
