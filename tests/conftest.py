@@ -16,7 +16,7 @@ settings.load_profile("personfollow")
 # render_mode="human" opens its pygame window on SDL's dummy driver: no screen needed.
 os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
 
-import follow_env  # noqa: F401  (registers PersonFollow-v0)
+import follow_env  # noqa: E402, F401  (registers PersonFollow-v0; after the SDL setting)
 
 
 @pytest.fixture(autouse=True)
