@@ -61,6 +61,19 @@ def agent_to_si(action: np.ndarray, low: np.ndarray, high: np.ndarray) -> np.nda
     return low + (a + 1.0) * 0.5 * (high - low)
 
 
+def _numbers(values: Any) -> np.ndarray | None:
+    """``values`` as a float64 array of numbers, or None if they are not numbers (a string,
+    a bool, a mapping, a ragged list): wrappers then name their argument in the error."""
+    items = values if isinstance(values, list | tuple | np.ndarray) else [values]
+    flat = np.asarray(items, dtype=object).ravel()
+    if any(isinstance(v, bool) or not isinstance(v, int | float | np.number) for v in flat):
+        return None
+    try:
+        return np.asarray(values, dtype=np.float64)
+    except (TypeError, ValueError):
+        return None
+
+
 class VecRescaleAction(VecEnvWrapper):
     """The agent acts in ``[-1, 1]^2``; the wrapped env receives SI actions (module docstring).
 
@@ -89,7 +102,8 @@ class VecRescaleAction(VecEnvWrapper):
         for k, (name, value) in enumerate((("v_max_mps", v_max_mps), ("w_max_radps", w_max_radps))):
             if value is None:
                 continue
-            if not (isinstance(value, int | float) and 0 < value <= high[k]):
+            number = isinstance(value, int | float) and not isinstance(value, bool)
+            if not (number and 0 < value <= high[k]):
                 raise ValueError(
                     f"VecRescaleAction.{name}={value!r} is out of range: must be in "
                     f"(0, {high[k]:g}] (the env's bound)"
@@ -183,14 +197,16 @@ class VecScaleObservation(VecEnvWrapper):
 
     def __init__(self, venv: VecEnv, scale: Sequence[float] = ()) -> None:
         obs_box = venv.observation_space
-        factors = np.asarray(scale, dtype=np.float64)
-        if not isinstance(obs_box, spaces.Box) or factors.shape != obs_box.shape:
+        factors = _numbers(scale)
+        if factors is None or not isinstance(obs_box, spaces.Box) or factors.shape != obs_box.shape:
             raise ValueError(
-                f"VecScaleObservation.scale={list(scale)!r} must have one factor per "
+                f"VecScaleObservation.scale={scale!r} is out of range: must be one factor per "
                 f"observation entry {obs_box.shape}"
             )
         if not np.all(np.isfinite(factors) & (factors > 0)):
-            raise ValueError(f"VecScaleObservation.scale={list(scale)!r} must be positive")
+            raise ValueError(
+                f"VecScaleObservation.scale={scale!r} is out of range: must be positive numbers"
+            )
         self.scale = factors.astype(np.float32)
         observation_space = spaces.Box(
             (obs_box.low * self.scale).astype(np.float32),
@@ -240,11 +256,22 @@ class VecIncrementalAction(VecEnvWrapper):
         obs_box, act_box = venv.observation_space, venv.action_space
         if not (isinstance(obs_box, spaces.Box) and isinstance(act_box, spaces.Box)):
             raise ValueError("VecIncrementalAction needs Box observation and action spaces")
-        change = np.asarray(max_change, dtype=np.float64)
-        if change.shape != act_box.shape or not np.all(np.isfinite(change) & (change > 0)):
+        change = _numbers(max_change)
+        if (
+            change is None
+            or change.shape != act_box.shape
+            or not np.all(np.isfinite(change) & (change > 0))
+        ):
             raise ValueError(
-                f"VecIncrementalAction.max_change={list(max_change)!r} is out of range: must "
+                f"VecIncrementalAction.max_change={max_change!r} is out of range: must "
                 f"be {act_box.shape[0]} positive numbers"
+            )
+        n_obs = obs_box.shape[0] if len(obs_box.shape) == 1 else 0
+        index_ok = isinstance(reading_index, int) and not isinstance(reading_index, bool)
+        if reading_index is not None and not (index_ok and 0 <= reading_index < n_obs):
+            raise ValueError(
+                f"VecIncrementalAction.reading_index={reading_index!r} is out of range: must be "
+                f"None or an observation index in [0, {n_obs - 1}]"
             )
         self.max_change = change
         self.reading_index = reading_index
