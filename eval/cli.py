@@ -215,12 +215,17 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _plural(n: int, one: str, many: str) -> str:
+    return one if n == 1 else many
+
+
 def _check_grid(n_policies: int, n_scenarios: int, episodes: int, seed: int) -> None:
     """Refuse a grid larger than :data:`MAX_EPISODES` or seeds beyond :data:`MAX_SEED`."""
     total = n_policies * n_scenarios * episodes
     if total > MAX_EPISODES:
         raise UsageError(
-            f"--episodes {episodes:,}: {n_policies} policies x {n_scenarios} scenarios x "
+            f"--episodes {episodes:,}: {n_policies} {_plural(n_policies, 'policy', 'policies')} "
+            f"x {n_scenarios} {_plural(n_scenarios, 'scenario', 'scenarios')} x "
             f"{episodes:,} episodes = {total:,} episodes is out of range: a run takes at most "
             f"{MAX_EPISODES:,} episodes (every step log is held in memory and written to disk)"
         )
