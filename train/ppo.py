@@ -5,7 +5,7 @@
     follow-train                                  # train/configs/ppo.yaml, all scenarios
     follow-train --n-timesteps 20000 --out runs/ppo-smoke
     follow-train --resume runs/ppo-<timestamp>    # continue from the newest checkpoint
-    follow-train --export policies/agents/ppo     # also copy the agent there (the shipped one)
+    follow-train --export agents/mine             # also copy the agent there (train.export)
 
 (also ``python -m train``). Read top-down: :class:`Args` holds every option; :func:`train`
 sets up the envs and the model, learns, and saves. SB3 does the algorithm; the agent's view of
