@@ -14,7 +14,7 @@ import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
-__all__ = ["atomic_folder", "atomic_path", "atomic_write_text"]
+__all__ = ["atomic_folder", "atomic_path", "atomic_write_text", "check_new_folder", "file_on_path"]
 
 
 def _umask() -> int:
@@ -58,6 +58,37 @@ def atomic_write_text(path: str | Path, text: str) -> Path:
     return path
 
 
+def file_on_path(path: str | Path) -> Path | None:
+    """The first existing entry on ``path`` that is not a folder (``path`` itself or one of its
+    parents), or None when a folder could be made at ``path``.
+
+    ``Path.mkdir`` below a regular file fails with an error that names the deepest missing
+    folder, not the file in the way; this names the file.
+    """
+    path = Path(path)
+    for candidate in (path, *path.parents):
+        if candidate.exists() or candidate.is_symlink():
+            return None if candidate.is_dir() else candidate
+    return None
+
+
+def check_new_folder(path: str | Path) -> None:
+    """Check that ``path`` can become a new folder: it does not exist or is an empty folder,
+    and no parent of it is a regular file.
+
+    :raises FileExistsError: if ``path`` exists and is not an empty folder.
+    :raises NotADirectoryError: if a parent of ``path`` is a regular file (the message names it).
+    """
+    path = Path(path)
+    blocker = file_on_path(path)
+    if blocker is not None and blocker != path:
+        raise NotADirectoryError(f"cannot write to {path}: {blocker} is a file, not a folder")
+    if path.exists() and not (path.is_dir() and not any(path.iterdir())):
+        raise FileExistsError(
+            f"{path} already exists and is not an empty folder; choose another output folder"
+        )
+
+
 @contextlib.contextmanager
 def atomic_folder(path: str | Path) -> Iterator[Path]:
     """Yield a temporary folder beside ``path``; rename it to ``path`` if the block succeeds.
@@ -66,13 +97,11 @@ def atomic_folder(path: str | Path) -> Iterator[Path]:
     On an exception the temporary folder and everything in it is removed.
 
     :raises FileExistsError: if ``path`` exists and is not an empty folder.
+    :raises NotADirectoryError: if a parent of ``path`` is a regular file (the message names it).
     :raises OSError: if the parent folder cannot be created or written (the message names it).
     """
     path = Path(path)
-    if path.exists() and not (path.is_dir() and not any(path.iterdir())):
-        raise FileExistsError(
-            f"{path} already exists and is not an empty folder; choose another output folder"
-        )
+    check_new_folder(path)
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent))

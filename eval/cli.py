@@ -17,7 +17,9 @@
     meta.json                                        command, grid, gains, versions, timing
 
 The folder appears whole when the run succeeds, or not at all. Bad arguments or input give one
-line on stderr (``follow-eval: error: ...``) and exit status 2, never a traceback.
+line on stderr (``follow-eval: error: ...``) and exit status 2, never a traceback, and are
+caught before any episode runs. A run is at most :data:`MAX_EPISODES` episodes (policies x
+scenarios x episodes), and its seeds stay within :data:`MAX_SEED`.
 """
 
 from __future__ import annotations
@@ -35,13 +37,22 @@ from typing import Any, NoReturn
 import yaml
 
 import follow_env
-from eval.atomic import atomic_folder, atomic_write_text
+from eval.atomic import atomic_folder, atomic_write_text, check_new_folder
 from eval.steplog import StepLogError, read_step_log, step_log_files, write_step_log
 
-__all__ = ["main"]
+__all__ = ["MAX_EPISODES", "MAX_SEED", "main"]
 
 PROG = "follow-eval"
 USAGE_ERROR = 2
+#: The most episodes one ``follow-eval run`` takes (policies x scenarios x episodes). A run holds
+#: every episode's step log in memory until its tables are written (50-200 kB an episode,
+#: measured: 135-450 rows of 41 columns) and writes one CSV of 40-140 kB per episode, so 50,000
+#: episodes can take 10 GB of memory and 7 GB of disk. Larger searches use ``eval.rollout``
+#: with a ``reduce`` function, as ``eval.tune`` does.
+MAX_EPISODES = 50_000
+#: The largest seed the env accepts: ``reset(seed=s)`` takes 0 <= s < 2**256 (follow_env seeds
+#: numpy's SeedSequence with up to eight 32-bit words; a test pins this).
+MAX_SEED = 2**256 - 1
 
 
 class UsageError(Exception):
@@ -105,21 +116,22 @@ def _workers(text: str) -> int | None:
     return value
 
 
-def _non_negative(text: str) -> int:
+def _integer(text: str, low: int) -> int:
     try:
         value = int(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"{value} is out of range: must be >= 0")
+    if value < low:
+        raise argparse.ArgumentTypeError(f"{value} is out of range: must be >= {low}")
     return value
+
+
+def _non_negative(text: str) -> int:
+    return _integer(text, 0)
 
 
 def _positive(text: str) -> int:
-    value = _non_negative(text)
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"{value} is out of range: must be >= 1")
-    return value
+    return _integer(text, 1)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -203,16 +215,39 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _plural(n: int, one: str, many: str) -> str:
+    return one if n == 1 else many
+
+
+def _check_grid(n_policies: int, n_scenarios: int, episodes: int, seed: int) -> None:
+    """Refuse a grid larger than :data:`MAX_EPISODES` or seeds beyond :data:`MAX_SEED`."""
+    total = n_policies * n_scenarios * episodes
+    if total > MAX_EPISODES:
+        raise UsageError(
+            f"--episodes {episodes:,}: {n_policies} {_plural(n_policies, 'policy', 'policies')} "
+            f"x {n_scenarios} {_plural(n_scenarios, 'scenario', 'scenarios')} x "
+            f"{episodes:,} episodes = {total:,} episodes is out of range: a run takes at most "
+            f"{MAX_EPISODES:,} episodes (every step log is held in memory and written to disk)"
+        )
+    if seed + episodes - 1 > MAX_SEED:
+        raise UsageError(
+            f"--seed {seed} with --episodes {episodes:,} is out of range: the seeds "
+            f"seed .. seed + episodes - 1 must stay within 0 .. 2**256 - 1 (the env's seeds)"
+        )
+
+
 def _check_run_args(args: argparse.Namespace) -> tuple[list[str], list[str]]:
     from policies import make_policy
 
     policies = _names(args.policies, "policies")
+    scenarios = _names(args.scenarios, "scenarios")
+    # Size first: it needs only the counts, and loading a policy is already work.
+    _check_grid(len(policies), len(scenarios), args.episodes, args.seed)
     for name in policies:
         try:
             make_policy(name)
         except (ValueError, TypeError) as e:
             raise UsageError(f"--policies: {e}") from None
-    scenarios = _names(args.scenarios, "scenarios")
     for name in scenarios:
         if name not in follow_env.SCENARIOS:
             known = ", ".join(sorted(follow_env.SCENARIOS))
@@ -269,8 +304,10 @@ def cmd_run(args: argparse.Namespace) -> int:
             folder.mkdir(parents=True, exist_ok=True)
             write_step_log(ep.log, folder / f"seed_{ep.seed}.csv")
         table = episode_table(episodes)
-        summary = summarize(table, seed=args.seed)
-        comparisons = compare(table, seed=args.seed)
+        # The bootstrap's default seed, as in `follow-eval metrics`: the same episodes give the
+        # same intervals whichever command scores them.
+        summary = summarize(table)
+        comparisons = compare(table)
         (tmp / "plots").mkdir()
         plot_thesis_metrics(summary, tmp / "plots" / "thesis_metrics.png")
         plot_offsets(episodes, plot_seed, tmp / "plots" / f"offsets_seed{plot_seed}.png")
@@ -310,23 +347,42 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 
 def cmd_metrics(args: argparse.Namespace) -> int:
-    """``follow-eval metrics``: the same tables from step-log files."""
+    """``follow-eval metrics``: the same tables from step-log files.
+
+    Episodes are ordered as ``run`` orders them (policy and scenario in the order first seen,
+    then seed as a number, not as text), so the same logs give the same tables and intervals.
+
+    :raises UsageError: when two logs are the same (policy, scenario, seed) episode.
+    """
     from eval.report import markdown_report, plot_thesis_metrics, write_tables
     from eval.rollout import Episode
     from eval.stats import compare, episode_table, summarize
 
+    if args.out is not None:
+        check_new_folder(args.out)  # before scoring: a bad --out should not cost the work
     files = step_log_files(args.logs)
     if not files:
         raise UsageError(f"no *.csv step logs under {', '.join(map(str, args.logs))}")
     episodes = []
+    seen: dict[tuple[str, str, int], Path] = {}
     for i, path in enumerate(files):
         log = read_step_log(path)
         policy = _first_text(log, "policy") or args.policy
         scenario = _first_text(log, "scenario") or args.scenario
         seed = int(log["seed"].iloc[0]) if "seed" in log and log["seed"].notna().all() else i
+        key = (policy, scenario, seed)
+        if key in seen:
+            raise UsageError(
+                f"{seen[key]} and {path} are both policy {policy!r}, scenario {scenario!r}, "
+                f"seed {seed}: give each episode once"
+            )
+        seen[key] = path
         if "termination" not in log:
             log = log.assign(termination="")
         episodes.append(Episode(policy, scenario, seed, log))
+    policy_order = {p: k for k, p in enumerate(dict.fromkeys(ep.policy for ep in episodes))}
+    scenario_order = {s: k for k, s in enumerate(dict.fromkeys(ep.scenario for ep in episodes))}
+    episodes.sort(key=lambda ep: (policy_order[ep.policy], scenario_order[ep.scenario], ep.seed))
     table = episode_table(episodes)
     summary = summarize(table)
     comparisons = compare(table)

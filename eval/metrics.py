@@ -43,7 +43,16 @@ from types import MappingProxyType
 import numpy as np
 import pandas as pd
 
-__all__ = ["METRICS", "THESIS_METRICS", "Metric", "episode_metrics", "extra_metrics", "metric"]
+__all__ = [
+    "HEADLINE_METRICS",
+    "METRICS",
+    "OUTCOME_METRICS",
+    "THESIS_METRICS",
+    "Metric",
+    "episode_metrics",
+    "extra_metrics",
+    "metric",
+]
 
 #: Desired following distance (SPEC.md §1.5: "the 1.0 m in V").
 TARGET_DISTANCE_M = 1.0
@@ -299,6 +308,21 @@ THESIS_METRICS: tuple[str, ...] = (
     "std_accel_mm_s2",
     "in_frame_rate_pct",
 )
+
+
+#: Shown beside the thesis's five wherever a table leads with them (``follow-eval``'s headline
+#: table, the model card): how often an episode ended in a collision or with the person lost,
+#: and how far from the 1 m reference the robot kept. The thesis's metrics score centring and
+#: smoothness only, so alone they rank a controller that backs into a wall above one that
+#: follows.
+OUTCOME_METRICS: tuple[str, ...] = (
+    "collision_rate_pct",
+    "lost_rate_pct",
+    "mean_distance_error_m",
+    "rms_distance_error_m",
+)
+#: The headline table's metrics, in column order.
+HEADLINE_METRICS: tuple[str, ...] = (*THESIS_METRICS, *OUTCOME_METRICS)
 
 
 def extra_metrics() -> tuple[str, ...]:

@@ -17,7 +17,7 @@ import numpy as np
 import pandas as pd
 
 from eval.atomic import atomic_path, atomic_write_text
-from eval.metrics import METRICS, THESIS_METRICS, extra_metrics
+from eval.metrics import HEADLINE_METRICS, METRICS, THESIS_METRICS
 from eval.rollout import Episode
 
 __all__ = [
@@ -73,16 +73,20 @@ def summary_markdown(summary: pd.DataFrame, *, extras: bool = False) -> str:
     """The summary as a Markdown table: mean [95 % CI] per cell.
 
     :param summary: from :func:`eval.stats.summarize`.
-    :param extras: the further metrics instead of the thesis's five.
+    :param extras: the further metrics instead of the headline ones (the thesis's five, then
+        :data:`eval.metrics.OUTCOME_METRICS`: collisions, losses, distance error).
     """
-    names = [m for m in (extra_metrics() if extras else THESIS_METRICS) if m in summary]
+    wanted = [m for m in METRICS if m not in HEADLINE_METRICS] if extras else HEADLINE_METRICS
+    names = [m for m in wanted if m in summary]
     table = summary[["policy", "scenario", "episodes"]].copy()
     for name in names:
         table[_label(name)] = _with_ci(summary, name)
     return table.to_markdown(index=False, disable_numparse=True)
 
 
-def comparison_markdown(comparisons: pd.DataFrame, metrics: Sequence[str] = THESIS_METRICS) -> str:
+def comparison_markdown(
+    comparisons: pd.DataFrame, metrics: Sequence[str] = HEADLINE_METRICS
+) -> str:
     """Paired differences A - B on the same seeds: ``diff [95 % CI] (p = Wilcoxon)``."""
     rows = []
     for (scenario, a, b), group in comparisons.groupby(
@@ -107,9 +111,10 @@ def comparison_markdown(comparisons: pd.DataFrame, metrics: Sequence[str] = THES
 
 
 def markdown_report(summary: pd.DataFrame, comparisons: pd.DataFrame | None = None) -> str:
-    """The thesis table, the further metrics and (if given) the paired comparisons."""
+    """The headline table, the further metrics and (if given) the paired comparisons."""
     parts = [
-        "## Thesis metrics (SPEC.md §1.6): mean [95 % bootstrap CI] over episodes\n",
+        "## Thesis metrics (SPEC.md §1.6) with collisions, losses and distance error: "
+        "mean [95 % bootstrap CI] over episodes\n",
         summary_markdown(summary),
         "\n\n## Further metrics\n",
         summary_markdown(summary, extras=True),
@@ -123,9 +128,9 @@ def markdown_report(summary: pd.DataFrame, comparisons: pd.DataFrame | None = No
 
 
 def summary_latex(summary: pd.DataFrame) -> str:
-    """The thesis table as a LaTeX ``tabular`` (booktabs): mean [95 % CI] per cell."""
+    """The headline table as a LaTeX ``tabular`` (booktabs): mean [95 % CI] per cell."""
     table = summary[["policy", "scenario", "episodes"]].copy()
-    for name in THESIS_METRICS:
+    for name in HEADLINE_METRICS:
         if name in summary:
             table[_label(name)] = _with_ci(summary, name)
     return table.to_latex(index=False, escape=True, column_format="ll" + "r" * (table.shape[1] - 2))

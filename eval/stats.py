@@ -10,12 +10,20 @@
 Episodes where a metric is NaN (e.g. ``reacquire_time_s`` when the person was never lost) are
 left out of that metric's mean, interval and test; ``<metric>_n`` in the episode counts says how
 many were used.
+
+Every interval is drawn from its own random stream, keyed by the bootstrap seed and the cell's
+names (policy, scenario, metric; for a comparison both policies, in name order, so A - B and
+B - A resample alike), over the cell's episodes in seed order. So an interval depends only on
+the episodes it summarises: not on the other cells of the table, nor on the order the episodes
+or log files came in (``follow-eval run`` and ``follow-eval metrics`` on its logs print the
+same intervals).
 """
 
 from __future__ import annotations
 
 import itertools
 import warnings
+import zlib
 from collections.abc import Sequence
 
 import numpy as np
@@ -55,6 +63,14 @@ def episode_table(episodes: Sequence[Episode]) -> pd.DataFrame:
     return pd.DataFrame(
         rows, columns=["policy", "scenario", "seed", "steps", "termination", *METRICS]
     )
+
+
+def _stream(seed: int, *names: str) -> np.random.Generator:
+    """The bootstrap stream of one cell: ``seed`` and a stable hash of its names.
+
+    crc32, not ``hash``: Python salts string hashes per process.
+    """
+    return np.random.default_rng([seed, zlib.crc32("\x1f".join(names).encode("utf-8"))])
 
 
 def _ci(values: np.ndarray, rng: np.random.Generator) -> tuple[float, float]:
@@ -99,15 +115,17 @@ def summarize(table: pd.DataFrame, *, seed: int = 0) -> pd.DataFrame:
         metric. Rows keep the order the cells first appear in ``table``.
     """
     metrics = [m for m in metric_columns() if m in table]
-    rng = np.random.default_rng(seed)
     rows = []
     for (policy, scenario), cell in table.groupby(list(KEY_COLUMNS), sort=False):
+        if "seed" in cell:
+            cell = cell.sort_values("seed", kind="stable")
         row: dict[str, object] = {"policy": policy, "scenario": scenario, "episodes": len(cell)}
         bounds: dict[str, float] = {}
         for m in metrics:
             values = cell[m].to_numpy(dtype=np.float64)
             values = values[np.isfinite(values)]
             row[m] = float(values.mean()) if values.size else np.nan
+            rng = _stream(seed, str(policy), str(scenario), m)
             bounds[f"{m}_ci_low"], bounds[f"{m}_ci_high"] = _ci(values, rng)
         rows.append({**row, **bounds})
     columns = ["policy", "scenario", "episodes", *metrics]
@@ -128,7 +146,6 @@ def compare(
         ``diff_ci_high`` and ``wilcoxon_p`` (NaN when every difference is 0 or n < 2).
     """
     metrics = [m for m in (metrics or metric_columns()) if m in table]
-    rng = np.random.default_rng(seed)
     policies = list(dict.fromkeys(table["policy"]))
     rows = []
     for scenario in dict.fromkeys(table["scenario"]):
@@ -136,7 +153,7 @@ def compare(
         for a, b in itertools.combinations(policies, 2):
             pa = in_scenario[in_scenario["policy"] == a].set_index("seed")
             pb = in_scenario[in_scenario["policy"] == b].set_index("seed")
-            seeds = pa.index.intersection(pb.index)
+            seeds = pa.index.intersection(pb.index).sort_values()
             if seeds.empty:
                 continue
             for m in metrics:
@@ -144,7 +161,7 @@ def compare(
                 vb = pb.loc[seeds, m].to_numpy(dtype=np.float64)
                 ok = np.isfinite(va) & np.isfinite(vb)
                 diff = va[ok] - vb[ok]
-                low, high = _ci(diff, rng)
+                low, high = _ci(diff, _stream(seed, str(scenario), *sorted((str(a), str(b))), m))
                 rows.append(
                     {
                         "scenario": scenario,

@@ -44,6 +44,7 @@ from __future__ import annotations
 
 import csv
 import math
+import re
 from collections.abc import Iterable
 from pathlib import Path
 
@@ -143,7 +144,8 @@ def read_step_log(path: str | Path) -> pd.DataFrame:
 
     :raises StepLogError: naming the file, and the line and column for a malformed row: a
         missing file, no header, a missing required column, a row with the wrong number of
-        fields, a cell that is not a number, a non-finite or non-increasing ``time_s``.
+        fields, a cell that is not a number (``nan`` included) or is infinite, a
+        non-increasing ``time_s``.
     """
     path = Path(path)
     try:
@@ -201,6 +203,14 @@ def _to_frame(path: Path, header: list[str], rows: list[list[str]]) -> pd.DataFr
             raise StepLogError(
                 f"{path}: line {lines[k]}, column {name}: {cells[k]!r} is not a number"
             )
+        # "inf" parses as a number, but every metric drops non-finite values, so a logging
+        # fault would vanish from the scores instead of being reported like "nan" is.
+        infinite = np.isinf(values.to_numpy(dtype=np.float64))
+        if infinite.any():
+            k = int(np.flatnonzero(infinite)[0])
+            raise StepLogError(
+                f"{path}: line {lines[k]}, column {name}: {cells[k]!r} is not a finite number"
+            )
         if name in REQUIRED_COLUMNS and values.isna().any():
             k = int(np.flatnonzero(values.isna().to_numpy())[0])
             raise StepLogError(f"{path}: line {lines[k]}, column {name}: value is missing")
@@ -246,9 +256,20 @@ def accel_from_speed(time_s: pd.Series, speed_mps: pd.Series) -> pd.Series:
     return accel.fillna(0.0) if len(accel) else accel
 
 
+def _natural_key(path: Path) -> list[str | int]:
+    """Sort key that compares runs of digits as numbers: ``seed_2`` before ``seed_10``."""
+    # re.split with a group alternates text and digits, so equal positions hold equal types.
+    parts = re.split(r"(\d+)", path.as_posix())
+    return [int(part) if k % 2 else part for k, part in enumerate(parts)]
+
+
 def step_log_files(paths: Iterable[str | Path]) -> list[Path]:
-    """Expand folders into the ``*.csv`` files below them (sorted); keep files as given."""
+    """Expand folders into the ``*.csv`` files below them; keep files as given.
+
+    Files found in a folder are sorted with numbers compared as numbers (``seed_2.csv``
+    before ``seed_10.csv``), the order ``follow-eval run`` wrote them in.
+    """
     out: list[Path] = []
     for p in map(Path, paths):
-        out.extend(sorted(p.rglob("*.csv")) if p.is_dir() else [p])
+        out.extend(sorted(p.rglob("*.csv"), key=_natural_key) if p.is_dir() else [p])
     return out

@@ -6,6 +6,7 @@
   several scenarios.
 - :mod:`train.envs`: builds the agent's env for training, evaluation and inference.
 - :mod:`train.run`: the run folder, atomic saves, checkpoints, the held-out evaluation log.
+- :mod:`train.export`: ``--export``: copies an agent into a folder without losing a file.
 - :mod:`train.report`: the learning curve, the comparison with a law, the model card.
 
 The trained agent is used through :mod:`policies.ppo` (``make_policy("ppo")``).

@@ -5,7 +5,7 @@
     follow-train                                  # train/configs/ppo.yaml, all scenarios
     follow-train --n-timesteps 20000 --out runs/ppo-smoke
     follow-train --resume runs/ppo-<timestamp>    # continue from the newest checkpoint
-    follow-train --export policies/agents/ppo     # also copy the agent there (the shipped one)
+    follow-train --export agents/mine             # also copy the agent there (train.export)
 
 (also ``python -m train``). Read top-down: :class:`Args` holds every option; :func:`train`
 sets up the envs and the model, learns, and saves. SB3 does the algorithm; the agent's view of
@@ -15,7 +15,13 @@ the env (action scaling, the observation's extra features, the training reward) 
 
 Seeds: training lane ``j`` starts from seed ``seed + j`` (10 000 + j by default) and a resumed
 session from ``seed + steps + j``; the held-out evaluation uses ``eval_seed + j`` (5 000 + j);
-the evaluation harness (``follow-eval``, ``make eval``) uses seeds 0 .. N. None overlap.
+the evaluation harness (``follow-eval``, ``make eval``) uses seeds 0 .. N. None overlap. Every
+seed stays below 2**32 (:data:`MAX_SEED`): SB3 seeds numpy's global generator, which takes no
+larger one.
+
+Every option and every hyperparameter is checked, and the envs and the model are built in
+memory, before anything is written: a bad input gives one line ``follow-train: error: ...``
+naming the option or YAML key, its value and what it may be, exit status 2, and no folder.
 """
 
 from __future__ import annotations
@@ -24,15 +30,12 @@ import argparse
 import dataclasses
 import shutil
 import sys
-import tempfile
-import time
 from collections.abc import Sequence
 from dataclasses import dataclass
-from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any, NoReturn
 
-from eval.atomic import atomic_write_text
+from eval.atomic import atomic_write_text, file_on_path
 from follow_env.tasks import task_for_env
 from train.config import (
     ConfigError,
@@ -43,15 +46,17 @@ from train.config import (
     schedule,
     sole_section,
 )
+from train.export import AGENT_FILES, EXPORT_EXTRAS, check_export, export_agent
 
-__all__ = ["Args", "main", "train"]
+__all__ = ["AGENT_FILES", "EXPORT_EXTRAS", "Args", "Interrupted", "main", "train"]
 
 PROG = "follow-train"
 USAGE_ERROR = 2
 DEFAULT_HYPERPARAMS = Path(__file__).parent / "configs" / "ppo.yaml"
-# The files that make an agent (what --export copies and policies.ppo loads).
-AGENT_FILES = ("model.zip", "vecnormalize.pkl", "config.yaml", "MODEL_CARD.md")
-EXPORT_EXTRAS = ("learning_curve.png",)
+#: The largest seed any lane may get: SB3 passes the seed to ``numpy.random.seed``.
+MAX_SEED = 2**32 - 1
+#: The most torch threads a run may ask for (more only slow a 0.1-ms policy step down).
+MAX_THREADS = 256
 
 
 @dataclass(frozen=True)
@@ -76,126 +81,146 @@ class Args:
     out: Path | None = None  # the run folder (default: runs/ppo-<timestamp>)
     resume: Path | None = None  # continue this run from its newest checkpoint
     export: Path | None = None  # also copy the finished agent into this folder
+    force: bool = False  # --export may write into a folder it did not make (train.export)
     progress: bool = True
+
+
+class Interrupted(KeyboardInterrupt):
+    """Ctrl-C during a run; the message says what was kept and how to go on."""
+
+
+class TrainingError(RuntimeError):
+    """Training diverged; the message says where and what the run folder keeps."""
 
 
 def train(args: Args, command: str = PROG) -> Path:
     """Train (or resume) a run as ``args`` say; returns the run folder.
 
-    :raises ValueError: for bad options or inputs (the message names them).
+    :raises ValueError: for bad options or inputs (the message names them), before anything
+        is written.
+    :raises Interrupted: on Ctrl-C once the run folder exists.
+    :raises TrainingError: if the policy's outputs became NaN.
     """
     import torch
-    from stable_baselines3 import PPO
     from stable_baselines3.common.logger import CSVOutputFormat, Logger, TensorBoardOutputFormat
 
     from train import report
     from train import run as runs
-    from train.envs import agent_env, base_env
 
-    # -- Set-up: the run folder, the hyperparameters, the envs, the model -------------------
-    torch.set_num_threads(args.threads)
+    # -- Check every option and hyperparameter; build the envs and the model in memory -------
     if args.resume is not None:
-        run = args.resume
-        saved = runs.read_config(run)
-        hp = parse_hyperparams(saved["hyperparams"], where=f"{run / runs.CONFIG} [hyperparams]")
-        if args.n_timesteps is not None:  # a longer run: the saved total follows
-            hp["n_timesteps"] = saved["hyperparams"]["n_timesteps"] = args.n_timesteps
-            runs.write_config(run, saved)
-        args = dataclasses.replace(
-            _args_from_dict(saved["args"]),
-            n_timesteps=args.n_timesteps,
-            threads=args.threads,
-            progress=args.progress,
-            export=args.export,
-            resume=run,
-        )
-        checkpoint = runs.newest_checkpoint(run)
-        if checkpoint is None:
-            raise ValueError(f"{run / runs.CHECKPOINTS}: no checkpoint to resume from")
+        run: Path | None = args.resume
+        args, hp, saved, where, checkpoint = _resume_settings(args)
         start_step, model_path, stats_path = checkpoint
+        _check_options(args, run=run)
     else:
+        run, saved, model_path, stats_path, start_step = None, None, None, None, 0
         args = _with_defaults(args)
-        hp = load_hyperparams(args.hyperparams, args.env_id)
-        hp |= {k: v for k in ("n_timesteps", "n_envs") if (v := getattr(args, k)) is not None}
-        _check_args(args, hp)
+        _check_options(args, run=None)
+        if args.n_envs is not None:  # before the file: its batch size may not fit either
+            _check_lanes(args.n_envs, args.scenarios)
+        given = {k: v for k in ("n_timesteps", "n_envs") if (v := getattr(args, k)) is not None}
+        hp = load_hyperparams(args.hyperparams, args.env_id, overrides=given)
+        where = f"{args.hyperparams} [{args.env_id}]"
+    _check_against_hyperparams(args, hp)
+    torch.set_num_threads(args.threads)
+    venv, eval_env, model = _build(args, hp, where, model_path, stats_path, start_step)
+
+    # -- The run folder, now that everything checked out -------------------------------------
+    made = run is None and (args.out is None or not args.out.exists())
+    if run is None:
         run = args.out if args.out is not None else runs.new_run_dir(args.runs)
         run.mkdir(parents=True, exist_ok=True)
-        if any(run.iterdir()):
-            raise ValueError(f"{run} already exists and is not empty; use --resume to continue it")
-        start_step, model_path, stats_path = 0, None, None
-    lanes = hp["n_envs"] // len(args.scenarios)
-    venv = agent_env(base_env(args.scenarios, lanes, args.env_config, args.env_id), hp, "train",
-                     normalization=stats_path if hp["normalize"] else None)  # fmt: skip
-    eval_env = agent_env(
-        base_env(args.scenarios, args.eval_episodes, args.env_config, args.env_id), hp, "eval"
-    )
-    if model_path is not None:
-        model = PPO.load(model_path, env=venv, device="cpu")
-        model.set_random_seed(args.seed + start_step)  # new episodes, still >= args.seed
-    else:
-        ppo_kwargs = {k: v for k, v in hp.items() if k not in _ZOO_ONLY}
-        for key in ("learning_rate", "clip_range"):
-            if key in ppo_kwargs:
-                ppo_kwargs[key] = schedule(ppo_kwargs[key])
-        policy = policy_class(hp["policy"])
-        model = PPO(policy, venv, seed=args.seed, device="cpu", verbose=0, **ppo_kwargs)
-        runs.write_config(run, _resolved_config(args, hp, venv, command))
-    (run / runs.LOGS).mkdir(exist_ok=True)
-    formats = [CSVOutputFormat(str(run / runs.LOGS / f"progress-{start_step}.csv"))]
-    formats.append(TensorBoardOutputFormat(str(run / runs.LOGS / "tb")))
-    model.set_logger(Logger(str(run / runs.LOGS), formats))
+    try:
+        if saved is None:
+            runs.write_config(run, _resolved_config(args, hp, venv, command))
+        else:
+            runs.remove_stale_scratch(run)
+            if args.n_timesteps is not None:  # a longer run: the saved total follows
+                saved["hyperparams"]["n_timesteps"] = hp["n_timesteps"]
+                runs.write_config(run, saved)
+        (run / runs.LOGS).mkdir(exist_ok=True)
+        formats = [CSVOutputFormat(str(run / runs.LOGS / f"progress-{start_step}.csv"))]
+        formats.append(TensorBoardOutputFormat(str(run / runs.LOGS / "tb")))
+        model.set_logger(Logger(str(run / runs.LOGS), formats))
+        session = runs.SessionLog(run, command, start_step, args.threads)
+    except BaseException:
+        if saved is None:
+            _remove_new_run(run, made)
+        raise
     callbacks = [
-        runs.AtomicCheckpointCallback(args.checkpoint_freq, run, venv.num_envs),
+        runs.AtomicCheckpointCallback(args.checkpoint_freq, run, venv.num_envs, session),
         runs.HeldOutEvalCallback(eval_env, run, args.eval_seed, args.eval_freq, venv.num_envs),
     ]
 
     # -- Learn ------------------------------------------------------------------------------
-    remaining = hp["n_timesteps"] - model.num_timesteps
-    started = time.perf_counter()
-    if remaining > 0:
+    try:
         model.learn(
-            remaining, callback=callbacks, progress_bar=args.progress, reset_num_timesteps=False
+            hp["n_timesteps"] - model.num_timesteps,
+            callback=callbacks,
+            progress_bar=args.progress,
+            reset_num_timesteps=False,
         )
-    wall_s = time.perf_counter() - started
+    except KeyboardInterrupt:
+        kept = runs.newest_checkpoint(run)
+        trained = model.num_timesteps - start_step
+        session.close("interrupted", kept[0] if kept else start_step, trained)
+        if kept is None and saved is None:
+            _remove_new_run(run, made)
+            raise Interrupted(
+                f"interrupted before the first checkpoint (every {args.checkpoint_freq:,} env "
+                f"steps): nothing to resume, removed {run}"
+            ) from None
+        raise Interrupted(
+            f"interrupted; resume with --resume {run} (continues from the checkpoint at "
+            f"{kept[0] if kept else start_step:,} env steps)"
+        ) from None
+    except ValueError as e:
+        kept = runs.newest_checkpoint(run)
+        trained = model.num_timesteps - start_step
+        session.close("failed", kept[0] if kept else start_step, trained)
+        if "invalid values" not in str(e):
+            raise
+        raise TrainingError(
+            f"training diverged at {model.num_timesteps:,} env steps: the policy's outputs became "
+            f"NaN (lower learning_rate or clip_range in {where}); {run} keeps its checkpoints"
+        ) from None
     steps = model.num_timesteps - start_step
 
     # -- Save: the agent, the session, the curve, the comparison, the model card --------------
-    runs.save_normalization(model.get_vec_normalize_env(), run / runs.NORMALIZATION)
-    runs.save_model(model, run / runs.MODEL)
-    venv.close()
-    eval_env.close()
-    sessions = runs.read_sessions(run)
-    sessions.append(
-        {
-            "command": command,
-            "finished_utc": datetime.now(UTC).isoformat(timespec="seconds"),
-            "first_step": start_step,
-            "last_step": model.num_timesteps,
-            "wall_s": round(wall_s, 1),
-            "env_steps_per_s": round(steps / wall_s) if steps and wall_s > 0 else None,
-            "threads": args.threads,
-        }
-    )
-    runs.write_sessions(run, sessions)
-    report.plot_learning_curve(run, run / runs.CURVE)
-    seeds = range(args.eval_seed, args.eval_seed + args.final_episodes)
-    comparison = None
-    if args.final_episodes > 0:
-        comparison = report.compare_with_law(
-            str(run), args.compare_with, args.scenarios, seeds, args.env_config
+    try:
+        runs.save_normalization(model.get_vec_normalize_env(), run / runs.NORMALIZATION)
+        runs.save_model(model, run / runs.MODEL)
+        session.close("finished", model.num_timesteps, steps)
+        venv.close()
+        eval_env.close()
+        report.plot_learning_curve(run, run / runs.CURVE)
+        seeds = range(args.eval_seed, args.eval_seed + args.final_episodes)
+        comparison = None
+        if args.final_episodes > 0:
+            comparison = report.compare_with_law(
+                str(run), args.compare_with, args.scenarios, seeds, args.env_config
+            )
+        card = report.model_card(
+            run=run,
+            args=args,
+            hp=hp,
+            sessions=session.sessions,
+            comparison=comparison,
+            seeds=seeds,
+            versions=report.package_versions(),
         )
-    card = report.model_card(
-        run=run,
-        args=args,
-        hp=hp,
-        sessions=sessions,
-        comparison=comparison,
-        seeds=seeds,
-        versions=report.package_versions(),
-    )
-    atomic_write_text(run / runs.CARD, card)
+        atomic_write_text(run / runs.CARD, card)
+    except KeyboardInterrupt:
+        raise Interrupted(
+            f"interrupted after training, while writing the report: the agent is in {run}, "
+            f"{runs.CARD} may be missing"
+        ) from None
     if args.export is not None:
-        export_agent(run, args.export)
+        try:
+            export_agent(run, args.export, force=args.force)
+        except ValueError as e:  # the folder changed during training: the run stays whole
+            raise ValueError(f"{e} (training finished: the run is complete in {run})") from None
     return run
 
 
@@ -205,36 +230,217 @@ def train(args: Args, command: str = PROG) -> Path:
 _ZOO_ONLY = ("n_envs", "n_timesteps", "normalize", "frame_stack", "vec_env_wrapper", "policy")
 
 
+def _resume_settings(args: Args) -> tuple[Args, Hyperparams, dict[str, Any], str, tuple]:
+    """The saved settings of the run ``args.resume``, with the options a resume may change.
+
+    :returns: ``(args, hyperparameters, saved config, where, (steps, model, statistics))``.
+    :raises ValueError: if the folder is no run, has no checkpoint, or nothing is left to train.
+    """
+    from train import run as runs
+
+    run = Path(args.resume)
+    if not run.is_dir():
+        what = "is a file, not a run folder" if run.exists() else "no such run folder"
+        raise ValueError(f"--resume {run}: {what}")
+    saved = runs.read_config(run)
+    where = f"{run / runs.CONFIG} [hyperparams]"
+    given = {"n_timesteps": args.n_timesteps} if args.n_timesteps is not None else {}
+    hp = parse_hyperparams(saved["hyperparams"], where=where, overrides=given)
+    if not isinstance(saved.get("args"), dict):
+        raise ValueError(f"{run / runs.CONFIG}: no 'args' mapping; not a follow-train run")
+    resumed = dataclasses.replace(
+        _args_from_dict(saved["args"], where=str(run / runs.CONFIG)),
+        n_timesteps=args.n_timesteps,
+        threads=args.threads,
+        progress=args.progress,
+        export=args.export,
+        force=args.force,
+        resume=run,
+    )
+    checkpoint = runs.newest_checkpoint(run)
+    if checkpoint is None:
+        raise ValueError(f"{run / runs.CHECKPOINTS}: no checkpoint to resume from")
+    steps = checkpoint[0]
+    if hp["n_timesteps"] <= steps:
+        option = "--n-timesteps" if given else f"n_timesteps in {run / runs.CONFIG}"
+        raise ValueError(
+            f"{option}={hp['n_timesteps']:,} is out of range: the newest checkpoint is at "
+            f"{steps:,} env steps, so a resume needs --n-timesteps > {steps:,}"
+        )
+    return resumed, hp, saved, where, checkpoint
+
+
+def _option(name: str) -> str:
+    return "--" + name.replace("_", "-")
+
+
+def _check_int(name: str, value: Any, low: int, high: int | None = None) -> None:
+    """``--name`` must be an integer in ``[low, high]``."""
+    is_int = isinstance(value, int) and not isinstance(value, bool)
+    if not is_int or value < low or (high is not None and value > high):
+        rule = f"an integer >= {low}" if high is None else f"an integer in [{low}, {high:,}]"
+        raise ValueError(f"{_option(name)} {value!r} is out of range: must be {rule}")
+
+
 def _with_defaults(args: Args) -> Args:
     """``args`` with the env id (the hyperparameter file's only section) and the scenarios (all
     of the task's) filled in where they were left to their defaults."""
-    env_id = args.env_id or sole_section(args.hyperparams)
-    scenarios = args.scenarios or tuple(task_for_env(env_id).variants())
+    env_id = args.env_id
+    if env_id is None:
+        try:
+            env_id = sole_section(args.hyperparams)
+        except ConfigError as e:
+            raise ValueError(str(e)) from None
+    scenarios = args.scenarios
+    if not scenarios:
+        try:
+            scenarios = tuple(task_for_env(env_id).variants())
+        except ValueError as e:
+            raise ValueError(f"--env-id: {e}") from None
     return dataclasses.replace(args, env_id=env_id, scenarios=scenarios)
 
 
-def _check_args(args: Args, hp: Hyperparams) -> None:
-    task = task_for_env(args.env_id)
+def _check_options(args: Args, *, run: Path | None) -> None:
+    """Check every option that does not depend on the hyperparameters.
+
+    :param run: the folder being resumed, None for a new run.
+    :raises ValueError: naming the option, its value and its allowed range.
+    """
+    from policies import make_policy
+
+    try:
+        task = task_for_env(args.env_id)
+    except ValueError as e:
+        raise ValueError(f"--env-id: {e}") from None
     known = task.variants()
-    for name in args.scenarios:
+    scenarios = args.scenarios
+    if not isinstance(scenarios, tuple | list) or not all(isinstance(s, str) for s in scenarios):
+        raise ValueError(f"--scenarios {scenarios!r} must be a list of scenario names")
+    for name in scenarios:
         if name not in known:
             raise ValueError(f"--scenarios: unknown scenario {name!r}; known: {', '.join(known)}")
-    if len(set(args.scenarios)) != len(args.scenarios) or not args.scenarios:
+    if len(set(scenarios)) != len(scenarios) or not scenarios:
         raise ValueError("--scenarios must name each scenario once, at least one")
     if args.env_config not in task.presets:
         raise ValueError(
             f"--env-config {args.env_config!r} is not a preset: {', '.join(task.presets)}"
         )
-    if hp["n_envs"] % len(args.scenarios):
+    for name in ("eval_episodes", "eval_freq", "checkpoint_freq"):
+        _check_int(name, getattr(args, name), 1)
+    _check_int("final_episodes", args.final_episodes, 0)
+    _check_int("threads", args.threads, 1, MAX_THREADS)
+    _check_int("seed", args.seed, 0, MAX_SEED)
+    _check_int("eval_seed", args.eval_seed, 0, MAX_SEED)
+    if not isinstance(args.progress, bool) or not isinstance(args.force, bool):
+        raise ValueError("progress and force must be true or false")
+    try:
+        make_policy(args.compare_with)
+    except (ValueError, TypeError) as e:
+        raise ValueError(f"--compare-with {args.compare_with!r}: {e}") from None
+    if run is None:
+        _check_run_folder(args)
+    if args.export is not None:
+        location = run or args.out or args.runs / "ppo-<timestamp>"
+        check_export(args.export, force=args.force, run=location)
+    elif args.force:
+        raise ValueError("--force applies to --export only (it lets --export write into a folder)")
+
+
+def _check_lanes(n_envs: int, scenarios: Sequence[str]) -> None:
+    if n_envs % len(scenarios):
         raise ValueError(
-            f"n_envs={hp['n_envs']} must be a multiple of the {len(args.scenarios)} scenarios "
-            "(each scenario gets the same number of lanes)"
+            f"n_envs={n_envs} is out of range: must be a multiple of the {len(scenarios)} "
+            "scenarios (each scenario gets the same number of lanes)"
         )
-    for name in ("eval_freq", "checkpoint_freq", "eval_episodes", "threads"):
-        if getattr(args, name) < 1:
-            raise ValueError(f"--{name.replace('_', '-')} must be >= 1")
-    if args.final_episodes < 0:
-        raise ValueError("--final-episodes must be >= 0")
+
+
+def _check_against_hyperparams(args: Args, hp: Hyperparams) -> None:
+    """The options whose range depends on the hyperparameters: lanes and seeds."""
+    _check_lanes(hp["n_envs"], args.scenarios)
+    # SB3 seeds numpy with seed + steps at a resume, and lane j with that + j.
+    _check_int("n_timesteps", hp["n_timesteps"], 1, MAX_SEED - hp["n_envs"])
+    _check_int("seed", args.seed, 0, MAX_SEED - hp["n_timesteps"] - hp["n_envs"])
+    eval_lanes = max(args.eval_episodes * len(args.scenarios), args.final_episodes)
+    _check_int("eval_seed", args.eval_seed, 0, MAX_SEED - eval_lanes)
+
+
+def _check_run_folder(args: Args) -> None:
+    """``--out`` must be new or an empty folder, and ``--runs`` a folder or creatable."""
+    for option, path in (("--out", args.out), ("--runs", args.runs)):
+        if path is None or (option == "--runs" and args.out is not None):
+            continue
+        blocker = file_on_path(path)
+        if blocker is not None:
+            where = "is a file" if blocker == path else f"runs through the file {blocker}"
+            raise ValueError(f"{option} {path}: {where}, not a folder")
+    if args.out is not None and args.out.exists() and any(args.out.iterdir()):
+        raise ValueError(
+            f"--out {args.out} already exists and is not empty; use --resume to continue it"
+        )
+
+
+def _build(
+    args: Args,
+    hp: Hyperparams,
+    where: str,
+    model_path: Path | None,
+    stats_path: Path | None,
+    start_step: int,
+) -> tuple[Any, Any, Any]:
+    """The training env, the held-out env and the model, in memory (nothing is written).
+
+    The wrappers and SB3 check their own arguments here, so a value they refuse is reported
+    as a bad hyperparameter before the run folder exists.
+    """
+    from stable_baselines3 import PPO
+
+    from train.envs import agent_env, base_env
+
+    lanes = hp["n_envs"] // len(args.scenarios)
+    normalization = stats_path if hp["normalize"] and stats_path is not None else None
+    try:
+        venv = agent_env(base_env(args.scenarios, lanes, args.env_config, args.env_id), hp,
+                         "train", normalization=normalization)  # fmt: skip
+        eval_env = agent_env(
+            base_env(args.scenarios, args.eval_episodes, args.env_config, args.env_id), hp, "eval"
+        )
+    except (ValueError, TypeError) as e:
+        raise ConfigError(f"{where}: the agent's env cannot be built: {e}") from None
+    except Exception as e:  # a resume's statistics file: pickle and SB3 raise their own
+        if normalization is None:
+            raise
+        problem = f"{type(e).__name__}: {e}"
+        raise ValueError(f"{normalization}: cannot resume from it ({problem})") from None
+    if model_path is not None:
+        try:
+            model = PPO.load(model_path, env=venv, device="cpu")
+        except Exception as e:  # zipfile, pickle, torch and SB3 each raise their own
+            problem = f"{type(e).__name__}: {e}"
+            raise ValueError(f"{model_path}: cannot resume from it ({problem})") from None
+        model.set_random_seed(args.seed + start_step)  # new episodes, still >= args.seed
+        return venv, eval_env, model
+    ppo_kwargs = {k: v for k, v in hp.items() if k not in _ZOO_ONLY}
+    for key in ("learning_rate", "clip_range", "clip_range_vf"):
+        if ppo_kwargs.get(key) is not None:
+            ppo_kwargs[key] = schedule(ppo_kwargs[key])
+    try:
+        model = PPO(policy_class(hp["policy"]), venv, seed=args.seed, device="cpu", verbose=0,
+                    **ppo_kwargs)  # fmt: skip
+    except (ValueError, TypeError, AssertionError) as e:
+        raise ConfigError(f"{where}: stable-baselines3 rejects the hyperparameters: {e}") from None
+    return venv, eval_env, model
+
+
+def _remove_new_run(run: Path, made: bool) -> None:
+    """Remove what this session wrote into a new run folder (the folder too if it made it)."""
+    if made:
+        shutil.rmtree(run, ignore_errors=True)
+    else:  # --out was an empty folder: everything in it is this session's
+        for child in run.iterdir():
+            if child.is_dir() and not child.is_symlink():
+                shutil.rmtree(child, ignore_errors=True)
+            else:
+                child.unlink(missing_ok=True)
 
 
 def _resolved_config(args: Args, hp: Hyperparams, venv: Any, command: str) -> dict[str, Any]:
@@ -265,7 +471,7 @@ def _resolved_config(args: Args, hp: Hyperparams, venv: Any, command: str) -> di
 def _args_to_dict(args: Args) -> dict[str, Any]:
     out: dict[str, Any] = {}
     for f in dataclasses.fields(args):
-        if f.name in ("resume", "export", "out"):
+        if f.name in ("resume", "export", "out", "force"):
             continue  # where this session writes, not how the run trains
         value = getattr(args, f.name)
         if isinstance(value, Path):
@@ -276,49 +482,25 @@ def _args_to_dict(args: Args) -> dict[str, Any]:
     return out
 
 
-def _args_from_dict(saved: dict[str, Any]) -> Args:
+def _args_from_dict(saved: dict[str, Any], *, where: str = "config.yaml") -> Args:
+    """:class:`Args` from a saved ``config.yaml`` (values are checked by :func:`_check_args`).
+
+    :raises ValueError: naming the file for a value of the wrong kind.
+    """
     fields = {f.name: f for f in dataclasses.fields(Args)}
     values: dict[str, Any] = {}
     for name, value in saved.items():
         if name not in fields:
             continue
-        if name in ("hyperparams", "runs"):
-            value = Path(value)
-        elif name == "scenarios":
-            value = tuple(value)
+        try:
+            if name in ("hyperparams", "runs"):
+                value = Path(value)
+            elif name == "scenarios":
+                value = tuple(value)
+        except TypeError:
+            raise ValueError(f"{where}: args.{name}={value!r} is not valid") from None
         values[name] = value
     return Args(**values)
-
-
-def export_agent(run: Path, dest: Path) -> Path:
-    """Copy the agent's files (:data:`AGENT_FILES` and the learning curve) into ``dest``.
-
-    The folder is replaced as a whole: the new copy is assembled beside it and renamed into
-    place, so ``dest`` always holds one complete agent.
-    """
-    dest = Path(dest)
-    dest.parent.mkdir(parents=True, exist_ok=True)
-    staging = Path(tempfile.mkdtemp(prefix=f".{dest.name}.", suffix=".tmp", dir=dest.parent))
-    try:
-        staging.chmod(0o755)  # mkdtemp makes 0700; an exported agent is for everyone to read
-        for name in AGENT_FILES + EXPORT_EXTRAS:
-            source = run / name
-            if source.exists():
-                shutil.copy2(source, staging / name)
-            elif name != "vecnormalize.pkl":
-                raise FileNotFoundError(f"{source}: missing; is the run finished?")
-        old = None
-        if dest.exists():
-            old = dest.with_name(f".{dest.name}.old")
-            shutil.rmtree(old, ignore_errors=True)
-            dest.rename(old)
-        staging.rename(dest)
-        if old is not None:
-            shutil.rmtree(old, ignore_errors=True)
-    except BaseException:
-        shutil.rmtree(staging, ignore_errors=True)
-        raise
-    return dest
 
 
 # -- Command line ----------------------------------------------------------------------------
@@ -338,10 +520,17 @@ def build_parser() -> argparse.ArgumentParser:
     d = Args()
     p = _Parser(prog=PROG, description="Train PPO on PersonFollow-v0 (stable-baselines3).")
     p.add_argument("--hyperparams", type=Path, help=f"YAML file (default: {d.hyperparams})")
-    p.add_argument("--env-id", help="section of the YAML file (default: its only one)")
+    p.add_argument(
+        "--env-id", help="section of the YAML file, naming the task (default: its only one)"
+    )
     p.add_argument("--scenarios", help="comma-separated scenarios (default: all registered)")
     p.add_argument("--env-config", help=f"env preset (default: {d.env_config})")
-    p.add_argument("--seed", type=int, help=f"training lanes start from seed + j ({d.seed})")
+    p.add_argument(
+        "--seed",
+        type=int,
+        help=f"training lanes start from seed + j ({d.seed}); seed + n_timesteps + n_envs "
+        "must stay below 2**32",
+    )
     p.add_argument("--eval-seed", type=int, help=f"held-out lanes: eval_seed + j ({d.eval_seed})")
     p.add_argument("--eval-episodes", type=int, help=f"per scenario ({d.eval_episodes})")
     p.add_argument("--eval-freq", type=int, help=f"env steps ({d.eval_freq})")
@@ -350,17 +539,30 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--compare-with", help=f"law in the model card ({d.compare_with})")
     p.add_argument("--n-timesteps", type=int, help="total env steps (default: the YAML's)")
     p.add_argument("--n-envs", type=int, help="lanes (default: the YAML's)")
-    p.add_argument("--threads", type=int, help=f"torch threads ({d.threads})")
+    p.add_argument("--threads", type=int, help=f"torch threads, 1..{MAX_THREADS} ({d.threads})")
     p.add_argument("--runs", type=Path, help=f"where run folders go ({d.runs})")
     p.add_argument("--out", type=Path, help="run folder (default: runs/ppo-<timestamp>)")
     p.add_argument("--resume", type=Path, metavar="RUN_DIR", help="continue this run")
-    p.add_argument("--export", type=Path, metavar="DIR", help="also copy the agent into DIR")
+    p.add_argument(
+        "--export",
+        type=Path,
+        metavar="DIR",
+        help="also copy the agent into DIR: a new or empty folder, or one an earlier export "
+        "wrote (its files are replaced, nothing else)",
+    )
+    p.add_argument(
+        "--force",
+        action="store_true",
+        default=None,
+        help="let --export write into a folder it did not make, or over exported files that "
+        "were changed: only files named like the agent's are replaced, none is deleted",
+    )
     p.add_argument("--no-progress", dest="progress", action="store_false", default=None)
     return p
 
 
 # Options that may accompany --resume (the rest come from the run's config.yaml).
-_RESUME_OPTIONS = {"resume", "n_timesteps", "threads", "progress", "export"}
+_RESUME_OPTIONS = {"resume", "n_timesteps", "threads", "progress", "export", "force"}
 
 
 def parse_args(argv: Sequence[str] | None = None) -> Args:
@@ -374,14 +576,31 @@ def parse_args(argv: Sequence[str] | None = None) -> Args:
         extra = ", ".join("--" + k.replace("_", "-") for k in sorted(set(given) - _RESUME_OPTIONS))
         raise UsageError(
             f"{extra}: a resumed run keeps its own settings; with --resume only "
-            "--n-timesteps, --threads, --no-progress and --export may be given"
+            "--n-timesteps, --threads, --no-progress, --export and --force may be given"
         )
     if "scenarios" in given:
         given["scenarios"] = tuple(s.strip() for s in given["scenarios"].split(",") if s.strip())
     for name in ("n_timesteps", "n_envs"):
         if name in given and given[name] < 1:
-            raise UsageError(f"--{name.replace('_', '-')} must be >= 1")
+            raise UsageError(
+                f"--{name.replace('_', '-')} {given[name]} is out of range: must be an integer >= 1"
+            )
     return Args(**given)
+
+
+def _written(run: Path) -> str:
+    """The run folder's files, as they are (a short run may have no checkpoint yet)."""
+    from train import run as runs
+
+    names = [runs.MODEL, runs.NORMALIZATION, runs.CONFIG, runs.CARD, runs.CURVE]
+    names += [runs.EVALUATIONS, runs.SESSIONS]
+    found = [name for name in names if (run / name).is_file()]
+    checkpoints = len(list((run / runs.CHECKPOINTS).glob(f"{runs.CHECKPOINT_PREFIX}_*_steps.zip")))
+    if checkpoints:
+        found.append(f"{runs.CHECKPOINTS}/ ({checkpoints} checkpoint{'s' * (checkpoints > 1)})")
+    if (run / runs.LOGS).is_dir():
+        found.append(f"{runs.LOGS}/")
+    return ", ".join(found)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -390,20 +609,25 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         args = parse_args(argv)
         run = train(args, command=" ".join([PROG, *argv]))
+    except Interrupted as e:
+        print(f"{PROG}: {e}", file=sys.stderr)
+        return 130
+    except KeyboardInterrupt:
+        print(f"{PROG}: interrupted before training started; nothing was written", file=sys.stderr)
+        return 130
+    except TrainingError as e:
+        print(f"{PROG}: error: {e}", file=sys.stderr)
+        return 1
     except (UsageError, ConfigError, ValueError, FileNotFoundError) as e:
         print(f"{PROG}: error: {e}", file=sys.stderr)
         return USAGE_ERROR
-    except KeyboardInterrupt:
-        print(f"{PROG}: interrupted; resume with --resume RUN_DIR", file=sys.stderr)
-        return 130
     from train.run import read_sessions
 
     last = read_sessions(run)[-1]
     print(
         f"Trained {last['first_step']:,} -> {last['last_step']:,} env steps in "
         f"{last['wall_s']:.0f} s ({last['env_steps_per_s'] or 0:,} env-steps/s). Wrote {run}/: "
-        "model.zip, vecnormalize.pkl, config.yaml, MODEL_CARD.md, learning_curve.png, "
-        "evaluations.npz, checkpoints/, logs/"
+        + _written(run)
         + (f"; exported the agent to {args.export}/" if args.export else "")
     )
     return 0

@@ -1,7 +1,11 @@
 """What a run reports: the learning curve, a held-out comparison with a law, the model card.
 
 The comparison uses the project's evaluation (:mod:`eval`): identical rollouts of the agent and
-a guidance law on held-out seeds, the thesis metrics, paired differences with bootstrap CIs.
+a guidance law on held-out seeds, paired differences with bootstrap CIs, on the issue's target
+metrics and on how often episodes failed (collisions, lost person) and the distance kept
+(:data:`CARD_METRICS`). Centring and smoothness alone would rank an agent that backs into a wall
+in every episode above the law, so the card says first, in words, whether the agent collides
+or loses the person more often than the law does (:func:`outcome_summary`).
 """
 
 from __future__ import annotations
@@ -16,22 +20,24 @@ import numpy as np
 import pandas as pd
 
 from eval.atomic import atomic_path
+from eval.metrics import METRICS, OUTCOME_METRICS
 
 __all__ = [
+    "CARD_METRICS",
     "TARGET_METRICS",
     "compare_with_law",
     "comparison_markdown",
+    "outcome_summary",
     "package_versions",
     "plot_learning_curve",
 ]
 
 #: The issue's targets: lower MeanOffset and StdAccel than the law, InFrameRate no lower.
 TARGET_METRICS = ("mean_offset_px", "std_accel_mm_s2", "in_frame_rate_pct")
-_LABELS = {
-    "mean_offset_px": "MeanOffset (px)",
-    "std_accel_mm_s2": "StdAccel (mm/s²)",
-    "in_frame_rate_pct": "InFrameRate (%)",
-}
+#: The card's comparison: the targets, then collision and lost rates and distance error.
+CARD_METRICS = (*TARGET_METRICS, *OUTCOME_METRICS)
+# Episode endings the card states in words, with the verb for "does it more often".
+_FAILURES = (("collision_rate_pct", "collides"), ("lost_rate_pct", "loses the person"))
 
 
 def package_versions() -> dict[str, str]:
@@ -90,33 +96,81 @@ def plot_learning_curve(run: Path, path: Path) -> Path:
 
 
 def compare_with_law(
-    agent: str, law: str, scenarios: Sequence[str], seeds: Sequence[int], config: Any
+    agent: Any, law: str, scenarios: Sequence[str], seeds: Sequence[int], config: Any
 ) -> pd.DataFrame:
-    """Paired comparison ``agent - law`` per scenario on the target metrics.
+    """Paired comparison ``agent - law`` per scenario on :data:`CARD_METRICS`.
 
-    :param agent: a policy name (e.g. a run folder path).
+    :param agent: a policy name (e.g. a run folder path) or a :class:`~policies.Policy`.
     :param law: a policy name, e.g. ``"gsmpn:tuned"``.
-    :returns: :func:`eval.stats.compare` rows for :data:`TARGET_METRICS`, agent as ``policy_a``.
+    :returns: :func:`eval.stats.compare` rows for :data:`CARD_METRICS`, agent as ``policy_a``.
     """
     from eval.rollout import rollout
     from eval.stats import compare, episode_table
 
     episodes = rollout([agent, law], list(scenarios), list(seeds), config=config, workers=1)
     table = episode_table(episodes)
-    return compare(table, metrics=list(TARGET_METRICS))
+    return compare(table, metrics=list(CARD_METRICS))
+
+
+def _digits(metric: str) -> int:
+    return 3 if metric.endswith("_m") else 1  # distances to the mm; px, mm/s² and % to 0.1
 
 
 def comparison_markdown(comparison: pd.DataFrame) -> str:
-    """A Markdown table: per scenario and target metric, agent, law, difference [95 % CI]."""
+    """A Markdown table: per scenario and metric, agent, law, difference [95 % CI]."""
     header = "| scenario | metric | agent | law | agent - law [95 % CI] |\n|---|---|---:|---:|---|"
     lines = [header]
     for row in comparison.itertuples():
+        d = _digits(row.metric)
+        label = METRICS[row.metric].label if row.metric in METRICS else row.metric
         lines.append(
-            f"| {row.scenario} | {_LABELS.get(row.metric, row.metric)} | {row.mean_a:.1f} | "
-            f"{row.mean_b:.1f} | {row.mean_diff:+.1f} [{row.diff_ci_low:+.1f}, "
-            f"{row.diff_ci_high:+.1f}] |"
+            f"| {row.scenario} | {label} | {row.mean_a:.{d}f} | {row.mean_b:.{d}f} | "
+            f"{row.mean_diff:+.{d}f} [{row.diff_ci_low:+.{d}f}, {row.diff_ci_high:+.{d}f}] |"
         )
     return "\n".join(lines)
+
+
+def outcome_summary(comparison: pd.DataFrame) -> str:
+    """One plain sentence: does the agent collide or lose the person more often than the law?
+
+    Counted per scenario on the same seeds (identical rollouts): "more often" is a higher rate
+    than the law's in that scenario, however small. Rates over all scenarios are pooled by the
+    number of episodes.
+
+    :param comparison: :func:`compare_with_law` output (agent as ``policy_a``).
+    """
+    law = comparison["policy_b"].iloc[0]
+    worse, overall = [], []
+    for metric, verb in _FAILURES:
+        rows = comparison[(comparison["metric"] == metric) & (comparison["n"] > 0)]
+        if rows.empty:
+            continue
+        n = rows["n"].to_numpy(dtype=float)
+        agent_pct = float((rows["mean_a"] * n).sum() / n.sum())
+        law_pct = float((rows["mean_b"] * n).sum() / n.sum())
+        noun = "collisions" if metric == "collision_rate_pct" else "lost person"
+        overall.append(f"{noun} in {agent_pct:.1f} % of episodes against {law_pct:.1f} %")
+        bad = rows[rows["mean_a"] > rows["mean_b"]]
+        if len(bad):
+            where = ", ".join(
+                f"{r.scenario} {r.mean_a:.0f} % against {r.mean_b:.0f} %" for r in bad.itertuples()
+            )
+            than = f" than `{law}`" if not worse else ""
+            worse.append(
+                f"{verb} more often{than} in {len(bad)} of {len(rows)} scenarios ({where})"
+            )
+    if not overall:
+        return f"Collision and lost-person rates are not available for `{law}`'s comparison."
+    totals = "; ".join(overall)
+    if worse:
+        return (
+            f"**Warning: the agent {', and '.join(worse)}.** Over all scenarios: {totals}. "
+            "Better centring or smoothness below does not make up for that."
+        )
+    return (
+        f"The agent collides and loses the person no more often than `{law}` in any scenario "
+        f"(over all scenarios: {totals})."
+    )
 
 
 def model_card(
@@ -142,7 +196,7 @@ def model_card(
     import yaml
 
     steps = sessions[-1]["last_step"] if sessions else 0
-    wall_s = sum(s["wall_s"] for s in sessions)
+    wall_s = sum(s["wall_s"] for s in sessions)  # killed sessions too, to their checkpoint
     rates = [s["env_steps_per_s"] for s in sessions if s.get("env_steps_per_s")]
     lines = [
         "# PPO agent for PersonFollow-v0",
@@ -154,12 +208,7 @@ def model_card(
         "",
         "## How it was trained",
         "",
-        *(
-            f"- `{s['command']}` ({s['first_step']:,} -> {s['last_step']:,} steps, "
-            f"{s['wall_s']:.0f} s, {s['env_steps_per_s'] or 0:,} env-steps/s, "
-            f"{s['threads']} torch thread(s), finished {s['finished_utc']})"
-            for s in sessions
-        ),
+        *(_session_line(s) for s in sessions),
         f"- total: {steps:,} env steps in {wall_s / 60:.1f} min of training"
         + (f" ({min(rates):,}-{max(rates):,} env-steps/s)" if rates else ""),
         f"- scenarios: {', '.join(args.scenarios)}; env preset `{args.env_config}`;"
@@ -191,13 +240,38 @@ def model_card(
     if comparison is not None and len(comparison):
         law = comparison["policy_b"].iloc[0]
         lines += [
-            f"Against `{law}` on held-out seeds {seeds.start}..{seeds.stop - 1} per scenario",
-            "(identical rollouts, `follow-eval`'s metrics; mean over episodes, paired",
-            "difference with 95 % bootstrap CI; lower is better for MeanOffset and StdAccel,",
-            "higher for InFrameRate):",
+            f"Against `{law}` on held-out seeds {seeds.start}..{seeds.stop - 1} per scenario.",
+            "",
+            outcome_summary(comparison),
+            "",
+            "Identical rollouts, `follow-eval`'s metrics; mean over episodes, paired difference",
+            "with 95 % bootstrap CI. Lower is better for MeanOffset, StdAccel, the collision and",
+            "lost-person rates (% of episodes) and the RMS distance error; higher for",
+            "InFrameRate; the mean distance error is signed (> 0: the robot trails behind the",
+            "1 m reference).",
             "",
             comparison_markdown(comparison),
             "",
         ]
     lines += ["## Versions", "", *(f"- {name} {value}" for name, value in versions.items()), ""]
     return "\n".join(lines)
+
+
+_ENDINGS = {
+    "finished": "finished {end}",
+    "interrupted": "interrupted {end}; steps after its last checkpoint were not kept",
+    "failed": "failed {end}; steps after its last checkpoint were not kept",
+    "killed": "killed; counted up to its last checkpoint",
+    "running": "running, or killed; counted up to its last checkpoint",
+}
+
+
+def _session_line(session: dict[str, Any]) -> str:
+    """One session of ``sessions.json`` (older runs' entries have no ``status``)."""
+    status = session.get("status", "finished")
+    ending = _ENDINGS.get(status, status).format(end=session.get("finished_utc"))
+    return (
+        f"- `{session['command']}` ({session['first_step']:,} -> {session['last_step']:,} steps, "
+        f"{session['wall_s']:.0f} s, {session.get('env_steps_per_s') or 0:,} env-steps/s, "
+        f"{session.get('threads', 1)} torch thread(s), {ending})"
+    )

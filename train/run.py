@@ -9,22 +9,26 @@
       MODEL_CARD.md         command, seed, versions, training time, scores
       learning_curve.png    held-out evaluation return and training return over steps
       evaluations.npz       the EvalCallback log (timesteps, results, ep_lengths)
-      sessions.json         one entry per training session (a resume starts a new one)
+      sessions.json         one entry per training session (a resume starts a new one), kept
+                            up to date at every checkpoint, so a killed session still counts
       checkpoints/          ppo_<steps>_steps.zip + ppo_vecnormalize_<steps>_steps.pkl
       logs/                 progress-<first step>.csv per session, tb/ (TensorBoard events)
 
 Every file is written to a temporary name beside it and renamed into place, so a run killed at
 any moment leaves complete files only; a checkpoint's statistics are written before its model,
-so a model file in ``checkpoints/`` always has its statistics.
+so a model file in ``checkpoints/`` always has its statistics. Nothing else is written: the
+held-out evaluation keeps SB3's own log in memory (earlier versions kept it in a
+``.eval-scratch-*`` folder, which a kill left behind; :func:`remove_stale_scratch` clears those).
 """
 
 from __future__ import annotations
 
+import io
 import json
 import re
 import shutil
-import tempfile
-from datetime import datetime
+import time
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
@@ -43,10 +47,12 @@ __all__ = [
     "NORMALIZATION",
     "AtomicCheckpointCallback",
     "HeldOutEvalCallback",
+    "SessionLog",
     "new_run_dir",
     "newest_checkpoint",
     "read_config",
     "read_sessions",
+    "remove_stale_scratch",
     "save_model",
     "save_normalization",
     "write_config",
@@ -107,14 +113,109 @@ def read_config(path: str | Path) -> dict[str, Any]:
 
 
 def read_sessions(run: Path) -> list[dict[str, Any]]:
-    """The training sessions recorded so far (empty for a new run)."""
+    """The training sessions recorded so far (empty for a new run).
+
+    :raises ValueError: naming the file if it is not a JSON list.
+    """
     path = run / SESSIONS
-    return json.loads(path.read_text(encoding="utf-8")) if path.exists() else []
+    if not path.exists():
+        return []
+    try:
+        sessions = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
+        raise ValueError(f"{path}: cannot read the training sessions: {e}") from None
+    if not isinstance(sessions, list) or not all(isinstance(s, dict) for s in sessions):
+        raise ValueError(f"{path}: not a list of training sessions")
+    return sessions
 
 
 def write_sessions(run: Path, sessions: list[dict[str, Any]]) -> None:
     """Record the training sessions (atomically)."""
     atomic_write_text(run / SESSIONS, json.dumps(sessions, indent=2) + "\n")
+
+
+class SessionLog:
+    """This session's entry in ``sessions.json``, rewritten as training goes.
+
+    The entry is written when learning starts (``status`` "running") and updated at every
+    checkpoint, so a session that is killed still counts in the card with the steps and time
+    up to its last checkpoint, which is where a resume continues. :meth:`close` records how
+    it ended. A "running" entry found by the next session was killed, and is marked so.
+
+    Entry keys: ``command``, ``started_utc``, ``finished_utc`` (None until it ends),
+    ``status`` ("running", "finished", "interrupted", "failed", "killed"), ``first_step``,
+    ``last_step`` (the steps a resume keeps: the last checkpoint's, or the final model's),
+    ``wall_s`` (learning time [s] up to ``last_step``; an interrupted or failed session's whole
+    time), ``env_steps_per_s``, ``threads``.
+
+    :param run: the run folder.
+    :param command: the command line of this session.
+    :param first_step: env steps the session starts from.
+    :param threads: torch threads.
+    """
+
+    def __init__(self, run: Path, command: str, first_step: int, threads: int) -> None:
+        self.run = run
+        self.sessions = read_sessions(run)
+        for session in self.sessions:
+            if session.get("status") == "running":
+                session["status"] = "killed"
+        self.entry: dict[str, Any] = {
+            "command": command,
+            "started_utc": datetime.now(UTC).isoformat(timespec="seconds"),
+            "finished_utc": None,
+            "status": "running",
+            "first_step": first_step,
+            "last_step": first_step,
+            "wall_s": 0.0,
+            "env_steps_per_s": None,
+            "threads": threads,
+        }
+        self.sessions.append(self.entry)
+        self._started = time.perf_counter()
+        write_sessions(run, self.sessions)
+
+    def _record(self, last_step: int, steps_done: int) -> None:
+        wall_s = time.perf_counter() - self._started
+        self.entry["last_step"] = last_step
+        self.entry["wall_s"] = round(wall_s, 1)
+        self.entry["env_steps_per_s"] = round(steps_done / wall_s) if steps_done > 0 else None
+
+    def checkpoint(self, step: int) -> None:
+        """A checkpoint at ``step`` env steps was written: record the session up to it."""
+        self._record(step, step - self.entry["first_step"])
+        write_sessions(self.run, self.sessions)
+
+    def close(self, status: str, last_step: int, steps_done: int) -> None:
+        """Record how the session ended.
+
+        :param status: "finished", "interrupted" or "failed".
+        :param last_step: the steps a resume keeps (the final model's, or the last
+            checkpoint's when the session did not finish).
+        :param steps_done: env steps this session trained, kept or not (for the rate).
+        """
+        self._record(last_step, steps_done)
+        self.entry["status"] = status
+        self.entry["finished_utc"] = datetime.now(UTC).isoformat(timespec="seconds")
+        write_sessions(self.run, self.sessions)
+
+
+def remove_stale_scratch(run: Path) -> list[Path]:
+    """Remove the ``.eval-scratch-*`` folders earlier versions left in ``run`` when killed.
+
+    Only folders holding nothing but SB3's ``evaluations.npz`` are removed (that is all such a
+    folder ever held); anything else is left alone.
+
+    :returns: the folders removed.
+    """
+    removed = []
+    for folder in sorted(run.glob(".eval-scratch-*")):
+        if folder.is_dir() and not folder.is_symlink():
+            contents = [p.name for p in folder.iterdir()]
+            if set(contents) <= {"evaluations.npz"}:
+                shutil.rmtree(folder)
+                removed.append(folder)
+    return removed
 
 
 def save_model(model: BaseAlgorithm, path: Path) -> Path:
@@ -157,15 +258,19 @@ class AtomicCheckpointCallback(CheckpointCallback):
     :param save_freq_steps: env steps between checkpoints (all lanes counted).
     :param run: the run folder; checkpoints go to ``run/checkpoints``.
     :param n_envs: lanes, to turn env steps into callback calls.
+    :param session: told of every checkpoint written (``sessions.json``), if given.
     """
 
-    def __init__(self, save_freq_steps: int, run: Path, n_envs: int) -> None:
+    def __init__(
+        self, save_freq_steps: int, run: Path, n_envs: int, session: SessionLog | None = None
+    ) -> None:
         super().__init__(
             save_freq=max(save_freq_steps // n_envs, 1),
             save_path=str(run / CHECKPOINTS),
             name_prefix=CHECKPOINT_PREFIX,
             save_vecnormalize=True,
         )
+        self.session = session
 
     def _on_step(self) -> bool:
         if self.n_calls % self.save_freq == 0:
@@ -174,6 +279,8 @@ class AtomicCheckpointCallback(CheckpointCallback):
                 Path(self._checkpoint_path("vecnormalize_", extension="pkl")),
             )
             save_model(self.model, Path(self._checkpoint_path(extension="zip")))
+            if self.session is not None:
+                self.session.checkpoint(self.num_timesteps)
         return True
 
 
@@ -182,8 +289,10 @@ class HeldOutEvalCallback(EvalCallback):
 
     Before each evaluation the eval env is seeded with ``eval_seed`` (lane ``j`` gets
     ``eval_seed + j``), so the curve compares the agent with itself on identical episodes.
-    ``evaluations.npz`` in the run folder gets the log (SB3's own copy goes to a scratch folder,
-    removed at the end); a resumed run continues the existing log.
+    ``evaluations.npz`` in the run folder gets the log, atomically; a resumed run continues the
+    existing log. SB3 saves its own copy with ``np.savez`` to ``log_path`` after every
+    evaluation, not atomically; here ``log_path`` is an in-memory file, so nothing but
+    ``evaluations.npz`` reaches the disk and a kill leaves nothing behind.
 
     :param eval_env: built like the training env (:func:`train.envs.agent_env`, mode "eval").
     :param run: the run folder.
@@ -195,15 +304,16 @@ class HeldOutEvalCallback(EvalCallback):
     def __init__(
         self, eval_env: Any, run: Path, eval_seed: int, eval_freq_steps: int, n_envs: int
     ) -> None:
-        self._scratch = Path(tempfile.mkdtemp(prefix=".eval-scratch-", dir=run))
         super().__init__(
             eval_env,
             n_eval_episodes=eval_env.num_envs,
             eval_freq=max(eval_freq_steps // n_envs, 1),
-            log_path=str(self._scratch),
+            log_path=None,
             deterministic=True,
             verbose=0,
         )
+        # Not None, so that SB3 keeps the per-episode results; np.savez accepts a file object.
+        self.log_path: Any = io.BytesIO()
         self.run = run
         self.eval_seed = eval_seed
         previous = run / EVALUATIONS
@@ -213,10 +323,16 @@ class HeldOutEvalCallback(EvalCallback):
                 self.evaluations_results = log["results"].tolist()
                 self.evaluations_length = log["ep_lengths"].tolist()
 
+    def _init_callback(self) -> None:
+        log_path, self.log_path = self.log_path, None  # SB3 would make a folder for a path
+        super()._init_callback()
+        self.log_path = log_path
+
     def _on_step(self) -> bool:
         due = self.eval_freq > 0 and self.n_calls % self.eval_freq == 0
         if due:
             self.eval_env.seed(self.eval_seed)
+            self.log_path = io.BytesIO()  # a fresh one: SB3's copy is not kept
         keep_going = super()._on_step()
         if due:
             self.write_log()
@@ -231,6 +347,3 @@ class HeldOutEvalCallback(EvalCallback):
                 results=np.asarray(self.evaluations_results, dtype=np.float64),
                 ep_lengths=np.asarray(self.evaluations_length, dtype=np.int64),
             )
-
-    def _on_training_end(self) -> None:
-        shutil.rmtree(self._scratch, ignore_errors=True)

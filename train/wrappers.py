@@ -33,6 +33,7 @@ scenario for all its lanes), into one VecEnv whose lanes are the sub-envs' lanes
 
 from __future__ import annotations
 
+import inspect
 from collections.abc import Sequence
 from typing import Any
 
@@ -68,17 +69,36 @@ __all__ = [
 
 class _FeatureWrapper(VecEnvWrapper):
     """A step of the agent's feature pipeline (:mod:`policies.learned.features`) as an SB3
-    ``VecEnvWrapper``: the same code the policy runs at inference, wrapped for training."""
+    ``VecEnvWrapper``: the same code the policy runs at inference, wrapped for training. Each
+    subclass's constructor takes ``venv`` and its feature's own arguments (its signature says
+    which, for the hyperparameter checks)."""
 
     feature_class: type[Feature]
 
-    def __init__(self, venv: VecEnv, **kwargs: Any) -> None:
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        params = list(inspect.signature(cls.feature_class.__init__).parameters.values())
+        venv = inspect.Parameter("venv", inspect.Parameter.POSITIONAL_OR_KEYWORD)
+
+        def __init__(self: _FeatureWrapper, venv: VecEnv, **kwargs: Any) -> None:  # noqa: N807
+            _FeatureWrapper._setup(self, venv, **kwargs)
+
+        __init__.__signature__ = inspect.Signature([params[0], venv, *params[1:]])  # type: ignore[attr-defined]
+        __init__.__doc__ = cls.feature_class.__init__.__doc__
+        cls.__init__ = __init__  # type: ignore[method-assign]
+
+    def _setup(self, venv: VecEnv, **kwargs: Any) -> None:
+        name = type(self).__name__
         obs_box, act_box = venv.observation_space, venv.action_space
         if not (isinstance(obs_box, spaces.Box) and isinstance(act_box, spaces.Box)):
-            raise ValueError(f"{type(self).__name__} needs Box observation and action spaces")
+            raise ValueError(f"{name} needs Box observation and action spaces")
         if len(obs_box.shape) != 1:
-            raise ValueError(f"{type(self).__name__} needs a flat Box observation space")
-        self.feature = self.feature_class(**kwargs)
+            raise ValueError(f"{name} needs a flat Box observation space")
+        try:
+            self.feature = self.feature_class(**kwargs)
+        except TypeError as e:
+            raise ValueError(f"{name}: {e}") from None
+        self.feature.owner = name
         obs, act = self.feature.bind(
             Box(obs_box.low, obs_box.high), Box(act_box.low, act_box.high), venv.num_envs
         )

@@ -86,6 +86,19 @@ def agent_to_si(action: np.ndarray, low: np.ndarray, high: np.ndarray) -> np.nda
     return low + (a + 1.0) * 0.5 * (high - low)
 
 
+def _numbers(values: Any) -> np.ndarray | None:
+    """``values`` as a float64 array of numbers, or None if they are not numbers (a string, a
+    bool, a mapping, a ragged list), so that a step can name its argument in the error."""
+    items = values if isinstance(values, list | tuple | np.ndarray) else [values]
+    flat = np.asarray(items, dtype=object).ravel()
+    if any(isinstance(v, bool) or not isinstance(v, int | float | np.number) for v in flat):
+        return None
+    try:
+        return np.asarray(values, dtype=np.float64)
+    except (TypeError, ValueError):
+        return None
+
+
 class Feature:
     """One step of the pipeline (see the module docstring). The defaults pass things through.
 
@@ -96,6 +109,15 @@ class Feature:
     """
 
     training_only = False
+
+    @property
+    def owner(self) -> str:
+        """The name errors are reported under (a training wrapper gives its own)."""
+        return getattr(self, "_owner", type(self).__name__)
+
+    @owner.setter
+    def owner(self, name: str) -> None:
+        self._owner = name
 
     def bind(self, obs: Box, act: Box, n: int) -> tuple[Box, Box]:
         """Remember the inner boxes and the lane count; return the outer boxes."""
@@ -138,14 +160,14 @@ class RescaleAction(Feature):
             or not np.all(np.isfinite([act.low, act.high]))
             or not np.allclose(act.low, -act.high)
         ):
-            raise ValueError(f"RescaleAction needs a bounded symmetric Box(2,), got {act}")
+            raise ValueError(f"{self.owner} needs a bounded symmetric Box(2,), got {act}")
         high = act.high.astype(np.float64).copy()
         for k, (name, value) in enumerate(
             zip(("v_max_mps", "w_max_radps"), self.limits, strict=True)
         ):
             if value is not None:
                 high[k] = check_number(
-                    f"RescaleAction.{name}", value, 0.0, float(high[k]), lo_open=True
+                    f"{self.owner}.{name}", value, 0.0, float(high[k]), lo_open=True
                 )
         self.si_low, self.si_high = -high, high
         return obs, Box([-1.0, -1.0], [1.0, 1.0])
@@ -166,11 +188,16 @@ class ObservationAge(Feature):
     """
 
     def __init__(self, max_age_steps: int = 30) -> None:
-        if not is_integer(max_age_steps) or max_age_steps < 1:
-            raise out_of_range("ObservationAge.max_age_steps", max_age_steps, "an integer >= 1")
-        self.max_age_steps = int(max_age_steps)
+        self.max_age_steps = max_age_steps
+
+    def _check(self) -> None:
+        steps = self.max_age_steps
+        if not is_integer(steps) or steps < 1:
+            raise out_of_range(f"{self.owner}.max_age_steps", steps, "an integer >= 1")
+        self.max_age_steps = int(steps)
 
     def bind(self, obs: Box, act: Box, n: int) -> tuple[Box, Box]:
+        self._check()
         self._last = np.zeros((n, *obs.shape), dtype=np.float32)
         self._age = np.zeros(n, dtype=np.int64)
         return Box(np.append(obs.low, 0.0), np.append(obs.high, 1.0)), act
@@ -210,17 +237,20 @@ class ScaleObservation(Feature):
     """
 
     def __init__(self, scale: Sequence[float] = ()) -> None:
-        self.factors = np.asarray(scale, dtype=np.float64)
+        self.given = scale
 
     def bind(self, obs: Box, act: Box, n: int) -> tuple[Box, Box]:
-        if self.factors.shape != obs.shape:
+        factors = _numbers(self.given)
+        if factors is None or factors.shape != obs.shape:
             raise ValueError(
-                f"ScaleObservation.scale={self.factors.tolist()!r} must have one factor per "
+                f"{self.owner}.scale={self.given!r} is out of range: must be one factor per "
                 f"observation entry {obs.shape}"
             )
-        if not np.all(np.isfinite(self.factors) & (self.factors > 0)):
-            raise ValueError(f"ScaleObservation.scale={self.factors.tolist()!r} must be positive")
-        self.scale = self.factors.astype(np.float32)
+        if not np.all(np.isfinite(factors) & (factors > 0)):
+            raise ValueError(
+                f"{self.owner}.scale={self.given!r} is out of range: must be positive numbers"
+            )
+        self.scale = factors.astype(np.float32)
         return Box(obs.low * self.scale, obs.high * self.scale), act
 
     def observe(self, obs: np.ndarray, done: np.ndarray) -> np.ndarray:
@@ -249,18 +279,28 @@ class IncrementalAction(Feature):
     def __init__(
         self, max_change: Sequence[float] = (0.1, 0.1), reading_index: int | None = None
     ) -> None:
-        self.change = np.asarray(max_change, dtype=np.float64)
+        self.given = max_change
         self.reading_index = reading_index
 
     def bind(self, obs: Box, act: Box, n: int) -> tuple[Box, Box]:
-        if self.change.shape != act.shape or not np.all(
-            np.isfinite(self.change) & (self.change > 0)
+        change = _numbers(self.given)
+        if (
+            change is None
+            or change.shape != act.shape
+            or not np.all(np.isfinite(change) & (change > 0))
         ):
             raise ValueError(
-                f"IncrementalAction.max_change={self.change.tolist()!r} is out of range: must be "
+                f"{self.owner}.max_change={self.given!r} is out of range: must be "
                 f"{act.shape[0]} positive numbers"
             )
-        self.max_change = self.change
+        n_obs = obs.shape[0]
+        index = self.reading_index
+        if index is not None and not (is_integer(index) and 0 <= index < n_obs):
+            raise ValueError(
+                f"{self.owner}.reading_index={index!r} is out of range: must be None or an "
+                f"observation index in [0, {n_obs - 1}]"
+            )
+        self.max_change = change
         self._low = act.low.astype(np.float64)
         self._high = act.high.astype(np.float64)
         self._command = np.zeros((n, act.shape[0]))

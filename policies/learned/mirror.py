@@ -85,6 +85,15 @@ class MirrorMlpPolicy(ActorCriticPolicy):
         mirror_action: Sequence[float] = (),
         **kwargs: Any,
     ) -> None:
+        for name, signs in (("mirror_obs", mirror_obs), ("mirror_action", mirror_action)):
+            ok = isinstance(signs, list | tuple) and all(
+                not isinstance(s, bool) and isinstance(s, int | float) and s in (-1, 1)
+                for s in signs
+            )
+            if not ok:
+                raise ValueError(
+                    f"MirrorMlpPolicy.{name}={signs!r} is out of range: must be a list of +1/-1"
+                )
         self.mirror_obs = [float(s) for s in mirror_obs]
         self.mirror_action = [float(s) for s in mirror_action]
         super().__init__(*args, **kwargs)
@@ -100,8 +109,6 @@ class MirrorMlpPolicy(ActorCriticPolicy):
                 f"({n_obs} entries) and mirror_action needs {n_act} signs, "
                 f"got {len(self.mirror_action)}"
             )
-        if not all(s in (-1.0, 1.0) for s in self.mirror_obs + self.mirror_action):
-            raise ValueError("MirrorMlpPolicy: mirror signs must be +1 or -1")
         obs_sign = torch.tensor(self.mirror_obs * (n_obs // frame), dtype=torch.float32)
         half = self.mlp_extractor.latent_dim_pi
         # Wrapping reuses the parameters, so the optimizer built by super()._build still holds

@@ -1,10 +1,11 @@
 """eval/atomic.py: files and folders appear whole or not at all."""
 
+import re
 from pathlib import Path
 
 import pytest
 
-from eval.atomic import atomic_folder, atomic_path, atomic_write_text
+from eval.atomic import atomic_folder, atomic_path, atomic_write_text, file_on_path
 
 
 def test_atomic_path_renames_into_place(tmp_path: Path) -> None:
@@ -65,3 +66,20 @@ def test_atomic_folder_never_overwrites_a_previous_run(tmp_path: Path) -> None:
     with pytest.raises(FileExistsError, match="already exists and is not an empty folder"):
         atomic_folder(tmp_path / "run").__enter__()
     assert (tmp_path / "run" / "old.csv").read_text() == "keep"
+
+
+@pytest.mark.parametrize("below", ["run", "sub/run"])
+def test_folder_below_a_regular_file_names_that_file(tmp_path: Path, below: str) -> None:
+    (tmp_path / "afile").write_text("x")
+    target = tmp_path / "afile" / below
+    message = re.escape(f"{tmp_path / 'afile'} is a file, not a folder")
+    with pytest.raises(NotADirectoryError, match=message), atomic_folder(target):
+        pass
+    assert (tmp_path / "afile").read_text() == "x"
+
+
+def test_file_on_path_is_none_where_a_folder_can_be_made(tmp_path: Path) -> None:
+    assert file_on_path(tmp_path / "new" / "deeper") is None
+    (tmp_path / "f").write_text("x")
+    assert file_on_path(tmp_path / "f") == tmp_path / "f"
+    assert file_on_path(tmp_path / "f" / "a" / "b") == tmp_path / "f"

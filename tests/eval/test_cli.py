@@ -7,7 +7,7 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from eval.cli import main
+from eval.cli import MAX_EPISODES, MAX_SEED, _check_grid, main
 from eval.metrics import THESIS_METRICS
 
 LEADING = [
@@ -141,6 +141,8 @@ def test_metrics_on_malformed_row_names_file_and_line(
         (["run", "--policies", "pn,lqr"], "unknown policy 'lqr'; known names: "),
         (["run", "--scenarios", "moonwalk"], "unknown scenario 'moonwalk'; known scenarios: "),
         (["run", "--episodes", "0"], "--episodes: 0 is out of range: must be >= 1"),
+        (["run", "--episodes", "-1"], "--episodes: -1 is out of range: must be >= 1"),
+        (["run", "--seed", "-1"], "--seed: -1 is out of range: must be >= 0"),
         (["run", "--episodes", "many"], "--episodes: 'many' is not an integer"),
         (["run", "--workers", "0"], "--workers: 0 is out of range"),
         (["run", "--policies", ","], "--policies is empty"),
@@ -192,14 +194,25 @@ def test_unwritable_folder_gives_one_line(tmp_path: Path, capsys: pytest.Capture
     assert "cannot write to" in one_line_error(capsys)
 
 
-def test_output_path_through_a_file_gives_one_line(
-    tmp_path: Path, capsys: pytest.CaptureFixture
+@pytest.mark.parametrize("below", ["run", "sub/run"])
+def test_output_path_through_a_file_names_that_file(
+    tmp_path: Path, capsys: pytest.CaptureFixture, below: str
 ) -> None:
     # Works as root too: a folder cannot be made below a regular file.
     (tmp_path / "file").write_text("x")
     args = ["run", "--policies", "pn", "--scenarios", "straight", "--episodes", "1"]
-    assert main([*args, "--out", str(tmp_path / "file" / "run")]) == 2
-    assert "cannot write to" in one_line_error(capsys)
+    assert main([*args, "--out", str(tmp_path / "file" / below)]) == 2
+    assert f"{tmp_path / 'file'} is a file, not a folder" in one_line_error(capsys)
+
+
+def test_metrics_output_through_a_file_is_refused_before_scoring(
+    tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
+    (tmp_path / "file").write_text("x")
+    # The log is malformed: the --out error must come first, before any log is read.
+    (tmp_path / "bad.csv").write_text("not a step log\n")
+    assert main(["metrics", str(tmp_path / "bad.csv"), "--out", str(tmp_path / "file" / "s")]) == 2
+    assert f"{tmp_path / 'file'} is a file, not a folder" in one_line_error(capsys)
 
 
 @pytest.mark.slow
@@ -238,3 +251,73 @@ def test_python_dash_m_eval_is_the_same_cli() -> None:
 
 def test_thesis_metrics_are_the_leading_metric_columns() -> None:
     assert LEADING[3:] == list(THESIS_METRICS)
+
+
+@pytest.mark.parametrize(
+    ("grid", "total"),
+    [
+        (
+            ["--policies", "pn", "--scenarios", "straight", "--episodes", "1000000000"],
+            "1,000,000,000",
+        ),
+        (
+            ["--policies", "pn,mpn", "--scenarios", "straight,curve", "--episodes", "12501"],
+            "50,004",
+        ),
+    ],
+)
+def test_absurd_grid_is_refused_before_any_work_stating_the_limit(
+    grid: list[str], total: str, tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
+    out = tmp_path / "run"
+    assert main(["run", *grid, "--out", str(out)]) == 2
+    err = one_line_error(capsys)
+    assert f"= {total} episodes is out of range: a run takes at most 50,000 episodes" in err
+    assert not out.exists()
+
+
+def test_the_largest_grid_is_accepted() -> None:
+    _check_grid(2, 2, MAX_EPISODES // 4, seed=0)  # exactly the limit: no error
+
+
+def test_seeds_beyond_the_envs_range_are_refused(capsys: pytest.CaptureFixture) -> None:
+    assert main(["run", "--seed", str(MAX_SEED), "--episodes", "2"]) == 2
+    assert "must stay within 0 .. 2**256 - 1 (the env's seeds)" in one_line_error(capsys)
+
+
+def test_max_seed_is_the_envs_largest_seed() -> None:
+    import gymnasium as gym
+
+    env = gym.make("PersonFollow-v0", scenario="straight")
+    env.reset(seed=MAX_SEED)
+    with pytest.raises(ValueError, match="out of range"):
+        env.reset(seed=MAX_SEED + 1)
+
+
+def test_metrics_gives_runs_intervals_with_seeds_past_9(
+    tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
+    # Seeds 4..15: read as text the logs come as seed_10 .. seed_15, seed_4 .. seed_9. Twelve
+    # episodes: with very few, BCa's bias correction hinges on exact ties between resample
+    # means, which the 9 digits of a log's values can break.
+    out = tmp_path / "run"
+    grid = ["--policies", "gsmpn:thesis,pn", "--scenarios", "straight", "--episodes", "12"]
+    assert main(["run", *grid, "--seed", "4", "--out", str(out)]) == 0
+    assert main(["metrics", str(out / "logs"), "--out", str(tmp_path / "scored")]) == 0
+    capsys.readouterr()
+    for name in ("summary.csv", "comparisons.csv"):
+        ran = pd.read_csv(out / name)
+        scored = pd.read_csv(tmp_path / "scored" / name)
+        pd.testing.assert_frame_equal(scored, ran, check_exact=False, rtol=1e-4)
+    assert list(pd.read_csv(tmp_path / "scored" / "episodes.csv")["seed"]) == list(range(4, 16)) * 2
+
+
+def test_metrics_refuses_two_logs_of_one_episode(
+    run_dir: Path, tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
+    first = run_dir / "logs" / "pn_tuned" / "straight" / "seed_5.csv"
+    copy = tmp_path / "copy.csv"
+    copy.write_bytes(first.read_bytes())
+    assert main(["metrics", str(run_dir / "logs"), str(copy)]) == 2
+    err = one_line_error(capsys)
+    assert f"{first} and {copy} are both policy 'pn:tuned', scenario 'straight', seed 5" in err

@@ -68,3 +68,22 @@ def test_paired_comparison_of_equal_policies_has_no_p_value() -> None:
     [row] = compare(table({"a": [1.0, 2.0, 3.0], "b": [1.0, 2.0, 3.0]})).to_dict("records")
     assert row["mean_diff"] == 0.0
     assert np.isnan(row["wilcoxon_p"])
+
+
+def test_an_interval_does_not_depend_on_the_order_of_episodes_or_other_cells() -> None:
+    rng = np.random.default_rng(7)
+    t = table({"pn": list(rng.normal(20, 3, 12)), "mpn": list(rng.normal(21, 3, 12))})
+    shuffled = t.sample(frac=1.0, random_state=3)  # e.g. log files read in another order
+    alone = t[t["policy"] == "pn"]  # the same cell without its neighbour
+    key = ["policy", "scenario"]
+    a = summarize(t).sort_values(key, ignore_index=True)
+    b = summarize(shuffled).sort_values(key, ignore_index=True)
+    pd.testing.assert_frame_equal(a, b)
+    pd.testing.assert_frame_equal(summarize(alone), a[a["policy"] == "pn"].reset_index(drop=True))
+
+
+def test_a_comparison_does_not_depend_on_the_order_of_episodes() -> None:
+    rng = np.random.default_rng(8)
+    t = table({"a": list(rng.normal(10, 2, 12)), "b": list(rng.normal(11, 2, 12))})
+    seeds_descending = t.sort_values(["policy", "seed"], ascending=[True, False])
+    pd.testing.assert_frame_equal(compare(t), compare(seeds_descending))

@@ -6,7 +6,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from eval.steplog import COLUMNS, StepLogError, read_step_log, write_step_log
+from eval.steplog import COLUMNS, StepLogError, read_step_log, step_log_files, write_step_log
 
 HEADER = "time_s,obs_distance_m,obs_offset_px,accel_mps2"
 
@@ -116,3 +116,37 @@ def test_binary_file_is_rejected_as_not_text(tmp_path: Path) -> None:
 def test_write_leaves_no_temporary_file(tmp_path: Path) -> None:
     write_step_log(pd.DataFrame({"time_s": [0.0], "obs_offset_px": [1.0]}), tmp_path / "a.csv")
     assert [p.name for p in tmp_path.iterdir()] == ["a.csv"]
+
+
+@pytest.mark.parametrize(("column", "cell"), [("obs_offset_px", "inf"), ("accel_mps2", "-inf")])
+def test_infinite_cell_names_file_line_and_column(tmp_path: Path, column: str, cell: str) -> None:
+    row = {"time_s": "0.1", "obs_distance_m": "1", "obs_offset_px": "3", "accel_mps2": "0"}
+    row[column] = cell
+    path = write(tmp_path, f"{HEADER}\n0.0,1.0,5,0.0\n{','.join(row.values())}\n")
+    with pytest.raises(
+        StepLogError, match=rf"log\.csv: line 3, column {column}: '{cell}' is not a finite number"
+    ):
+        read_step_log(path)
+
+
+def test_infinite_optional_cell_is_rejected_too(tmp_path: Path) -> None:
+    text = f"{HEADER},raw_depth_m\n0.0,1.0,5,0.0,1.2\n0.1,1.0,5,0.0,Infinity\n"
+    with pytest.raises(
+        StepLogError, match="line 3, column raw_depth_m: 'Infinity' is not a finite"
+    ):
+        read_step_log(write(tmp_path, text))
+
+
+def test_nan_cell_is_rejected_as_not_a_number(tmp_path: Path) -> None:
+    with pytest.raises(StepLogError, match="line 3, column obs_offset_px: 'nan' is not a number"):
+        read_step_log(write(tmp_path, f"{HEADER}\n0.0,1.0,5,0.0\n0.1,1.0,nan,0.0\n"))
+
+
+def test_folders_list_logs_with_seeds_in_numeric_order(tmp_path: Path) -> None:
+    for policy in ("pn", "mpn"):
+        (tmp_path / policy).mkdir()
+        for seed in (10, 2, 1, 0, 11):
+            write(tmp_path / policy, f"{HEADER}\n0,1,0,0\n", f"seed_{seed}.csv")
+    names = [p.relative_to(tmp_path).as_posix() for p in step_log_files([tmp_path])]
+    expected = [f"{p}/seed_{k}.csv" for p in ("mpn", "pn") for k in (0, 1, 2, 10, 11)]
+    assert names == expected

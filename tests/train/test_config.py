@@ -57,12 +57,122 @@ def test_missing_file_is_named(tmp_path: Path) -> None:
         ({"vec_env_wrapper": ["train.wrappers.NoSuchWrapper"]}, "does not import"),
         ({"policy": "CnnPolicy"}, "does not import"),
         ({"policy": "train.wrappers.VecRescaleAction"}, "not an SB3 ActorCriticPolicy"),
-        ({"learning_rate": "cos_3e-4"}, "must be a number or 'lin_<number>'"),
+        ({"learning_rate": "cos_3e-4"}, "learning_rate='cos_3e-4' is out of range: must be a"),
     ],
 )
 def test_bad_values_are_rejected_naming_the_key(override: dict, message: str) -> None:
     with pytest.raises(ConfigError, match=message):
         parse_hyperparams(MINIMAL | override)
+
+
+W = "train.wrappers.VecRescaleAction"
+
+
+# Each case: a bad value, and the start of its message (key=value, then the allowed range).
+@pytest.mark.parametrize(
+    ("override", "message"),
+    [
+        ({"n_steps": "sixty"}, "n_steps='sixty' is out of range: must be an integer >= 1"),
+        ({"n_steps": 0}, "n_steps=0 is out of range: must be an integer >= 1"),
+        ({"n_steps": 64.5}, "n_steps=64.5 is out of range: must be an integer >= 1"),
+        ({"n_steps": True}, "n_steps=True is out of range: must be an integer >= 1"),
+        ({"n_epochs": 0}, "n_epochs=0 is out of range: must be an integer >= 1"),
+        ({"gamma": 7.5}, r"gamma=7.5 is out of range: must be a number in \[0, 1\]"),
+        ({"gamma": -0.1}, r"gamma=-0.1 is out of range: must be a number in \[0, 1\]"),
+        ({"gamma": float("nan")}, r"gamma=nan is out of range: must be a number in \[0, 1\]"),
+        ({"gamma": "0.99"}, r"gamma='0.99' is out of range: must be a number in \[0, 1\]"),
+        ({"gae_lambda": 1.5}, r"gae_lambda=1.5 is out of range: must be a number in \[0, 1\]"),
+        ({"learning_rate": 0}, "learning_rate=0 is out of range: must be a number > 0"),
+        ({"learning_rate": -3e-4}, "learning_rate=-0.0003 is out of range: must be a number > 0"),
+        ({"learning_rate": "lin_-1"}, "learning_rate='lin_-1' is out of range"),
+        ({"learning_rate": float("inf")}, "learning_rate=inf is out of range"),
+        ({"clip_range": 0}, "clip_range=0 is out of range: must be a number > 0"),
+        ({"clip_range": "lin_abc"}, "clip_range='lin_abc' is out of range"),
+        ({"clip_range_vf": -0.2}, "clip_range_vf=-0.2 is out of range: must be a number > 0"),
+        ({"ent_coef": -0.01}, "ent_coef=-0.01 is out of range: must be a number >= 0"),
+        ({"vf_coef": float("inf")}, "vf_coef=inf is out of range: must be a number >= 0"),
+        ({"max_grad_norm": 0}, "max_grad_norm=0 is out of range: must be a number > 0"),
+        ({"target_kl": 0}, "target_kl=0 is out of range: must be a number > 0"),
+        ({"sde_sample_freq": -2}, "sde_sample_freq=-2 is out of range: must be an integer >= -1"),
+        ({"stats_window_size": 0}, "stats_window_size=0 is out of range: must be an integer >= 1"),
+        ({"use_sde": "no"}, "use_sde='no' is out of range: must be true or false"),
+        ({"normalize_advantage": 1}, "normalize_advantage=1 is out of range: must be true or"),
+        ({"rollout_buffer_class": "x.Buffer"}, "rollout_buffer_class='x.Buffer' is not supported"),
+        ({"_init_setup_model": False}, r"unknown key\(s\) _init_setup_model"),
+        ({"frame_stack": "4"}, "frame_stack='4' is out of range: must be an integer >= 1"),
+        ({"n_timesteps": -5}, "n_timesteps=-5 is out of range: must be an integer >= 1"),
+        ({"normalize": {"norm_obs": "yes"}}, "normalize.norm_obs='yes' is out of range: must be"),
+        ({"normalize": {"clip_obs": 0}}, "normalize.clip_obs=0 is out of range: must be a number"),
+        ({"normalize": {"gamma": 2}}, r"normalize.gamma=2 is out of range: must be a number in"),
+        ({"normalize": {"clipobs": 1}}, "normalize.clipobs is not a VecNormalize argument"),
+        ({"policy_kwargs": {"net_arch": [64, -1]}}, r"net_arch=\[64, -1\] is out of range"),
+        ({"policy_kwargs": {"net_arch": "64,64"}}, "net_arch='64,64' is out of range"),
+        ({"policy_kwargs": {"net_arch": {"pi": [8], "q": [8]}}}, "net_arch=.* is out of range"),
+        ({"policy_kwargs": {"net_arch": [64.0]}}, r"net_arch=\[64.0\] is out of range"),
+        ({"policy_kwargs": {"log_std_init": "a"}}, "log_std_init='a' is out of range: must be a"),
+        ({"policy_kwargs": {"ortho_init": "no"}}, "ortho_init='no' is out of range: must be true"),
+        ({"policy_kwargs": {"activation_fn": "nn.ReLU"}}, "activation_fn='nn.ReLU' is not suppo"),
+        ({"policy_kwargs": {"netarch": [64]}}, "policy_kwargs.netarch is not an argument of"),
+        ({"policy_kwargs": {"use_sde": True}}, "policy_kwargs.use_sde is not an argument of"),
+        ({"vec_env_wrapper": [{W: {"w_max": 2.0}}]}, "'w_max' is not one of its arguments"),
+        ({"vec_env_wrapper": [{W: {"venv": None}}]}, "'venv' is not one of its arguments"),
+        ({"vec_env_wrapper": ["train.config.ConfigError"]}, "is not an SB3 VecEnvWrapper"),
+        ({"vec_env_wrapper": [{W: [2.0]}]}, "entry .* is malformed"),
+    ],
+)
+def test_every_field_is_checked_naming_key_value_and_range(override: dict, message: str) -> None:
+    with pytest.raises(ConfigError, match=message) as error:
+        parse_hyperparams(MINIMAL | override)
+    assert str(error.value).startswith("hyperparameters: ")  # the source, then the key
+
+
+def test_wrapper_arguments_are_checked_against_its_signature_listing_them() -> None:
+    with pytest.raises(ConfigError, match=r"\(accepted: v_max_mps, w_max_radps\)"):
+        parse_hyperparams(MINIMAL | {"vec_env_wrapper": [{W: {"w_max": 2.0}}]})
+
+
+def test_policy_kwargs_of_a_custom_policy_include_its_own_arguments() -> None:
+    hp = MINIMAL | {"policy": "train.mirror.MirrorMlpPolicy"}
+    parse_hyperparams(hp | {"policy_kwargs": {"mirror_obs": [1, -1], "net_arch": [8]}})
+    with pytest.raises(ConfigError, match=r"policy_kwargs\.mirror_ob is not an argument"):
+        parse_hyperparams(hp | {"policy_kwargs": {"mirror_ob": [1, -1]}})
+
+
+@pytest.mark.parametrize(
+    ("override", "message"),
+    [
+        ({"n_steps": 64, "batch_size": 512}, r"batch_size=512 .* in \[2, .* = 64 \* 4 = 256\]"),
+        ({"n_steps": 64, "batch_size": 1}, r"batch_size=1 is out of range: must be in \[2, "),
+        ({"n_envs": 1, "n_steps": 1, "batch_size": 1}, r"n_steps \* n_envs = 1 \* 1 is out of"),
+    ],
+)
+def test_batch_size_must_fit_the_rollout_buffer(override: dict, message: str) -> None:
+    with pytest.raises(ConfigError, match=message):
+        parse_hyperparams(MINIMAL | override)
+
+
+def test_a_batch_of_one_is_allowed_without_advantage_normalisation() -> None:
+    hp = MINIMAL | {"n_steps": 64, "batch_size": 1, "normalize_advantage": False}
+    assert parse_hyperparams(hp)["batch_size"] == 1
+
+
+def test_a_command_line_override_is_named_as_the_option() -> None:
+    with pytest.raises(ConfigError, match=r"= 64 \* 2 = 128\] \(n_envs from --n-envs\)"):
+        parse_hyperparams(MINIMAL | {"n_steps": 64, "batch_size": 256}, overrides={"n_envs": 2})
+    with pytest.raises(ConfigError, match="--n-timesteps=0 is out of range"):
+        parse_hyperparams(MINIMAL, overrides={"n_timesteps": 0})
+
+
+def test_integral_floats_become_ints_as_yaml_writes_them() -> None:
+    hp = parse_hyperparams(MINIMAL | {"n_steps": 64.0, "batch_size": 256.0})
+    assert (hp["n_steps"], hp["batch_size"]) == (64, 256)
+    assert isinstance(hp["n_steps"], int)
+
+
+@pytest.mark.parametrize("value", [0, -1.0, "lin_0", "lin_-3e-4", "cos_1", float("nan"), True])
+def test_schedule_rejects_anything_but_a_positive_number_or_lin(value: object) -> None:
+    with pytest.raises(ConfigError, match="is out of range: must be a number > 0"):
+        schedule(value)
 
 
 def test_lin_schedule_decays_linearly_to_zero() -> None:

@@ -11,8 +11,8 @@ import pytest
 import yaml
 
 from policies import make_policy
-from train.ppo import Args, main, train
-from train.run import newest_checkpoint
+from train.ppo import DEFAULT_HYPERPARAMS, ENV_ID, Args, main, train
+from train.run import HeldOutEvalCallback, SessionLog, newest_checkpoint
 
 SMOKE_STEPS = 2000
 # Two scenarios, 4 lanes, tiny intervals: a few seconds, every part of a run exercised.
@@ -72,6 +72,7 @@ def test_run_folder_and_export_load_as_policies(smoke_run: Path) -> None:
     assert sorted(p.name for p in exported.iterdir()) == [
         "MODEL_CARD.md",
         "config.yaml",
+        "follow-train-export.json",
         "learning_curve.png",
         "model.zip",
         "vecnormalize.pkl",
@@ -101,24 +102,171 @@ def test_resume_continues_the_step_count_from_the_newest_checkpoint(
     assert newest_checkpoint(run)[0] > last_checkpoint
 
 
-@pytest.mark.parametrize(
-    ("argv", "message"),
-    [
-        (["--resume", "runs/x", "--seed", "3"], "--seed: a resumed run keeps its own settings"),
-        (["--scenarios", "straight,moon", "--n-envs", "2"], "unknown scenario 'moon'"),
-        (["--scenarios", "straight,curve", "--n-envs", "3"], "must be a multiple of the 2"),
-        (["--n-timesteps", "0"], "--n-timesteps must be >= 1"),
-        (["--hyperparams", "nope.yaml"], "nope.yaml: cannot read"),
-    ],
-)
+def shipped_yaml(tmp_path: Path, **changes: object) -> Path:
+    """The shipped hyperparameter file with ``changes`` applied to its section."""
+    document = yaml.safe_load(DEFAULT_HYPERPARAMS.read_text())
+    document[ENV_ID].update(changes)
+    path = tmp_path / "hp.yaml"
+    path.write_text(yaml.safe_dump(document))
+    return path
+
+
+def rescale(**kwargs: object) -> list:
+    """The shipped wrapper list with VecRescaleAction's arguments replaced."""
+    wrappers = yaml.safe_load(DEFAULT_HYPERPARAMS.read_text())[ENV_ID]["vec_env_wrapper"]
+    return [{"train.wrappers.VecRescaleAction": kwargs}, *wrappers[1:]]
+
+
+# Each case: argv (besides --runs), the message's start. Every one fails before anything is
+# built or written (the test checks the runs folder and --out are never made).
+BAD_ARGUMENTS = [
+    (["--scenarios", "straight,moon", "--n-envs", "2"], "unknown scenario 'moon'"),
+    (["--scenarios", "straight,straight"], "--scenarios must name each scenario once"),
+    (["--scenarios", ","], "--scenarios must name each scenario once"),
+    (["--scenarios", "straight,curve", "--n-envs", "3"], "n_envs=3 is out of range: must be a"),
+    (["--n-timesteps", "0"], "--n-timesteps 0 is out of range: must be an integer >= 1"),
+    (["--n-envs", "-4"], "--n-envs -4 is out of range: must be an integer >= 1"),
+    (["--n-envs", "2", "--scenarios", "straight"], r"batch_size=256 is out of range: must be in"),
+    (["--threads", "0"], "--threads 0 is out of range: must be an integer in [1, 256]"),
+    (["--threads", "1000"], "--threads 1000 is out of range: must be an integer in [1, 256]"),
+    (["--threads", "two"], "argument --threads: invalid int value: 'two'"),
+    (["--seed", "-1"], "--seed -1 is out of range: must be an integer in [0, "),
+    (["--seed", str(2**32 - 1)], f"--seed {2**32 - 1} is out of range: must be an integer in"),
+    (["--n-timesteps", str(2**32)], "--n-timesteps 4294967296 is out of range: must be an"),
+    (["--eval-seed", "-5"], "--eval-seed -5 is out of range: must be an integer in [0, "),
+    (["--eval-freq", "0"], "--eval-freq 0 is out of range: must be an integer >= 1"),
+    (["--checkpoint-freq", "0"], "--checkpoint-freq 0 is out of range: must be an integer >= 1"),
+    (["--eval-episodes", "0"], "--eval-episodes 0 is out of range: must be an integer >= 1"),
+    (["--final-episodes", "-1"], "--final-episodes -1 is out of range: must be an integer >= 0"),
+    (["--compare-with", "nope"], "--compare-with 'nope': unknown policy 'nope'"),
+    (["--env-config", "harsh"], "--env-config 'harsh' is not a preset"),
+    (["--force"], "--force applies to --export only"),
+    (["--export", "{runs}"], "--export {runs}: would contain the run folder {runs}/ppo-<time"),
+    (["--hyperparams", "nope.yaml"], "nope.yaml: cannot read"),
+    (["--resume", "runs/x", "--seed", "3"], "--seed: a resumed run keeps its own settings"),
+    (["--resume", "no/such/run"], "--resume no/such/run: no such run folder"),
+]
+
+
+@pytest.mark.parametrize(("argv", "message"), BAD_ARGUMENTS)
 def test_bad_arguments_give_one_line_and_status_2(
     argv: list[str], message: str, capsys: pytest.CaptureFixture[str], tmp_path: Path
 ) -> None:
-    assert main([*argv, "--runs", str(tmp_path)] if "--resume" not in argv else argv) == 2
+    runs = tmp_path / "runs"
+    argv = [arg.format(runs=runs) for arg in argv]
+    assert main([*argv, "--runs", str(runs)] if "--resume" not in argv else argv) == 2
+    assert_one_line(capsys, message.format(runs=runs))
+    assert not runs.exists(), "nothing written"
+
+
+def assert_one_line(capsys: pytest.CaptureFixture[str], message: str) -> None:
     err = capsys.readouterr().err
-    assert err.startswith("follow-train: error:")
+    assert err.startswith("follow-train: error: ")
+    assert err.count("\n") == 1, err
     assert message in err
-    assert not list(tmp_path.iterdir()), "nothing written"
+
+
+# Each case: changes to the shipped YAML section, and the message's start.
+BAD_YAML = [
+    ({"n_steps": "sixty"}, "n_steps='sixty' is out of range: must be an integer >= 1"),
+    ({"gamma": 7.5}, "gamma=7.5 is out of range: must be a number in [0, 1]"),
+    ({"learning_rate": -1.0}, "learning_rate=-1.0 is out of range: must be a number > 0"),
+    ({"vec_env_wrapper": rescale(w_max=2.0)}, "'w_max' is not one of its arguments"),
+    (
+        {"vec_env_wrapper": rescale(w_max_radps=99.0)},
+        "the agent's env cannot be built: VecRescaleAction.w_max_radps=99.0 is out of range",
+    ),
+    (
+        {"policy_kwargs": {"mirror_obs": [2, 1], "mirror_action": [1, -1]}},
+        "MirrorMlpPolicy.mirror_obs=[2, 1] is out of range: must be a list of +1/-1",
+    ),
+]
+
+
+@pytest.mark.parametrize(("changes", "message"), BAD_YAML)
+def test_bad_yaml_fields_give_one_line_naming_the_field_before_anything_is_written(
+    changes: dict, message: str, capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    out = tmp_path / "run"
+    argv = ["--hyperparams", str(shipped_yaml(tmp_path, **changes)), "--out", str(out)]
+    assert main([*argv, "--scenarios", "straight", "--n-envs", "4", "--no-progress"]) == 2
+    assert_one_line(capsys, message)
+    assert not out.exists()
+
+
+def test_yaml_that_does_not_parse_gives_one_line(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    path = tmp_path / "hp.yaml"
+    path.write_text("PersonFollow-v0:\n  n_envs: [4\n  gamma: 0.9\n")
+    assert main(["--hyperparams", str(path), "--runs", str(tmp_path / "runs")]) == 2
+    assert_one_line(capsys, "hp.yaml: not valid YAML")
+
+
+@pytest.mark.parametrize(
+    ("make", "message"),
+    [
+        ("file", "--out {out}: is a file, not a folder"),
+        ("below_file", "--out {out}: runs through the file {tmp}/afile, not a folder"),
+        ("full_folder", "--out {out} already exists and is not empty; use --resume"),
+    ],
+)
+def test_out_must_be_a_new_or_empty_folder(
+    make: str, message: str, capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    (tmp_path / "afile").write_text("x")
+    out = {"file": tmp_path / "afile", "below_file": tmp_path / "afile" / "run"}.get(make)
+    if make == "full_folder":
+        out = tmp_path / "full"
+        out.mkdir()
+        (out / "notes.txt").write_text("mine")
+    assert main(["--out", str(out)]) == 2
+    assert_one_line(capsys, message.format(out=out, tmp=tmp_path))
+    assert (tmp_path / "afile").read_text() == "x"
+
+
+def test_runs_pointing_at_a_file_gives_one_line(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    (tmp_path / "afile").write_text("x")
+    assert main(["--runs", str(tmp_path / "afile")]) == 2
+    assert_one_line(capsys, "--runs {}: is a file, not a folder".format(tmp_path / "afile"))
+
+
+@pytest.mark.parametrize(
+    ("target", "message"),
+    [
+        ("users_folder", "the folder is not empty and holds no export of follow-train"),
+        ("afile", "is a file, not a folder; give a folder (--force never replaces a file)"),
+        (".", "--export .: the folder is not empty"),
+    ],
+)
+def test_an_export_that_would_lose_a_file_is_refused_before_training(
+    target: str,
+    message: str,
+    capsys: pytest.CaptureFixture[str],
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "users_folder").mkdir()
+    (tmp_path / "users_folder" / "thesis.pdf").write_text("mine")
+    (tmp_path / "afile").write_text("x")
+    before = sorted(str(p.relative_to(tmp_path)) for p in tmp_path.rglob("*"))
+    assert main([*SMOKE, "--out", "run", "--export", target]) == 2
+    assert_one_line(capsys, message)
+    assert sorted(str(p.relative_to(tmp_path)) for p in tmp_path.rglob("*")) == before
+    assert (tmp_path / "users_folder" / "thesis.pdf").read_text() == "mine"
+
+
+def test_resume_with_nothing_left_to_train_is_refused(
+    smoke_run: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    run = tmp_path / "run"
+    shutil.copytree(smoke_run, run)
+    steps = newest_checkpoint(run)[0]
+    assert main(["--resume", str(run), "--n-timesteps", str(steps)]) == 2
+    assert_one_line(capsys, f"--n-timesteps={steps:,} is out of range: the newest checkpoint is")
 
 
 def test_resume_without_checkpoint_names_the_folder(tmp_path: Path, smoke_config: Path) -> None:
@@ -141,3 +289,105 @@ def smoke_config(tmp_path: Path) -> Path:
         )
     )
     return path
+
+
+class Killed(BaseException):
+    """Stands in for SIGKILL: nothing in follow-train handles it."""
+
+
+def stop_at_checkpoint(monkeypatch: pytest.MonkeyPatch, step: int, error: BaseException) -> None:
+    """Raise ``error`` right after the checkpoint at ``step`` is recorded in sessions.json."""
+    record = SessionLog.checkpoint
+
+    def checkpoint(self: SessionLog, at: int) -> None:
+        record(self, at)
+        if at >= step:
+            raise error
+
+    monkeypatch.setattr(SessionLog, "checkpoint", checkpoint)
+
+
+@pytest.mark.slow
+def test_killed_and_interrupted_sessions_count_in_the_card(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    run = tmp_path / "run"
+    with monkeypatch.context() as m:
+        stop_at_checkpoint(m, 800, Killed())
+        with pytest.raises(Killed):
+            main([*SMOKE, "--out", str(run)])
+    [killed] = json.loads((run / "sessions.json").read_text())
+    assert (killed["status"], killed["last_step"]) == ("running", 800)
+    assert killed["wall_s"] > 0
+    stale = run / ".eval-scratch-x1y2"  # what earlier versions left after a kill
+    stale.mkdir()
+    (stale / "evaluations.npz").write_bytes(b"")
+
+    with monkeypatch.context() as m:
+        stop_at_checkpoint(m, 1600, KeyboardInterrupt())
+        assert main(["--resume", str(run), "--no-progress"]) == 130
+    err = capsys.readouterr().err
+    assert err == (
+        f"follow-train: interrupted; resume with --resume {run} (continues from the checkpoint "
+        "at 1,600 env steps)\n"
+    )
+    assert not stale.exists()
+
+    assert main(["--resume", str(run), "--no-progress"]) == 0
+    sessions = json.loads((run / "sessions.json").read_text())
+    assert [s["status"] for s in sessions] == ["killed", "interrupted", "finished"]
+    assert [(s["first_step"], s["last_step"]) for s in sessions[:2]] == [(0, 800), (800, 1600)]
+    card = (run / "MODEL_CARD.md").read_text()
+    assert "killed; counted up to its last checkpoint" in card
+    assert "interrupted" in card
+    total_min = sum(s["wall_s"] for s in sessions) / 60
+    assert f"in {total_min:.1f} min of training" in card
+    assert not list(run.glob(".*")), "no hidden or temporary files"
+
+
+def test_ctrl_c_before_the_first_checkpoint_removes_the_new_run(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    def interrupt(self: HeldOutEvalCallback) -> bool:
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(HeldOutEvalCallback, "_on_step", interrupt)
+    run = tmp_path / "run"
+    assert main([*SMOKE, "--out", str(run)]) == 130
+    assert capsys.readouterr().err == (
+        "follow-train: interrupted before the first checkpoint (every 800 env steps): nothing "
+        f"to resume, removed {run}\n"
+    )
+    assert not run.exists()
+
+
+def test_divergence_gives_one_line_and_keeps_the_run(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    def diverge(self: HeldOutEvalCallback) -> bool:
+        raise ValueError("Expected parameter loc ... but found invalid values:\ntensor([[nan]])")
+
+    monkeypatch.setattr(HeldOutEvalCallback, "_on_step", diverge)
+    run = tmp_path / "run"
+    assert main([*SMOKE, "--out", str(run)]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1, err
+    assert err.startswith("follow-train: error: training diverged at ")
+    assert "the policy's outputs became NaN" in err
+    assert json.loads((run / "sessions.json").read_text())[0]["status"] == "failed"
+
+
+def test_the_summary_lists_only_files_that_were_written(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    run = tmp_path / "run"
+    short = ["--scenarios", "straight", "--n-envs", "4", "--n-timesteps", "300"]
+    never = ["--eval-freq", "100000", "--checkpoint-freq", "100000", "--final-episodes", "0"]
+    assert main([*short, *never, "--no-progress", "--out", str(run)]) == 0
+    printed = capsys.readouterr().out
+    assert "evaluations.npz" not in printed
+    assert "checkpoints/" not in printed
+    listed = printed.split(f"Wrote {run}/: ")[1].strip().split(", ")
+    assert listed[0] == "model.zip"
+    for name in listed:
+        assert (run / name).exists(), name

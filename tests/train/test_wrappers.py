@@ -206,3 +206,32 @@ def test_concat_vec_env_lane_j_replays_its_scenario_seeded_s_plus_j() -> None:
     np.testing.assert_array_equal(obs[3], reference[0])
     assert joined.num_envs == 4
     assert joined.get_attr("render_mode") == [None] * 4
+
+
+# Values a YAML file can hold that each constructor refuses, naming Class.argument and the range
+# (follow-train reports them before anything is written).
+@pytest.mark.parametrize(
+    ("build", "message"),
+    [
+        (lambda e: VecRescaleAction(e, w_max_radps=True), r"VecRescaleAction\.w_max_radps=True"),
+        (lambda e: VecRescaleAction(e, v_max_mps="1"), r"VecRescaleAction\.v_max_mps='1'"),
+        (lambda e: VecScaleObservation(e, scale="abc"), r"VecScaleObservation\.scale='abc' is out"),
+        (lambda e: VecScaleObservation(e, scale=[1.0, "a"]), r"scale=\[1\.0, 'a'\] is out of"),
+        (lambda e: VecScaleObservation(e, scale=[1.0, -1.0]), "must be positive numbers"),
+        (
+            lambda e: VecIncrementalAction(e, max_change="x"),
+            r"VecIncrementalAction\.max_change='x' is out of range: must be 2 positive numbers",
+        ),
+        (
+            lambda e: VecIncrementalAction(e, reading_index=5),
+            r"VecIncrementalAction\.reading_index=5 is out of range: must be None or an "
+            r"observation index in \[0, 1\]",
+        ),
+        (lambda e: VecIncrementalAction(e, reading_index="0"), r"reading_index='0' is out of"),
+        (lambda e: VecObservationAge(e, max_age_steps=2.5), r"max_age_steps=2\.5 is out of range"),
+        (lambda e: VecShapedReward(e, v_rate_weight=-1), r"v_rate_weight=-1 is out of range"),
+    ],
+)
+def test_constructors_refuse_bad_arguments_naming_them(build: Any, message: str) -> None:
+    with pytest.raises(ValueError, match=message):
+        build(ScriptedVecEnv(constant_obs(1)))
