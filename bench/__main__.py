@@ -105,13 +105,13 @@ def bench_vector_env(quick: bool) -> list[tuple[str, float, str]]:
 
 def bench_memory(quick: bool) -> list[tuple[str, float, str]]:
     """Bytes of simulation state per lane (the arrays of the batched core), by scenario."""
-    from follow_env.config import THESIS
-    from follow_env.core import BatchedSim
+    from follow_env.tasks.person_follow.config import THESIS
+    from follow_env.tasks.person_follow.task import batched_sim
 
     rows = []
     for scenario in ("straight", "curve", "random", "crowd", "random_world"):
-        sim = BatchedSim(THESIS.replace(scenario={"name": scenario}), 1024)
-        arrays = (sim.params, sim.fstate, sim.istate, sim.pstate, sim.paths, sim.walls, sim.keys)
+        sim = batched_sim(THESIS.replace(scenario={"name": scenario}), 1024)
+        arrays = (sim.params, sim.state, *sim.world, sim.keys)
         per_lane = sum(a.nbytes for a in arrays) / sim.n
         sim.close()
         rows.append((f"state per lane, {scenario}", per_lane, f"{per_lane / 1024:.1f} KiB"))

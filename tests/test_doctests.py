@@ -8,7 +8,7 @@ import importlib
 import pytest
 
 
-@pytest.mark.parametrize("module", ["follow_env.env", "follow_env", "policies"])
+@pytest.mark.parametrize("module", ["follow_env.tasks.person_follow.env", "follow_env", "policies"])
 def test_docstring_examples_run(module: str) -> None:
     result = doctest.testmod(importlib.import_module(module), optionflags=doctest.ELLIPSIS)
     assert result.failed == 0

@@ -1,7 +1,7 @@
-"""``python -m train``: the same as ``follow-train`` (:mod:`train.ppo`)."""
+"""``python -m train``: the same as ``follow-train`` (:mod:`train.cli`)."""
 
 import sys
 
-from train.ppo import main
+from train.cli import main
 
 sys.exit(main())

@@ -178,18 +178,23 @@ def _sb3_defaults() -> dict[str, Any]:
     return {name: p.default for name, p in parameters.items() if name in PPO_RULES}
 
 
+def _document(path: Path) -> Any:
+    """The parsed hyperparameter file (one-line errors naming it)."""
+    try:
+        return yaml.safe_load(path.read_text(encoding="utf-8"))
+    except OSError as e:
+        raise ConfigError(f"{path}: cannot read hyperparameters: {e.strerror or e}") from None
+    except yaml.YAMLError as e:
+        raise ConfigError(f"{path}: not valid YAML: {' '.join(str(e).split())}") from None
+
+
 def sole_section(path: str | Path) -> str:
     """The env id of a hyperparameter file with one section (the usual case).
 
     :raises ConfigError: if the file is unreadable or has several sections (name one).
     """
     path = Path(path)
-    try:
-        document = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except OSError as e:
-        raise ConfigError(f"{path}: cannot read hyperparameters: {e.strerror or e}") from None
-    except yaml.YAMLError as e:
-        raise ConfigError(f"{path}: not valid YAML: {e}") from None
+    document = _document(path)
     if not isinstance(document, dict) or len(document) != 1:
         found = ", ".join(map(str, document)) if isinstance(document, dict) else "nothing"
         raise ConfigError(f"{path}: one section expected (found: {found}); give --env-id")
@@ -207,12 +212,7 @@ def load_hyperparams(
         key or value is not understood (the message names the file and the key).
     """
     path = Path(path)
-    try:
-        document = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except OSError as e:
-        raise ConfigError(f"{path}: cannot read hyperparameters: {e.strerror or e}") from None
-    except yaml.YAMLError as e:
-        raise ConfigError(f"{path}: not valid YAML: {' '.join(str(e).split())}") from None
+    document = _document(path)
     if not isinstance(document, dict) or env_id not in document:
         found = ", ".join(map(str, document)) if isinstance(document, dict) else "nothing"
         raise ConfigError(f"{path}: no section {env_id!r} (found: {found})")

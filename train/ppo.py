@@ -26,14 +26,12 @@ naming the option or YAML key, its value and what it may be, exit status 2, and 
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import shutil
-import sys
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, NoReturn
+from typing import Any
 
 from eval.atomic import atomic_write_text, file_on_path
 from follow_env.tasks import task_for_env
@@ -48,7 +46,7 @@ from train.config import (
 )
 from train.export import AGENT_FILES, EXPORT_EXTRAS, check_export, export_agent
 
-__all__ = ["AGENT_FILES", "EXPORT_EXTRAS", "Args", "Interrupted", "main", "train"]
+__all__ = ["AGENT_FILES", "EXPORT_EXTRAS", "Args", "Interrupted", "train"]
 
 PROG = "follow-train"
 USAGE_ERROR = 2
@@ -65,7 +63,7 @@ class Args:
 
     hyperparams: Path = DEFAULT_HYPERPARAMS  # rl-zoo3-style YAML, keyed by env id
     env_id: str | None = None  # the YAML section, and the task; default: the file's only section
-    scenarios: tuple[str, ...] = ()  # the task's variants (scenarios) to train on; () = all
+    scenarios: tuple[str, ...] | None = None  # the task's variants to train on; None = all
     env_config: str = "thesis"  # the env preset the agent trains and is evaluated on
     seed: int = 10_000  # training lanes start from seed + j
     eval_seed: int = 5_000  # held-out lanes start from eval_seed + j
@@ -292,7 +290,7 @@ def _with_defaults(args: Args) -> Args:
         except ConfigError as e:
             raise ValueError(str(e)) from None
     scenarios = args.scenarios
-    if not scenarios:
+    if scenarios is None:
         try:
             scenarios = tuple(task_for_env(env_id).variants())
         except ValueError as e:
@@ -501,137 +499,3 @@ def _args_from_dict(saved: dict[str, Any], *, where: str = "config.yaml") -> Arg
             raise ValueError(f"{where}: args.{name}={value!r} is not valid") from None
         values[name] = value
     return Args(**values)
-
-
-# -- Command line ----------------------------------------------------------------------------
-
-
-class UsageError(Exception):
-    """Bad arguments: reported as one line, exit status 2."""
-
-
-class _Parser(argparse.ArgumentParser):
-    def error(self, message: str) -> NoReturn:
-        raise UsageError(message)
-
-
-def build_parser() -> argparse.ArgumentParser:
-    """The ``follow-train`` argument parser; defaults are :class:`Args`'s."""
-    d = Args()
-    p = _Parser(prog=PROG, description="Train PPO on PersonFollow-v0 (stable-baselines3).")
-    p.add_argument("--hyperparams", type=Path, help=f"YAML file (default: {d.hyperparams})")
-    p.add_argument(
-        "--env-id", help="section of the YAML file, naming the task (default: its only one)"
-    )
-    p.add_argument("--scenarios", help="comma-separated scenarios (default: all registered)")
-    p.add_argument("--env-config", help=f"env preset (default: {d.env_config})")
-    p.add_argument(
-        "--seed",
-        type=int,
-        help=f"training lanes start from seed + j ({d.seed}); seed + n_timesteps + n_envs "
-        "must stay below 2**32",
-    )
-    p.add_argument("--eval-seed", type=int, help=f"held-out lanes: eval_seed + j ({d.eval_seed})")
-    p.add_argument("--eval-episodes", type=int, help=f"per scenario ({d.eval_episodes})")
-    p.add_argument("--eval-freq", type=int, help=f"env steps ({d.eval_freq})")
-    p.add_argument("--checkpoint-freq", type=int, help=f"env steps ({d.checkpoint_freq})")
-    p.add_argument("--final-episodes", type=int, help=f"per scenario, 0 skips ({d.final_episodes})")
-    p.add_argument("--compare-with", help=f"law in the model card ({d.compare_with})")
-    p.add_argument("--n-timesteps", type=int, help="total env steps (default: the YAML's)")
-    p.add_argument("--n-envs", type=int, help="lanes (default: the YAML's)")
-    p.add_argument("--threads", type=int, help=f"torch threads, 1..{MAX_THREADS} ({d.threads})")
-    p.add_argument("--runs", type=Path, help=f"where run folders go ({d.runs})")
-    p.add_argument("--out", type=Path, help="run folder (default: runs/ppo-<timestamp>)")
-    p.add_argument("--resume", type=Path, metavar="RUN_DIR", help="continue this run")
-    p.add_argument(
-        "--export",
-        type=Path,
-        metavar="DIR",
-        help="also copy the agent into DIR: a new or empty folder, or one an earlier export "
-        "wrote (its files are replaced, nothing else)",
-    )
-    p.add_argument(
-        "--force",
-        action="store_true",
-        default=None,
-        help="let --export write into a folder it did not make, or over exported files that "
-        "were changed: only files named like the agent's are replaced, none is deleted",
-    )
-    p.add_argument("--no-progress", dest="progress", action="store_false", default=None)
-    return p
-
-
-# Options that may accompany --resume (the rest come from the run's config.yaml).
-_RESUME_OPTIONS = {"resume", "n_timesteps", "threads", "progress", "export", "force"}
-
-
-def parse_args(argv: Sequence[str] | None = None) -> Args:
-    """Parse the command line into :class:`Args`.
-
-    :raises UsageError: for unknown or conflicting options.
-    """
-    ns = build_parser().parse_args(argv)
-    given = {k: v for k, v in vars(ns).items() if v is not None}
-    if "resume" in given and set(given) - _RESUME_OPTIONS:
-        extra = ", ".join("--" + k.replace("_", "-") for k in sorted(set(given) - _RESUME_OPTIONS))
-        raise UsageError(
-            f"{extra}: a resumed run keeps its own settings; with --resume only "
-            "--n-timesteps, --threads, --no-progress, --export and --force may be given"
-        )
-    if "scenarios" in given:
-        given["scenarios"] = tuple(s.strip() for s in given["scenarios"].split(",") if s.strip())
-    for name in ("n_timesteps", "n_envs"):
-        if name in given and given[name] < 1:
-            raise UsageError(
-                f"--{name.replace('_', '-')} {given[name]} is out of range: must be an integer >= 1"
-            )
-    return Args(**given)
-
-
-def _written(run: Path) -> str:
-    """The run folder's files, as they are (a short run may have no checkpoint yet)."""
-    from train import run as runs
-
-    names = [runs.MODEL, runs.NORMALIZATION, runs.CONFIG, runs.CARD, runs.CURVE]
-    names += [runs.EVALUATIONS, runs.SESSIONS]
-    found = [name for name in names if (run / name).is_file()]
-    checkpoints = len(list((run / runs.CHECKPOINTS).glob(f"{runs.CHECKPOINT_PREFIX}_*_steps.zip")))
-    if checkpoints:
-        found.append(f"{runs.CHECKPOINTS}/ ({checkpoints} checkpoint{'s' * (checkpoints > 1)})")
-    if (run / runs.LOGS).is_dir():
-        found.append(f"{runs.LOGS}/")
-    return ", ".join(found)
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of ``follow-train`` and ``python -m train``; returns the exit status."""
-    argv = sys.argv[1:] if argv is None else list(argv)
-    try:
-        args = parse_args(argv)
-        run = train(args, command=" ".join([PROG, *argv]))
-    except Interrupted as e:
-        print(f"{PROG}: {e}", file=sys.stderr)
-        return 130
-    except KeyboardInterrupt:
-        print(f"{PROG}: interrupted before training started; nothing was written", file=sys.stderr)
-        return 130
-    except TrainingError as e:
-        print(f"{PROG}: error: {e}", file=sys.stderr)
-        return 1
-    except (UsageError, ConfigError, ValueError, FileNotFoundError) as e:
-        print(f"{PROG}: error: {e}", file=sys.stderr)
-        return USAGE_ERROR
-    from train.run import read_sessions
-
-    last = read_sessions(run)[-1]
-    print(
-        f"Trained {last['first_step']:,} -> {last['last_step']:,} env steps in "
-        f"{last['wall_s']:.0f} s ({last['env_steps_per_s'] or 0:,} env-steps/s). Wrote {run}/: "
-        + _written(run)
-        + (f"; exported the agent to {args.export}/" if args.export else "")
-    )
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

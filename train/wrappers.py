@@ -80,14 +80,14 @@ class _FeatureWrapper(VecEnvWrapper):
         params = list(inspect.signature(cls.feature_class.__init__).parameters.values())
         venv = inspect.Parameter("venv", inspect.Parameter.POSITIONAL_OR_KEYWORD)
 
-        def __init__(self: _FeatureWrapper, venv: VecEnv, **kwargs: Any) -> None:  # noqa: N807
-            _FeatureWrapper._setup(self, venv, **kwargs)
+        def __init__(self: _FeatureWrapper, venv: VecEnv, *args: Any, **kwargs: Any) -> None:  # noqa: N807
+            _FeatureWrapper._setup(self, venv, *args, **kwargs)
 
         __init__.__signature__ = inspect.Signature([params[0], venv, *params[1:]])  # type: ignore[attr-defined]
         __init__.__doc__ = cls.feature_class.__init__.__doc__
         cls.__init__ = __init__  # type: ignore[method-assign]
 
-    def _setup(self, venv: VecEnv, **kwargs: Any) -> None:
+    def _setup(self, venv: VecEnv, *args: Any, **kwargs: Any) -> None:
         name = type(self).__name__
         obs_box, act_box = venv.observation_space, venv.action_space
         if not (isinstance(obs_box, spaces.Box) and isinstance(act_box, spaces.Box)):
@@ -95,7 +95,7 @@ class _FeatureWrapper(VecEnvWrapper):
         if len(obs_box.shape) != 1:
             raise ValueError(f"{name} needs a flat Box observation space")
         try:
-            self.feature = self.feature_class(**kwargs)
+            self.feature = self.feature_class(*args, **kwargs)
         except TypeError as e:
             raise ValueError(f"{name}: {e}") from None
         self.feature.owner = name

@@ -21,7 +21,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from follow_env.sim import streams
+from follow_env.sim import body, streams
 from follow_env.sim.config import Sections
 from follow_env.sim.jit import njit
 from follow_env.sim.rng import LaneRandom, uniform_at
@@ -41,22 +41,8 @@ __all__ = [
     "push_velocity",
 ]
 
-BODY = Block(
-    "body",
-    "the robot's pose and twist (world frame, SI), and its speed as its encoders measure it",
-    [
-        f8("x", "m", "position of the axle centre, x"),
-        f8("y", "m", "position of the axle centre, y"),
-        f8("th", "rad", "heading, counter-clockwise from +x, in (-pi, pi]"),
-        f8("v", "m/s", "forward speed (true)"),
-        f8("w", "rad/s", "turn rate, counter-clockwise positive (true)"),
-        f8("v_meas", "m/s", "forward speed from the encoders, as the robot computes it"),
-        f8("v_meas_prev", "m/s", "v_meas one control step earlier"),
-        f8("accel", "m/s^2", "finite difference of v_meas over the control step"),
-        f8("push_vx", "m/s", "a push (randomisation) this control step, x"),
-        f8("push_vy", "m/s", "a push this control step, y"),
-    ],
-)
+# The body record lives in the sim layer (every robot has one); platforms write it.
+BODY = body.BODY
 
 
 def base_param_fields() -> list[Field]:

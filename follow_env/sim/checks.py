@@ -56,13 +56,20 @@ def range_text(
     hi_open: bool = False,
     integer: bool = False,
 ) -> str:
-    """``[lo, hi] unit`` in interval notation (``-inf``/``inf`` for a missing bound)."""
+    """``[lo, hi] unit`` in interval notation; ``> lo`` / ``>= lo`` / ``<= hi`` for a range
+    bounded on one side only."""
+    tail = f" {unit}" if unit else ""
+    if lo is None or hi is None:
+        kind = "an integer " if integer else ""
+        if lo is not None:
+            return f"{kind}{'>' if lo_open else '>='} {lo:g}{tail}"
+        if hi is not None:
+            return f"{kind}{'<' if hi_open else '<='} {hi:g}{tail}"
+        return ("an integer" if integer else "a finite number") + tail
     left = "(" if lo_open else "["
     right = ")" if hi_open else "]"
-    lo_s = "-inf" if lo is None else f"{lo:g}"
-    hi_s = "inf" if hi is None else f"{hi:g}"
     kind = "an integer in " if integer else ""
-    return f"{kind}{left}{lo_s}, {hi_s}{right}" + (f" {unit}" if unit else "")
+    return f"{kind}{left}{lo:g}, {hi:g}{right}{tail}"
 
 
 def check_number(

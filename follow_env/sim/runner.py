@@ -18,16 +18,15 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from follow_env.platforms import get_platform
-from follow_env.platforms.base import BODY, Platform
 from follow_env.sim import compose
+from follow_env.sim.body import BODY
 from follow_env.sim.checks import out_of_range
 from follow_env.sim.jit import compile_notice
 from follow_env.sim.rng import LaneSeeds
 from follow_env.sim.schema import Block, f8, i8
 from follow_env.sim.streams import N_STREAMS
 
-__all__ = ["EPISODE", "PARALLEL_MIN_LANES", "BatchedSim", "LaneView", "TaskModel"]
+__all__ = ["EPISODE", "PARALLEL_MIN_LANES", "BatchedSim", "LaneView", "PlatformModel", "TaskModel"]
 
 EPISODE = Block(
     "episode",
@@ -46,6 +45,20 @@ PARALLEL_MIN_LANES = 256
 """From this many lanes on, the runner steps blocks of lanes on one thread per core."""
 
 
+class PlatformModel(Protocol):
+    """What the runner needs of a platform (``follow_env.platforms.base.Platform``)."""
+
+    name: str
+    module: str
+    params: Block
+    state: Block
+
+    def randomize(
+        self, params: np.ndarray, base: np.void, lanes: np.ndarray, cfg: Any, keys: np.ndarray
+    ) -> None:
+        """Per-episode draws into the lanes' platform parameter records."""
+
+
 class TaskModel(Protocol):
     """What the runner needs of a task (see ``follow_env.tasks.person_follow.task``)."""
 
@@ -53,6 +66,9 @@ class TaskModel(Protocol):
     kernel_module: str
     params: Block
     state: Block
+
+    def platform_of(self, cfg: Any) -> PlatformModel:
+        """The platform the configuration names."""
 
     def check(self, cfg: Any) -> None:
         """Refuse a configuration the task cannot run (naming the field)."""
@@ -96,7 +112,7 @@ class BatchedSim:
         self.task = task
         self.cfg = cfg
         self.n = num_lanes
-        self.platform: Platform = get_platform(cfg.platform.NAME)
+        self.platform: Any = task.platform_of(cfg)
         task.check(cfg)
         self.params_dtype = np.dtype(
             [("platform", self.platform.params.dtype), ("task", task.params.dtype)], align=True

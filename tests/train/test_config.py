@@ -6,8 +6,9 @@ from pathlib import Path
 
 import pytest
 
+from follow_env.tasks.person_follow import ENV_ID
 from train.config import ConfigError, load_hyperparams, parse_hyperparams, policy_class, schedule
-from train.ppo import DEFAULT_HYPERPARAMS, ENV_ID
+from train.ppo import DEFAULT_HYPERPARAMS
 
 MINIMAL = {"n_envs": 4, "n_timesteps": 1000}
 

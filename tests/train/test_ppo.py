@@ -10,8 +10,10 @@ import numpy as np
 import pytest
 import yaml
 
+from follow_env.tasks.person_follow import ENV_ID
 from policies import make_policy
-from train.ppo import DEFAULT_HYPERPARAMS, ENV_ID, Args, main, train
+from train.cli import main
+from train.ppo import DEFAULT_HYPERPARAMS, Args, train
 from train.run import HeldOutEvalCallback, SessionLog, newest_checkpoint
 
 SMOKE_STEPS = 2000

@@ -238,6 +238,10 @@ class PersonFollowTask:
                 f"tracks at most {PEOPLE_MAX}"
             )
 
+    def platform_of(self, cfg: EnvConfig) -> Platform:
+        """The registered platform of ``cfg.platform``."""
+        return get_platform(cfg.platform.NAME)
+
     def info_keys(self, platform: Platform) -> tuple[str, ...]:
         """Every key of the ``info`` dict on ``platform``."""
         return SPEC.info_keys(tuple(key for key, *_ in platform.info))

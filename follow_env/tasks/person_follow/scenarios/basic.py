@@ -21,7 +21,7 @@ import numpy as np
 from follow_env.sim.jit import njit
 from follow_env.sim.rng import uniform_at
 from follow_env.tasks.person_follow.people import N_PW
-from follow_env.tasks.person_follow.scenarios import (
+from follow_env.tasks.person_follow.scenarios.registry import (
     PW,
     WALL_MARGIN_M,
     ScenarioBatch,

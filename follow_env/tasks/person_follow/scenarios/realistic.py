@@ -31,7 +31,7 @@ import numpy as np
 from follow_env.sim import streams
 from follow_env.sim.rng import LaneRandom
 from follow_env.tasks.person_follow.people import N_PW
-from follow_env.tasks.person_follow.scenarios import (
+from follow_env.tasks.person_follow.scenarios.registry import (
     PW,
     SCENARIOS,
     ScenarioBatch,

@@ -1,4 +1,4 @@
-"""policies/ppo.py: a trained PPO agent as a Policy, loaded by name or path."""
+"""policies/learned/ppo.py: a trained PPO agent as a Policy, loaded by name or path."""
 
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ from stable_baselines3.common.vec_env import VecEnvWrapper
 
 from eval.rollout import run_episode
 from policies import Policy, make_policy
-from policies.ppo import DEFAULT_AGENT, AgentLoadError, PPOPolicy
+from policies.learned.ppo import DEFAULT_AGENT, AgentLoadError, PPOPolicy
 from train.envs import agent_env, base_env
 from train.run import read_config
 
@@ -163,3 +163,35 @@ def test_names_resolve_in_evaluation_worker_processes() -> None:
     for a, b in zip(pooled, here, strict=True):
         assert a.policy == b.policy
         np.testing.assert_array_equal(a.log["action_w_radps"], b.log["action_w_radps"])
+
+
+def test_building_the_agent_imports_no_training_code() -> None:
+    import subprocess
+    import sys
+
+    code = (
+        "import sys; from policies import make_policy; p = make_policy('ppo'); "
+        "p.act([1.2, 30.0]); print(sorted(m for m in sys.modules if m.split('.')[0] in "
+        "('train', 'eval')))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"
+
+
+def test_batched_acting_equals_acting_lane_by_lane() -> None:
+    rng = np.random.default_rng(0)
+    rows = rng.uniform([0.5, -300.0], [3.0, 300.0], (30, 5, 2)).astype(np.float32)
+    batch = make_policy("ppo")
+    batch.reset_batch(5)
+    lanes = [make_policy("ppo") for _ in range(5)]
+    for step in rows:
+        together = batch.act_batch(step)
+        alone = np.stack([law.act(step[i]) for i, law in enumerate(lanes)])
+        np.testing.assert_array_equal(together, alone)
+
+
+def test_act_batch_needs_reset_batch_for_its_lane_count() -> None:
+    policy = make_policy("ppo")
+    policy.reset_batch(3)
+    with pytest.raises(ValueError, match=r"reset_batch\(2\)"):
+        policy.act_batch(np.ones((2, 2), dtype=np.float32))

@@ -1,4 +1,4 @@
-"""train/mirror.py: the mirror-symmetric actor-critic."""
+"""policies/learned/mirror.py: the mirror-symmetric actor-critic."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import pytest
 import torch
 from gymnasium import spaces
 
-from train.mirror import MirrorMlpPolicy
+from policies.learned.mirror import MirrorMlpPolicy
 
 OBS_SIGN = [1.0, -1.0, 1.0]
 ACT_SIGN = [1.0, -1.0]

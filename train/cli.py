@@ -1,0 +1,152 @@
+"""``follow-train``'s command line: options into :class:`~train.ppo.Args`, one-line errors.
+
+Bad arguments or input give one line on stderr (``follow-train: error: ...``) and exit status 2,
+before anything is written; Ctrl-C names the run to resume.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import NoReturn
+
+from train.config import ConfigError
+from train.ppo import MAX_THREADS, PROG, USAGE_ERROR, Args, Interrupted, TrainingError, train
+
+__all__ = ["build_parser", "main", "parse_args"]
+
+
+# -- Command line ----------------------------------------------------------------------------
+
+
+class UsageError(Exception):
+    """Bad arguments: reported as one line, exit status 2."""
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str) -> NoReturn:
+        raise UsageError(message)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The ``follow-train`` argument parser; defaults are :class:`Args`'s."""
+    d = Args()
+    p = _Parser(prog=PROG, description="Train PPO on PersonFollow-v0 (stable-baselines3).")
+    p.add_argument("--hyperparams", type=Path, help=f"YAML file (default: {d.hyperparams})")
+    p.add_argument(
+        "--env-id", help="section of the YAML file, naming the task (default: its only one)"
+    )
+    p.add_argument("--scenarios", help="comma-separated scenarios (default: all registered)")
+    p.add_argument("--env-config", help=f"env preset (default: {d.env_config})")
+    p.add_argument(
+        "--seed",
+        type=int,
+        help=f"training lanes start from seed + j ({d.seed}); seed + n_timesteps + n_envs "
+        "must stay below 2**32",
+    )
+    p.add_argument("--eval-seed", type=int, help=f"held-out lanes: eval_seed + j ({d.eval_seed})")
+    p.add_argument("--eval-episodes", type=int, help=f"per scenario ({d.eval_episodes})")
+    p.add_argument("--eval-freq", type=int, help=f"env steps ({d.eval_freq})")
+    p.add_argument("--checkpoint-freq", type=int, help=f"env steps ({d.checkpoint_freq})")
+    p.add_argument("--final-episodes", type=int, help=f"per scenario, 0 skips ({d.final_episodes})")
+    p.add_argument("--compare-with", help=f"law in the model card ({d.compare_with})")
+    p.add_argument("--n-timesteps", type=int, help="total env steps (default: the YAML's)")
+    p.add_argument("--n-envs", type=int, help="lanes (default: the YAML's)")
+    p.add_argument("--threads", type=int, help=f"torch threads, 1..{MAX_THREADS} ({d.threads})")
+    p.add_argument("--runs", type=Path, help=f"where run folders go ({d.runs})")
+    p.add_argument("--out", type=Path, help="run folder (default: runs/ppo-<timestamp>)")
+    p.add_argument("--resume", type=Path, metavar="RUN_DIR", help="continue this run")
+    p.add_argument(
+        "--export",
+        type=Path,
+        metavar="DIR",
+        help="also copy the agent into DIR: a new or empty folder, or one an earlier export "
+        "wrote (its files are replaced, nothing else)",
+    )
+    p.add_argument(
+        "--force",
+        action="store_true",
+        default=None,
+        help="let --export write into a folder it did not make, or over exported files that "
+        "were changed: only files named like the agent's are replaced, none is deleted",
+    )
+    p.add_argument("--no-progress", dest="progress", action="store_false", default=None)
+    return p
+
+
+# Options that may accompany --resume (the rest come from the run's config.yaml).
+_RESUME_OPTIONS = {"resume", "n_timesteps", "threads", "progress", "export", "force"}
+
+
+def parse_args(argv: Sequence[str] | None = None) -> Args:
+    """Parse the command line into :class:`Args`.
+
+    :raises UsageError: for unknown or conflicting options.
+    """
+    ns = build_parser().parse_args(argv)
+    given = {k: v for k, v in vars(ns).items() if v is not None}
+    if "resume" in given and set(given) - _RESUME_OPTIONS:
+        extra = ", ".join("--" + k.replace("_", "-") for k in sorted(set(given) - _RESUME_OPTIONS))
+        raise UsageError(
+            f"{extra}: a resumed run keeps its own settings; with --resume only "
+            "--n-timesteps, --threads, --no-progress, --export and --force may be given"
+        )
+    if "scenarios" in given:
+        given["scenarios"] = tuple(s.strip() for s in given["scenarios"].split(",") if s.strip())
+    for name in ("n_timesteps", "n_envs"):
+        if name in given and given[name] < 1:
+            raise UsageError(
+                f"--{name.replace('_', '-')} {given[name]} is out of range: must be an integer >= 1"
+            )
+    return Args(**given)
+
+
+def _written(run: Path) -> str:
+    """The run folder's files, as they are (a short run may have no checkpoint yet)."""
+    from train import run as runs
+
+    names = [runs.MODEL, runs.NORMALIZATION, runs.CONFIG, runs.CARD, runs.CURVE]
+    names += [runs.EVALUATIONS, runs.SESSIONS]
+    found = [name for name in names if (run / name).is_file()]
+    checkpoints = len(list((run / runs.CHECKPOINTS).glob(f"{runs.CHECKPOINT_PREFIX}_*_steps.zip")))
+    if checkpoints:
+        found.append(f"{runs.CHECKPOINTS}/ ({checkpoints} checkpoint{'s' * (checkpoints > 1)})")
+    if (run / runs.LOGS).is_dir():
+        found.append(f"{runs.LOGS}/")
+    return ", ".join(found)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``follow-train`` and ``python -m train``; returns the exit status."""
+    argv = sys.argv[1:] if argv is None else list(argv)
+    try:
+        args = parse_args(argv)
+        run = train(args, command=" ".join([PROG, *argv]))
+    except Interrupted as e:
+        print(f"{PROG}: {e}", file=sys.stderr)
+        return 130
+    except KeyboardInterrupt:
+        print(f"{PROG}: interrupted before training started; nothing was written", file=sys.stderr)
+        return 130
+    except TrainingError as e:
+        print(f"{PROG}: error: {e}", file=sys.stderr)
+        return 1
+    except (UsageError, ConfigError, ValueError, FileNotFoundError) as e:
+        print(f"{PROG}: error: {e}", file=sys.stderr)
+        return USAGE_ERROR
+    from train.run import read_sessions
+
+    last = read_sessions(run)[-1]
+    print(
+        f"Trained {last['first_step']:,} -> {last['last_step']:,} env steps in "
+        f"{last['wall_s']:.0f} s ({last['env_steps_per_s'] or 0:,} env-steps/s). Wrote {run}/: "
+        + _written(run)
+        + (f"; exported the agent to {args.export}/" if args.export else "")
+    )
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
