@@ -1,0 +1,58 @@
+"""The bridge between PersonFollow and a real (or emulated) robot: the serial link.
+
+A leaf package: it imports numpy at most, never the simulator, training or evaluation, so it
+runs on a robot's PC with nothing else installed.
+
+* ``bridge.protocol``: messages, the reference framing (SPEC §1) and the robust framing,
+  streaming decoders and their statistics;
+"""
+
+from __future__ import annotations
+
+from .protocol import (
+    FRAMINGS,
+    PROTOCOL_VERSION,
+    Capability,
+    Codec,
+    CommandKind,
+    Feedback,
+    Framing,
+    Hello,
+    LinkStats,
+    Message,
+    MsgType,
+    PeerRole,
+    Received,
+    ReferenceCodec,
+    ReferenceDecoder,
+    RobustCodec,
+    RobustDecoder,
+    Role,
+    VersionMismatch,
+    WheelCommand,
+    make_codec,
+)
+
+__all__ = [
+    "FRAMINGS",
+    "PROTOCOL_VERSION",
+    "Capability",
+    "Codec",
+    "CommandKind",
+    "Feedback",
+    "Framing",
+    "Hello",
+    "LinkStats",
+    "Message",
+    "MsgType",
+    "PeerRole",
+    "Received",
+    "ReferenceCodec",
+    "ReferenceDecoder",
+    "RobustCodec",
+    "RobustDecoder",
+    "Role",
+    "VersionMismatch",
+    "WheelCommand",
+    "make_codec",
+]
