@@ -5,10 +5,14 @@ runs on a robot's PC with nothing else installed.
 
 * ``bridge.protocol``: messages, the reference framing (SPEC §1) and the robust framing,
   streaming decoders and their statistics;
+* ``bridge.link``: :class:`SerialLink`, either framing over any pyserial URL.
+
+The MCU side of the robust framing, in C99, is in ``firmware/``.
 """
 
 from __future__ import annotations
 
+from .link import IncompatibleVersionError, LinkError, LinkOpenError, SerialLink
 from .protocol import (
     FRAMINGS,
     PROTOCOL_VERSION,
@@ -42,6 +46,9 @@ __all__ = [
     "Feedback",
     "Framing",
     "Hello",
+    "IncompatibleVersionError",
+    "LinkError",
+    "LinkOpenError",
     "LinkStats",
     "Message",
     "MsgType",
@@ -52,6 +59,7 @@ __all__ = [
     "RobustCodec",
     "RobustDecoder",
     "Role",
+    "SerialLink",
     "VersionMismatch",
     "WheelCommand",
     "make_codec",
