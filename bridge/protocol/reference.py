@@ -197,11 +197,15 @@ class ReferenceDecoder:
             else:
                 self.stats.false_frames += 1
                 self._pos = p + 1
+        # No later frame can start before _pos: count what lies behind it now, so the link
+        # statistics show garbage as it arrives.
+        self.stats.bytes_skipped += self._pos - self._skip_from
+        self._skip_from = self._pos
         self._compact()
         return frames
 
     def _compact(self) -> None:
-        drop = min(self._pos, self._skip_from) - self._base
+        drop = self._pos - self._base
         if drop >= _COMPACT_BYTES:
             del self._buf[:drop]
             self._base += drop

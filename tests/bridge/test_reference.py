@@ -144,6 +144,13 @@ def test_resynchronises_after_a_cut_frame() -> None:
     assert decoder.stats.false_frames == 1  # the cut frame's header was a candidate
 
 
+def test_garbage_is_counted_as_skipped_as_it_arrives() -> None:
+    decoder = ReferenceDecoder()
+    decoder.feed(bytes(100) + b"\xa5")
+    assert decoder.stats.bytes_skipped == 100  # the trailing A5 may start a header
+    assert decoder.pending_bytes == 1
+
+
 def test_resynchronises_after_garbage_that_has_no_a5() -> None:
     stream = bytes(range(0x10, 0x50)) + encode_reference(-91, 165) + b"\x00\x01"
     assert decode_all(stream) == [(-91, 165)]
