@@ -43,7 +43,7 @@ def _recovered(sent: Sequence[object], got: Sequence[object]) -> int:
     return k
 
 
-def _best_rate(n_bytes: int, run: Callable[[], object], repeats: int = 3) -> float:
+def _best_rate(n_bytes: int, run: Callable[[], object], repeats: int = 5) -> float:
     """Best of ``repeats`` runs, MB/s: the least disturbed by the other core's load."""
     best = 0.0
     for _ in range(repeats):
