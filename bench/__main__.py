@@ -118,10 +118,18 @@ def bench_memory(quick: bool) -> list[tuple[str, float, str]]:
     return rows
 
 
+def bench_serial_link(quick: bool) -> list[tuple[str, float, str]]:
+    """The serial link's decoders (bench/bridge.py)."""
+    from bench.bridge import bench_bridge
+
+    return bench_bridge(quick)
+
+
 BENCHMARKS: dict[str, Callable[[bool], list[tuple[str, float, str]]]] = {
     "single env (steps/s)": bench_single_env,
     "vector env (env-steps/s)": bench_vector_env,
     "memory (bytes)": bench_memory,
+    "serial link": bench_serial_link,
 }
 
 

@@ -76,7 +76,7 @@ def bench_bridge(quick: bool) -> list[tuple[str, float, str]]:
     garbage = rng.randbytes(n_garbage)
     rows: list[tuple[str, float, str]] = []
 
-    # Reference: encoder speeds in the robot's range (+-1.5 m/s), SPEC §1.
+    # Reference: encoder speeds in the robot's range (+-1.5 m/s), reference §1.
     pairs = [(rng.randint(-1500, 1500), rng.randint(-1500, 1500)) for _ in range(n_frames)]
     stream = _interleave(garbage, [encode_reference(*p) for p in pairs], rng)
     base = _best_rate(len(stream), lambda: _find_all(stream, b"\xa5\xa5"))

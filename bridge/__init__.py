@@ -3,7 +3,7 @@
 A leaf package: it imports numpy at most, never the simulator, training or evaluation, so it
 runs on a robot's PC with nothing else installed.
 
-* ``bridge.protocol``: messages, the reference framing (SPEC §1) and the robust framing,
+* ``bridge.protocol``: messages, the reference framing (reference §1) and the robust framing,
   streaming decoders and their statistics;
 * ``bridge.link``: :class:`SerialLink`, either framing over any pyserial URL.
 

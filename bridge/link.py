@@ -1,7 +1,7 @@
 """A serial link to the wheel microcontroller (or its emulator), in either framing.
 
 Every transport goes through pyserial's ``serial.serial_for_url``: a real port
-(``/dev/ttyUSB0``, ``COM3``) at the reference robot's 115200 baud (SPEC §1), ``socket://host:port``
+(``/dev/ttyUSB0``, ``COM3``) at the reference robot's 115200 baud (reference §1), ``socket://host:port``
 (an emulator, a serial-over-TCP bridge), ``loop://`` (tests), or any other URL pyserial knows.
 
     >>> from bridge import SerialLink, WheelCommand, CommandKind
@@ -36,7 +36,7 @@ from .protocol import (
 )
 
 REFERENCE_BAUD = 115200
-"""The reference robot's serial speed, baud (SPEC §1)."""
+"""The reference robot's serial speed, baud (reference §1)."""
 _READ_CHUNK = 4096  # bytes asked of one non-blocking read
 
 
@@ -69,7 +69,7 @@ class SerialLink:
 
     :param url: anything ``serial.serial_for_url`` opens: ``/dev/ttyUSB0``,
         ``socket://127.0.0.1:5760``, ``loop://``.
-    :param framing: ``"reference"`` (the reference robot's 6-byte frames, SPEC §1) or
+    :param framing: ``"reference"`` (the reference robot's 6-byte frames, reference §1) or
         ``"robust"`` (COBS + version + sequence + CRC-16, for new firmware).
     :param role: ``"pc"`` (sends commands, receives feedback) or ``"mcu"`` (the other end,
         e.g. an emulator that connects out).
@@ -200,7 +200,7 @@ class SerialLink:
         :raises IncompatibleVersionError: the peer speaks another protocol version.
         """
         if isinstance(self.codec, ReferenceCodec):
-            raise LinkError(f"{self.url}: the reference framing has no hello (SPEC §1)")
+            raise LinkError(f"{self.url}: the reference framing has no hello (reference §1)")
         self.send(hello)
         deadline = time.monotonic() + timeout_s
         others: list[Message] = []
@@ -231,7 +231,7 @@ class SerialLink:
 
     def _idle_flush_due(self, now: float) -> bool:
         # A reference frame whose data contains 0xA5 may wait for the next bytes; after a
-        # silence the stream is over for now (SPEC §1: frames are sent whole, back to back).
+        # silence the stream is over for now (reference §1: frames are sent whole, back to back).
         if self.idle_flush_s is None or not isinstance(self.codec, ReferenceCodec):
             return False
         return self.codec.decoder.pending_bytes > 0 and now - self._last_rx >= self.idle_flush_s

@@ -4,7 +4,7 @@
   policy meets the same person and the same sensor noise (:mod:`eval.rollout`).
 - Step logs (:mod:`eval.steplog`) are CSV, one row per control step, in a layout a real robot's
   log can be written in; :func:`read_step_log` validates one.
-- :data:`METRICS` are functions over a step log: the thesis's five (SPEC.md §1.6) and more
+- :data:`METRICS` are functions over a step log: the thesis's five (reference §1.6) and more
   (:mod:`eval.metrics`); :func:`episode_metrics` computes them all.
 - :func:`summarize` and :func:`compare` give bootstrap CIs and paired tests (:mod:`eval.stats`);
   :mod:`eval.report` writes tables, plots and videos; ``follow-eval`` (:mod:`eval.cli`) fronts it.

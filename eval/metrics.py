@@ -1,6 +1,6 @@
 """Metrics of one episode, each one function over a step log (:mod:`eval.steplog`).
 
-## The thesis's metrics (SPEC.md §1.6), and how each reading was decided
+## The thesis's metrics (reference §1.6), and how each reading was decided
 - ``mean_offset_px``: MeanOffset, the mean absolute pixel offset. From the **observed** offset
   (``obs_offset_px``), because the thesis logged camera data: what the detector published, with
   its jitter, not the true position of the person. Only rows with a fresh detection count
@@ -21,7 +21,7 @@
 
 ## Further metrics
 ``mean_true_offset_px`` (mean |true offset|, simulation only), ``mean_distance_error_m`` and
-``rms_distance_error_m`` (distance minus the 1.0 m reference, SPEC.md §1.5; true distance when
+``rms_distance_error_m`` (distance minus the 1.0 m reference, reference §1.5; true distance when
 logged, else the published one where it is > 0), ``reacquire_time_s``, ``jerk_rms_m_s3``,
 ``turn_accel_rms_rad_s2``, ``lost_rate_pct`` and ``collision_rate_pct`` (per episode 100 or 0,
 so their mean over episodes is a rate), ``path_length_ratio``.
@@ -54,7 +54,7 @@ __all__ = [
     "metric",
 ]
 
-#: Desired following distance (SPEC.md §1.5: "the 1.0 m in V").
+#: Desired following distance (reference §1.5: "the 1.0 m in V").
 TARGET_DISTANCE_M = 1.0
 #: Episode endings that count as a collision (``follow_env.INFO_KEYS`` "termination").
 COLLISION_ENDINGS = frozenset({"collision_wall", "collision_person", "collision_bystander"})
@@ -71,7 +71,7 @@ class Metric:
     :param unit: unit for labels.
     :param label: short human label for plots and tables.
     :param fn: the function over a step log.
-    :param thesis: one of the thesis's five metrics (SPEC.md §1.6).
+    :param thesis: one of the thesis's five metrics (reference §1.6).
     """
 
     name: str
@@ -122,7 +122,7 @@ def _std(values: np.ndarray) -> float:
     return float(np.std(values)) if values.size else float("nan")
 
 
-# -- the thesis's metrics (SPEC.md §1.6) ---------------------------------------------------------
+# -- the thesis's metrics (reference §1.6) ---------------------------------------------------------
 
 
 @metric("mean_offset_px", "px", "MeanOffset (px)", thesis=True)
@@ -227,7 +227,7 @@ def jerk_rms_m_s3(log: pd.DataFrame) -> float:
 def turn_accel_rms_rad_s2(log: pd.DataFrame) -> float:
     """RMS of the yaw acceleration [rad/s²]: finite difference of ``robot_w_radps`` between rows.
 
-    The three classical laws share V = kv (d - 1) and differ only in w (SPEC.md §1.5), so
+    The three classical laws share V = kv (d - 1) and differ only in w (reference §1.5), so
     MeanAccel/StdAccel, being forward accelerations, can barely tell them apart; this is the
     smoothness of what they do differ in. NaN without ``robot_w_radps``.
     """
@@ -300,7 +300,7 @@ def path_length_ratio(log: pd.DataFrame) -> float:
 
 METRICS: MappingProxyType[str, Metric] = MappingProxyType(_REGISTRY)
 """Every registered metric by name, in registration order (the table's column order)."""
-#: The thesis's five metrics, in the order of its table (SPEC.md §1.6).
+#: The thesis's five metrics, in the order of its table (reference §1.6).
 THESIS_METRICS: tuple[str, ...] = (
     "mean_offset_px",
     "std_offset_px",

@@ -113,7 +113,7 @@ def comparison_markdown(
 def markdown_report(summary: pd.DataFrame, comparisons: pd.DataFrame | None = None) -> str:
     """The headline table, the further metrics and (if given) the paired comparisons."""
     parts = [
-        "## Thesis metrics (SPEC.md §1.6) with collisions, losses and distance error: "
+        "## Thesis metrics (reference §1.6) with collisions, losses and distance error: "
         "mean [95 % bootstrap CI] over episodes\n",
         summary_markdown(summary),
         "\n\n## Further metrics\n",

@@ -1,6 +1,6 @@
 """Step logs: one CSV per episode, one row per control step, in a layout a real robot can write.
 
-The reference robot logged its camera and encoder data to CSV every 0.1 s (SPEC.md §1.6). A step
+The reference robot logged its camera and encoder data to CSV every 0.1 s (reference §1.6). A step
 log here is that file, extended with the simulation's ground truth. Only the first columns are
 needed to compute the thesis metrics, so a log recorded on the real robot (time, observation,
 encoder speeds) is read and scored by the same code as a simulated one; every other column is
@@ -14,7 +14,7 @@ In this order (units in the names; a real robot's log may leave out any optional
 | ``policy``, ``scenario``, ``seed`` | | no | what ran (text, text, integer); constant per file |
 | ``step`` | | no | control step index, 0 at reset |
 | ``time_s`` | s | yes | time since reset; strictly increasing |
-| ``obs_distance_m`` | m | yes | published distance (SPEC §1.4; 0 = no reading yet) |
+| ``obs_distance_m`` | m | yes | published distance (reference §1.4; 0 = no reading yet) |
 | ``obs_offset_px`` | px | yes | published offset, > 0 right of centre (held when not detected) |
 | ``detected`` | 0/1 | no | a fresh detection was published at this step |
 | ``raw_depth_m`` | m | no | the depth pixel behind the last detection, before the filter |
@@ -246,7 +246,7 @@ def validate_step_log(
 def accel_from_speed(time_s: pd.Series, speed_mps: pd.Series) -> pd.Series:
     """Acceleration as the robot computes it: speed difference over the time between rows.
 
-    The first row has no predecessor and gets 0 (the robot starts at rest, SPEC.md §1.6).
+    The first row has no predecessor and gets 0 (the robot starts at rest, reference §1.6).
 
     :param time_s: sample times [s].
     :param speed_mps: encoder speed [m/s].

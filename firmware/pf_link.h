@@ -9,7 +9,7 @@
  *
  *     version u8 | type u8 | seq u16 | payload (0..64 bytes) | CRC-16 u16
  *
- * multi-byte fields big-endian (as the reference protocol, SPEC §1). The CRC is
+ * multi-byte fields big-endian (as the reference protocol, reference §1). The CRC is
  * CRC-16/CCITT-FALSE (poly 0x1021, init 0xFFFF, no reflection, xorout 0; check value 0x29B1
  * for "123456789") over every byte before it.
  */

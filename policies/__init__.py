@@ -1,6 +1,6 @@
 """Everything that maps an observation ``[distance_m, offset_px]`` to an action ``[v, w]``.
 
-The classical guidance laws of SPEC §1.5 (PN, MPN, GS-MPN and its variants) and, later,
+The classical guidance laws of reference §1.5 (PN, MPN, GS-MPN and its variants) and, later,
 learned agents, all behind one :class:`Policy` protocol and reachable by name::
 
     >>> import numpy as np

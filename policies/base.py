@@ -5,7 +5,7 @@ and units, no simulation import), which gives the observation's size; nothing he
 simulator, training code, torch or stable-baselines3.
 
 ## Observation
-float32 array, shape (2,) (SPEC §1.4, step 5):
+float32 array, shape (2,) (reference §1.4, step 5):
 
 | index | name       | unit | meaning                                                      |
 |-------|------------|------|--------------------------------------------------------------|
@@ -13,7 +13,7 @@ float32 array, shape (2,) (SPEC §1.4, step 5):
 | 1     | offset_px  | px   | box centre minus image centre; > 0 means right of centre     |
 
 ## Before the first reading
-``distance_m <= 0`` means the perception has not measured the person yet (SPEC §1.4: the
+``distance_m <= 0`` means the perception has not measured the person yet (reference §1.4: the
 distance filter starts from nothing, and invalid depth reads as 0). The reference robot did not
 move before its first detection, so every guidance law then commands a zero action and leaves
 its memory untouched; without this, ``V = kv (0 - 1.0)`` would drive backwards at full speed.
@@ -26,7 +26,7 @@ float32 array, shape (2,), SI:
 | 0     | v_mps   | m/s   | forward speed                          |
 | 1     | w_radps | rad/s | yaw rate, counter-clockwise positive   |
 
-## Sign convention (SPEC §1.5 "Sign")
+## Sign convention (reference §1.5 "Sign")
 Image u grows to the right and w is counter-clockwise positive, so a person right of centre
 (offset_px > 0) needs a clockwise turn: w < 0. The thesis hid this sign in its motor wiring; each
 law here applies it with one commented minus sign.
@@ -44,7 +44,7 @@ from numpy.typing import ArrayLike
 from follow_env.sim.checks import check_number
 from follow_env.tasks.person_follow.spec import SPEC
 
-# A distance at or below this means "no valid reading yet" (SPEC §1.4: invalid depth is 0).
+# A distance at or below this means "no valid reading yet" (reference §1.4: invalid depth is 0).
 NO_READING_M = 0.0
 OBS_SIZE = SPEC.observation_size
 """Entries of an observation (the task spec's)."""
@@ -249,7 +249,7 @@ class GuidanceLaw(ABC):
 
 class OffsetRateLaw(GuidanceLaw):
     """Base of the laws with a derivative term: remembers the previous offset for
-    ``rate = (o - o_prev) / dt`` (SPEC §1.5); the first step after a reset has rate 0."""
+    ``rate = (o - o_prev) / dt`` (reference §1.5); the first step after a reset has rate 0."""
 
     def __init__(self) -> None:
         self._prev_offset_px: float | None = None

@@ -1,4 +1,4 @@
-"""Gain-scheduled modified proportional navigation (GS-MPN), SPEC §1.5.
+"""Gain-scheduled modified proportional navigation (GS-MPN), reference §1.5.
 
 MPN whose derivative gain kd grows from 0 to lambda_d with the size of the scheduling signal:
 
@@ -55,7 +55,7 @@ EQUATION_DISTANCE_FLOOR_M = 1.0
 
 
 def scheduled_gain(x: float, lambda_d: float, a: float, *, listing: bool = False) -> float:
-    """The GS-MPN gain kd for scheduling signal ``x`` (SPEC §1.5).
+    """The GS-MPN gain kd for scheduling signal ``x`` (reference §1.5).
 
     kd = lambda_d (1 - e) / (1 + e) with e = exp(-a |x|), i.e. lambda_d tanh(a |x| / 2):
     0 at x = 0, rising towards lambda_d as |x| grows, never above it.
@@ -155,17 +155,17 @@ class GSMPN(OffsetRateLaw):
     def _command(self, distance_m: float, offset_px: float) -> tuple[float, float]:
         p = self.params
         rate_px_s = self._offset_rate(offset_px, p.dt_s)  # remembered by every variant
-        # SPEC §1.5 GS-MPN: V = kv (d - 1.0)
+        # reference §1.5 GS-MPN: V = kv (d - 1.0)
         v_mps = p.kv_per_s * (distance_m - p.d_ref_m)
         if p.variant == "equation":
-            # SPEC §1.5, the thesis equation: kd scheduled on |o|; w = kw o / max(d, 1) + kd o
+            # reference §1.5, the thesis equation: kd scheduled on |o|; w = kw o / max(d, 1) + kd o
             kd = scheduled_gain(offset_px, p.lambda_d, p.a)
             w_law = (
                 p.kw_rad_per_s_px * offset_px / max(distance_m, EQUATION_DISTANCE_FLOOR_M)
                 + kd * offset_px
             )
         else:
-            # SPEC §1.5, the code listing: rate = (o - o_prev) / dt; kd scheduled on |rate|;
+            # reference §1.5, the code listing: rate = (o - o_prev) / dt; kd scheduled on |rate|;
             # w = N kw o / d + kd rate
             kd = scheduled_gain(rate_px_s, p.lambda_d, p.a, listing=p.variant == "listing")
             w_law = (

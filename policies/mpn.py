@@ -1,4 +1,4 @@
-"""Modified proportional navigation (MPN), SPEC §1.5.
+"""Modified proportional navigation (MPN), reference §1.5.
 
     rate = (o - o_prev) / dt          (0 on the first step after reset)
     V    = kv (d - d_ref)
@@ -6,7 +6,7 @@
 
 PN plus a constant-gain derivative term on the pixel offset. The law remembers the previous
 offset itself. The spec divides by d alone; ``max(d, 0.1 m)`` only guards readings below the
-camera's minimum depth (about 0.17 m, SPEC §1.3). d <= 0 ("no valid reading yet") never
+camera's minimum depth (about 0.17 m, reference §1.3). d <= 0 ("no valid reading yet") never
 reaches the law: it gives a zero action (:mod:`policies.base`).
 
 ## Thesis preset in SI
@@ -23,7 +23,7 @@ from types import MappingProxyType
 
 from policies.base import LawParams, OffsetRateLaw, check_range
 
-# Guards the division by d (SPEC §1.5 writes a bare "/ d"); see the module docstring.
+# Guards the division by d (reference §1.5 writes a bare "/ d"); see the module docstring.
 DISTANCE_FLOOR_M = 0.1
 
 
@@ -86,7 +86,7 @@ class MPN(OffsetRateLaw):
     def _command(self, distance_m: float, offset_px: float) -> tuple[float, float]:
         p = self.params
         rate_px_s = self._offset_rate(offset_px, p.dt_s)
-        # SPEC §1.5 MPN: rate = (o - o_prev) / dt; V = kv (d - 1.0);
+        # reference §1.5 MPN: rate = (o - o_prev) / dt; V = kv (d - 1.0);
         # w = N kw o / d + lambda rate
         v_mps = p.kv_per_s * (distance_m - p.d_ref_m)
         w_law = (

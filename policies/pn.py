@@ -1,4 +1,4 @@
-"""Proportional navigation (PN), SPEC §1.5.
+"""Proportional navigation (PN), reference §1.5.
 
     V = kv (d - d_ref)
     w = -(N kw o / max(d, 1.0))
@@ -7,7 +7,7 @@ d = person distance [m], o = pixel offset [px] (> 0 = right of centre), d_ref = 
 distance [m]. The minus sign is the project's sign convention (see :mod:`policies.base`).
 
 ## Thesis preset in SI
-The thesis gives kv = 5000, kw = 50.0, N = 0.1 without units. SPEC §1.5 "Units": the reading
+The thesis gives kv = 5000, kw = 50.0, N = 0.1 without units. reference §1.5 "Units": the reading
 that makes them consistent is V in mm/s and w in mrad/s, with d in metres. So:
 
 - kv = 5000 mm/s per m = 5.0 m/s per m = 5.0 1/s.
@@ -23,7 +23,7 @@ from types import MappingProxyType
 
 from policies.base import GuidanceLaw, LawParams, check_range
 
-# SPEC §1.5: PN divides by max(d, 1.0). (d <= 0, "no valid reading yet", gives a zero action
+# reference §1.5: PN divides by max(d, 1.0). (d <= 0, "no valid reading yet", gives a zero action
 # before the law runs; see policies.base.)
 PN_DISTANCE_FLOOR_M = 1.0
 
@@ -77,7 +77,7 @@ class PN(GuidanceLaw):
 
     def _command(self, distance_m: float, offset_px: float) -> tuple[float, float]:
         p = self.params
-        # SPEC §1.5 PN: V = kv (d - 1.0); w = N kw o / max(d, 1.0)
+        # reference §1.5 PN: V = kv (d - 1.0); w = N kw o / max(d, 1.0)
         v_mps = p.kv_per_s * (distance_m - p.d_ref_m)
         w_law = p.nav_n * p.kw_rad_per_s_px * offset_px / max(distance_m, PN_DISTANCE_FLOOR_M)
         # Sign convention: o > 0 (person right of centre) needs a clockwise turn, i.e. w < 0.

@@ -2,7 +2,7 @@
 
 Two framings, selectable by name, behind one interface (:class:`Codec`):
 
-* ``"reference"``: the reference robot's 6-byte ``A5 A5`` frames, exactly (SPEC §1);
+* ``"reference"``: the reference robot's 6-byte ``A5 A5`` frames, exactly (reference §1);
 * ``"robust"``: COBS frames with a version byte, a sequence number and a CRC-16, for new
   firmware (the C codec in ``firmware/`` is its MCU side).
 

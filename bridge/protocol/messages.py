@@ -47,12 +47,12 @@ class CommandKind(IntEnum):
 
     DUTY_CENTI_PERCENT = 0
     """Motor duty in 0.01 % (-10000 = full reverse, 10000 = full forward), for firmware whose
-    wheel PID runs on the PC (as the reference robot's does, SPEC §1.2)."""
+    wheel PID runs on the PC (as the reference robot's does, reference §1.2)."""
     SPEED_MM_S = 1
     """Wheel speed target in mm/s, for firmware that runs the wheel PID itself."""
     DUTY_PERCENT = 2
     """Motor duty in whole percent: what the reference firmware reads from its 6-byte command
-    (SPEC §1: clamped to +-99 by its driver). Reference framing only."""
+    (reference §1: clamped to +-99 by its driver). Reference framing only."""
 
 
 class Capability(IntFlag):
@@ -98,7 +98,7 @@ class WheelCommand:
 
 @dataclass(frozen=True, slots=True)
 class Feedback:
-    """MCU -> PC: what the wheel controller measured, sent every 10 ms (SPEC §1).
+    """MCU -> PC: what the wheel controller measured, sent every 10 ms (reference §1).
 
     The reference framing carries only the two speeds; the other fields are then ``None``.
 
@@ -143,7 +143,7 @@ class Hello:
     :param role: ``PeerRole.PC`` or ``PeerRole.MCU``.
     :param capabilities: what the sender accepts and sends (:class:`Capability` bits).
     :param feedback_period_ms: the MCU's feedback period, ms (10 on the reference robot,
-        SPEC §1); 0 from a PC.
+        reference §1); 0 from a PC.
     :param firmware_version: (major, minor, patch) of the sender's software, each uint8.
     """
 

@@ -1,4 +1,4 @@
-"""The reference robot's framing, exactly as its firmware speaks it (SPEC §1).
+"""The reference robot's framing, exactly as its firmware speaks it (reference §1).
 
 Both directions use the same 6-byte frame, with no checksum and no length::
 
@@ -31,11 +31,11 @@ from .messages import (
 from .stats import LinkStats
 
 HEADER = b"\xa5\xa5"
-"""The two header bytes of every reference frame (SPEC §1)."""
+"""The two header bytes of every reference frame (reference §1)."""
 FRAME_LEN = 6
 """Bytes in a reference frame: 2 header + 2 x int16."""
 _A5 = 0xA5
-_FRAME = struct.Struct(">2shh")  # big-endian, as the reference firmware writes it (SPEC §1)
+_FRAME = struct.Struct(">2shh")  # big-endian, as the reference firmware writes it (reference §1)
 _COMPACT_BYTES = 1 << 16  # drop consumed bytes from the buffer once this many have piled up
 
 
@@ -253,7 +253,7 @@ class ReferenceCodec:
         :class:`WheelCommand`.
     :param command_kind: what the firmware at the MCU end does with the two command values;
         the wire does not say. The reference firmware reads whole percent duty
-        (``CommandKind.DUTY_PERCENT``, SPEC §1).
+        (``CommandKind.DUTY_PERCENT``, reference §1).
     """
 
     framing = "reference"
@@ -283,7 +283,7 @@ class ReferenceCodec:
         if isinstance(message, Feedback):
             return encode_reference(message.right_mm_s, message.left_mm_s)
         if isinstance(message, Hello):
-            raise ValueError("the reference framing has no hello message (SPEC §1)")
+            raise ValueError("the reference framing has no hello message (reference §1)")
         raise TypeError(f"cannot encode {type(message).__name__}: not a message")
 
     def feed(self, data: bytes | bytearray | memoryview) -> list[Message]:

@@ -7,7 +7,7 @@ a cut frame), so garbage between frames can never swallow the next one; two deli
 row are an empty frame, which is ignored.
 
 **A frame** (before COBS), all multi-byte fields big-endian (the byte order of the reference
-protocol, SPEC §1)::
+protocol, reference §1)::
 
     offset  size  field
     0       1     protocol version (PROTOCOL_VERSION = 1)

@@ -197,7 +197,7 @@ class Platform:
 
 def motor_gains(keys: np.ndarray, n_motors: int, spread: float) -> np.ndarray:
     """Per-episode gain factors ``(len(keys), n_motors)``: ``1 + spread z`` clipped to
-    [0.5, 1.5] (SPEC §2's motor ratios P_i)."""
+    [0.5, 1.5] (reference §2's motor ratios P_i)."""
     gains = 1.0 + LaneRandom(keys[:, streams.MOTOR.index]).normal(
         n_motors, scale=spread, at=MOTOR_GAINS
     )

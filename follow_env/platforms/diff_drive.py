@@ -1,4 +1,4 @@
-"""The differential-drive base of the reference robot (SPEC §1.1, §1.2): one platform module.
+"""The differential-drive base of the reference robot (reference §1.1, §1.2): one platform module.
 
 Two wheels (right, left, as in the reference robot's serial protocol) under speed PIDs, each
 with its DC gear-motor and quadrature encoder (:mod:`follow_env.platforms.wheels`). Its action is
@@ -63,7 +63,7 @@ MAX_SUB_STEPS = 4096
 
 @dataclass(frozen=True)
 class RobotConfig(Validated):
-    """Geometry of the differential-drive base (SPEC §1.1: the thesis gives no r, L or size)."""
+    """Geometry of the differential-drive base (reference §1.1; the thesis gives no r, L, size)."""
 
     wheel_radius_m: float = param(
         0.075,
@@ -156,12 +156,12 @@ class DiffDriveConfig(PlatformConfig):
         return 2.0 * self.max_wheel_speed_mps / self.robot.track_width_m
 
 
-# --- kinematics (SPEC §1.1) ----------------------------------------------------------------
+# --- kinematics (reference §1.1) ----------------------------------------------------------------
 
 
 @njit(inline="always")
 def diff_drive_ik(v: float, w: float, r: float, L: float) -> tuple[float, float]:
-    """Wheel angular speeds (rad/s) for a body twist (SPEC §1.1).
+    """Wheel angular speeds (rad/s) for a body twist (reference §1.1).
 
     ``wR = (v + L w / 2) / r``, ``wL = (v - L w / 2) / r``.
 
@@ -174,7 +174,7 @@ def diff_drive_ik(v: float, w: float, r: float, L: float) -> tuple[float, float]
 
 @njit(inline="always")
 def diff_drive_fk(wR: float, wL: float, r: float, L: float) -> tuple[float, float]:
-    """Body twist for wheel angular speeds (SPEC §1.1): ``v = r/2 (wR + wL)``,
+    """Body twist for wheel angular speeds (reference §1.1): ``v = r/2 (wR + wL)``,
     ``w = r/L (wR - wL)``. Returns ``(v m/s, w rad/s)``."""
     return 0.5 * r * (wR + wL), r / L * (wR - wL)
 
@@ -183,7 +183,7 @@ def diff_drive_fk(wR: float, wL: float, r: float, L: float) -> tuple[float, floa
 def euler_pose_step(
     x: float, y: float, th: float, v: float, w: float, dt: float
 ) -> tuple[float, float, float]:
-    """One explicit Euler step of the unicycle pose (SPEC §1.1):
+    """One explicit Euler step of the unicycle pose (reference §1.1):
     ``x += v cos(th) dt``, ``y += v sin(th) dt``, ``th += w dt`` (th wrapped to (-pi, pi])."""
     x += v * np.cos(th) * dt
     y += v * np.sin(th) * dt
@@ -336,9 +336,9 @@ def drive(
 ) -> None:
     """One control step under ``action = [v m/s, w rad/s]`` (clipped to the platform's bounds).
 
-    1. Inverse kinematics to wheel targets, as linear wheel speeds (SPEC §1.1).
+    1. Inverse kinematics to wheel targets, as linear wheel speeds (reference §1.1).
     2. ``sub_steps`` ticks: per wheel PID on the last encoder estimate, the motor, the encoder
-       (SPEC §1.1, §1.2); forward kinematics with the *true* geometry and an Euler pose step.
+       (reference §1.1, §1.2); forward kinematics with the *true* geometry and an Euler pose step.
     3. The robot's own speed estimate (mean of the wheels' encoder speeds) and its finite
        difference over the control step: the acceleration the robot logs.
     """

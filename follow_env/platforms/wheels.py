@@ -1,4 +1,4 @@
-"""Wheels: the DC gear-motor, the quadrature encoder and the wheel speed PID (SPEC §1.1, §1.2).
+"""Wheels: the DC gear-motor, the quadrature encoder, the wheel speed PID (reference §1.1, §1.2).
 
 Their configuration sections (:class:`MotorConfig`, :class:`EncoderConfig`, :class:`PIDConfig`)
 and their compiled models, one wheel and one 10 ms tick at a time: every wheeled platform runs
@@ -34,7 +34,7 @@ class MotorConfig(Validated):
 
     Steady-state wheel speed for duty ``u`` (%): ``no_load * sign(u) * (|u| - friction) /
     (100 - friction)`` when ``|u| > friction``, else 0; a stopped wheel stays stopped while
-    ``|u| < stall_duty_pct`` (static friction; SPEC §2 reports such stalls on hardware).
+    ``|u| < stall_duty_pct`` (static friction; reference §2 reports such stalls on hardware).
     """
 
     no_load_speed_radps: float = param(
@@ -47,13 +47,13 @@ class MotorConfig(Validated):
         4.0, 0.0, 50.0, "%", "choice: Coulomb friction expressed as the duty it eats"
     )
     stall_duty_pct: float = param(
-        8.0, 0.0, 50.0, "%", "choice: static friction; SPEC §2 observes stalls at low duty"
+        8.0, 0.0, 50.0, "%", "choice: static friction; reference §2 observes stalls at low duty"
     )
     max_duty_pct: float = param(
-        99.0, 1.0, 100.0, "%", "SPEC §1.1: the gate driver cannot hold 100 %"
+        99.0, 1.0, 100.0, "%", "reference §1.1: the gate driver cannot hold 100 %"
     )
     gain_spread: float = param(
-        0.02, 0.0, 0.5, "", "choice: std of a per-episode, per-motor gain factor (SPEC §2 P_i)"
+        0.02, 0.0, 0.5, "", "choice: std of a per-episode, per-motor gain factor (reference §2 P_i)"
     )
 
     def __post_init__(self) -> None:
@@ -72,19 +72,21 @@ class MotorConfig(Validated):
 
 @dataclass(frozen=True)
 class EncoderConfig(Validated):
-    """Quadrature wheel encoder and the firmware's speed estimate (SPEC §1.1)."""
+    """Quadrature wheel encoder and the firmware's speed estimate (reference §1.1)."""
 
-    ppr: int = param(2048, 1, 1_000_000, "pulses/rev", "SPEC §1.1: AMT102-V", integer=True)
-    quadrature: int = param(4, 1, 4, "counts/pulse", "SPEC §1.1: counted in 4x mode", integer=True)
+    ppr: int = param(2048, 1, 1_000_000, "pulses/rev", "reference §1.1: AMT102-V", integer=True)
+    quadrature: int = param(
+        4, 1, 4, "counts/pulse", "reference §1.1: counted in 4x mode", integer=True
+    )
     sample_period_s: float = param(
-        0.01, 0.0005, 0.1, "s", "SPEC §1.1: firmware estimates speed every 10 ms"
+        0.01, 0.0005, 0.1, "s", "reference §1.1: firmware estimates speed every 10 ms"
     )
     speed_quantum_mps: float = param(
         0.001,
         0.0,
         0.1,
         "m/s",
-        "SPEC §1.1: speed sent as an int16 in mm/s (truncated); 0 disables the quantisation",
+        "reference §1.1: speed sent as an int16 in mm/s (truncated); 0 disables the quantisation",
     )
 
     @property
@@ -95,7 +97,7 @@ class EncoderConfig(Validated):
 
 @dataclass(frozen=True)
 class PIDConfig(Validated):
-    """Wheel speed PID with the low-pass filtered derivative of SPEC §1.2.
+    """Wheel speed PID with the low-pass filtered derivative of reference §1.2.
 
     Input: target minus measured linear wheel speed (m/s); output: duty (%). The thesis gives no
     gains; the defaults are tuned here (``tests/follow_env/test_drive.py`` shows the step
@@ -105,7 +107,7 @@ class PIDConfig(Validated):
     kp: float = param(120.0, 0.0, 1e4, "%/(m/s)", "choice: tuned, see class docstring")
     ki: float = param(1500.0, 0.0, 1e5, "%/m", "choice: tuned, see class docstring")
     kd: float = param(0.5, 0.0, 1e3, "%·s/(m/s)", "choice: tuned, see class docstring")
-    tau_s: float = param(0.01, 0.0, 1.0, "s", "SPEC §1.2: derivative low-pass time constant")
+    tau_s: float = param(0.01, 0.0, 1.0, "s", "reference §1.2: derivative low-pass time constant")
     anti_windup: str = param(
         "clamp",
         doc="choice: stop integrating while the duty is saturated and the error "
@@ -133,7 +135,7 @@ def encoder_speed(
     wheel_diameter_m: float,
     quantum_mps: float,
 ) -> float:
-    """Linear wheel speed (m/s) as the firmware estimates it (SPEC §1.1).
+    """Linear wheel speed (m/s) as the firmware estimates it (reference §1.1).
 
     ``rot = count / ppr``, ``rps = (rot - prev_rot) / period``, ``velocity = rps pi D``; the
     firmware sends it as an int16 in mm/s, so it is truncated towards zero to ``quantum_mps``
@@ -161,10 +163,10 @@ def pid_step(
     max_duty: float,
     anti_windup: bool,
 ) -> tuple[float, float, float]:
-    """One PID update with the low-pass filtered derivative of SPEC §1.2.
+    """One PID update with the low-pass filtered derivative of reference §1.2.
 
     ``integral += e dt``; ``raw = (e - e_prev) / dt``; ``D = (tau D_prev + dt raw) / (tau + dt)``;
-    ``u = Kp e + Ki integral + Kd D``, clamped to ``+-max_duty`` (SPEC §1.1). Anti-windup by
+    ``u = Kp e + Ki integral + Kd D``, clamped to ``+-max_duty`` (reference §1.1). Anti-windup by
     clamping: while the output saturates and the error pushes further into saturation the
     integral is not advanced.
 
@@ -205,7 +207,7 @@ def motor_step(
     Steady speed: ``gain * no_load * sign(u) * (|u| - friction) / (100 - friction)`` for
     ``|u| > friction``, else 0 (Coulomb friction eats the first ``friction`` % of duty). A wheel
     turning slower than a small stiction speed while ``|u| < stall`` stops dead (static
-    friction: SPEC §2 reports motors stalling at low duty). The lag of time constant ``tau`` is
+    friction: reference §2 reports motors stalling at low duty). The lag of time constant ``tau`` is
     integrated exactly over a tick ``dt``: ``omega += (omega_ss - omega) alpha`` with
     ``alpha = 1 - exp(-dt / tau)`` (see :func:`lag_factor`).
     """

@@ -1,4 +1,4 @@
-"""Pinhole camera with camera-to-robot extrinsics ``[R T]`` (SPEC §1.3), and what it sees.
+"""Pinhole camera with camera-to-robot extrinsics ``[R T]`` (reference §1.3), and what it sees.
 
 The camera's configuration (:class:`CameraConfig`: the Intel RealSense D435i's colour stream,
 its mounting, and its depth figures), its per-lane parameters (:data:`PARAMS`), the compiled
@@ -7,7 +7,7 @@ projection helpers, and :func:`sight_box`: the part of a body in the camera's li
 Frames: the camera frame has x right, y down, z forward (optical axis); the robot frame has
 x forward, y left, z up, origin on the floor below the wheel axle's centre. A point maps camera
 -> robot as ``p_r = R p_c + T``. Pixels: ``u = fx Xc / Zc + cx``, ``v = fy Yc / Zc + cy``, and
-back ``Xc = (u - cx) Zc / fx``, ``Yc = (v - cy) Zc / fy`` (SPEC §1.3).
+back ``Xc = (u - cx) Zc / fx``, ``Yc = (v - cy) Zc / fy`` (reference §1.3).
 
 :func:`project` and :func:`back_project` are vectorised numpy functions for users and tests; the
 compiled helpers below are what the core's kernel calls, one lane at a time.
@@ -48,7 +48,7 @@ NEAR_PLANE_M = 0.01
 
 @dataclass(frozen=True)
 class CameraConfig(Validated):
-    """Pinhole colour camera with aligned depth (Intel RealSense D435i, SPEC §1.3).
+    """Pinhole colour camera with aligned depth (Intel RealSense D435i, reference §1.3).
 
     Intrinsics derive from the field of view: ``fy = (height/2) / tan(vfov/2)``, ``fx = fy``
     (square pixels), principal point at the image centre. The D435i colour sensor has a
@@ -68,14 +68,14 @@ class CameraConfig(Validated):
     mount_z_m: float = param(0.60, 0.05, 3.0, "m", "choice: on a mast above the cargo deck")
     pitch_deg: float = param(0.0, -60.0, 60.0, "deg", "choice: level")
     yaw_deg: float = param(0.0, -90.0, 90.0, "deg", "choice: straight ahead")
-    depth_min_m: float = param(0.1, 0.0, 5.0, "m", "SPEC §1.3: range 0.1 to 10 m")
-    depth_max_m: float = param(10.0, 0.5, 100.0, "m", "SPEC §1.3: range 0.1 to 10 m")
+    depth_min_m: float = param(0.1, 0.0, 5.0, "m", "reference §1.3: range 0.1 to 10 m")
+    depth_max_m: float = param(10.0, 0.5, 100.0, "m", "reference §1.3: range 0.1 to 10 m")
     depth_focal_px: float = param(
-        424.0, 10.0, 5000.0, "px", "SPEC §1.3: depth focal length at 848 px width"
+        424.0, 10.0, 5000.0, "px", "reference §1.3: depth focal length at 848 px width"
     )
-    depth_baseline_m: float = param(0.05, 0.001, 1.0, "m", "SPEC §1.3: stereo baseline 50 mm")
+    depth_baseline_m: float = param(0.05, 0.001, 1.0, "m", "reference §1.3: stereo baseline 50 mm")
     depth_subpixel: float = param(
-        0.08, 0.0, 1.0, "px", "SPEC §1.3: RMS = Z^2 subpixel / (f B); 0.08 typical, 0.03 tuned"
+        0.08, 0.0, 1.0, "px", "reference §1.3: RMS = Z^2 subpixel / (f B); 0.08 typical, 0.03 tuned"
     )
     depth_unit_m: float = param(
         0.001, 0.0, 0.1, "m", "datasheet: depth is reported in whole millimetres; 0 = exact"
@@ -180,7 +180,7 @@ class Camera:
 
 
 def project(cam: Camera, p_cam: np.ndarray) -> np.ndarray:
-    """Pixel coordinates (..., 2) of camera-frame points (..., 3) (SPEC §1.3 pinhole).
+    """Pixel coordinates (..., 2) of camera-frame points (..., 3) (reference §1.3 pinhole).
 
     Points at or behind the camera plane (``Zc <= 0``) give NaN.
     """
@@ -193,7 +193,7 @@ def project(cam: Camera, p_cam: np.ndarray) -> np.ndarray:
 
 
 def back_project(cam: Camera, uv: np.ndarray, depth_m: np.ndarray) -> np.ndarray:
-    """Camera-frame points (..., 3) for pixels (..., 2) and depths Zc (...) (SPEC §1.3):
+    """Camera-frame points (..., 3) for pixels (..., 2) and depths Zc (...) (reference §1.3):
     ``Xc = (u - cx) Zc / fx``, ``Yc = (v - cy) Zc / fy``, ``Zc = D(u, v)``."""
     uv = np.asarray(uv, dtype=float)
     z = np.asarray(depth_m, dtype=float)

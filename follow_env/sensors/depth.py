@@ -1,5 +1,5 @@
 """Depth: the value at one pixel of the D435i's aligned depth image, and the robot's distance
-filter (SPEC §1.3, §1.4).
+filter (reference §1.3, §1.4).
 
 :func:`depth_ray` casts the pixel's ray through the world (people as upright boxes, walls and
 obstacles up to their height, the floor); :func:`measure` adds the D435i's noise (RMS growing
@@ -35,7 +35,7 @@ HISTORY_MAX = 32
 
 @njit(inline="always")
 def depth_noise_std(z_m: float, subpixel: float, focal_px: float, baseline_m: float) -> float:
-    """D435i depth RMS error (m) at depth ``z_m`` (SPEC §1.3): ``Z^2 subpixel / (f B)``."""
+    """D435i depth RMS error (m) at depth ``z_m`` (reference §1.3): ``Z^2 subpixel / (f B)``."""
     return z_m * z_m * subpixel / (focal_px * baseline_m)
 
 
@@ -111,7 +111,7 @@ def depth_ray(
 ) -> float:
     """True depth Zc (m) seen at pixel (cu, cv) by a camera at (ox, oy) on a robot heading
     th (``c, s = cos th, sin th``): the nearest of people (upright boxes of ``body = (width,
-    depth, height)``), walls and floor along the pixel's ray (SPEC §1.3 back-projection);
+    depth, height)``), walls and floor along the pixel's ray (reference §1.3 back-projection);
     ``inf`` if the ray hits nothing."""
     dcx = (cu - cam.cx) / cam.fx
     dcy = (cv - cam.cy) / cam.fy
@@ -168,13 +168,13 @@ def depth_ray(
 @njit(inline="always")
 def measure(prm: np.void, z: float, keys: np.ndarray, step: int) -> float:
     """What the depth stream reports for a true depth ``z`` (m): 0 (invalid) out of range or
-    for a random invalid pixel, else ``z`` plus noise of RMS ``depth_k z^2`` (SPEC §1.3),
+    for a random invalid pixel, else ``z`` plus noise of RMS ``depth_k z^2`` (reference §1.3),
     quantised to ``depth_unit``."""
     kd = keys[_DEPTH]
     dslot = step * _STRIDE + _OFFSET
     if z < prm.depth_min or z > prm.depth_max:
         return 0.0
-    z += normal_pair_at(kd, dslot)[0] * prm.depth_k * z * z  # RMS ~ Z^2 (SPEC §1.3)
+    z += normal_pair_at(kd, dslot)[0] * prm.depth_k * z * z  # RMS ~ Z^2 (reference §1.3)
     if prm.depth_unit > 0.0:
         z = np.round(z / prm.depth_unit) * prm.depth_unit
     invalid = uniform_at(kd, dslot + 1) < prm.invalid_p
@@ -187,7 +187,7 @@ def measure(prm: np.void, z: float, keys: np.ndarray, step: int) -> float:
 def distance_filter(
     raw_m: float, prev_m: float, history: np.ndarray, count: int, head: int, length: int
 ) -> tuple[float, int, int]:
-    """The asymmetric distance filter of SPEC §1.4 step 4.
+    """The asymmetric distance filter of reference §1.4 step 4.
 
     * ``raw == 0`` (invalid depth): keep the previous value;
     * ``raw < prev`` (approaching): reset the history to ``[raw]`` and return ``raw``;

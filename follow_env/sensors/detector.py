@@ -1,4 +1,4 @@
-"""The person detector as the robot meets it (SPEC §1.3, §1.4): misses, bursts, jitter, the
+"""The person detector as the robot meets it (reference §1.3, §1.4): misses, bursts, jitter, the
 detector's list order, the association rule (first detection, or a tracker with re-ID), and the
 delay line of its latency.
 
@@ -45,20 +45,20 @@ SLOTS_PER_PERSON = 8
 
 @dataclass(frozen=True)
 class PerceptionConfig(Validated):
-    """Detector model, first-detection rule and distance filter (SPEC §1.3, §1.4)."""
+    """Detector model, first-detection rule and distance filter (reference §1.3, §1.4)."""
 
     latency_frames: int = param(
         1, 0, 8, "frames", "choice: the detector result arrives one 0.1 s frame late", integer=True
     )
     miss_prob: float = param(0.03, 0.0, 1.0, "", "choice: independent misses per frame")
     burst_start_prob: float = param(
-        0.01, 0.0, 1.0, "", "SPEC §1.3: bursts of occlusion; chance per frame that one starts"
+        0.01, 0.0, 1.0, "", "reference §1.3: bursts of occlusion; chance per frame that one starts"
     )
     burst_mean_frames: float = param(
         5.0, 1.0, 1000.0, "frames", "choice: mean length of a burst (geometric)"
     )
     center_jitter_frac: float = param(
-        0.05, 0.0, 1.0, "of box height", "SPEC §1.3: centre jitter std ~ 1/20 of box height"
+        0.05, 0.0, 1.0, "of box height", "reference §1.3: centre jitter std ~ 1/20 of box height"
     )
     size_jitter_frac: float = param(
         0.05, 0.0, 1.0, "of box size", "choice: width/height jitter std"
@@ -70,11 +70,11 @@ class PerceptionConfig(Validated):
         10.0, 0.0, 1000.0, "px", "choice: smaller boxes are below the detector's resolution"
     )
     filter_history: int = param(
-        5, 1, 32, "samples", "choice: SPEC §1.4 leaves the history length open", integer=True
+        5, 1, 32, "samples", "choice: reference §1.4 leaves the history length open", integer=True
     )
     association: str = param(
         "first",
-        doc="SPEC §1.4: the robot follows the first detection ('first'); 'tracker' keeps the "
+        doc="reference §1.4: the robot follows the first detection ('first'); 'tracker' keeps the "
         "detection that looks like the target and best overlaps its predicted box (appearance "
         "and IoU gates, constant-velocity prediction), the fix for bystanders who steal it",
         choices=("first", "tracker"),
@@ -131,7 +131,7 @@ def jitter_box(
     size_frac: float,
 ) -> tuple[float, float, float, float]:
     """Detector box noise: the centre moves by ``center_frac * box height`` standard deviations
-    (SPEC §1.3: about 1/20 of the box height), width and height scale by ``1 + size_frac z``.
+    (reference §1.3: about 1/20 of the box height), width and height scale by ``1 + size_frac z``.
     ``z_*`` are standard normal draws."""
     w, h = u2 - u1, v2 - v1
     cu = 0.5 * (u1 + u2) + center_frac * h * z_cu
@@ -153,7 +153,7 @@ def listed_before(area: float, best_area: float) -> bool:
 
 @njit
 def first_detection(boxes: np.ndarray, detected: np.ndarray) -> int:
-    """The detection the robot follows: the first of the detector's list (SPEC §1.4 step 2).
+    """The detection the robot follows: the first of the detector's list (reference §1.4 step 2).
 
     The detector lists boxes by confidence, modelled as box area, largest first; ties keep the
     lower index. ``boxes`` is (n, 4) ``u1, v1, u2, v2``; returns the index into ``boxes`` of the
@@ -395,7 +395,7 @@ def consider(
     reid: Candidate,
     match: Candidate,
 ) -> tuple[Candidate, Candidate, Candidate]:
-    """Walk the detector's list as it is produced: keep the first listed detection (SPEC §1.4
+    """Walk the detector's list as it is produced: keep the first listed detection (reference §1.4
     step 2, order as in :func:`first_detection`), the first listed one that looks like the
     target (re-ID; every one before the target's look is known), and the one that looks like it
     and best overlaps the tracker's predicted box."""

@@ -2,7 +2,7 @@
 
 With ``perception.association = "tracker"`` the robot follows the detection that best overlaps
 the track's predicted box (an IoU gate) and looks like the target (an appearance gate standing
-in for re-identification), instead of the first detection (SPEC §1.4), which a nearer bystander
+in for re-identification), instead of the first detection (reference §1.4), which a nearer bystander
 steals. The state lives in the detector's record (:data:`follow_env.sensors.detector.STATE`).
 """
 

@@ -1,7 +1,7 @@
-"""T-RRT: a transition-based RRT on a 2-D cost map (SPEC §3), for people's walking paths.
+"""T-RRT: a transition-based RRT on a 2-D cost map (reference §3), for people's walking paths.
 
 A plain RRT finds *a* path; people walk down the middle of corridors and keep off walls. T-RRT
-(SPEC §3) grows the tree with a *transition test* on a cost map whose cost rises near
+(reference §3) grows the tree with a *transition test* on a cost map whose cost rises near
 obstacles, so the tree prefers the valleys of the cost (the middle of free space) and only
 climbs towards obstacles when it has to. A deterministic post-processing pass then takes out
 the random zigzags and resamples the path to waypoints a simulated person can walk.
@@ -14,7 +14,7 @@ the random zigzags and resamples the path to waypoints a simulated person can wa
 the edge of the body to the nearest obstacle: 1 at contact, falling off over a few length
 scales. A point outside the grid is never free.
 
-**The planner** (:func:`plan`), SPEC §3 step by step, in compiled code:
+**The planner** (:func:`plan`), reference §3 step by step, in compiled code:
 
 1. *sample* a point uniformly over the grid, or the goal with probability ``goal_bias``;
 2. find the *nearest node* of the tree (linear scan: a few thousand nodes at most);
@@ -28,7 +28,7 @@ scales. A point outside the grid is never free.
 7. stop when a new node lies within ``goal_tol_m`` of the goal and the segment to the goal is
    free (the goal joins the tree), or when ``max_iters`` iterations have run.
 
-**Reading of SPEC §3's temperature rule.** The text says, literally: "on acceptance
+**Reading of reference §3's temperature rule.** The text says, literally: "on acceptance
 ``T = T / alpha`` and reset the failure count; on rejection, if failures reached a maximum then
 ``T = T * alpha`` and reset the count, else count the failure". We follow it to the letter, with
 ``alpha > 1`` (the value of the T-RRT literature, e.g. 2): every accepted *uphill* move cools
@@ -92,7 +92,7 @@ COUNTERS_PER_ITER = 4
 _SLOT_GOAL, _SLOT_X, _SLOT_Y, _SLOT_TEST = 0, 1, 2, 3
 
 # Numerical guard only: T stays within float range however long a run of acceptances or
-# failures lasts (SPEC §3 puts no bound on T; ordinary runs never come near these).
+# failures lasts (reference §3 puts no bound on T; ordinary runs never come near these).
 _T_MIN = 1e-200
 _T_MAX = 1e200
 
@@ -109,14 +109,14 @@ _N_ST = 6
 _LOG_T, _LOG_DC, _LOG_ACCEPTED = 0, 1, 2
 
 
-# --- the transition test and the temperature rule (SPEC §3) -------------------------------------
+# --- the transition test and the temperature rule (reference §3) ------------------------------
 
 
 @njit
 def transition_probability(
     child_cost: float, parent_cost: float, distance_m: float, K: float, T: float
 ) -> float:
-    """Probability that SPEC §3's transition test accepts a child.
+    """Probability that reference §3's transition test accepts a child.
 
     1 when ``child_cost <= parent_cost``; else ``exp(-dC / (K T))`` with
     ``dC = (child_cost - parent_cost) / distance_m`` (cost per m).
@@ -137,7 +137,7 @@ def transition_probability(
 def update_temperature(
     T: float, n_fail: int, accepted: bool, alpha: float, n_fail_max: int
 ) -> tuple[float, int]:
-    """SPEC §3's temperature rule after the transition test of an uphill child.
+    """reference §3's temperature rule after the transition test of an uphill child.
 
     Accepted: ``T = T / alpha`` and the failure count resets. Rejected: if the count has
     reached ``n_fail_max``, ``T = T * alpha`` and the count resets; else the failure is counted.
@@ -182,7 +182,7 @@ def _grow_tree(
     T0: float,
     K: float,
 ) -> tuple:
-    """Grow a T-RRT from (sx, sy) towards (gx, gy) (SPEC §3; see the module docstring).
+    """Grow a T-RRT from (sx, sy) towards (gx, gy) (reference §3; see the module docstring).
 
     :return: ``(nodes (n, 2), parent (n,), goal_index or -1, iterations, T, stats, log)``.
     """
@@ -243,7 +243,7 @@ def _grow_tree(
         if trace_segment(cost, occ, x0, y0, res, px, py, qx, qy) == np.inf:
             stats[_ST_COLLISION] += 1
             continue
-        # 5. Transition test (SPEC §3), 6. temperature update on uphill moves only.
+        # 5. Transition test (reference §3), 6. temperature update on uphill moves only.
         ix, iy = cell_of(qx, qy, x0, y0, res, ny, nx)
         child_cost = cost[iy, ix]
         if child_cost <= node_cost[best]:
@@ -303,7 +303,7 @@ def _branch(nodes: np.ndarray, parent: np.ndarray, leaf: int) -> np.ndarray:
 
 @dataclass(frozen=True)
 class TRRTParams(Validated):
-    """Parameters of the T-RRT planner (SPEC §3) and of its post-processing.
+    """Parameters of the T-RRT planner (reference §3) and of its post-processing.
 
     The spec gives the algorithm only; every value here is a choice, tuned so that a path
     through a 20 m x 14 m maze is found in a few milliseconds.
@@ -331,7 +331,7 @@ class TRRTParams(Validated):
         1.0,
         100.0,
         "",
-        "SPEC §3: temperature factor; > 1 so that acceptances cool (module docstring)",
+        "reference §3: temperature factor; > 1 so that acceptances cool (module docstring)",
         lo_open=True,
     )
     n_fail_max: int = param(
@@ -339,7 +339,7 @@ class TRRTParams(Validated):
         0,
         1_000_000,
         "failures",
-        "SPEC §3: uphill rejections counted before T rises. Choice of value: the rule settles "
+        "reference §3: uphill rejections counted before T rises. Choice of value: the rule settles "
         "near 1 / (n_fail_max + 2) of uphill moves accepted; 2 (about 25 %) still finds "
         "1 m doorways quickly, 10 (8 %) takes several times longer there",
         integer=True,
@@ -352,7 +352,7 @@ class TRRTParams(Validated):
         0.0,
         1e6,
         "",
-        "choice: least K (SPEC §3: mean cost of start and goal), so that start and goal far "
+        "choice: least K (reference §3: mean cost of start and goal), so that start and goal far "
         "from all obstacles (cost ~ 0) do not make every uphill step impossible",
         lo_open=True,
     )
@@ -441,7 +441,7 @@ def plan(
     *,
     counter0: int = 0,
 ) -> PlanResult:
-    """Plan a walking path from ``start_xy`` to ``goal_xy`` with T-RRT (SPEC §3).
+    """Plan a walking path from ``start_xy`` to ``goal_xy`` with T-RRT (reference §3).
 
     Deterministic: the same map, points, key, counter0 and params give the same tree and path.
     Not finding a path is an outcome, not an error: ``success`` is False, ``path`` empty and
@@ -472,7 +472,7 @@ def plan(
         raise ValueError(f"counter0={counter0!r} is out of range: must be an integer in [0, 2**62)")
     cost, occ = cost_map.cost, cost_map.occupied
     x0, y0, res = cost_map.x0_m, cost_map.y0_m, cost_map.resolution_m
-    # SPEC §3: K = mean cost of start and goal, floored (see TRRTParams.k_floor).
+    # reference §3: K = mean cost of start and goal, floored (see TRRTParams.k_floor).
     K = max(0.5 * (cost_map.cost_at((sx, sy)) + cost_map.cost_at((gx, gy))), p.k_floor)
     nodes, parent, goal_i, iters, T, stats, log = _grow_tree(
         cost,

@@ -97,6 +97,40 @@ def agent_files(path: str | Path) -> AgentFiles:
     return AgentFiles(path, path.with_name(NORMALIZATION), path.with_name(CONFIG))
 
 
+class _NoOptimizer:
+    """Stands in for the training optimizer when a policy network is built for inference."""
+
+    def __init__(self, params: Any, lr: float = 0.0, **kwargs: Any) -> None:
+        pass
+
+
+class _Network:
+    """A loaded policy network, acting deterministically on agent observations: the same
+    operations as stable-baselines3's ``predict`` (a float tensor, the mean action, clipped to
+    the action box), one row at a time (module docstring)."""
+
+    def __init__(self, policy: Any) -> None:
+        self.policy = policy
+        policy.set_training_mode(False)
+        self.observation_space = policy.observation_space
+        self.action_space = policy.action_space
+        self._low, self._high = self.action_space.low, self.action_space.high
+        self._shape = self.action_space.shape
+
+    def act(self, obs: np.ndarray) -> np.ndarray:
+        """Actions ``(n, m)`` float32 for agent observations ``(n, k)`` float32."""
+        import torch
+
+        out = np.empty((len(obs), *self._shape), dtype=np.float32)
+        with torch.no_grad():
+            for i in range(len(obs)):
+                tensor = torch.as_tensor(obs[i : i + 1]).float()
+                action = self.policy._predict(tensor, deterministic=True)
+                action = action.cpu().numpy().reshape((-1, *self._shape))
+                out[i] = np.clip(action, self._low, self._high)[0]
+        return out
+
+
 class _Statistics(NamedTuple):
     """What inference needs of a saved ``VecNormalize``."""
 
@@ -200,8 +234,8 @@ class _Loaded:
             ) from None
 
     @staticmethod
-    def _load_model(path: Path, policy: Any) -> Any:
-        from stable_baselines3 import PPO
+    def _load_model(path: Path, policy: Any) -> _Network:
+        from stable_baselines3.common.save_util import load_from_zip_file
 
         custom: dict[str, Any] = {}
         if isinstance(policy, str) and policy.endswith("MirrorMlpPolicy"):
@@ -211,11 +245,24 @@ class _Loaded:
             # keeps training code out of inference.
             custom["policy_class"] = MirrorMlpPolicy
         try:
-            return PPO.load(path, device="cpu", custom_objects=custom)
+            data, params, _ = load_from_zip_file(path, device="cpu", custom_objects=custom)
+            kwargs = dict(data.get("policy_kwargs") or {})
+            # Inference needs no optimizer (and building torch's Adam imports its compiler,
+            # about a second).
+            kwargs["optimizer_class"] = _NoOptimizer
+            net = data["policy_class"](
+                data["observation_space"],
+                data["action_space"],
+                lambda _: 0.0,
+                use_sde=data.get("use_sde", False),
+                **kwargs,
+            )
+            net.load_state_dict(params["policy"])
         except Exception as e:  # zipfile, pickle, torch and SB3 each raise their own
             raise AgentLoadError(
                 f"{path}: not a readable stable-baselines3 PPO model ({type(e).__name__}: {e})"
             ) from None
+        return _Network(net)
 
     def pipeline(self, n: int) -> Pipeline:
         """A fresh feature pipeline for ``n`` lanes."""
@@ -297,7 +344,7 @@ class PPOPolicy:
             self._started = True
         else:
             agent_obs = self._view.observe(row)
-        action, _ = self._agent.model.predict(agent_obs, deterministic=True)
+        action = self._agent.model.act(agent_obs)
         return self._view.act(action).astype(np.float32)[0]
 
     def reset_batch(self, n: int) -> None:
@@ -318,10 +365,7 @@ class PPOPolicy:
             agent_obs = self._batch.start(rows)
         else:
             agent_obs = self._batch.observe(rows)
-        model = self._agent.model
-        actions = np.concatenate(
-            [model.predict(agent_obs[i : i + 1], deterministic=True)[0] for i in range(len(rows))]
-        )
+        actions = self._agent.model.act(agent_obs)
         return self._batch.act(actions).astype(np.float32)
 
     def __reduce__(self) -> tuple[Any, ...]:

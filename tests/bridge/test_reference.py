@@ -1,4 +1,4 @@
-"""bridge/protocol/reference.py: the reference framing (SPEC §1) and its decoder's guarantees.
+"""bridge/protocol/reference.py: the reference framing (reference §1) and its decoder's guarantees.
 
 Each guarantee and each documented ambiguity of ``ReferenceDecoder`` is tested here as stated
 in its docstring.

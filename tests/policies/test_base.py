@@ -16,7 +16,7 @@ def obs(distance_m: float, offset_px: float) -> np.ndarray:
     return np.array([distance_m, offset_px], dtype=np.float32)
 
 
-# The sign rule of SPEC §1.5 is a property of the guidance laws' equations. A learned agent is
+# The sign rule of reference §1.5 is a property of the guidance laws' equations. A learned agent is
 # held to what it does over an episode instead (tests/policies/test_ppo.py): on its first step
 # from rest, far from its 1 m training start, it may turn the wrong way for one step.
 LAWS = [name for name in available_policies() if not name.startswith("ppo")]
@@ -42,7 +42,7 @@ def test_action_is_a_float32_pair(name: str) -> None:
 def test_person_right_and_beyond_reference_gives_forward_clockwise_action(
     name: str, distance_m: float, offset_px: float
 ) -> None:
-    # SPEC.md §1.5 "Sign": o > 0 (right of centre) needs w < 0; d > d_ref = 1 m needs v > 0.
+    # reference §1.5 "Sign": o > 0 (right of centre) needs w < 0; d > d_ref = 1 m needs v > 0.
     v_mps, w_radps = make_policy(name).act(obs(distance_m, offset_px))
     assert v_mps > 0
     assert w_radps < 0

@@ -1,4 +1,4 @@
-"""policies/gsmpn.py: gain-scheduled MPN and its three variants, SPEC.md §1.5."""
+"""policies/gsmpn.py: gain-scheduled MPN and its three variants, reference §1.5."""
 
 import math
 from dataclasses import replace
@@ -44,7 +44,7 @@ def test_scheduled_gain_stays_between_zero_and_lambda_d(
 
 @given(x=st.floats(min_value=-1e3, max_value=1e3))
 def test_scheduled_gain_is_lambda_d_tanh_of_half_a_abs_x(x: float) -> None:
-    # SPEC.md §1.5: (1 - e) / (1 + e) with e = exp(-a|x|) equals tanh(a|x| / 2).
+    # reference §1.5: (1 - e) / (1 + e) with e = exp(-a|x|) equals tanh(a|x| / 2).
     expected = 0.5 * math.tanh(0.2 * abs(x) / 2)
     assert scheduled_gain(x, lambda_d=0.5, a=0.2) == pytest.approx(expected, abs=1e-15)
 

@@ -1,4 +1,4 @@
-"""policies/mpn.py: modified proportional navigation, SPEC.md §1.5."""
+"""policies/mpn.py: modified proportional navigation, reference §1.5."""
 
 import numpy as np
 import pytest

@@ -1,4 +1,4 @@
-"""policies/pn.py: proportional navigation, SPEC.md §1.5."""
+"""policies/pn.py: proportional navigation, reference §1.5."""
 
 import numpy as np
 import pytest
@@ -29,7 +29,7 @@ def test_pn_thesis_matches_hand_computed_values(
 
 @pytest.mark.parametrize("distance_m", [0.05, 0.3, 1.0])
 def test_pn_divides_by_at_least_one_metre(distance_m: float) -> None:
-    # SPEC.md §1.5: max(d, 1.0), so any 0 < d <= 1 m turns like d = 1 m:
+    # reference §1.5: max(d, 1.0), so any 0 < d <= 1 m turns like d = 1 m:
     # w = -(0.1 * 0.05 * 60 / 1) = -0.3
     assert PN(PN_THESIS).act(obs(distance_m, 60.0))[1] == pytest.approx(-0.3)
 

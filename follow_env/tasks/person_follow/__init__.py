@@ -1,4 +1,4 @@
-"""PersonFollow-v0: a robot follows a walking person using only an RGB-D camera (SPEC §1).
+"""PersonFollow-v0: a robot follows a walking person using only an RGB-D camera (reference §1).
 
 This package's modules, lowest first: :mod:`.spec` (names and units, no simulation import),
 :mod:`.config` (sections and presets), :mod:`.people` and :mod:`.scenarios` (who walks where),

@@ -80,12 +80,12 @@ class ScenarioConfig(Validated):
     (:mod:`follow_env.tasks.person_follow.scenarios`); the name is checked when an env is built,
     so a config never depends on what happens to be registered when it is made."""
 
-    name: str = param("straight", doc="SPEC §1.6 condition 1")
+    name: str = param("straight", doc="reference §1.6 condition 1")
     walk_length_m: float = param(
-        10.0, 0.5, 500.0, "m", "SPEC §1.6: the person walks 10 m ('straight' and 'curve')"
+        10.0, 0.5, 500.0, "m", "reference §1.6: the person walks 10 m ('straight' and 'curve')"
     )
     start_distance_m: float = param(
-        1.0, 0.4, 8.0, "m", "SPEC §1.6: the person starts 1 m in front (camera to body front)"
+        1.0, 0.4, 8.0, "m", "reference §1.6: the person starts 1 m in front (camera to body front)"
     )
     curve_turn_deg: float = param(
         90.0,
@@ -163,7 +163,7 @@ class RandomizationConfig(Validated):
 class RewardConfig(Validated):
     """Dense following reward, from ground truth (see ``PersonFollowEnv`` docstring)."""
 
-    target_distance_m: float = param(1.0, 0.3, 10.0, "m", "SPEC §1.5: desired distance 1.0 m")
+    target_distance_m: float = param(1.0, 0.3, 10.0, "m", "reference §1.5: desired distance 1.0 m")
     alive_bonus: float = param(1.0, 0.0, 100.0, "/step", "choice: reward for following at all")
     distance_weight: float = param(
         1.0, 0.0, 100.0, "/m", "choice: min(|d - d_ref|, 1 m) penalty (capped, see the env)"
@@ -184,7 +184,7 @@ class RewardConfig(Validated):
 class EpisodeConfig(Validated):
     """Timing and episode end."""
 
-    control_dt_s: float = param(0.1, 0.01, 1.0, "s", "SPEC §1.5/§1.6: 0.1 s sampling")
+    control_dt_s: float = param(0.1, 0.01, 1.0, "s", "reference §1.5/§1.6: 0.1 s sampling")
     max_steps: int = param(
         1000,
         1,
@@ -234,7 +234,7 @@ class EnvConfig(Sections):
 
 
 THESIS = EnvConfig()
-"""The reference robot as closely as the sources allow (SPEC §1): the default."""
+"""The reference robot as closely as the sources allow (reference §1): the default."""
 
 IDEAL = THESIS.replace(
     motor={"gain_spread": 0.0},

@@ -19,7 +19,7 @@ class PersonFollowEnv(TaskEnv):
 
     ## Description
 
-    The simulated twin of a camera-only person-following transport robot (SPEC §1): two wheels
+    The simulated twin of a camera-only person-following transport robot (reference §1): two wheels
     under PID speed control on a microcontroller, an Intel RealSense D435i camera, and a person
     detector whose first detection is followed. Each step is one 0.1 s control period: the
     action sets the body twist, the wheels track it through 10 ticks of 10 ms (encoder, PID with
@@ -44,7 +44,7 @@ class PersonFollowEnv(TaskEnv):
 
     ## Observation Space
 
-    ``Box(2,)`` float32: what the robot's perception publishes (SPEC §1.4).
+    ``Box(2,)`` float32: what the robot's perception publishes (reference §1.4).
 
     | Num | Observation                           | Min      | Max         | Unit |
     |-----|---------------------------------------|----------|-------------|------|
@@ -67,7 +67,7 @@ class PersonFollowEnv(TaskEnv):
     ## Starting State
 
     Set by the scenario (``straight`` by default): the robot at rest, the person standing
-    ``start_distance_m`` (1 m) in front of the camera, centred in the image (SPEC §1.6). The
+    ``start_distance_m`` (1 m) in front of the camera, centred in the image (reference §1.6). The
     first observation is the perception of that frame.
 
     ## Episode End

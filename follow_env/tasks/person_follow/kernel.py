@@ -91,7 +91,7 @@ def step(prm: np.void, st: np.void, world: tuple, i: int, keys: np.ndarray) -> N
         person_step(ps[p], paths[i, p], tp.person_accel, tp.person_decel, tp.dt)
     if ts.walk_end_t < 0.0 and ps[0].done > 0.0:
         ts.walk_end_t = ep.t
-    # 4. Camera frame and perception (SPEC §1.4).
+    # 4. Camera frame and perception (reference §1.4).
     frame(prm, st, ps, walls[i], keys, ep.step)
     # 5. Contacts, reward, episode end.
     reason = contacts(prm, st, ps, walls[i])

@@ -1,4 +1,4 @@
-"""The robot's camera node, one frame (SPEC §1.4): what the perception publishes this step.
+"""The robot's camera node, one frame (reference §1.4): what the perception publishes this step.
 
 Composed from the sensors: every person's body box (camera), the part of it in sight (camera
 and world line of sight), the detector's view of it (bursts, misses, jitter, the list order),
@@ -98,7 +98,7 @@ def frame(
             first, reid, match = consider(dp, det, p, j1, j2, j3, j4, area, app, first, reid, match)
     chosen = associate(dp, det, was_tracking, first, reid, match)
 
-    # Measurement of this frame: box centre pixel and the depth there (SPEC §1.4 step 3).
+    # Measurement of this frame: box centre pixel and the depth there (reference §1.4 step 3).
     m_det, m_cu, m_cv, m_raw = 0.0, 0.0, 0.0, 0.0
     if chosen[0] >= 0:
         m_det = 1.0

@@ -74,7 +74,7 @@ SPEC = TaskSpec(
     ),
     platform_info_after="raw_depth_m",
 )
-"""The person-following task (SPEC §1)."""
+"""The person-following task (reference §1)."""
 
 
 def observation_bounds(width_px: int, depth_max_m: float) -> tuple[list[float], list[float]]:

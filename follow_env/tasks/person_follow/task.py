@@ -140,7 +140,7 @@ class _InfoColumns(NamedTuple):
 
 
 class PersonFollowTask:
-    """The person-following task (SPEC §1) for the runner and the env faces."""
+    """The person-following task (reference §1) for the runner and the env faces."""
 
     def __init__(self) -> None:
         self._column_cache: dict[tuple[Any, ...], _InfoColumns] = {}

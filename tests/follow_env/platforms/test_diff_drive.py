@@ -1,4 +1,4 @@
-"""Differential-drive kinematics (SPEC §1.1)."""
+"""Differential-drive kinematics (reference §1.1)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Encoder, PID and motor models (SPEC §1.1, §1.2), and the tuned wheel step response."""
+"""Encoder, PID and motor models (reference §1.1, §1.2), and the tuned wheel step response."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Pinhole camera, extrinsics and body boxes (SPEC §1.3)."""
+"""Pinhole camera, extrinsics and body boxes (reference §1.3)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Depth: the D435i noise model and the robot's asymmetric distance filter (SPEC §1.3, §1.4)."""
+"""Depth: the D435i noise model and the robot's distance filter (reference §1.3, §1.4)."""
 
 from __future__ import annotations
 
@@ -43,7 +43,7 @@ def test_depth_noise_grows_with_the_square_of_depth() -> None:
     s1 = depth_noise_std(1.0, 0.08, 424.0, 0.05)
     s2 = depth_noise_std(2.0, 0.08, 424.0, 0.05)
     s4 = depth_noise_std(4.0, 0.08, 424.0, 0.05)
-    assert s1 == pytest.approx(0.08 / (424 * 0.05))  # ~3.8 mm at 1 m (SPEC §1.3)
+    assert s1 == pytest.approx(0.08 / (424 * 0.05))  # ~3.8 mm at 1 m (reference §1.3)
     assert s2 == pytest.approx(4 * s1)
     assert s4 == pytest.approx(16 * s1)
-    assert 0.05 < s4 < 0.07  # SPEC: roughly 60 mm at 4 m
+    assert 0.05 < s4 < 0.07  # reference: roughly 60 mm at 4 m

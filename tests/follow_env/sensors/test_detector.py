@@ -1,4 +1,4 @@
-"""The detector model: the first-detection rule, box jitter, clipping (SPEC §1.3, §1.4)."""
+"""The detector model: the first-detection rule, box jitter, clipping (reference §1.3, §1.4)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""T-RRT planner (SPEC §3): finds paths through clutter, keeps to free space, is deterministic
+"""T-RRT planner (reference §3): finds paths through clutter, keeps to free space, is deterministic
 per key, and its transition test and temperature rule behave as the spec says."""
 
 from __future__ import annotations
@@ -188,7 +188,7 @@ def test_counter0_selects_another_part_of_the_stream(maze: CostMap) -> None:
     assert not np.array_equal(a.tree_xy[:10], b.tree_xy[:10])
 
 
-# --- the transition test and the temperature rule (SPEC §3) -----------------------------------
+# --- the transition test and the temperature rule (reference §3) ------------------------------
 
 
 def test_a_child_no_costlier_than_its_parent_is_always_accepted() -> None:
@@ -213,7 +213,7 @@ def test_rejected_uphill_move_counts_a_failure_below_n_fail_max() -> None:
 
 
 def test_t_is_multiplied_by_alpha_once_failures_reach_n_fail_max() -> None:
-    # SPEC §3, literally: "if failures reached a maximum then T = T * alpha and reset the
+    # reference §3, literally: "if failures reached a maximum then T = T * alpha and reset the
     # count". With n_fail_max = 3, three rejections are counted, the fourth multiplies T.
     T, n_fail = 1.0, 0
     history = []
@@ -271,7 +271,7 @@ def test_planner_acceptances_match_the_transition_probabilities(
 
 
 def test_planner_temperature_follows_the_rule_test_by_test(maze_plans: list[PlanResult]) -> None:
-    # Replay SPEC §3's rule over the logged outcomes: each test ran at the replayed T.
+    # Replay reference §3's rule over the logged outcomes: each test ran at the replayed T.
     p = TRRTParams()
     for r in maze_plans:
         T, n_fail = p.T0, 0

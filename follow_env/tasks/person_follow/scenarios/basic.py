@@ -1,4 +1,4 @@
-"""The reference experiment's walks (SPEC §1.6) and a random walk.
+"""The reference experiment's walks (reference §1.6) and a random walk.
 
 * ``straight``: condition 1. The person starts ``start_distance_m`` (1 m) in front of the
   camera, centred in the image, and walks ``walk_length_m`` (10 m) straight on.
@@ -47,7 +47,7 @@ _PW_X, _PW_Y, _PW_S, _PW_VMAX, _PW_PAUSE = PW.x, PW.y, PW.s, PW.vmax, PW.pause
 
 @register_scenario("straight", max_points=2)
 def straight(rng: ScenarioRandom, cfg: EnvConfig) -> ScenarioBatch:
-    """SPEC §1.6 condition 1: start 1 m ahead, centred; walk 10 m straight on."""
+    """reference §1.6 condition 1: start 1 m ahead, centred; walk 10 m straight on."""
     n = rng.n
     length = cfg.scenario.walk_length_m
     pose = np.zeros((n, 3))
@@ -78,7 +78,7 @@ def _curve_points(cfg: EnvConfig) -> int:
 
 @register_scenario("curve", max_points=_curve_points)
 def curve(rng: ScenarioRandom, cfg: EnvConfig) -> ScenarioBatch:
-    """SPEC §1.6 condition 2: the thesis start, then one arc of ``curve_turn_deg``."""
+    """reference §1.6 condition 2: the thesis start, then one arc of ``curve_turn_deg``."""
     n = rng.n
     sc = cfg.scenario
     turn = math.radians(sc.curve_turn_deg)

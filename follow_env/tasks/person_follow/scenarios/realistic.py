@@ -1,9 +1,9 @@
 """Scenarios of a realistic world: corridors, doorways, pillars, bystanders, stops and zigzags.
 
-The reference experiment (SPEC §1.6) had one person walking 10 m in an empty space; these
+The reference experiment (reference §1.6) had one person walking 10 m in an empty space; these
 scenarios add what real corridors have: walls and obstacles that hide the person, a doorway to
 drive through, bystanders who cross in front and can steal the target (the robot follows the
-first detection, SPEC §1.4), stops and sharp turns. Every one starts as the thesis does: the
+first detection, reference §1.4), stops and sharp turns. Every one starts as the thesis does: the
 robot at rest, the person 1 m in front of the camera and centred.
 
 Each lane's layout comes from its own streams (the person's for the target's pace and path,
@@ -18,7 +18,7 @@ Each lane's layout comes from its own streams (the person's for the target's pac
 | ``crowd`` | four bystanders criss-cross the hall while the person walks about |
 | ``stop_and_go`` | 14 m with a stop (1-3 s) every 2-3 m and changes of pace |
 | ``zigzag`` | 12 m of 2 m legs turning +-60 deg, corners rounded to 0.6 m |
-| ``random_world`` | a random map per seed; people's paths planned through it (T-RRT, SPEC §3) |
+| ``random_world`` | a random map per seed; paths planned through it (T-RRT, reference §3) |
 """
 
 from __future__ import annotations
@@ -130,7 +130,7 @@ def smooth_path(
 
 
 def _start(cfg: EnvConfig, x: float, y: float, heading: float) -> tuple[np.ndarray, np.ndarray]:
-    """Robot pose and the person's start 1 m in front of its camera (SPEC §1.6)."""
+    """Robot pose and the person's start 1 m in front of its camera (reference §1.6)."""
     pose = np.array([[x, y, heading]])
     return pose[0], person_ahead(cfg, pose)[0]
 
@@ -363,7 +363,7 @@ def _planned_path(
     cfg: EnvConfig,
     delay: float = 0.0,
 ) -> np.ndarray | None:
-    """A T-RRT path (SPEC §3) from start to goal as walkable waypoints, or None."""
+    """A T-RRT path (reference §3) from start to goal as walkable waypoints, or None."""
     from follow_env.world.trrt import plan
 
     result = plan(cost_map, start, goal, key)  # type: ignore[arg-type]
@@ -394,7 +394,7 @@ _RW_MAX_BYSTANDERS = 3
 def random_world(rng: ScenarioRandom, cfg: EnvConfig) -> ScenarioBatch:
     """A random map per seed: a 20 x 14 m hall with 3-10 pillars and pieces of furniture, and
     in half the maps a partition with a 1.2 m door; the person's walk to a far goal and up to
-    three bystanders' walks are planned through it with T-RRT (SPEC §3), keeping 0.45 m from
+    three bystanders' walks are planned through it with T-RRT (reference §3), keeping 0.45 m from
     obstacles so that the robot behind fits too."""
     from follow_env.world.trrt import cost_map_from_obstacles
 

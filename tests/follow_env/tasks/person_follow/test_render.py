@@ -150,3 +150,35 @@ def test_wall_loops_finds_closed_outlines_only():
     partition = np.array([[0.0, -4.0, 0.0, -1.0, 3.0], [0.0, -1.0, 0.0, 0.5, 3.0]])  # open
     walls = np.vstack([room, partition, pillar])
     assert wall_loops(walls) == [(0, 4), (6, 10)]
+
+
+def test_trails_are_recorded_before_the_first_frame_is_drawn() -> None:
+    # Regression: trails used to start at the first render() call, not at the reset.
+    env = gym.make("PersonFollow-v0", render_mode="rgb_array").unwrapped
+    env.reset(seed=0)
+    for _ in range(30):
+        env.step(FORWARD)
+    env.render()
+    assert env._renderer.robot_trail.n == 31  # the reset pose and 30 steps
+    assert env._renderer.target_trail.n == 31
+
+
+def test_human_mode_shows_every_step_in_a_window() -> None:
+    env = gym.make("PersonFollow-v0", render_mode="human")
+    env.reset(seed=0)
+    for _ in range(3):
+        env.step(FORWARD)
+    assert env.render() is None  # Gymnasium's convention: human mode draws, returns nothing
+    window = env.unwrapped._window
+    assert window is not None
+    assert window._screen.get_size() == (FRAME_WIDTH_PX, FRAME_HEIGHT_PX)
+    env.close()
+    assert env.unwrapped._window is None
+
+
+def test_human_mode_without_a_display_says_so(monkeypatch: pytest.MonkeyPatch) -> None:
+    for name in ("SDL_VIDEODRIVER", "DISPLAY", "WAYLAND_DISPLAY"):
+        monkeypatch.delenv(name, raising=False)
+    env = gym.make("PersonFollow-v0", render_mode="human")
+    with pytest.raises(RuntimeError, match="needs a display"):
+        env.reset(seed=0)
