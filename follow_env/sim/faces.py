@@ -89,6 +89,7 @@ class TaskEnv(gym.Env[np.ndarray, np.ndarray]):
         self.observation_space, self.action_space = self.task.spaces(self.config, self.sim.platform)
         self._action_names = "[" + ", ".join(a.name for a in self.sim.platform.actions) + "]"
         self._action = np.zeros((1, self.action_space.shape[0]))
+        self._action_shape = self.action_space.shape
         self._lane = np.zeros(1, dtype=np.int64)
         self._renderer: Any = None
         self._window: Any = None
@@ -117,15 +118,19 @@ class TaskEnv(gym.Env[np.ndarray, np.ndarray]):
         """Apply ``action`` (the platform's, in SI) for one control step."""
         if self._needs_reset:
             raise ResetNeeded("call reset() before step()")
-        self._action[0] = action_array(action, self.action_space.shape, self._action_names)
+        if type(action) is np.ndarray and action.shape == self._action_shape:
+            self._action[0] = action  # the common case, checked below for NaN and inf
+            if not np.isfinite(self._action).all():
+                action_array(action, self._action_shape, self._action_names)  # raises
+        else:
+            self._action[0] = action_array(action, self._action_shape, self._action_names)
         self.sim.step(self._action)
-        ep = self.sim.episode[0]
-        terminated, truncated = bool(ep["terminated"]), bool(ep["truncated"])
+        reward, terminated, truncated = self.sim.outcome(0)
         if self._renderer is not None:
             self._renderer.record(self.sim.lane(0))
             if self.render_mode == "human":
                 self.render()
-        return self._obs(), float(ep["reward"]), terminated, truncated, self._info()
+        return self._obs(), reward, terminated, truncated, self._info()
 
     def render(self) -> np.ndarray | None:
         """``rgb_array``: the frame (H x W x 3 uint8). ``human``: shows it in a window."""
@@ -159,7 +164,7 @@ class TaskEnv(gym.Env[np.ndarray, np.ndarray]):
         return self._renderer
 
     def _obs(self) -> np.ndarray:
-        return self.task.observations(self.sim)[0]
+        return self.task.observation(self.sim, 0)
 
     def _info(self) -> dict[str, Any]:
         return self.task.lane_info(self.sim, 0)

@@ -81,6 +81,31 @@ class TaskModel(Protocol):
         robots' start poses ``(len(lanes), 3)``."""
 
 
+_DTYPES: dict[tuple[int, int], tuple[np.dtype, np.dtype]] = {}
+
+
+def _composed_dtypes(platform: PlatformModel, task: TaskModel) -> tuple[np.dtype, np.dtype]:
+    """The parameter and state record types of a (platform, task) pair, made once: numba's
+    dispatcher recognises an argument's type quickly only by the very same dtype object (an
+    equal but new one takes its slow path, about 6 us a call)."""
+    key = (id(platform.params), id(task.params))
+    if key not in _DTYPES:
+        params = np.dtype(
+            [("platform", platform.params.dtype), ("task", task.params.dtype)], align=True
+        )
+        state = np.dtype(
+            [
+                ("body", BODY.dtype),
+                ("episode", EPISODE.dtype),
+                ("platform", platform.state.dtype),
+                ("task", task.state.dtype),
+            ],
+            align=True,
+        )
+        _DTYPES[key] = params, state
+    return _DTYPES[key]
+
+
 class LaneView:
     """One lane's live records: ``params``, ``state`` (numpy records) and ``world`` (the
     lane's entry of each world array). Reading them always shows the current step."""
@@ -114,18 +139,7 @@ class BatchedSim:
         self.n = num_lanes
         self.platform: Any = task.platform_of(cfg)
         task.check(cfg)
-        self.params_dtype = np.dtype(
-            [("platform", self.platform.params.dtype), ("task", task.params.dtype)], align=True
-        )
-        self.state_dtype = np.dtype(
-            [
-                ("body", BODY.dtype),
-                ("episode", EPISODE.dtype),
-                ("platform", self.platform.state.dtype),
-                ("task", task.state.dtype),
-            ],
-            align=True,
-        )
+        self.params_dtype, self.state_dtype = _composed_dtypes(self.platform, task)
         self.base_params = np.zeros((), self.params_dtype)
         self.platform.params.fill(self.base_params["platform"], cfg)
         task.params.fill(self.base_params["task"], cfg)
@@ -133,6 +147,18 @@ class BatchedSim:
         self.params[:] = self.base_params
         self.state = np.zeros(num_lanes, self.state_dtype)
         self.world = task.world(cfg, num_lanes)
+        # Every record is made of 8-byte words: these views (no copies) let readers gather many
+        # fields of many lanes in one indexing operation (columns from schema.float_column).
+        self.state_words = self.state.view(np.float64).reshape(num_lanes, -1)
+        self._state_raw = self.state.view(np.uint64).reshape(num_lanes, -1)
+        self._params_raw = self.params.view(np.uint64).reshape(num_lanes, -1)
+        self._base_raw = self.base_params.reshape(1).view(np.uint64)
+        self.state_ints = self.state.view(np.int64).reshape(num_lanes, -1)
+        self.world_words = tuple(w.view(np.float64).reshape(num_lanes, -1) for w in self.world)
+        ep = self.state_dtype.fields["episode"][1] // 8
+        ep_fields = EPISODE.dtype.fields
+        self._reward_col = ep + ep_fields["reward"][1] // 8
+        self._end_cols = [ep + ep_fields[k][1] // 8 for k in ("terminated", "truncated")]
         self.keys = np.zeros((num_lanes, N_STREAMS), dtype=np.uint64)
         self.seeds = LaneSeeds(num_lanes)
         self._all = np.ones(num_lanes, dtype=np.bool_)
@@ -161,6 +187,12 @@ class BatchedSim:
         """Every lane's episode record (step, time, reward, flags, reason)."""
         return self.state["episode"]
 
+    def outcome(self, lane: int) -> tuple[float, bool, bool]:
+        """Lane ``lane``'s last step: ``(reward, terminated, truncated)``."""
+        words = self.state_words[lane]
+        term, trunc = self._end_cols
+        return float(words[self._reward_col]), bool(words[term] > 0.0), bool(words[trunc] > 0.0)
+
     def lane(self, i: int) -> LaneView:
         """A live view of lane ``i`` (for renderers and tests)."""
         return LaneView(self, i)
@@ -178,8 +210,9 @@ class BatchedSim:
             self.seeds.seed(lanes, list(seeds))
         keys = self.seeds.next_keys(lanes)
         self.keys[lanes] = keys
-        self.state[lanes] = np.zeros(lanes.size, self.state_dtype)
-        self.params[lanes] = self.base_params
+        # Raw 8-byte copies: the lanes' state zeroed, their parameters the configured ones.
+        self._state_raw[lanes] = 0
+        self._params_raw[lanes] = self._base_raw
         self.platform.randomize(
             self.params["platform"], self.base_params["platform"], lanes, self.cfg, keys
         )
