@@ -124,8 +124,11 @@ class _RecordActions(VecEnvWrapper):
 def test_policy_acts_as_the_agent_did_in_its_training_env() -> None:
     # One lane of the training stack (eval mode: frozen statistics), stepped by the model itself,
     # against the policy in the single env on the same seed: the same SI actions, step by step.
+    from stable_baselines3 import PPO
+
     config = read_config(DEFAULT_AGENT)
     policy = PPOPolicy(DEFAULT_AGENT)
+    model = PPO.load(DEFAULT_AGENT / "model.zip", device="cpu")  # SB3's own loader and predict
     recorder = _RecordActions(base_env(["curve"], 1, config["args"]["env_config"]))
     venv = agent_env(
         recorder, config["hyperparams"], "eval", normalization=DEFAULT_AGENT / "vecnormalize.pkl"
@@ -133,7 +136,7 @@ def test_policy_acts_as_the_agent_did_in_its_training_env() -> None:
     venv.seed(7)
     agent_obs = venv.reset()
     for _ in range(60):
-        action, _ = policy._agent.model.predict(agent_obs, deterministic=True)
+        action, _ = model.predict(agent_obs, deterministic=True)
         agent_obs, *_ = venv.step(action)
     episode = run_episode(policy, "curve", 7).log
     expected = episode[["action_v_mps", "action_w_radps"]].to_numpy()[:60]  # row k: act on obs k
