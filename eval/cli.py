@@ -34,11 +34,10 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any, NoReturn
 
-import yaml
-
 import follow_env
 from eval.atomic import atomic_folder, atomic_write_text, check_new_folder
 from eval.steplog import StepLogError, read_step_log, step_log_files, write_step_log
+from follow_env.tasks.person_follow.config import config_from_text
 
 __all__ = ["MAX_EPISODES", "MAX_SEED", "main"]
 
@@ -68,33 +67,10 @@ class _Parser(argparse.ArgumentParser):
 
 def _config(text: str) -> str | dict[str, Any]:
     """``--config``: a preset name, a JSON object of section overrides, or a file of one."""
-    if text in follow_env.PRESETS:
-        return text
-    path = Path(text)
-    if path.suffix.lower() in (".json", ".yaml", ".yml"):
-        try:
-            overrides = yaml.safe_load(path.read_text(encoding="utf-8"))
-        except OSError as exc:
-            raise argparse.ArgumentTypeError(f"cannot read {path}: {exc.strerror}") from None
-        except yaml.YAMLError as exc:
-            raise argparse.ArgumentTypeError(f"{path} is not valid YAML/JSON: {exc}") from None
-        where = str(path)
-    else:
-        try:
-            overrides = json.loads(text)
-        except json.JSONDecodeError:
-            raise argparse.ArgumentTypeError(
-                f"{text!r} is not a preset ({', '.join(sorted(follow_env.PRESETS))}), a JSON "
-                "object, or a .json/.yaml file"
-            ) from None
-        where = "the JSON object"
-    if not isinstance(overrides, dict):
-        raise argparse.ArgumentTypeError(f"{where} must be a mapping of config sections")
     try:
-        follow_env.EnvConfig.from_overrides(follow_env.THESIS, overrides)
+        return config_from_text(text)
     except ValueError as exc:
-        raise argparse.ArgumentTypeError(f"{where}: {exc}") from None
-    return overrides
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def _names(text: str, what: str) -> list[str]:

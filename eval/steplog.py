@@ -6,38 +6,8 @@ needed to compute the thesis metrics, so a log recorded on the real robot (time,
 encoder speeds) is read and scored by the same code as a simulated one; every other column is
 optional and the metrics that need it give NaN without it.
 
-## Columns
-In this order (units in the names; a real robot's log may leave out any optional column):
-
-| column | unit | required | meaning |
-|---|---|---|---|
-| ``policy``, ``scenario``, ``seed`` | | no | what ran (text, text, integer); constant per file |
-| ``step`` | | no | control step index, 0 at reset |
-| ``time_s`` | s | yes | time since reset; strictly increasing |
-| ``obs_distance_m`` | m | yes | published distance (reference §1.4; 0 = no reading yet) |
-| ``obs_offset_px`` | px | yes | published offset, > 0 right of centre (held when not detected) |
-| ``detected`` | 0/1 | no | a fresh detection was published at this step |
-| ``raw_depth_m`` | m | no | the depth pixel behind the last detection, before the filter |
-| ``action_v_mps``, ``action_w_radps`` | m/s, rad/s | no | command sent (final row: none) |
-| ``wheel_target_r_mps``, ``wheel_target_l_mps`` | m/s | no | PID set-points |
-| ``wheel_measured_r_mps``, ``wheel_measured_l_mps`` | m/s | no | encoder wheel speeds |
-| ``duty_r_pct``, ``duty_l_pct`` | % | no | motor duty |
-| ``encoder_speed_mps`` | m/s | see below | robot speed from the encoders, (right + left) / 2 |
-| ``accel_mps2`` | m/s² | see below | finite difference of ``encoder_speed_mps`` over one step |
-| ``true_distance_m``, ``true_offset_px``, ``in_frame`` | m, px, 0/1 | no | the person's truth |
-| ``robot_x_m`` ... ``robot_w_radps`` | m, rad, m/s, rad/s | no | robot pose and speeds |
-| ``person_x_m`` ... ``person_v_mps`` | m, rad, m/s | no | person pose and speed |
-| ``wheel_true_r_radps``, ``wheel_true_l_radps`` | rad/s | no | true wheel speeds |
-| ``wall_clearance_m``, ``person_clearance_m`` | m | no | clearances |
-| ``detected_person`` | | no | index of the person the detector picked first (-1: none) |
-| ``reward`` | | no | the env's reward for the step that led to this row |
-| ``termination`` | | no | why the episode ended (final row only; see ``follow_env.INFO_KEYS``) |
-
-One of ``accel_mps2`` and ``encoder_speed_mps`` is required; when only the speed is logged, the
-acceleration is computed from it as the robot does (finite difference per row).
-
-Row k holds the observation published at time k dt, the state at that time and the action the
-policy chose from it; the final row holds the state the episode ended in (no action).
+The columns, their units and their order are the task's
+(:mod:`follow_env.tasks.person_follow.steplog`); this module reads, validates and writes them.
 """
 
 from __future__ import annotations
@@ -52,6 +22,14 @@ import numpy as np
 import pandas as pd
 
 from eval.atomic import atomic_path
+from follow_env.tasks.person_follow.steplog import (
+    ACCEL_SOURCES,
+    ACTION_COLUMNS,
+    COLUMNS,
+    META_COLUMNS,
+    REQUIRED_COLUMNS,
+    TEXT_COLUMNS,
+)
 
 __all__ = [
     "ACTION_COLUMNS",
@@ -67,52 +45,7 @@ __all__ = [
     "write_step_log",
 ]
 
-META_COLUMNS: tuple[str, ...] = ("policy", "scenario", "seed")
-ACTION_COLUMNS: tuple[str, ...] = ("action_v_mps", "action_w_radps")
-#: Every column a simulated step log has, in file order (module docstring).
-COLUMNS: tuple[str, ...] = (
-    *META_COLUMNS,
-    "step",
-    "time_s",
-    "obs_distance_m",
-    "obs_offset_px",
-    "detected",
-    "raw_depth_m",
-    *ACTION_COLUMNS,
-    "wheel_target_r_mps",
-    "wheel_target_l_mps",
-    "wheel_measured_r_mps",
-    "wheel_measured_l_mps",
-    "duty_r_pct",
-    "duty_l_pct",
-    "encoder_speed_mps",
-    "accel_mps2",
-    "true_distance_m",
-    "true_offset_px",
-    "in_frame",
-    "robot_x_m",
-    "robot_y_m",
-    "robot_theta_rad",
-    "robot_v_mps",
-    "robot_w_radps",
-    "person_x_m",
-    "person_y_m",
-    "person_theta_rad",
-    "person_v_mps",
-    "wheel_true_r_radps",
-    "wheel_true_l_radps",
-    "wall_clearance_m",
-    "person_clearance_m",
-    "detected_person",
-    "reward",
-    "termination",
-)
-#: Columns holding text; every other column is numeric.
-TEXT_COLUMNS: frozenset[str] = frozenset({"policy", "scenario", "termination"})
-#: Columns a log must have, with a value in every row.
-REQUIRED_COLUMNS: tuple[str, ...] = ("time_s", "obs_distance_m", "obs_offset_px")
-# One of these must be present (module docstring).
-_ACCEL_SOURCES = ("accel_mps2", "encoder_speed_mps")
+_ACCEL_SOURCES = ACCEL_SOURCES
 # Enough digits that float32 observations and float64 ground truth survive the round trip to
 # 1e-9 relative, at a third of the size of full repr precision.
 FLOAT_FORMAT = "%.9g"

@@ -15,8 +15,12 @@ allow; the default), :data:`IDEAL` (perfect sensing, for debugging and tests), :
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass, field
-from typing import ClassVar
+from pathlib import Path
+from typing import Any, ClassVar
+
+import yaml
 
 from follow_env.platforms.base import PlatformConfig
 from follow_env.platforms.diff_drive import DiffDriveConfig
@@ -37,6 +41,7 @@ __all__ = [
     "RandomizationConfig",
     "RewardConfig",
     "ScenarioConfig",
+    "config_from_text",
 ]
 
 
@@ -285,3 +290,40 @@ PRESETS: dict[str, EnvConfig] = {
     "noisy": NOISY,
     "randomized": RANDOMIZED,
 }
+
+
+def config_from_text(text: str) -> str | dict[str, Any]:
+    """A command line's ``--config``: a preset name, a JSON object of section overrides, or a
+    ``.json``/``.yaml`` file holding one; checked against :data:`THESIS` and returned as the
+    preset name or the overrides (what ``config=`` takes).
+
+    :raises ValueError: naming the file or the text and what is wrong (unreadable, not
+        YAML/JSON, not a mapping, or a config value out of range).
+    """
+    if text in PRESETS:
+        return text
+    path = Path(text)
+    if path.suffix.lower() in (".json", ".yaml", ".yml"):
+        try:
+            overrides = yaml.safe_load(path.read_text(encoding="utf-8"))
+        except OSError as exc:
+            raise ValueError(f"cannot read {path}: {exc.strerror}") from None
+        except yaml.YAMLError as exc:
+            raise ValueError(f"{path} is not valid YAML/JSON: {exc}") from None
+        where = str(path)
+    else:
+        try:
+            overrides = json.loads(text)
+        except json.JSONDecodeError:
+            raise ValueError(
+                f"{text!r} is not a preset ({', '.join(sorted(PRESETS))}), a JSON object, or a "
+                ".json/.yaml file"
+            ) from None
+        where = "the JSON object"
+    if not isinstance(overrides, dict):
+        raise ValueError(f"{where} must be a mapping of config sections")
+    try:
+        EnvConfig.from_overrides(THESIS, overrides)
+    except ValueError as exc:
+        raise ValueError(f"{where}: {exc}") from None
+    return overrides

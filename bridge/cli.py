@@ -1,0 +1,293 @@
+"""``follow-robot``: the same policies on an emulated or a real robot, and a live web monitor.
+
+::
+
+    follow-robot emulate --listen socket://127.0.0.1:5760 [--framing reference|robust]
+        [--firmware reference|fixed] [--scenario straight] [--seed 0] [--config thesis]
+    follow-robot run --port URL --policy NAME [--framing reference|robust]
+        [--perception sim|sim:HOST:PORT|replay:LOG.csv|realsense:MODEL.pt] [--duration S]
+        [--log OUT.csv] [--command auto|duty|speed] [--seed N] [--monitor] [--http HOST:PORT]
+    follow-robot monitor --sim [--policy NAME] [--scenario S] [--seed N] [--http HOST:PORT]
+    follow-robot monitor --port URL [--perception ...] [--http HOST:PORT]   (a robot, from stop)
+
+(also ``python -m bridge ...``). ``URL`` is anything pyserial opens: ``/dev/ttyUSB0``,
+``socket://127.0.0.1:5760`` (the emulator), ``loop://``. The monitor serves
+``http://127.0.0.1:8000/`` by default; any other host needs ``--token``, which the page's
+URL then carries (``/?token=...``). Bad arguments give one line on stderr and exit status 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import signal
+import sys
+import time
+from collections.abc import Sequence
+from typing import Any, NoReturn
+
+from bridge.link import LinkError, SerialLink
+from bridge.perception import PerceptionError, open_source
+from bridge.protocol import FRAMINGS
+
+__all__ = ["main"]
+
+PROG = "follow-robot"
+USAGE_ERROR = 2
+FIRMWARES = ("reference", "fixed")  # bridge.mcu.FIRMWARES, without importing the simulator
+
+
+class UsageError(Exception):
+    """Bad arguments: one line, exit status 2."""
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str) -> NoReturn:
+        raise UsageError(message)
+
+
+def _positive(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not 0 < value <= 86400:
+        raise argparse.ArgumentTypeError(f"{text} is out of range: must be in (0, 86400] s")
+    return value
+
+
+def _seed(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+    if not 0 <= value < 2**63:
+        raise argparse.ArgumentTypeError(f"{text} is out of range: must be in [0, 2**63)")
+    return value
+
+
+def _http(text: str) -> tuple[str, int]:
+    host, _, port = text.rpartition(":")
+    host = host.strip("[]") or "127.0.0.1"
+    if not port.isdigit() or not 0 <= int(port) <= 65535:
+        raise argparse.ArgumentTypeError(f"{text!r} is not HOST:PORT (port 0-65535)")
+    return host, int(port)
+
+
+def _config(text: str) -> Any:
+    from follow_env.tasks.person_follow.config import config_from_text
+
+    try:
+        return config_from_text(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def _parser() -> _Parser:
+    parser = _Parser(prog=PROG, description=__doc__.split("\n\n")[0])
+    sub = parser.add_subparsers(dest="subcommand", required=True, parser_class=_Parser)
+
+    emulate = sub.add_parser("emulate", help="emulate the robot's MCU and its world")
+    emulate.add_argument("--listen", default="socket://127.0.0.1:5760", help="socket://HOST:PORT")
+    emulate.add_argument("--framing", choices=FRAMINGS, default="reference")
+    emulate.add_argument("--firmware", choices=FIRMWARES, default="reference")
+    emulate.add_argument("--scenario", default="straight", help="the world's scenario")
+    emulate.add_argument("--seed", type=_seed, default=0, help="the world's episode seed")
+    emulate.add_argument("--config", type=_config, default="thesis", help="env preset or JSON")
+
+    def robot_options(p: _Parser) -> None:
+        p.add_argument("--port", help="the serial URL (a port, socket://HOST:PORT, loop://)")
+        p.add_argument("--framing", choices=FRAMINGS, default="reference")
+        p.add_argument("--perception", default="sim", help="sim | replay:LOG.csv | realsense:M")
+        p.add_argument("--command", choices=("auto", "duty", "speed"), default="auto")
+        p.add_argument("--duration", type=_positive, default=None, help="stop after S seconds")
+        p.add_argument("--log", default=None, help="write the step log here (CSV)")
+        p.add_argument("--seed", type=_seed, default=None, help="reset the sim world to it")
+        p.add_argument("--config", type=_config, default="thesis", help="robot preset or JSON")
+        p.add_argument("--http", type=_http, default=("127.0.0.1", 8000), help="monitor address")
+        p.add_argument("--token", default=None, help="required by the monitor off loopback")
+
+    run = sub.add_parser("run", help="drive a robot with a policy")
+    robot_options(run)
+    run.add_argument("--policy", required=True, help="pn, gsmpn:tuned, ppo, a model path ...")
+    run.add_argument("--monitor", action="store_true", help="serve the live monitor too")
+
+    monitor = sub.add_parser("monitor", help="the live web monitor")
+    robot_options(monitor)
+    monitor.add_argument("--sim", action="store_true", help="watch the simulator, no hardware")
+    monitor.add_argument("--policy", default="stop", help="the starting mode")
+    monitor.add_argument("--scenario", default="straight", help="--sim: the scenario")
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point; returns the exit status."""
+    try:
+        args = _parser().parse_args(argv)
+        return _dispatch(args)
+    except UsageError as exc:
+        print(f"{PROG}: error: {exc}", file=sys.stderr)
+        return USAGE_ERROR
+
+
+def _dispatch(args: argparse.Namespace) -> int:
+    if args.subcommand == "emulate":
+        return _emulate(args)
+    if args.subcommand == "monitor" and args.sim:
+        return _monitor_sim(args)
+    if not args.port:
+        raise UsageError(f"{args.subcommand} needs --port URL (or, for monitor, --sim)")
+    return _run(args, monitor=args.subcommand == "monitor" or args.monitor)
+
+
+def _env_config(args: argparse.Namespace, scenario: str | None = None) -> Any:
+    from follow_env.tasks.person_follow.task import TASK
+
+    try:
+        return TASK.resolve_config(args.config, scenario=scenario)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+
+
+def _emulate(args: argparse.Namespace) -> int:
+    from bridge.emulator import Emulator
+
+    config = _env_config(args, args.scenario)
+    from follow_env.tasks.person_follow.task import TASK
+
+    try:
+        TASK.check(config)  # the scenario name is checked here
+        emulator = Emulator(args.listen, args.framing, args.firmware, config, args.seed)
+    except (ValueError, OSError) as exc:
+        raise UsageError(str(exc)) from None
+    host, port = emulator.camera_address
+    print(
+        f"{PROG}: emulating the {args.firmware} firmware ({args.framing} framing) on "
+        f"{emulator.url}; the world's camera ({config.scenario.name}, seed {args.seed}) on "
+        f"{host}:{port}. Ctrl-C ends.",
+        flush=True,
+    )
+    signal.signal(signal.SIGTERM, _interrupt)  # `kill` stops it as cleanly as Ctrl-C
+    with contextlib.suppress(KeyboardInterrupt):
+        emulator.serve_forever()
+    print(f"{PROG}: emulator stopped: {emulator.stats}, {emulator.mcu.stats}", flush=True)
+    return 0
+
+
+def _policy_factory() -> Any:
+    from policies import make_policy
+
+    def build(name: str) -> Any:
+        return make_policy(name)
+
+    return build
+
+
+def _start_monitor(args: argparse.Namespace, hub: Any) -> Any:
+    from bridge.monitor.app import serve
+
+    host, port = args.http
+    try:
+        server = serve(hub, host, port, args.token)
+    except (ValueError, RuntimeError) as exc:
+        raise UsageError(str(exc)) from None
+    query = f"?token={args.token}" if args.token else ""
+    print(f"{PROG}: monitor on {server.url}{query}", flush=True)
+    return server
+
+
+def _monitor_sim(args: argparse.Namespace) -> int:
+    from bridge.monitor.hub import MonitorHub
+    from bridge.monitor.sim import SimDriver
+
+    config = _env_config(args, args.scenario)
+    factory = _policy_factory()
+    try:
+        driver = SimDriver(MonitorHub(args.policy), factory, config=config, seed=args.seed or 0)
+        if args.policy not in ("stop", "manual"):
+            factory(args.policy)  # a bad name fails here, not in the driver's thread
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    server = _start_monitor(args, driver.hub)
+    driver.start()
+    signal.signal(signal.SIGTERM, _interrupt)
+    try:
+        while True:
+            time.sleep(1.0)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        driver.stop()
+        server.stop()
+    return 0
+
+
+def _run(args: argparse.Namespace, monitor: bool) -> int:
+    from bridge.runner import Runner, RunnerConfig
+
+    config = _env_config(args)
+    factory = _policy_factory()
+    policy_name = args.policy if args.subcommand == "run" else "stop"
+    try:
+        policy = factory(policy_name) if policy_name not in ("stop", "manual") else None
+        run_config = RunnerConfig(duration_s=args.duration, command=args.command)
+        perception = open_source(args.perception, args.port, args.seed)
+    except (ValueError, PerceptionError) as exc:
+        raise UsageError(str(exc)) from None
+    try:
+        link = SerialLink(args.port, args.framing)
+    except LinkError as exc:
+        raise UsageError(str(exc)) from None
+    hub = server = None
+    if monitor:
+        from bridge.monitor.hub import MonitorHub
+
+        hub = MonitorHub(policy_name)
+        server = _start_monitor(args, hub)
+    meta = {"policy": policy_name, "scenario": f"robot:{args.perception}", "seed": args.seed}
+    runner = Runner(
+        link,
+        policy if policy is not None else _Idle(policy_name),
+        perception,
+        config.platform,
+        run_config,
+        log=args.log,
+        meta=meta,
+        monitor=hub,
+        policy_factory=factory,
+    )
+    previous = signal.getsignal(signal.SIGTERM)
+    signal.signal(signal.SIGTERM, _interrupt)  # a service manager's stop is a Ctrl-C too
+    try:
+        result = runner.run()
+    except (LinkError, PerceptionError) as exc:
+        print(f"{PROG}: error: {exc}", file=sys.stderr)
+        return 1
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+        link.close()
+        if server is not None:
+            server.stop()
+    print(f"{PROG}: {result.summary()}", flush=True)
+    return 0 if not result.reason.startswith(("no feedback", "link error")) else 1
+
+
+def _interrupt(signum: int, frame: Any) -> None:
+    raise KeyboardInterrupt
+
+
+class _Idle:
+    """The policy of the ``stop`` and ``manual`` start modes (the monitor picks the rest)."""
+
+    def __init__(self, name: str) -> None:
+        self.name = name
+
+    def reset(self) -> None:
+        pass
+
+    def act(self, obs: Any) -> Any:
+        return (0.0, 0.0)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,219 @@
+"""The monitor's FastAPI app: a static page, and a WebSocket that streams state and takes modes.
+
+``GET /`` serves the page (``static/index.html``: Canvas2D, no framework, no CDN: it works
+offline, beside the robot). ``/ws`` is the WebSocket:
+
+* server to client, JSON: ``{"type": "scene", ...}`` once (walls to draw), then ``{"type":
+  "state", ...}`` at ``rate_hz`` (10 Hz) whenever the driver has published a newer state;
+  replies ``{"type": "ack", ...}`` or ``{"type": "error", "error": ...}`` to every message;
+* client to server, JSON validated with pydantic: ``{"type": "mode", "mode": "gsmpn"}``
+  (one of ``pn, mpn, gsmpn, ppo, stop, manual``), ``{"type": "manual", "v_mps": 0.3,
+  "w_radps": 0.0}`` and ``{"type": "ping", "t": ...}``. A malformed message gets an error
+  reply; the connection and the server go on.
+
+With a ``token`` the WebSocket handshake must carry it (``/ws?token=...``); a wrong or missing
+token is refused before the connection opens (HTTP 403). The command line requires a token
+for any host other than loopback.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import secrets
+import threading
+import time
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+import uvicorn
+from fastapi import FastAPI, WebSocket, WebSocketDisconnect
+from fastapi.responses import FileResponse
+from fastapi.staticfiles import StaticFiles
+from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, ValidationError
+
+from bridge.monitor.hub import MANUAL_LIMITS, MODES, MonitorHub
+
+__all__ = ["LOOPBACK_HOSTS", "MAX_MESSAGE_BYTES", "Server", "create_app", "serve"]
+
+STATIC = Path(__file__).with_name("static")
+MAX_MESSAGE_BYTES = 4096
+"""Longest client message accepted."""
+LOOPBACK_HOSTS = frozenset({"127.0.0.1", "localhost", "::1"})
+
+Mode = Literal["pn", "mpn", "gsmpn", "ppo", "stop", "manual"]
+assert set(Mode.__args__) == set(MODES)  # one list of modes
+
+
+class _Message(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+class ModeMessage(_Message):
+    """Select an operating mode."""
+
+    type: Literal["mode"]
+    mode: Mode
+
+
+class ManualMessage(_Message):
+    """A manual command, m/s and rad/s (used in ``manual`` mode)."""
+
+    type: Literal["manual"]
+    v_mps: float = Field(ge=-MANUAL_LIMITS[0], le=MANUAL_LIMITS[0], allow_inf_nan=False)
+    w_radps: float = Field(ge=-MANUAL_LIMITS[1], le=MANUAL_LIMITS[1], allow_inf_nan=False)
+
+
+class PingMessage(_Message):
+    """Echoed back (clients measure the round trip)."""
+
+    type: Literal["ping"]
+    t: float | None = None
+
+
+ClientMessage = TypeAdapter(
+    Annotated[ModeMessage | ManualMessage | PingMessage, Field(discriminator="type")]
+)
+
+
+def _error_text(exc: ValidationError) -> str:
+    parts = []
+    for err in exc.errors()[:3]:
+        where = ".".join(str(p) for p in err["loc"]) or "message"
+        parts.append(f"{where}: {err['msg']}")
+    return "; ".join(parts)
+
+
+def create_app(hub: MonitorHub, token: str | None = None, rate_hz: float = 10.0) -> FastAPI:
+    """The monitor app over ``hub``.
+
+    :param hub: the state and mode store the robot's driver shares.
+    :param token: required at the WebSocket handshake when given.
+    :param rate_hz: state messages per second at most.
+    """
+    if not 0.1 <= rate_hz <= 100.0:
+        raise ValueError(f"rate_hz={rate_hz} is out of range: must be in [0.1, 100] Hz")
+    app = FastAPI(title="PersonFollow monitor", docs_url=None, redoc_url=None)
+    app.state.hub = hub
+    app.state.clients = 0
+    app.mount("/static", StaticFiles(directory=STATIC), name="static")
+
+    @app.get("/", include_in_schema=False)
+    async def index() -> FileResponse:
+        return FileResponse(STATIC / "index.html", media_type="text/html")
+
+    @app.get("/state")
+    async def state() -> dict[str, Any]:
+        """The newest state (for scripts; the page uses the WebSocket)."""
+        return hub.latest() or {"type": "state", "seq": 0}
+
+    @app.websocket("/ws")
+    async def websocket(ws: WebSocket) -> None:
+        if token is not None and not secrets.compare_digest(
+            ws.query_params.get("token", ""), token
+        ):
+            await ws.close(code=1008, reason="wrong or missing token")
+            return
+        await ws.accept()
+        app.state.clients += 1
+        sender = asyncio.create_task(_send_states(ws, hub, 1.0 / rate_hz))
+        try:
+            await _receive(ws, hub)
+        except WebSocketDisconnect:
+            pass
+        finally:
+            sender.cancel()
+            with contextlib.suppress(asyncio.CancelledError, Exception):
+                await sender
+            app.state.clients -= 1
+
+    return app
+
+
+async def _send_states(ws: WebSocket, hub: MonitorHub, period_s: float) -> None:
+    await ws.send_text(json.dumps({"type": "scene", **hub.scene}))
+    last = -1
+    while True:
+        state = hub.latest()
+        if state is not None and state["seq"] != last:
+            last = state["seq"]
+            await ws.send_text(json.dumps(state, allow_nan=False, default=_jsonable))
+        await asyncio.sleep(period_s)
+
+
+def _jsonable(value: Any) -> Any:
+    if hasattr(value, "tolist"):
+        return value.tolist()
+    raise TypeError(f"cannot send {type(value).__name__}")
+
+
+async def _receive(ws: WebSocket, hub: MonitorHub) -> None:
+    while True:
+        text = await ws.receive_text()
+        if len(text.encode()) > MAX_MESSAGE_BYTES:
+            await ws.send_json(
+                {"type": "error", "error": f"message over {MAX_MESSAGE_BYTES} bytes"}
+            )
+            continue
+        try:
+            message = ClientMessage.validate_json(text)
+        except ValidationError as exc:
+            await ws.send_json({"type": "error", "error": _error_text(exc)})
+            continue
+        if isinstance(message, ModeMessage):
+            hub.set_mode(message.mode)
+            await ws.send_json({"type": "ack", "mode": message.mode})
+        elif isinstance(message, ManualMessage):
+            hub.set_manual(message.v_mps, message.w_radps)
+            await ws.send_json({"type": "ack", "manual": [message.v_mps, message.w_radps]})
+        else:
+            await ws.send_json({"type": "pong", "t": message.t})
+
+
+class Server:
+    """uvicorn serving an app in a background thread; :meth:`stop` ends it."""
+
+    def __init__(self, app: FastAPI, host: str = "127.0.0.1", port: int = 8000) -> None:
+        config = uvicorn.Config(app, host=host, port=port, log_level="warning", lifespan="off")
+        self._server = uvicorn.Server(config)
+        self._thread = threading.Thread(target=self._server.run, name="monitor", daemon=True)
+        self.host = host
+        self.port = port
+
+    def start(self, timeout_s: float = 10.0) -> Server:
+        """Start serving; returns once the socket listens (``RuntimeError`` if it cannot)."""
+        self._thread.start()
+        end = time.monotonic() + timeout_s
+        while not self._server.started:
+            if not self._thread.is_alive() or time.monotonic() > end:
+                raise RuntimeError(f"the monitor could not listen on {self.host}:{self.port}")
+            time.sleep(0.02)
+        if self.port == 0:
+            sock = self._server.servers[0].sockets[0]
+            self.port = sock.getsockname()[1]
+        return self
+
+    @property
+    def url(self) -> str:
+        """The page's address."""
+        host = f"[{self.host}]" if ":" in self.host else self.host
+        return f"http://{host}:{self.port}/"
+
+    def stop(self) -> None:
+        """Stop serving (idempotent)."""
+        self._server.should_exit = True
+        if self._thread.is_alive():
+            self._thread.join(timeout=5.0)
+
+
+def serve(
+    hub: MonitorHub, host: str = "127.0.0.1", port: int = 8000, token: str | None = None
+) -> Server:
+    """Serve the monitor over ``hub`` in a background thread; ``ValueError`` for a host that
+    is not loopback without a token."""
+    if host not in LOOPBACK_HOSTS and not token:
+        raise ValueError(
+            f"--host {host} is not loopback: give --token so that only you can drive the robot"
+        )
+    return Server(create_app(hub, token), host, port).start()

@@ -1,0 +1,275 @@
+"""Where the runner's observations come from: one interface, three sources.
+
+A source hands the runner a :class:`Frame` at every control step: the published observation
+``[distance_m, offset_px]`` (reference §1.4: held when nothing is detected), whether it is a
+fresh detection, and, where the source knows it, ground truth for the step log.
+
+* :class:`SimCamera` (``--perception sim``): the camera of the emulator's simulated world
+  (:mod:`bridge.emulator`), over its JSON-lines socket; the robot is the emulated one, so this
+  is hardware-in-the-loop on one machine.
+* :class:`Replay` (``--perception replay:LOG.csv``): the observations of a step log, in time.
+* ``realsense`` (:mod:`bridge.realsense`, the ``realsense`` extra): a RealSense colour and
+  depth stream and a YOLO person detector.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import csv
+import json
+import math
+import socket
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Protocol
+from urllib.parse import urlsplit
+
+__all__ = [
+    "Frame",
+    "PerceptionError",
+    "PerceptionSource",
+    "Replay",
+    "SimCamera",
+    "open_source",
+    "parse_socket_url",
+    "perception_address",
+]
+
+
+def parse_socket_url(url: str) -> tuple[str, int]:
+    """``socket://HOST:PORT`` as ``(host, port)``; ``ValueError`` naming the URL otherwise."""
+    parts = urlsplit(url)
+    if parts.scheme != "socket" or not parts.hostname or parts.port is None:
+        raise ValueError(f"{url!r} is not a socket://HOST:PORT address")
+    return parts.hostname, parts.port
+
+
+def perception_address(url: str) -> tuple[str, int]:
+    """Where the emulator at serial URL ``socket://HOST:PORT`` serves its camera: PORT + 1."""
+    host, port = parse_socket_url(url)
+    return host, port + 1
+
+
+class PerceptionError(Exception):
+    """The perception source failed (unreachable, closed, malformed); the message says which."""
+
+
+@dataclass(frozen=True)
+class Frame:
+    """One published observation.
+
+    :param distance_m: filtered distance, m (0: no reading yet).
+    :param offset_px: box centre column minus ``width // 2``, px (> 0: right of centre).
+    :param detected: a fresh detection (not a held value).
+    :param done: the source has nothing more (the replay ended, the world's episode is over).
+    :param termination: why it is over, if it is.
+    :param truth: ground truth by step-log column name (simulated sources only).
+    """
+
+    distance_m: float
+    offset_px: float
+    detected: bool
+    done: bool = False
+    termination: str = ""
+    truth: dict[str, float | None] = field(default_factory=dict)
+
+
+class PerceptionSource(Protocol):
+    """What the runner reads from."""
+
+    name: str
+
+    def start(self) -> None:
+        """Get ready (connect, reset the world, rewind); called once before the first read."""
+
+    def read(self) -> Frame:
+        """The newest frame."""
+        ...
+
+    def close(self) -> None:
+        """Release everything (idempotent)."""
+
+
+class SimCamera:
+    """The camera of the emulator's world (``HOST:PORT+1`` of its ``socket://HOST:PORT``).
+
+    :param host: the emulator's host.
+    :param port: its camera port (the serial port + 1).
+    :param seed: reset the world to this seed at :meth:`start` (``None``: the emulator's).
+    :param timeout_s: longest wait for an answer, s.
+    """
+
+    def __init__(
+        self, host: str, port: int, seed: int | None = None, timeout_s: float = 1.0
+    ) -> None:
+        self.name = "sim"
+        self.address = (host, port)
+        self.seed = seed
+        self.timeout_s = timeout_s
+        self._sock: socket.socket | None = None
+        self._file: Any = None
+        self.info: dict[str, Any] = {}
+
+    def start(self) -> None:
+        try:
+            self._sock = socket.create_connection(self.address, timeout=self.timeout_s)
+        except OSError as exc:
+            host, port = self.address
+            raise PerceptionError(
+                f"no emulator camera at {host}:{port} ({exc.strerror or exc}); start "
+                "`follow-robot emulate` first"
+            ) from exc
+        self._sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        self._file = self._sock.makefile("rwb")
+        self.info = self._ask({"op": "info"})
+        request: dict[str, Any] = {"op": "reset"}
+        if self.seed is not None:
+            request["seed"] = self.seed
+        self._ask(request)
+
+    def read(self) -> Frame:
+        reply = self._ask({"op": "frame"})
+        truth = {k: v for k, v in reply.items() if k not in _FRAME_KEYS}
+        return Frame(
+            float(reply["distance_m"]),
+            float(reply["offset_px"]),
+            bool(reply["detected"]),
+            bool(reply["done"]),
+            str(reply["termination"]),
+            truth,
+        )
+
+    def _ask(self, request: dict[str, Any]) -> dict[str, Any]:
+        if self._file is None:
+            raise PerceptionError("the sim camera is not started")
+        try:
+            self._file.write(json.dumps(request).encode() + b"\n")
+            self._file.flush()
+            line = self._file.readline()
+        except OSError as exc:
+            raise PerceptionError(f"the emulator camera failed: {exc}") from exc
+        if not line:
+            raise PerceptionError("the emulator closed its camera connection")
+        reply = json.loads(line)
+        if "error" in reply:
+            raise PerceptionError(f"the emulator camera refused {request}: {reply['error']}")
+        return reply
+
+    def close(self) -> None:
+        for part in (self._file, self._sock):
+            if part is not None:
+                with contextlib.suppress(OSError):
+                    part.close()
+        self._file = self._sock = None
+
+
+# Not ground truth: the observation itself, and the world's own clock (the log keeps the runner's).
+_FRAME_KEYS = frozenset(
+    {"distance_m", "offset_px", "detected", "done", "termination", "time_s", "step"}
+)
+
+
+class Replay:
+    """The observations of a step log, replayed in time: at ``t`` seconds after :meth:`start`
+    the frame is the last row with ``time_s <= t``; done after the last row.
+
+    :param path: a step log CSV (``time_s``, ``obs_distance_m``, ``obs_offset_px``; ``detected``
+        optional).
+    :raises PerceptionError: naming the file and what is wrong with it.
+    """
+
+    def __init__(self, path: str | Path, clock: Any = time.monotonic) -> None:
+        self.name = f"replay:{path}"
+        self.path = Path(path)
+        self._clock = clock
+        self._t0 = 0.0
+        self.rows = _read_replay(self.path)
+
+    def start(self) -> None:
+        self._t0 = self._clock()
+
+    def read(self) -> Frame:
+        t = self._clock() - self._t0 + self.rows[0][0]
+        index = 0
+        for k, row in enumerate(self.rows):  # logs are short: a few thousand rows
+            if row[0] <= t + 1e-9:
+                index = k
+            else:
+                break
+        _, distance, offset, detected = self.rows[index]
+        done = index == len(self.rows) - 1 and t >= self.rows[-1][0]
+        return Frame(distance, offset, detected, done, "replay_over" if done else "")
+
+    def close(self) -> None:
+        pass
+
+
+def _read_replay(path: Path) -> list[tuple[float, float, float, bool]]:
+    try:
+        with path.open(newline="", encoding="utf-8") as f:
+            rows = list(csv.DictReader(f))
+    except FileNotFoundError:
+        raise PerceptionError(f"{path}: no such step log") from None
+    except (OSError, UnicodeDecodeError, csv.Error) as exc:
+        raise PerceptionError(f"{path}: cannot read it as a CSV step log: {exc}") from None
+    if not rows:
+        raise PerceptionError(f"{path}: no rows; a replay needs a step log with data")
+    missing = [c for c in ("time_s", "obs_distance_m", "obs_offset_px") if c not in rows[0]]
+    if missing:
+        raise PerceptionError(f"{path}: missing column(s) {', '.join(missing)}")
+    out: list[tuple[float, float, float, bool]] = []
+    for line, row in enumerate(rows, start=2):
+        try:
+            t, d, o = (float(row[c]) for c in ("time_s", "obs_distance_m", "obs_offset_px"))
+            detected = float(row.get("detected") or 1.0) > 0.5
+        except (TypeError, ValueError):
+            raise PerceptionError(f"{path}: line {line}: a value is not a number") from None
+        if not all(math.isfinite(x) for x in (t, d, o)):
+            raise PerceptionError(f"{path}: line {line}: a value is not finite")
+        if out and t <= out[-1][0]:
+            raise PerceptionError(f"{path}: line {line}: time_s={t} does not increase")
+        out.append((t, d, o, detected))
+    return out
+
+
+def open_source(spec: str, port_url: str, seed: int | None = None) -> PerceptionSource:
+    """A perception source from the runner's ``--perception`` value.
+
+    :param spec: ``sim``, ``sim:HOST:PORT``, ``replay:LOG.csv`` or ``realsense:MODEL.pt``.
+    :param port_url: the runner's ``--port`` (``sim`` finds the emulator's camera from it).
+    :param seed: the world's seed for ``sim``.
+    :raises ValueError: an unknown kind, or ``sim`` without a ``socket://`` port.
+    """
+    kind, _, rest = spec.partition(":")
+    if kind == "sim":
+        if rest:
+            host, _, port = rest.rpartition(":")
+            if not host or not port.isdigit():
+                raise ValueError(f"--perception {spec!r}: expected sim or sim:HOST:PORT")
+            return SimCamera(host, int(port), seed)
+        try:
+            host, port_no = perception_address(port_url)
+        except ValueError:
+            raise ValueError(
+                f"--perception sim needs --port socket://HOST:PORT (the emulator's), not "
+                f"{port_url!r}; or give the camera as sim:HOST:PORT"
+            ) from None
+        return SimCamera(host, port_no, seed)
+    if kind == "replay":
+        if not rest:
+            raise ValueError("--perception replay needs a step log: replay:LOG.csv")
+        return Replay(rest)
+    if kind == "realsense":
+        from bridge.realsense import RealSensePerception
+
+        if not rest:
+            raise ValueError(
+                "--perception realsense needs a detector model file: realsense:MODEL.pt "
+                "(nothing is downloaded at run time)"
+            )
+        return RealSensePerception(rest)
+    raise ValueError(
+        f"--perception {spec!r} is out of range: must be sim, sim:HOST:PORT, replay:LOG.csv "
+        "or realsense:MODEL.pt"
+    )

@@ -1,0 +1,469 @@
+"""``follow-robot run``: any Policy driving a robot (real or emulated) at the control rate.
+
+Two loops, as on the reference robot (reference §1: a guidance node at 10 Hz, a PID node and
+the serial nodes below it):
+
+* the **control loop** (this thread) wakes on a monotonic schedule every ``control_dt_s``
+  (0.1 s), reads the perception, asks the policy for ``(v, w)``, clips it to the platform's
+  bounds, turns it into wheel speed targets with the platform's inverse kinematics (reference
+  §1.1) and writes one step-log row; how late each wake-up was is recorded (p50 / p99);
+* the **wheel loop** (a thread) runs every ``wheel_dt_s`` (10 ms): it reads the MCU's feedback,
+  and sends the wheel command: the speed targets in mm/s to firmware that runs the wheel PID
+  itself, or a duty from the PC's own PID (the simulator's PID of reference §1.2, on the
+  measured wheel speeds, dt from the clock) to firmware that takes duties, as the reference
+  robot's did. When no feedback has come for ``feedback_timeout_s`` (0.1 s) it stops the wheels
+  and ends the run.
+
+On Ctrl-C, at the end of the perception (the world's episode, the replay) or after
+``duration_s``, the wheels are commanded to zero before the link closes. The step log (the
+evaluation's layout, :mod:`follow_env.tasks.person_follow.steplog`) is written to a temporary
+file and renamed into place, so ``follow-eval metrics`` scores a real run like a simulated one.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import csv
+import math
+import os
+import tempfile
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from bridge.link import LinkError, SerialLink
+from bridge.perception import Frame, PerceptionSource
+from bridge.protocol import Capability, CommandKind, Feedback, Hello, PeerRole, WheelCommand
+from follow_env.platforms.diff_drive import DiffDriveConfig, diff_drive_ik
+from follow_env.platforms.wheels import pid_step
+from follow_env.sim.checks import out_of_range
+from follow_env.tasks.person_follow.steplog import COLUMNS
+
+__all__ = ["COMMAND_MODES", "RunResult", "Runner", "RunnerConfig", "write_rows"]
+
+COMMAND_MODES = ("auto", "duty", "speed")
+_ZERO_REPEATS = 3  # stop commands sent at the end (one may be lost on a noisy line)
+_FIRST_FEEDBACK_S = 1.0  # longest wait for the MCU's first feedback, s
+
+# The pure-Python bodies of the simulator's compiled functions: the same arithmetic, and the
+# runner never compiles a kernel.
+_ik = diff_drive_ik.py_func
+_pid = pid_step.py_func
+
+
+@dataclass(frozen=True)
+class RunnerConfig:
+    """How the runner drives the robot.
+
+    :param control_dt_s: control period, s (reference §1.6: 0.1 s).
+    :param wheel_dt_s: wheel loop period, s (choice: the MCU's 10 ms encoder period).
+    :param feedback_timeout_s: stop the wheels when no feedback came for this long, s.
+    :param duration_s: end after this long, s (``None``: at the end of the perception).
+    :param command: ``"speed"`` (the MCU runs the wheel PID), ``"duty"`` (the PC does), or
+        ``"auto"``: speed if the MCU's hello offers it, else duty.
+    """
+
+    control_dt_s: float = 0.1
+    wheel_dt_s: float = 0.01
+    feedback_timeout_s: float = 0.1
+    duration_s: float | None = None
+    command: str = "auto"
+
+    def __post_init__(self) -> None:
+        for name, lo, hi in (
+            ("control_dt_s", 0.005, 10.0),
+            ("wheel_dt_s", 0.001, 1.0),
+            ("feedback_timeout_s", 0.01, 10.0),
+        ):
+            value = getattr(self, name)
+            if not (isinstance(value, int | float) and lo <= value <= hi):
+                raise out_of_range(f"RunnerConfig.{name}", value, f"in [{lo}, {hi}] s")
+        if self.wheel_dt_s > self.control_dt_s:
+            raise out_of_range(
+                "RunnerConfig.wheel_dt_s",
+                self.wheel_dt_s,
+                f"<= control_dt_s ({self.control_dt_s} s)",
+            )
+        if self.duration_s is not None and not (
+            isinstance(self.duration_s, int | float) and 0 < self.duration_s <= 86400
+        ):
+            raise out_of_range("RunnerConfig.duration_s", self.duration_s, "in (0, 86400] s")
+        if self.command not in COMMAND_MODES:
+            raise out_of_range(
+                "RunnerConfig.command", self.command, "one of " + ", ".join(COMMAND_MODES)
+            )
+
+
+@dataclass
+class RunResult:
+    """How a run went."""
+
+    steps: int = 0
+    reason: str = ""
+    command: str = ""
+    lateness_ms: list[float] = field(default_factory=list)
+    overruns: int = 0
+    feedback_frames: int = 0
+    log: Path | None = None
+
+    def lateness_percentile(self, q: float) -> float:
+        """Percentile ``q`` (0-100) of how late the control loop woke, ms."""
+        return float(np.percentile(self.lateness_ms, q)) if self.lateness_ms else math.nan
+
+    def summary(self) -> str:
+        """One line for the command line."""
+        return (
+            f"{self.steps} control steps, ended: {self.reason}; commands: {self.command}; "
+            f"loop lateness p50 {self.lateness_percentile(50):.2f} ms, p99 "
+            f"{self.lateness_percentile(99):.2f} ms, {self.overruns} overruns; "
+            f"{self.feedback_frames} feedback frames" + (f"; log: {self.log}" if self.log else "")
+        )
+
+
+class _Wheels:
+    """The wheel loop's shared state (guarded by ``lock``)."""
+
+    def __init__(self) -> None:
+        self.lock = threading.Lock()
+        self.target = [0.0, 0.0]  # m/s, set by the control loop
+        self.measured = [0.0, 0.0]  # m/s, the newest feedback
+        self.duty = [math.nan, math.nan]  # %, the PC PID's output (duty mode)
+        self.last_feedback = math.nan  # monotonic time of the newest feedback
+        self.frames = 0
+        self.failure = ""  # why the wheel loop stopped the robot
+
+
+class Runner:
+    """Drive a robot with a policy; see the module docstring.
+
+    :param link: an open serial link to the MCU (or the emulator).
+    :param policy: anything with ``reset()`` and ``act(obs) -> [v, w]``.
+    :param perception: the observation source.
+    :param platform: the differential drive's configuration (geometry, PID gains, bounds).
+    :param config: periods, timeout, duration and command mode.
+    :param log: where to write the step log (``None``: no log).
+    :param meta: the step log's ``policy``, ``scenario`` and ``seed`` values.
+    :param monitor: a :class:`bridge.monitor.hub.MonitorHub` to publish to and take modes from.
+    :param policy_factory: builds the policy of a mode the monitor selects (``pn``, ...).
+    """
+
+    def __init__(
+        self,
+        link: SerialLink,
+        policy: Any,
+        perception: PerceptionSource,
+        platform: DiffDriveConfig | None = None,
+        config: RunnerConfig | None = None,
+        log: str | Path | None = None,
+        meta: dict[str, Any] | None = None,
+        monitor: Any = None,
+        policy_factory: Callable[[str], Any] | None = None,
+    ) -> None:
+        self.link = link
+        self.policy = policy
+        self.perception = perception
+        self.platform = platform if platform is not None else DiffDriveConfig()
+        self.config = config if config is not None else RunnerConfig()
+        self.log = Path(log) if log is not None else None
+        self.meta = dict(meta or {})
+        self.monitor = monitor
+        self.policy_factory = policy_factory
+        self._wheels = _Wheels()
+        self._stop = threading.Event()
+        self._rows: list[dict[str, Any]] = []
+        self._policies: dict[str, Any] = {}
+        self._mode = getattr(policy, "name", "policy")
+        if self.log is not None and not self.log.parent.is_dir():
+            raise ValueError(f"--log {self.log}: the folder {self.log.parent} does not exist")
+
+    # ---- command mode -------------------------------------------------------------------
+
+    def _choose_command(self) -> str:
+        wanted = self.config.command
+        if self.link.framing != "robust":
+            if wanted == "speed":
+                return "speed"
+            return "duty"  # the reference firmware takes duties (reference §1.1)
+        hello = self.link.handshake(Hello(PeerRole.PC), timeout_s=1.0)
+        caps = hello.capabilities
+        if wanted == "auto":
+            return "speed" if caps & Capability.SPEED_COMMANDS else "duty"
+        need = Capability.SPEED_COMMANDS if wanted == "speed" else Capability.DUTY_COMMANDS
+        if not caps & need:
+            raise LinkError(f"{self.link.url}: the MCU does not take {wanted} commands ({caps!r})")
+        return wanted
+
+    def _wheel_command(self, mode: str, target: list[float], duty: list[float]) -> WheelCommand:
+        if mode == "speed":
+            mm = [max(-32768, min(32767, round(1000.0 * t))) for t in target]
+            return WheelCommand(mm[0], mm[1], CommandKind.SPEED_MM_S)
+        if self.link.framing == "robust":
+            cp = [max(-10000, min(10000, round(100.0 * u))) for u in duty]
+            return WheelCommand(cp[0], cp[1], CommandKind.DUTY_CENTI_PERCENT)
+        pct = [max(-99, min(99, round(u))) for u in duty]
+        return WheelCommand(pct[0], pct[1], CommandKind.DUTY_PERCENT)
+
+    # ---- the wheel loop -----------------------------------------------------------------
+
+    def _wheel_loop(self, mode: str) -> None:
+        cfg, wheels, pid = self.config, self._wheels, self.platform.pid
+        max_duty = self.platform.motor.max_duty_pct
+        anti_windup = pid.anti_windup == "clamp"
+        state = [[0.0, 0.0, 0.0], [0.0, 0.0, 0.0]]  # integral, e_prev, d_filt per wheel
+        start = time.monotonic()
+        last_pid = start
+        next_tick = start
+        duty = [0.0, 0.0]
+        while not self._stop.is_set():
+            now = time.monotonic()
+            try:
+                for message in self.link.receive(0.0):
+                    if isinstance(message, Feedback):
+                        with wheels.lock:
+                            wheels.measured = [
+                                message.right_mm_s / 1000.0,
+                                message.left_mm_s / 1000.0,
+                            ]
+                            wheels.last_feedback = now
+                            wheels.frames += 1
+            except LinkError as exc:
+                self._fail(f"link error: {exc}")
+                return
+            with wheels.lock:
+                target, measured, last_fb = (
+                    list(wheels.target),
+                    list(wheels.measured),
+                    wheels.last_feedback,
+                )
+            since = now - (start if math.isnan(last_fb) else last_fb)
+            limit = _FIRST_FEEDBACK_S if math.isnan(last_fb) else cfg.feedback_timeout_s
+            if since > limit:
+                self._fail(
+                    f"no feedback from the MCU for {since * 1000:.0f} ms (limit "
+                    f"{limit * 1000:.0f} ms): wheels stopped"
+                )
+                return
+            if mode == "duty":
+                dt = max(now - last_pid, 1e-4)  # the thesis's PID node takes dt from the clock
+                last_pid = now
+                for k in (0, 1):
+                    integral, e_prev, d_filt = state[k]
+                    error = target[k] - measured[k]
+                    duty[k], integral, d_filt = _pid(
+                        error,
+                        e_prev,
+                        integral,
+                        d_filt,
+                        pid.kp,
+                        pid.ki,
+                        pid.kd,
+                        pid.tau_s,
+                        dt,
+                        max_duty,
+                        anti_windup,
+                    )
+                    state[k] = [integral, error, d_filt]
+                with wheels.lock:
+                    wheels.duty = list(duty)
+            try:
+                self.link.send(self._wheel_command(mode, target, duty))
+            except LinkError as exc:
+                self._fail(f"link error: {exc}")
+                return
+            next_tick += cfg.wheel_dt_s
+            delay = next_tick - time.monotonic()
+            if delay < -cfg.wheel_dt_s:  # far behind: start the schedule again from now
+                next_tick = time.monotonic()
+            elif delay > 0:
+                self._stop.wait(delay)
+
+    def _fail(self, why: str) -> None:
+        self._wheels.failure = why
+        self._stop.set()
+
+    def _stop_wheels(self, mode: str) -> None:
+        zero = self._wheel_command(mode, [0.0, 0.0], [0.0, 0.0])
+        for _ in range(_ZERO_REPEATS):
+            with contextlib.suppress(LinkError, ValueError):
+                self.link.send(zero)
+            time.sleep(0.002)
+
+    # ---- the control loop ---------------------------------------------------------------
+
+    def run(self) -> RunResult:
+        """Run until the perception ends, ``duration_s`` passes, the link fails or Ctrl-C."""
+        cfg = self.config
+        result = RunResult()
+        mode = self._choose_command()
+        result.command = (
+            "speed targets (PID on the MCU)" if mode == "speed" else "duty (PID on the PC)"
+        )
+        self.perception.start()
+        walls = getattr(self.perception, "info", {}).get("walls")
+        if self.monitor is not None and walls:
+            self.monitor.scene = {"walls": walls}  # the emulated world's, for the top-down view
+        self.policy.reset()
+        wheel_thread = threading.Thread(target=self._wheel_loop, args=(mode,), name="wheel-loop")
+        start = time.monotonic()
+        wheel_thread.start()
+        step = 0
+        frame: Frame | None = None
+        prev_speed = 0.0
+        try:
+            while not self._stop.is_set():
+                scheduled = start + step * cfg.control_dt_s
+                delay = scheduled - time.monotonic()
+                if delay > 0 and self._stop.wait(delay):
+                    break
+                woke = time.monotonic()
+                late = woke - scheduled
+                if late > cfg.control_dt_s:  # a whole period lost: skip to the next slot
+                    result.overruns += 1
+                    step = int((woke - start) // cfg.control_dt_s)
+                    continue
+                result.lateness_ms.append(1000.0 * late)
+                frame = self.perception.read()
+                t = step * cfg.control_dt_s
+                if frame.done:
+                    result.reason = f"perception over ({frame.termination or 'done'})"
+                    break
+                if cfg.duration_s is not None and t >= cfg.duration_s:
+                    result.reason = f"duration {cfg.duration_s:g} s reached"
+                    break
+                v, w = self._act(frame)
+                prev_speed = self._record(step, t, frame, v, w, prev_speed)
+                step += 1
+        except KeyboardInterrupt:
+            result.reason = "interrupted (Ctrl-C)"
+        finally:
+            self._stop.set()
+            wheel_thread.join(timeout=1.0)
+            self._stop_wheels(mode)
+            self.perception.close()
+            if self._wheels.failure and not result.reason:
+                result.reason = self._wheels.failure
+            if frame is not None:
+                self._record(step, step * cfg.control_dt_s, frame, None, None, prev_speed)
+            result.steps = step
+            result.feedback_frames = self._wheels.frames
+            if self.log is not None:
+                result.log = write_rows(self._rows, self.log)
+        return result
+
+    def _act(self, frame: Frame) -> tuple[float, float]:
+        policy = self._current_policy()
+        if policy == "stop":
+            v, w = 0.0, 0.0
+        elif policy == "manual":
+            v, w = self.monitor.manual_command()
+        else:
+            obs = np.array([frame.distance_m, frame.offset_px], dtype=np.float32)
+            v, w = (float(x) for x in policy.act(obs))
+        v_max, w_max = self.platform.max_speed_mps, self.platform.max_turn_rate_radps
+        v, w = min(max(v, -v_max), v_max), min(max(w, -w_max), w_max)
+        r, track = self.platform.robot.wheel_radius_m, self.platform.robot.track_width_m
+        w_r, w_l = _ik(v, w, r, track)
+        with self._wheels.lock:
+            self._wheels.target = [w_r * r, w_l * r]
+        return v, w
+
+    def _current_policy(self) -> Any:
+        if self.monitor is None:
+            return self.policy
+        mode = self.monitor.mode
+        if mode in ("stop", "manual"):
+            self._mode = mode
+            return mode
+        if mode != self._mode or mode not in self._policies:
+            if mode not in self._policies:
+                if mode == getattr(self.policy, "name", None) or self.policy_factory is None:
+                    self._policies[mode] = self.policy
+                else:
+                    self._policies[mode] = self.policy_factory(mode)
+            self._policies[mode].reset()
+            self._mode = mode
+        return self._policies[mode]
+
+    def _record(
+        self, step: int, t: float, frame: Frame, v: float | None, w: float | None, prev: float
+    ) -> float:
+        with self._wheels.lock:
+            target, measured = list(self._wheels.target), list(self._wheels.measured)
+            duty = list(self._wheels.duty)
+        speed = 0.5 * (measured[0] + measured[1])
+        row: dict[str, Any] = {
+            **self.meta,
+            "step": step,
+            "time_s": round(t, 9),
+            "obs_distance_m": frame.distance_m,
+            "obs_offset_px": frame.offset_px,
+            "detected": int(frame.detected),
+            "action_v_mps": v,
+            "action_w_radps": w,
+            "wheel_target_r_mps": target[0],
+            "wheel_target_l_mps": target[1],
+            "wheel_measured_r_mps": measured[0],
+            "wheel_measured_l_mps": measured[1],
+            "duty_r_pct": None if math.isnan(duty[0]) else duty[0],
+            "duty_l_pct": None if math.isnan(duty[1]) else duty[1],
+            "encoder_speed_mps": speed,
+            "accel_mps2": 0.0 if step == 0 else (speed - prev) / self.config.control_dt_s,
+            "termination": frame.termination if v is None else "",
+        }
+        for key, value in frame.truth.items():
+            if key in COLUMNS:
+                row[key] = value
+        self._rows.append(row)
+        if self.monitor is not None:
+            self.monitor.publish(
+                {
+                    "time_s": t,
+                    "mode": self._mode,
+                    "obs": [frame.distance_m, frame.offset_px],
+                    "detected": frame.detected,
+                    "command": [v, w],
+                    "wheel_target_mps": target,
+                    "wheel_measured_mps": measured,
+                    "robot": _pose(frame.truth, "robot"),
+                    "person": _pose(frame.truth, "person"),
+                    "link": self.link.stats.as_dict(),
+                }
+            )
+        return speed
+
+
+def _pose(truth: dict[str, Any], who: str) -> list[float] | None:
+    keys = (f"{who}_x_m", f"{who}_y_m", f"{who}_theta_rad")
+    if not all(truth.get(k) is not None for k in keys):
+        return None
+    return [float(truth[k]) for k in keys]
+
+
+def write_rows(rows: list[dict[str, Any]], path: Path) -> Path:
+    """Write step-log rows (the columns they use, in the layout's order) atomically."""
+    used = {k for row in rows for k, v in row.items() if v is not None}
+    header = [c for c in COLUMNS if c in used]
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".tmp.csv", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w", newline="", encoding="utf-8") as f:
+            writer = csv.writer(f, lineterminator="\n")
+            writer.writerow(header)
+            for row in rows:
+                writer.writerow(["" if row.get(c) is None else _cell(row[c]) for c in header])
+        os.chmod(tmp, 0o644)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return path
+
+
+def _cell(value: Any) -> str:
+    if isinstance(value, float):
+        return f"{value:.9g}"
+    return str(value)
