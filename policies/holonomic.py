@@ -12,9 +12,10 @@ Strafing centres the person without swinging the camera, so the offset is correc
 actuators at once. Signs: a person right of centre (o > 0) needs vy < 0 (to the right) and
 w < 0 (clockwise), the project's convention (:mod:`policies.base`).
 
-The ``default`` preset is a choice, not tuned: PN's speed gain, half of PN's turn gain, and
-``ks = 0.0012`` 1/(s px), i.e. about 0.75 1/s on the sideways distance with the default camera
-(f = 617 px).
+The ``default`` preset is a choice, not tuned by a search: PN's tuned gains (it is PN plus a
+strafe term) and ``ks = 0.0012`` 1/(s px), about 0.75 1/s on the sideways distance with the
+default camera (f = 617 px). A first choice, half of PN's turn gain, turned too slowly to follow
+the person round bends (README, "The mecanum base").
 """
 
 from __future__ import annotations
@@ -41,7 +42,7 @@ class HolonomicParams(LawParams):
     kv_per_s: float = 5.0
     d_ref_m: float = 1.0
     nav_n: float = 0.1
-    kw_rad_per_s_px: float = 0.025
+    kw_rad_per_s_px: float = 0.05
     ks_per_s_px: float = 0.0012
 
     def __post_init__(self) -> None:

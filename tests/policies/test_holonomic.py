@@ -18,7 +18,14 @@ def test_a_person_right_of_centre_makes_it_strafe_right_and_turn_clockwise() -> 
     v, vy, w = make_policy("holonomic").act(obs(2.0, 100.0))
     assert v == pytest.approx(5.0)
     assert vy == pytest.approx(-0.0012 * 2.0 * 100.0)
-    assert w == pytest.approx(-0.1 * 0.025 * 100.0 / 2.0)
+    assert w == pytest.approx(-0.1 * 0.05 * 100.0 / 2.0)
+
+
+def test_without_strafing_it_is_pn() -> None:
+    pn = make_policy("pn")
+    v, vy, w = Holonomic(HolonomicParams(ks_per_s_px=0.0)).act(obs(3.0, -70.0))
+    assert vy == 0.0
+    assert np.array_equal([v, w], pn.act(obs(3.0, -70.0)))
 
 
 def test_it_stands_still_before_the_first_reading() -> None:
