@@ -50,6 +50,10 @@ def bench_single_env(quick: bool) -> list[tuple[str, float, str]]:
     for scenario in ("straight", "curve", "random"):
         rate = single_env_steps_per_s("PersonFollow-v0", follow, steps, scenario=scenario)
         rows.append((f"PersonFollow-v0 {scenario}", rate, f"{cartpole / rate:.2f}x slower"))
+    # The mecanum base: 50 physics ticks of 2 ms per control step, four wheels, body dynamics.
+    ahead = np.array([0.5, 0.0, 0.0], dtype=np.float32)
+    rate = single_env_steps_per_s("PersonFollow-v0", ahead, steps, platform="mecanum")
+    rows.append(("PersonFollow-v0 straight, mecanum", rate, f"{cartpole / rate:.2f}x slower"))
     return rows
 
 
@@ -99,6 +103,16 @@ def bench_vector_env(quick: bool) -> list[tuple[str, float, str]]:
     rate = vector_steps_per_s(env, np.tile(follow, (1024, 1)), max(20, budget // 1024))
     ratio = f"{rate / sync:.0f}x (b), {rate / cartpole:.2f}x (d)"
     rows.append(("(c) native, crowd scenario N=1024", rate, ratio))
+    env = gym.make_vec(
+        "PersonFollow-v0",
+        num_envs=1024,
+        vectorization_mode="vector_entry_point",
+        platform="mecanum",
+    )
+    ahead = np.tile(np.array([0.5, 0.0, 0.0], dtype=np.float32), (1024, 1))
+    rate = vector_steps_per_s(env, ahead, max(20, budget // 1024))
+    ratio = f"{rate / sync:.0f}x (b), {rate / cartpole:.2f}x (d)"
+    rows.append(("(c) native, mecanum N=1024", rate, ratio))
     rows.append(("(d) CartPoleVectorEnv N=1024", cartpole, "1.00x (d)"))
     return rows
 

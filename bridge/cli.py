@@ -27,14 +27,16 @@ from collections.abc import Sequence
 from typing import Any, NoReturn
 
 from bridge.link import LinkError, SerialLink
-from bridge.perception import PerceptionError, open_source
+from bridge.perception import PerceptionError
 from bridge.protocol import FRAMINGS
+from bridge.sources import open_source
 
 __all__ = ["main"]
 
 PROG = "follow-robot"
 USAGE_ERROR = 2
 FIRMWARES = ("reference", "fixed")  # bridge.mcu.FIRMWARES, without importing the simulator
+LOOPBACK_HOSTS = frozenset({"127.0.0.1", "localhost", "::1"})  # bridge.monitor.app's
 
 
 class UsageError(Exception):
@@ -131,6 +133,15 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def _dispatch(args: argparse.Namespace) -> int:
+    # Ctrl-C must reach us even when a shell started us with SIGINT ignored (a background job).
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    signal.signal(signal.SIGTERM, _interrupt)  # `kill` stops as cleanly as Ctrl-C
+    if args.subcommand != "emulate":
+        host, _ = args.http
+        if host not in LOOPBACK_HOSTS and not args.token:
+            raise UsageError(
+                f"--http {host}: not loopback; give --token so that only you can drive the robot"
+            )
     if args.subcommand == "emulate":
         return _emulate(args)
     if args.subcommand == "monitor" and args.sim:
@@ -167,7 +178,6 @@ def _emulate(args: argparse.Namespace) -> int:
         f"{host}:{port}. Ctrl-C ends.",
         flush=True,
     )
-    signal.signal(signal.SIGTERM, _interrupt)  # `kill` stops it as cleanly as Ctrl-C
     with contextlib.suppress(KeyboardInterrupt):
         emulator.serve_forever()
     print(f"{PROG}: emulator stopped: {emulator.stats}, {emulator.mcu.stats}", flush=True)
@@ -210,7 +220,6 @@ def _monitor_sim(args: argparse.Namespace) -> int:
         raise UsageError(str(exc)) from None
     server = _start_monitor(args, driver.hub)
     driver.start()
-    signal.signal(signal.SIGTERM, _interrupt)
     try:
         while True:
             time.sleep(1.0)
@@ -256,15 +265,12 @@ def _run(args: argparse.Namespace, monitor: bool) -> int:
         monitor=hub,
         policy_factory=factory,
     )
-    previous = signal.getsignal(signal.SIGTERM)
-    signal.signal(signal.SIGTERM, _interrupt)  # a service manager's stop is a Ctrl-C too
     try:
         result = runner.run()
     except (LinkError, PerceptionError) as exc:
         print(f"{PROG}: error: {exc}", file=sys.stderr)
         return 1
     finally:
-        signal.signal(signal.SIGTERM, previous)
         link.close()
         if server is not None:
             server.stop()

@@ -14,8 +14,10 @@ Two sockets:
 * ``HOST:PORT+1``: the world's camera, one JSON object per line. Requests: ``{"op": "frame"}``
   (the newest frame), ``{"op": "reset", "seed": S}`` (start the episode again; the world then
   waits for the first wheel command, so the person does not walk off before the robot is
-  driven), ``{"op": "info"}`` (what is emulated). A malformed request gets ``{"error": ...}``
-  and the connection stays open.
+  driven), ``{"op": "info"}`` (what is emulated, and the wheels' state), ``{"op": "cut",
+  "seconds": S}`` (fault injection: the MCU sends nothing for S seconds, as a loose cable
+  would; commands still arrive). A malformed request gets ``{"error": ...}`` and the
+  connection stays open.
 
 Time is this machine's monotonic clock. The wheels tick every 10 ms. The world's clock starts
 with the first wheel command after a reset and counts whole control periods (0.1 s); the
@@ -27,6 +29,7 @@ at the control rate sees every period once.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import json
 import select
 import socket
@@ -111,6 +114,7 @@ class Emulator:
         self._codec = self._make_codec()
         self._last_rx = 0.0
         self._muted = False
+        self._cut_until = -1.0
         self._mcu_lock = threading.Lock()  # the MCU and the world's clock: serial vs camera
         self._arm_world()
 
@@ -170,6 +174,11 @@ class Emulator:
     def mute(self, muted: bool = True) -> None:
         """Stop (or resume) sending anything on the serial line, as a cut cable would."""
         self._muted = muted
+
+    @property
+    def muted(self) -> bool:
+        """Whether the serial line sends nothing now (:meth:`mute`, or a ``cut`` request)."""
+        return self._muted or self.now() < self._cut_until
 
     # ---- the serial line and the MCU ----------------------------------------------------
 
@@ -286,7 +295,7 @@ class Emulator:
                 self.stats.version_mismatches += 1  # refused, as the firmware does
 
     def _send(self, messages: list[Feedback] | list[Hello]) -> None:
-        if not messages or self._client is None or self._muted:
+        if not messages or self._client is None or self.muted:
             return
         try:
             data = b"".join(self._codec.encode(m) for m in messages)
@@ -359,18 +368,42 @@ class Emulator:
                 self.mcu.gains = self.world.motor_gains()
                 return frame
             if op == "info":
-                return {
-                    "framing": self.framing,
-                    "firmware": self.mcu.firmware,
-                    "scenario": self.world.config.scenario.name,
-                    "seed": self.world.seed,
-                    "control_dt_s": self.world.dt,
-                    "walls": self.world.walls(),
-                }
-            raise ValueError(f"op={op!r} is out of range: must be 'frame', 'reset' or 'info'")
+                return self._info()
+            if op == "cut":
+                seconds = request.get("seconds")
+                if isinstance(seconds, bool) or not isinstance(seconds, int | float):
+                    raise ValueError(f"seconds={seconds!r} must be a number")
+                if not 0 <= seconds <= 3600:
+                    raise ValueError(f"seconds={seconds} is out of range: must be in [0, 3600]")
+                self._cut_until = self.now() + float(seconds)
+                return {"cut_s": float(seconds)}
+            raise ValueError(
+                f"op={op!r} is out of range: must be 'frame', 'reset', 'info' or 'cut'"
+            )
         except (ValueError, TypeError) as exc:  # json.JSONDecodeError is a ValueError
             self.stats.perception_errors += 1
             return {"error": str(exc)}
+
+    def _info(self) -> dict[str, Any]:
+        with self._mcu_lock:
+            mcu = self.mcu
+            wheels = {
+                "duty_pct": list(mcu.duty),
+                "target_mps": list(mcu.target),
+                "omega_radps": list(mcu.omega),
+                "watchdog_stopped": mcu.watchdog_stopped,
+            }
+        return {
+            "framing": self.framing,
+            "firmware": mcu.firmware,
+            "scenario": self.world.config.scenario.name,
+            "seed": self.world.seed,
+            "control_dt_s": self.world.dt,
+            "walls": self.world.walls(),
+            "wheels": wheels,
+            "mcu": dataclasses.asdict(mcu.stats),
+            "serial": dataclasses.asdict(self.stats),
+        }
 
 
 class _HalReceive(ReferenceCodec):

@@ -10,6 +10,8 @@ fresh detection, and, where the source knows it, ground truth for the step log.
 * :class:`Replay` (``--perception replay:LOG.csv``): the observations of a step log, in time.
 * ``realsense`` (:mod:`bridge.realsense`, the ``realsense`` extra): a RealSense colour and
   depth stream and a YOLO person detector.
+
+:func:`bridge.sources.open_source` builds one from the runner's ``--perception`` value.
 """
 
 from __future__ import annotations
@@ -31,7 +33,6 @@ __all__ = [
     "PerceptionSource",
     "Replay",
     "SimCamera",
-    "open_source",
     "parse_socket_url",
     "perception_address",
 ]
@@ -231,45 +232,3 @@ def _read_replay(path: Path) -> list[tuple[float, float, float, bool]]:
             raise PerceptionError(f"{path}: line {line}: time_s={t} does not increase")
         out.append((t, d, o, detected))
     return out
-
-
-def open_source(spec: str, port_url: str, seed: int | None = None) -> PerceptionSource:
-    """A perception source from the runner's ``--perception`` value.
-
-    :param spec: ``sim``, ``sim:HOST:PORT``, ``replay:LOG.csv`` or ``realsense:MODEL.pt``.
-    :param port_url: the runner's ``--port`` (``sim`` finds the emulator's camera from it).
-    :param seed: the world's seed for ``sim``.
-    :raises ValueError: an unknown kind, or ``sim`` without a ``socket://`` port.
-    """
-    kind, _, rest = spec.partition(":")
-    if kind == "sim":
-        if rest:
-            host, _, port = rest.rpartition(":")
-            if not host or not port.isdigit():
-                raise ValueError(f"--perception {spec!r}: expected sim or sim:HOST:PORT")
-            return SimCamera(host, int(port), seed)
-        try:
-            host, port_no = perception_address(port_url)
-        except ValueError:
-            raise ValueError(
-                f"--perception sim needs --port socket://HOST:PORT (the emulator's), not "
-                f"{port_url!r}; or give the camera as sim:HOST:PORT"
-            ) from None
-        return SimCamera(host, port_no, seed)
-    if kind == "replay":
-        if not rest:
-            raise ValueError("--perception replay needs a step log: replay:LOG.csv")
-        return Replay(rest)
-    if kind == "realsense":
-        from bridge.realsense import RealSensePerception
-
-        if not rest:
-            raise ValueError(
-                "--perception realsense needs a detector model file: realsense:MODEL.pt "
-                "(nothing is downloaded at run time)"
-            )
-        return RealSensePerception(rest)
-    raise ValueError(
-        f"--perception {spec!r} is out of range: must be sim, sim:HOST:PORT, replay:LOG.csv "
-        "or realsense:MODEL.pt"
-    )

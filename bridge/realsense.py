@@ -74,6 +74,7 @@ class RealSensePerception:
         self._history = np.zeros(filter_history)
         self._length = filter_history
         self._stop: Callable[[], None] | None = None
+        self._started = False
         self.reset()
 
     def reset(self) -> None:
@@ -90,9 +91,10 @@ class RealSensePerception:
             assert self.model is not None
             self._detect = yolo_detector(self.model)
         self.reset()
+        self._started = True
 
     def read(self) -> Frame:
-        if self._grab is None or self._detect is None:
+        if not self._started or self._grab is None or self._detect is None:
             raise PerceptionError("realsense: call start() before read()")
         colour, depth_m = self._grab()
         box = next((b for b in self._detect(colour) if int(b[4]) == PERSON_CLASS), None)
@@ -112,6 +114,7 @@ class RealSensePerception:
         return Frame(float(self._distance), self._offset, True)
 
     def close(self) -> None:
+        self._started = False
         if self._stop is not None:
             self._stop()
             self._stop = None

@@ -3,7 +3,8 @@
 ::
 
     follow-eval run --policies pn,mpn,gsmpn --scenarios straight,curve --episodes 20 --seed 0 \\
-        --out runs/eval-<timestamp> [--workers auto|N] [--config thesis] [--video]
+        --out runs/eval-<timestamp> [--workers auto|N] [--config thesis] [--video] \\
+        [--platforms diff_drive,mecanum]
     follow-eval metrics LOG.csv [LOG.csv | FOLDER ...] [--out DIR]
 
 (also ``python -m eval ...``). ``run`` writes into its output folder::
@@ -128,6 +129,13 @@ def build_parser() -> argparse.ArgumentParser:
         "(default: %(default)s)",
     )
     run.add_argument(
+        "--platforms",
+        default=None,
+        help="comma-separated platforms (e.g. diff_drive,mecanum): every policy runs on each, "
+        "on the same scenarios and seeds, labelled <policy>@<platform>; a single pair is also "
+        "named as pn@mecanum in --policies (default: the config's platform)",
+    )
+    run.add_argument(
         "--scenarios",
         default="straight,curve",
         help="comma-separated scenario names (default: %(default)s)",
@@ -213,15 +221,30 @@ def _check_grid(n_policies: int, n_scenarios: int, episodes: int, seed: int) -> 
 
 
 def _check_run_args(args: argparse.Namespace) -> tuple[list[str], list[str]]:
-    from policies import make_policy
+    from eval.rollout import policy_spec
+    from follow_env.platforms import get_platform
+    from policies import for_platform, make_policy
 
     policies = _names(args.policies, "policies")
+    if args.platforms is not None:
+        platforms = _names(args.platforms, "platforms")
+        for name in platforms:
+            try:
+                get_platform(name)
+            except ValueError as e:
+                raise UsageError(f"--platforms: {e}") from None
+        if any("@" in p for p in policies):
+            raise UsageError("--policies names a platform (policy@platform): leave out --platforms")
+        policies = [f"{p}@{m}" for p in policies for m in platforms]
     scenarios = _names(args.scenarios, "scenarios")
     # Size first: it needs only the counts, and loading a policy is already work.
     _check_grid(len(policies), len(scenarios), args.episodes, args.seed)
     for name in policies:
         try:
-            make_policy(name)
+            spec, platform = policy_spec(name)
+            law = make_policy(spec)  # type: ignore[arg-type]
+            if platform is not None:
+                for_platform(law, tuple(a.name for a in get_platform(platform).actions))
         except (ValueError, TypeError) as e:
             raise UsageError(f"--policies: {e}") from None
     for name in scenarios:
@@ -262,7 +285,6 @@ def cmd_run(args: argparse.Namespace) -> int:
     )
     from eval.rollout import auto_workers, rollout
     from eval.stats import compare, episode_table, summarize
-    from policies import make_policy
 
     policies, scenarios = _check_run_args(args)
     seeds = list(range(args.seed, args.seed + args.episodes))
@@ -301,7 +323,7 @@ def cmd_run(args: argparse.Namespace) -> int:
             "command": " ".join([PROG, *sys.argv[1:]]),
             "finished_utc": datetime.now(UTC).isoformat(timespec="seconds"),
             "elapsed_s": round(elapsed, 2),
-            "policies": {p.name: repr(getattr(p, "params", p)) for p in map(make_policy, policies)},
+            "policies": {name: repr(getattr(p, "params", p)) for name, p in _built(policies)},
             "scenarios": scenarios,
             "seeds": seeds,
             "config": args.config,
@@ -320,6 +342,19 @@ def cmd_run(args: argparse.Namespace) -> int:
         + (", videos/" if args.video else "")
     )
     return 0
+
+
+def _built(policies: list[str]) -> list[tuple[str, Any]]:
+    """``(episode label, policy)`` of every policy spec (``pn@mecanum`` included)."""
+    from eval.rollout import policy_spec
+    from policies import make_policy
+
+    out = []
+    for name in policies:
+        spec, platform = policy_spec(name)
+        law = make_policy(spec)  # type: ignore[arg-type]
+        out.append((law.name if platform is None else f"{law.name}@{platform}", law))
+    return out
 
 
 def cmd_metrics(args: argparse.Namespace) -> int:

@@ -27,24 +27,26 @@ from collections.abc import Callable, Iterator, Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from multiprocessing import get_context
-from typing import Any
+from typing import Any, NamedTuple
 
 import gymnasium as gym
 import numpy as np
 import pandas as pd
 
-from eval.steplog import COLUMNS
+from eval.steplog import log_columns
 from follow_env.platforms import get_platform
+from follow_env.platforms.base import Platform
 from follow_env.sim.runner import BatchedSim
 from follow_env.tasks.person_follow import ENV_ID
 from follow_env.tasks.person_follow.task import TASK
-from policies import BatchPolicy, Policy, make_policy
+from policies import BatchPolicy, Policy, for_platform, make_policy
 
 __all__ = [
     "BATCH_LANES",
     "MAX_EPISODES",
     "Episode",
     "auto_workers",
+    "policy_spec",
     "rollout",
     "run_batch",
     "run_episode",
@@ -54,10 +56,6 @@ PolicySpec = str | Policy
 EnvConfigSpec = str | Mapping[str, Any] | Any
 Reducer = Callable[["Episode"], Any]
 
-# Step-log columns copied from ``info`` under the same name (see eval.steplog.COLUMNS).
-_INFO_COLUMNS = tuple(
-    c for c in COLUMNS if c in TASK.info_keys(get_platform("diff_drive")) and c != "termination"
-)
 # Booleans in info become 0/1 in the log, as a robot's CSV would hold them.
 _FLAG_COLUMNS = ("detected", "in_frame")
 
@@ -94,6 +92,36 @@ class Episode:
         return str(self.log["termination"].iloc[-1])
 
 
+class _Layout(NamedTuple):
+    """A platform's step-log layout: the columns, those copied from ``info`` under the same
+    name (eval.steplog.log_columns), and the action's entry names."""
+
+    columns: tuple[str, ...]
+    info: tuple[str, ...]
+    actions: tuple[str, ...]
+
+
+def _layout(platform: Platform) -> _Layout:
+    actions = tuple(a.name for a in platform.actions)
+    columns = log_columns(actions, tuple(key for key, *_ in platform.info))
+    keys = TASK.info_keys(platform)
+    return _Layout(columns, tuple(c for c in columns if c in keys and c != "termination"), actions)
+
+
+def policy_spec(spec: PolicySpec) -> tuple[PolicySpec, str | None]:
+    """``(policy, platform)`` of a spec: ``"pn@mecanum"`` runs ``pn`` on the ``mecanum``
+    platform (its episodes labelled ``pn:tuned@mecanum``); a name without ``@``, or a policy
+    object, runs on the configuration's platform.
+
+    :raises ValueError: for an unknown platform (naming the known ones).
+    """
+    if isinstance(spec, str) and "@" in spec:
+        name, _, platform = spec.rpartition("@")
+        get_platform(platform)
+        return name, platform
+    return spec, None
+
+
 _ENV_CACHE: dict[tuple[str, str], gym.Env] = {}
 
 #: Most seeds run as the lanes of one batch (bounds the memory of the step logs in flight).
@@ -103,19 +131,25 @@ BATCH_LANES = 256
 MAX_EPISODES = 1_000_000
 
 
-def _env(scenario: str, config: EnvConfigSpec, render: bool) -> gym.Env:
-    """One env per (scenario, config) per process: gym.make costs more than an episode."""
+def _env(scenario: str, config: EnvConfigSpec, render: bool, platform: str | None) -> gym.Env:
+    """One env per (scenario, config, platform) per process: gym.make costs more than an
+    episode."""
+    kwargs: dict[str, Any] = {"scenario": scenario, "config": config, "platform": platform}
     if render:
-        return gym.make(ENV_ID, scenario=scenario, config=config, render_mode="rgb_array")
-    key = (scenario, repr(config))
+        return gym.make(ENV_ID, render_mode="rgb_array", **kwargs)
+    key = (scenario, repr(config), str(platform))
     env = _ENV_CACHE.get(key)
     if env is None:
-        env = _ENV_CACHE[key] = gym.make(ENV_ID, scenario=scenario, config=config)
+        env = _ENV_CACHE[key] = gym.make(ENV_ID, **kwargs)
     return env
 
 
 def _policy(spec: PolicySpec) -> Policy:
     return make_policy(spec) if isinstance(spec, str) else spec
+
+
+def _label(name: str, platform: str | None) -> str:
+    return name if platform is None else f"{name}@{platform}"
 
 
 def run_episode(
@@ -138,8 +172,10 @@ def run_episode(
     :param on_frame: if given, the env renders (``rgb_array``) and each frame, the reset frame
         included, is passed to it (for videos).
     """
-    law = _policy(policy)
-    env = _env(scenario, config, render=on_frame is not None)
+    spec, platform = policy_spec(policy)
+    env = _env(scenario, config, on_frame is not None, platform)
+    layout = _layout(env.unwrapped.sim.platform)
+    law = for_platform(_policy(spec), layout.actions)
     try:
         obs, info = env.reset(seed=int(seed))
         law.reset()
@@ -161,23 +197,21 @@ def run_episode(
         if on_frame is not None:
             env.close()
     obs_arr = np.asarray(observations, dtype=np.float64)
-    act_arr = np.asarray(actions, dtype=np.float64).reshape(-1, 2)
-    columns = {k: [inf[k] for inf in infos] for k in (*_INFO_COLUMNS, "termination")}
-    return Episode(
-        law.name,
-        scenario,
-        int(seed),
-        _step_log(law.name, scenario, seed, obs_arr, act_arr, columns, rewards),
-    )
+    act_arr = np.asarray(actions, dtype=np.float64).reshape(-1, len(layout.actions))
+    columns = {k: [inf[k] for inf in infos] for k in (*layout.info, "termination")}
+    name = _label(law.name, platform)
+    log = _step_log(layout, name, scenario, seed, obs_arr, act_arr, columns, rewards)
+    return Episode(name, scenario, int(seed), log)
 
 
 class _Actor:
     """Actions for n lanes: the policy's own ``act_batch`` (one object, per-lane memory), or
     one copy of the policy per lane for a policy that acts for one robot only."""
 
-    def __init__(self, spec: PolicySpec, n: int) -> None:
-        first = _policy(spec)
+    def __init__(self, spec: PolicySpec, n: int, actions: tuple[str, ...]) -> None:
+        first = for_platform(_policy(spec), actions)
         self.name = first.name
+        self.size = len(actions)
         if isinstance(first, BatchPolicy):
             self.batch: BatchPolicy | None = first
             first.reset_batch(n)
@@ -186,7 +220,9 @@ class _Actor:
             self.batch = None
             # A name builds fresh copies; an object is copied so lanes never share memory.
             self.lanes = [first] + [
-                make_policy(spec) if isinstance(spec, str) else copy.deepcopy(first)
+                for_platform(make_policy(spec), actions)
+                if isinstance(spec, str)
+                else copy.deepcopy(first)
                 for _ in range(n - 1)
             ]
             for law in self.lanes:
@@ -195,7 +231,7 @@ class _Actor:
     def act(self, obs: np.ndarray, active: np.ndarray) -> np.ndarray:
         if self.batch is not None:
             return np.asarray(self.batch.act_batch(obs), dtype=np.float32)
-        out = np.zeros((len(obs), 2), dtype=np.float32)
+        out = np.zeros((len(obs), self.size), dtype=np.float32)
         for i in np.flatnonzero(active):
             out[i] = np.asarray(self.lanes[i].act(obs[i]), dtype=np.float32)
         return out
@@ -214,11 +250,13 @@ def run_batch(
     :param config: the env configuration, as for :func:`run_episode`.
     """
     n = len(seeds)
-    cfg = TASK.resolve_config(config, scenario=scenario)
+    spec, platform = policy_spec(policy)
+    cfg = TASK.resolve_config(config, scenario=scenario, platform=platform)
     sim = BatchedSim(TASK, cfg, n)
+    layout = _layout(sim.platform)
     try:
         sim.reset_lanes(np.arange(n), [int(s) for s in seeds])
-        actor = _Actor(policy, n)
+        actor = _Actor(spec, n, layout.actions)
         active = np.ones(n, dtype=bool)
         ended_at = np.zeros(n, dtype=np.int64)  # the step each lane's episode ended at
         observations = [TASK.observations(sim)]
@@ -241,9 +279,10 @@ def run_batch(
     finally:
         sim.close()
     obs_all = np.stack(observations).astype(np.float64)  # (steps + 1, n, 2)
-    act_all = np.stack(actions).astype(np.float64)  # (steps, n, 2)
+    act_all = np.stack(actions).astype(np.float64)  # (steps, n, action size)
     rew_all = np.stack(rewards)  # (steps, n)
-    keys = (*_INFO_COLUMNS, "termination")
+    keys = (*layout.info, "termination")
+    name = _label(actor.name, platform)
     info_all = {k: np.stack([inf[k] for inf in infos]) for k in keys}  # (steps + 1, n)
     episodes = []
     for i, seed in enumerate(seeds):
@@ -251,7 +290,8 @@ def run_batch(
         columns = {k: v[: last + 1, i] for k, v in info_all.items()}
         rewards_i = [math.nan, *rew_all[:last, i].tolist()]
         log = _step_log(
-            actor.name,
+            layout,
+            name,
             scenario,
             seed,
             obs_all[: last + 1, i],
@@ -259,11 +299,12 @@ def run_batch(
             columns,
             rewards_i,
         )
-        episodes.append(Episode(actor.name, scenario, int(seed), log))
+        episodes.append(Episode(name, scenario, int(seed), log))
     return episodes
 
 
 def _step_log(
+    layout: _Layout,
     policy: str,
     scenario: str,
     seed: int,
@@ -272,10 +313,10 @@ def _step_log(
     info: dict[str, Any],
     rewards: list[float],
 ) -> pd.DataFrame:
-    """One episode's step log: rows of observations ``(n, 2)``, actions ``(n - 1, 2)`` (the
+    """One episode's step log: rows of observations ``(n, 2)``, actions ``(n - 1, m)`` (the
     final row has none), info columns of length n, rewards (NaN in the reset row)."""
     n = len(obs)
-    act = np.full((n, 2), np.nan)
+    act = np.full((n, len(layout.actions)), np.nan)
     act[: len(actions)] = actions
     data: dict[str, Any] = {
         "policy": policy,
@@ -283,18 +324,18 @@ def _step_log(
         "seed": int(seed),
         "obs_distance_m": obs[:, 0],
         "obs_offset_px": obs[:, 1],
-        "action_v_mps": act[:, 0],
-        "action_w_radps": act[:, 1],
         "reward": np.asarray(rewards, dtype=np.float64),
     }
-    for column in _INFO_COLUMNS:
+    for k, entry in enumerate(layout.actions):
+        data[f"action_{entry}"] = act[:, k]
+    for column in layout.info:
         values = np.asarray(info[column])
         data[column] = values.astype(np.int64) if column in _FLAG_COLUMNS else values
     # termination is only ever set in the final row; earlier rows are blank in the CSV.
     termination = np.full(n, "", dtype=object)
     termination[-1] = info["termination"][-1]
     data["termination"] = termination
-    return pd.DataFrame(data, columns=list(COLUMNS))
+    return pd.DataFrame(data, columns=list(layout.columns))
 
 
 def auto_workers(episodes: int) -> int:
@@ -383,11 +424,16 @@ def _check_grid(
             f"the grid holds {total:,} episodes ({len(policies)} policies x {len(scenarios)} "
             f"scenarios x {len(seeds)} seeds): at most {MAX_EPISODES:,} are run at once"
         )
-    for spec in policies:
+    for given in policies:
+        spec, platform = policy_spec(given)  # an unknown platform raises
         if isinstance(spec, str):
-            make_policy(spec)  # raises ValueError listing the known names
+            law = make_policy(spec)  # raises ValueError listing the known names
         elif not isinstance(spec, Policy):
             raise ValueError(f"policy {spec!r} is neither a policy name nor a Policy")
+        else:
+            law = spec
+        if platform is not None:  # a law the platform cannot run raises
+            for_platform(law, tuple(a.name for a in get_platform(platform).actions))
     known = TASK.variants()
     for scenario in scenarios:
         if scenario not in known:

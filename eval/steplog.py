@@ -29,6 +29,8 @@ from follow_env.tasks.person_follow.steplog import (
     META_COLUMNS,
     REQUIRED_COLUMNS,
     TEXT_COLUMNS,
+    WHEEL_COLUMNS,
+    log_columns,
 )
 
 __all__ = [
@@ -37,8 +39,10 @@ __all__ = [
     "META_COLUMNS",
     "REQUIRED_COLUMNS",
     "TEXT_COLUMNS",
+    "WHEEL_COLUMNS",
     "StepLogError",
     "accel_from_speed",
+    "log_columns",
     "read_step_log",
     "step_log_files",
     "validate_step_log",

@@ -10,9 +10,12 @@ learned agents, all behind one :class:`Policy` protocol and reachable by name::
     >>> law.act(np.array([2.0, 100.0], dtype=np.float32))  # 2 m away, 100 px right of centre
     array([ 5.  , -0.25], dtype=float32)
 
-Actions are SI with w counter-clockwise positive: a person right of centre gives w < 0.
+Actions are SI with w counter-clockwise positive: a person right of centre gives w < 0. A law
+names its action's entries (``action_names``); :func:`for_platform` fits it to a platform's
+action by name (PN on the mecanum base: ``vy = 0``).
 """
 
+from policies.adapt import PlatformAction, for_platform
 from policies.base import (
     BatchPolicy,
     GuidanceLaw,
@@ -23,6 +26,7 @@ from policies.base import (
     validate_obs_batch,
 )
 from policies.gsmpn import GSMPN, GSMPN_THESIS, GSMPN_TUNED, GSMPN_VARIANTS, GSMPNParams
+from policies.holonomic import Holonomic, HolonomicParams
 from policies.mpn import MPN, MPN_THESIS, MPN_TUNED, MPNParams
 from policies.pn import PN, PN_THESIS, PN_TUNED, PNParams
 from policies.registry import (
@@ -48,13 +52,17 @@ __all__ = [
     "BatchPolicy",
     "GSMPNParams",
     "GuidanceLaw",
+    "Holonomic",
+    "HolonomicParams",
     "LawParams",
     "MPNParams",
     "OffsetRateLaw",
     "PNParams",
+    "PlatformAction",
     "Policy",
     "PolicyRegistry",
     "available_policies",
+    "for_platform",
     "make_policy",
     "register_law",
     "register_policy",

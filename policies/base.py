@@ -26,6 +26,10 @@ float32 array, shape (2,), SI:
 | 0     | v_mps   | m/s   | forward speed                          |
 | 1     | w_radps | rad/s | yaw rate, counter-clockwise positive   |
 
+A law that strafes too (:mod:`policies.holonomic`) acts ``[v_mps, vy_mps, w_radps]`` (vy to the
+left). Every policy names its entries in ``action_names`` (default :data:`LAW_ACTION_NAMES`);
+:func:`policies.adapt.for_platform` fits it to a platform's action by those names.
+
 ## Sign convention (reference §1.5 "Sign")
 Image u grows to the right and w is counter-clockwise positive, so a person right of centre
 (offset_px > 0) needs a clockwise turn: w < 0. The thesis hid this sign in its motor wiring; each
@@ -49,6 +53,8 @@ NO_READING_M = 0.0
 OBS_SIZE = SPEC.observation_size
 """Entries of an observation (the task spec's)."""
 OBS_NAMES = "[" + ", ".join(SPEC.observation_names) + "]"
+LAW_ACTION_NAMES = ("v_mps", "w_radps")
+"""What a guidance law commands: forward speed and yaw rate (the differential drive's action)."""
 
 
 @runtime_checkable
@@ -189,6 +195,7 @@ class GuidanceLaw(ABC):
 
     name: str
     params: LawParams
+    action_names: tuple[str, ...] = LAW_ACTION_NAMES
 
     def reset(self) -> None:  # noqa: B027 - an optional hook: memoryless laws keep the no-op
         """Forget remembered state; a memoryless law has nothing to forget."""
@@ -204,13 +211,18 @@ class GuidanceLaw(ABC):
         """
         distance_m, offset_px = validate_obs(obs)
         if distance_m <= NO_READING_M:
-            return make_action(0.0, 0.0, None, None)
-        v_mps, w_radps = self._command(distance_m, offset_px)
-        return make_action(v_mps, w_radps, self.params.v_max_mps, self.params.w_max_radps)
+            return np.zeros(len(self.action_names), dtype=np.float32)
+        command = self._command(distance_m, offset_px)
+        vw = make_action(command[0], command[-1], self.params.v_max_mps, self.params.w_max_radps)
+        if len(command) == 2:
+            return vw
+        # [v, vy, w]: the sideways speed between, unclipped (the env bounds it).
+        return np.array([vw[0], command[1], vw[1]], dtype=np.float32)
 
     @abstractmethod
-    def _command(self, distance_m: float, offset_px: float) -> tuple[float, float]:
-        """Return ``(v [m/s], w [rad/s, counter-clockwise positive])`` before clipping."""
+    def _command(self, distance_m: float, offset_px: float) -> tuple[float, ...]:
+        """Return ``(v [m/s], w [rad/s, counter-clockwise positive])`` before clipping (a law
+        whose ``action_names`` has three entries: ``(v, vy [m/s, left], w)``)."""
 
     # -- many lanes at once: the same scalar law per lane, each with its own memory ---------
 
@@ -227,7 +239,7 @@ class GuidanceLaw(ABC):
         self._lanes = [self._memory() for _ in range(n)]
 
     def act_batch(self, obs: np.ndarray) -> np.ndarray:
-        """Actions ``(n, 2)`` float32 for observations ``(n, 2)``: :meth:`act` for each lane
+        """Actions ``(n, m)`` float32 for observations ``(n, 2)``: :meth:`act` for each lane
         with that lane's memory, so each lane's actions equal a run of its episode alone (the
         scalar arithmetic is reused, not re-derived in numpy, for bitwise equality)."""
         rows = validate_obs_batch(obs)
@@ -236,7 +248,7 @@ class GuidanceLaw(ABC):
             raise ValueError(
                 f"act_batch got {len(rows)} observations: call reset_batch({len(rows)}) first"
             )
-        out = np.empty((len(rows), 2), dtype=np.float32)
+        out = np.empty((len(rows), len(self.action_names)), dtype=np.float32)
         for i, row in enumerate(rows):
             self._set_memory(lanes[i])
             out[i] = self.act(row)

@@ -5,7 +5,9 @@
 
 - law: ``pn``, ``mpn``, ``gsmpn``, ``gsmpn-listing``, ``gsmpn-equation``. A GS-MPN variant is a
   different equation, so it is part of the law's name (:mod:`policies.gsmpn` describes them).
-- preset: ``thesis`` (the thesis's values in SI) or ``tuned``. A bare law name means ``tuned``.
+  ``holonomic`` (:mod:`policies.holonomic`) also strafes, for a platform that can.
+- preset: ``thesis`` (the thesis's values in SI) or ``tuned``. A bare law name means ``tuned``
+  (``holonomic`` has one preset, ``default``, which a bare name means).
 
 So ``"gsmpn"`` is ``"gsmpn:tuned"``, and ``"gsmpn-listing:thesis"`` is the thesis's code listing
 with the thesis's values. A built policy's ``name`` is always the full ``<law>:<preset>``.
@@ -33,7 +35,7 @@ from dataclasses import replace
 from functools import partial
 from typing import TypeVar
 
-from policies import gsmpn, mpn, pn
+from policies import gsmpn, holonomic, mpn, pn
 from policies.base import Policy
 from policies.learned import ppo
 
@@ -159,6 +161,8 @@ for _variant in gsmpn.GSMPN_VARIANTS:
         gsmpn.GSMPN,
         {preset: replace(p, variant=_variant) for preset, p in gsmpn.PRESETS.items()},
     )
+# A base that strafes (the mecanum platform); no tuned preset yet.
+register_law("holonomic", holonomic.Holonomic, holonomic.PRESETS, default_preset="default")
 # Learned agents: the shipped PPO agent by name, any other by its path (a run folder or a .zip).
 # policies.learned.ppo loads torch and stable-baselines3 only when an agent is built.
 register_policy("ppo", ppo.load_default)

@@ -16,7 +16,8 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("follow_env", "policies", "train", "eval", "bench", "bridge")
 # follow_env's layers, lowest first: a module may import its own layer and the ones below.
-LAYERS = ("sim", "world", "platforms", "sensors", "tasks")
+# experiments (reproductions of the sources' hardware experiments) may use every layer.
+LAYERS = ("sim", "world", "platforms", "sensors", "tasks", "experiments")
 
 
 def _modules() -> dict[str, Path]:

@@ -1,6 +1,6 @@
 """What every platform shares: the body's state, the parameters every base has, the protocol.
 
-A platform is one module (``diff_drive.py``, later ``mecanum.py``) that defines its config
+A platform is one module (``diff_drive.py``, ``mecanum.py``) that defines its config
 sections, its parameter and state blocks, its action, and two compiled functions the kernel of
 every task calls for each lane (:mod:`follow_env.sim.compose`):
 
@@ -176,6 +176,9 @@ class Platform:
         ``(params, lanes, cfg, keys)``.
     :param info: ``(info key, state field, index or None, doc)`` the envs report.
     :param doc: one line for docs and errors.
+    :param wheels: for drawing: the wheels of a config as rows ``(x, y, length, width,
+        roller slope)`` in the body frame (m; slope ``s`` draws rollers along ``(1, s)``, 0
+        none).
     """
 
     name: str
@@ -188,6 +191,7 @@ class Platform:
     randomize: Callable[[np.ndarray, np.ndarray, Any, np.ndarray], None]
     info: Sequence[tuple[str, str, int | None, str]] = field(default_factory=tuple)
     doc: str = ""
+    wheels: Callable[[Any], np.ndarray] | None = None
 
     @property
     def action_size(self) -> int:

@@ -445,6 +445,13 @@ def action_high(cfg: Any) -> np.ndarray:
     return np.array([cfg.platform.max_speed_mps, cfg.platform.max_turn_rate_radps])
 
 
+def wheel_outlines(cfg: Any) -> np.ndarray:
+    """The two wheels for drawing: ``(x, y, length, width, 0)`` in the body frame (m); the
+    width, 40 mm, is for the picture only."""
+    r, L = cfg.platform.robot.wheel_radius_m, cfg.platform.robot.track_width_m
+    return np.array([(0.0, -0.5 * L, 2.0 * r, 0.04, 0.0), (0.0, 0.5 * L, 2.0 * r, 0.04, 0.0)])
+
+
 PLATFORM = register_platform(
     Platform(
         name="diff_drive",
@@ -469,5 +476,6 @@ PLATFORM = register_platform(
             ("duty_l_pct", "duty", 1, "left motor duty (%)"),
         ),
         doc="two driven wheels on one axle (the reference robot)",
+        wheels=wheel_outlines,
     )
 )

@@ -321,3 +321,34 @@ def test_metrics_refuses_two_logs_of_one_episode(
     assert main(["metrics", str(run_dir / "logs"), str(copy)]) == 2
     err = one_line_error(capsys)
     assert f"{first} and {copy} are both policy 'pn:tuned', scenario 'straight', seed 5" in err
+
+
+def test_platforms_run_every_policy_on_each_on_the_same_seeds(tmp_path: Path) -> None:
+    out = tmp_path / "run"
+    argv = ["run", "--policies", "pn", "--platforms", "diff_drive,mecanum", "--scenarios"]
+    assert main([*argv, "straight", "--episodes", "2", "--out", str(out)]) == 0
+    summary = pd.read_csv(out / "summary.csv")
+    assert list(summary["policy"]) == ["pn:tuned@diff_drive", "pn:tuned@mecanum"]
+    meta = json.loads((out / "meta.json").read_text())
+    assert set(meta["policies"]) == {"pn:tuned@diff_drive", "pn:tuned@mecanum"}
+    log = pd.read_csv(out / "logs" / "pn_tuned_mecanum" / "straight" / "seed_1.csv")
+    assert "action_vy_mps" in log
+    assert "duty_fl" in log
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--policies", "holonomic", "--platforms", "diff_drive"], "commands vy_mps"),
+        (["--policies", "pn", "--platforms", "tank"], "--platforms: platform='tank'"),
+        (["--policies", "pn@mecanum", "--platforms", "mecanum"], "leave out --platforms"),
+    ],
+)
+def test_a_platform_a_policy_cannot_run_on_is_one_line_and_status_2(
+    argv: list[str], message: str, capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    assert main(["run", *argv, "--out", str(tmp_path / "x")]) == 2
+    err = capsys.readouterr().err
+    assert message in err
+    assert err.count("\n") == 1
+    assert not (tmp_path / "x").exists()

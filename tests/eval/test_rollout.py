@@ -139,3 +139,27 @@ def test_workers_below_one_is_rejected(workers: int) -> None:
 def test_auto_workers_runs_small_grids_in_process() -> None:
     assert auto_workers(120) == 1
     assert auto_workers(1) == 1
+
+
+def test_a_policy_runs_on_another_platform_by_name_with_its_own_columns() -> None:
+    from eval.rollout import run_batch, run_episode
+    from eval.steplog import COLUMNS
+
+    batch = run_batch("pn@mecanum", "straight", [0, 1])
+    single = run_episode("pn@mecanum", "straight", 1)
+    log = batch[1].log
+    assert batch[0].policy == single.policy == "pn:tuned@mecanum"
+    assert {"action_vy_mps", "wheel_true_fl_radps", "duty_rr"} <= set(log.columns)
+    assert "wheel_target_r_mps" not in log
+    assert (log["action_vy_mps"].dropna() == 0.0).all()
+    pd.testing.assert_frame_equal(log, single.log)
+    assert list(run_batch("pn", "straight", [0])[0].log.columns) == list(COLUMNS)
+
+
+def test_a_law_a_platform_cannot_run_is_refused_before_any_episode() -> None:
+    from eval.rollout import rollout
+
+    with pytest.raises(ValueError, match="commands vy_mps"):
+        rollout(["holonomic@diff_drive"], ["straight"], [0])
+    with pytest.raises(ValueError, match="platform='tank' is out of range"):
+        rollout(["pn@tank"], ["straight"], [0])

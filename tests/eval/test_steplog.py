@@ -150,3 +150,19 @@ def test_folders_list_logs_with_seeds_in_numeric_order(tmp_path: Path) -> None:
     names = [p.relative_to(tmp_path).as_posix() for p in step_log_files([tmp_path])]
     expected = [f"{p}/seed_{k}.csv" for p in ("mpn", "pn") for k in (0, 1, 2, 10, 11)]
     assert names == expected
+
+
+def test_the_reference_robots_layout_is_columns_and_another_platform_brings_its_own() -> None:
+    from eval.steplog import WHEEL_COLUMNS, log_columns
+
+    assert log_columns() == COLUMNS
+    assert log_columns(("v_mps", "w_radps"), WHEEL_COLUMNS[::-1]) == COLUMNS
+    other = log_columns(("v_mps", "vy_mps", "w_radps"), ("duty_fl", "duty_fr"))
+    assert not set(WHEEL_COLUMNS) & set(other)
+    at = other.index("action_v_mps")
+    assert other[at : at + 3] == ("action_v_mps", "action_vy_mps", "action_w_radps")
+    assert other[other.index("duty_fl") : other.index("duty_fl") + 3] == (
+        "duty_fl",
+        "duty_fr",
+        "encoder_speed_mps",
+    )

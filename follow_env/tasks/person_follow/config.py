@@ -16,12 +16,14 @@ allow; the default), :data:`IDEAL` (perfect sensing, for debugging and tests), :
 from __future__ import annotations
 
 import json
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, ClassVar
 
 import yaml
 
+from follow_env.platforms import get_platform
 from follow_env.platforms.base import PlatformConfig
 from follow_env.platforms.diff_drive import DiffDriveConfig
 from follow_env.sensors.camera import CameraConfig
@@ -236,6 +238,39 @@ class EnvConfig(Sections):
     def control_dt_s(self) -> float:
         """The control period (s)."""
         return self.episode.control_dt_s
+
+    @classmethod
+    def from_overrides(cls, base: Any, overrides: Mapping[str, Any]) -> Any:
+        """As :meth:`Sections.from_overrides`; the platform may also be named: ``"platform":
+        "mecanum"`` (its default configuration), ``"platform": {"name": "mecanum", "motor":
+        {...}}`` (the form ``to_dict`` writes) or ``"platform.name": "mecanum"``. A named
+        platform replaces the current one where it appears, so later keys may use its
+        sections (``{"platform": "mecanum", "floor": {...}}``)."""
+        cfg, pending = base, {}
+        for key, value in overrides.items():
+            platform = _named_platform(key, value)
+            if platform is None:
+                pending[key] = value
+                continue
+            cfg = super().from_overrides(cfg, pending) if pending else cfg
+            cfg, pending = super().from_overrides(cfg, {"platform": platform}), {}
+        return super().from_overrides(cfg, pending)
+
+
+def _named_platform(key: str, value: Any) -> PlatformConfig | None:
+    """The platform config a ``platform`` override names, or None if it names none."""
+    if key == "platform.name" or (key == "platform" and isinstance(value, str)):
+        if not isinstance(value, str):
+            raise ValueError(f"platform name {value!r} is out of range: must be a string")
+        return get_platform(value).config()
+    if key == "platform" and isinstance(value, Mapping) and "name" in value:
+        name = value["name"]
+        if not isinstance(name, str):
+            raise ValueError(f"platform name {name!r} is out of range: must be a string")
+        default = get_platform(name).config()
+        rest = {k: v for k, v in value.items() if k != "name"}
+        return type(default).from_overrides(default, rest) if rest else default
+    return None
 
 
 THESIS = EnvConfig()

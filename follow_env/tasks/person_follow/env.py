@@ -15,7 +15,7 @@ __all__ = ["PersonFollowEnv", "PersonFollowVectorEnv", "make_sb3_vec_env"]
 
 
 class PersonFollowEnv(TaskEnv):
-    """A differential-drive robot follows a walking person using only an RGB-D camera.
+    """A robot (differential drive by default) follows a walking person using only an RGB-D camera.
 
     ## Description
 
@@ -40,7 +40,9 @@ class PersonFollowEnv(TaskEnv):
     With the default robot v_max = 1.48 m/s and w_max = 7.42 rad/s. An action of another shape
     (after ``np.asarray``), or a NaN or infinite one, raises ``ValueError``; ``step`` before
     ``reset`` raises ``gymnasium.error.ResetNeeded``. On another platform the action is that
-    platform's (``platform=``, below).
+    platform's (``platform=``, below). With ``platform="mecanum"`` (reference §2) it is
+    ``Box(3,)`` ``[v_mps, vy_mps, w_radps]``: vx forward, vy to the left, w counter-clockwise
+    (REP 103), bounded by 1.35 m/s, 1.35 m/s and 8.32 rad/s with the default base.
 
     ## Observation Space
 
@@ -89,11 +91,14 @@ class PersonFollowEnv(TaskEnv):
     * ``scenario``: a registered scenario name (``straight``, ``curve``, ``random``,
       ``corridor_turn``, ``doorway``, ``occlusion``, ``crossing``, ``crowd``, ``stop_and_go``,
       ``zigzag``, ``random_world``).
-    * ``platform``: a registered platform name (``"diff_drive"``, the default) or a platform
-      config object (``DiffDriveConfig(...)``).
-    * any config section as a dict (``robot``, ``motor``, ``encoder``, ``pid`` of the platform;
-      ``camera``, ``perception``, ``person``, ``scenario``, ``reward``, ``episode``,
-      ``randomization``), or one field as ``section__field=value``.
+    * ``platform``: a registered platform name (``"diff_drive"``, the default, or
+      ``"mecanum"``) or a platform config object (``DiffDriveConfig(...)``,
+      ``MecanumConfig(...)``); in ``config`` dicts also ``{"platform": {"name": "mecanum",
+      ...}}``.
+    * any config section as a dict (the platform's: ``robot``, ``motor``, ``encoder``, ``pid``
+      of the differential drive, ``body``, ``motor``, ``floor``, ``drive``, ``encoder``, ``pid``
+      of the mecanum base; ``camera``, ``perception``, ``person``, ``scenario``, ``reward``,
+      ``episode``, ``randomization``), or one field as ``section__field=value``.
     * ``render_mode``: ``"rgb_array"`` (a 480 x 1280 frame: top-down view beside the camera
       view), ``"human"`` (the same frame in a pygame window, at 10 frames a second; needs
       pygame and a display) or ``None``.
@@ -109,10 +114,12 @@ class PersonFollowEnv(TaskEnv):
 
     ## Info
 
-    Ground truth for metrics (keys in ``INFO_KEYS``): robot pose and speeds, person pose and
-    speed, true distance and offset, ``in_frame`` and ``detected``, wheel speed targets,
-    encoder-measured and true wheel speeds, duties, and the robot's acceleration computed from
-    encoder speed as the robot computes it.
+    Ground truth for metrics (keys in ``INFO_KEYS``): robot pose and speeds (``robot_vy_mps``,
+    the sideways speed, is 0 unless the base strafes), person pose and speed, true distance and
+    offset, ``in_frame`` and ``detected``, the platform's wheels (speed targets,
+    encoder-measured and true speeds, duties: ``..._r_...``/``..._l_...`` on the differential
+    drive, ``..._fl_...``, ``rl``, ``rr``, ``fr`` on the mecanum base, whose duty is of 255),
+    and the robot's forward acceleration computed from encoder speed as the robot computes it.
 
     ## Example
 

@@ -5,11 +5,11 @@ in a window of :mod:`follow_env.sim.window`).
 Left panel (map): the room's walls and obstacles fitted to the panel, shaded by height (walls
 and pillars at least as tall as a person dark: they hide a whole body; lower furniture light:
 it hides legs only), a metre grid, the camera's horizontal field of view, the robot's footprint
-with a heading arrow, every person as a rotated rectangle (the target, person 0, in orange,
-bystanders grey), the trails of the robot and the target, the line of sight from the camera to
-the target coloured by how much of the target is in sight (see :func:`sight_state`), a ring
-round the person whose detection the perception took this frame (green on the target, red with
-"followed: bystander N" when a bystander has stolen it), and a header with time, the
+with its wheels and a heading arrow, every person as a rotated rectangle (the target, person 0,
+in orange, bystanders grey), the trails of the robot and the target, the line of sight from the
+camera to the target coloured by how much of the target is in sight (see :func:`sight_state`),
+a ring round the person whose detection the perception took this frame (green on the target,
+red with "followed: bystander N" when a bystander has stolen it), and a header with time, the
 observation, the ground truth, who is followed, the target's visible share and the episode end
 reason.
 
@@ -34,6 +34,7 @@ from typing import TYPE_CHECKING
 import cv2
 import numpy as np
 
+from follow_env.platforms import get_platform
 from follow_env.sensors.camera import Camera, body_box
 from follow_env.sim.drawing import MapView, Trail
 from follow_env.tasks.person_follow.render_camera import CameraPanel
@@ -86,6 +87,8 @@ class Renderer(MapPanel, CameraPanel):
         self._scratch = np.zeros(24)  # body_box works in caller-owned memory
         self.foot_l = config.platform.footprint_length_m
         self.foot_w = config.platform.footprint_width_m
+        wheels = get_platform(config.platform.NAME).wheels
+        self.wheels = np.zeros((0, 5)) if wheels is None else np.asarray(wheels(config))
         self.robot_trail = Trail()
         self.target_trail = Trail()
         # The map background (floor, grid, walls) only changes with the walls or the view;

@@ -73,6 +73,7 @@ class MapPanel:
     target_trail: Trail
     foot_l: float
     foot_w: float
+    wheels: np.ndarray  # (x, y, length, width, roller slope) per wheel, body frame (m)
 
     def _world_bounds(self, lane: Lane) -> tuple[float, float, float, float]:
         """Extent (m) the map shows: the walls when there are any; otherwise the people and
@@ -252,6 +253,16 @@ class MapPanel:
         poly = view.px(rect_corners(rx, ry, rth, self.foot_l, self.foot_w))
         cv2.fillPoly(img, [poly], C_ROBOT, cv2.LINE_AA, SHIFT)
         cv2.polylines(img, [poly], True, C_ROBOT_EDGE, 1, cv2.LINE_AA, SHIFT)
+        # The platform's wheels, with a stroke along a mecanum wheel's rollers.
+        for wx, wy, wl, ww, slope in self.wheels:
+            cx, cy = rx + wx * c - wy * s, ry + wx * s + wy * c
+            wheel = view.px(rect_corners(cx, cy, rth, wl, ww))
+            cv2.fillPoly(img, [wheel], C_ROBOT_EDGE, cv2.LINE_AA, SHIFT)
+            if slope:
+                half = 0.35 * wl / math.hypot(1.0, slope)
+                dx, dy = half * (c - slope * s), half * (s + slope * c)
+                end1, end2 = view.pt(cx - dx, cy - dy), view.pt(cx + dx, cy + dy)
+                cv2.line(img, end1, end2, C_ROBOT, 1, cv2.LINE_AA, SHIFT)
         reach = 0.5 * self.foot_l + 0.3
         cv2.arrowedLine(
             img,

@@ -55,6 +55,7 @@ SPEC = TaskSpec(
         _Q("robot_theta_rad", "rad", "robot heading"),
         _Q("robot_v_mps", "m/s", "robot forward speed (true)"),
         _Q("robot_w_radps", "rad/s", "robot turn rate (true)"),
+        _Q("robot_vy_mps", "m/s", "robot sideways speed, to the left (true; 0 unless it strafes)"),
         _Q("true_distance_m", "m", "camera to the front of the target's body"),
         _Q("true_offset_px", "px", "image column of the target's axis - width // 2"),
         _Q("raw_depth_m", "m", "unfiltered depth of the published detection"),

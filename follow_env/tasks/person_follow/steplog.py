@@ -24,13 +24,18 @@ In this order (units in the names; a real robot's log may leave out any optional
 | ``encoder_speed_mps`` | m/s | see below | robot speed from the encoders, (right + left) / 2 |
 | ``accel_mps2`` | m/s² | see below | finite difference of ``encoder_speed_mps`` over one step |
 | ``true_distance_m``, ``true_offset_px``, ``in_frame`` | m, px, 0/1 | no | the person's truth |
-| ``robot_x_m`` ... ``robot_w_radps`` | m, rad, m/s, rad/s | no | robot pose and speeds |
+| ``robot_x_m`` ... ``robot_vy_mps`` | m, rad, m/s, rad/s, m/s | no | robot pose and speeds |
 | ``person_x_m`` ... ``person_v_mps`` | m, rad, m/s | no | person pose and speed |
 | ``wheel_true_r_radps``, ``wheel_true_l_radps`` | rad/s | no | true wheel speeds |
 | ``wall_clearance_m``, ``person_clearance_m`` | m | no | clearances |
 | ``detected_person`` | | no | index of the person the detector picked first (-1: none) |
 | ``reward`` | | no | the env's reward for the step that led to this row |
 | ``termination`` | | no | why the episode ended (final row only; see ``follow_env.INFO_KEYS``) |
+
+That is the reference robot's layout (the differential drive). On another platform
+(:func:`log_columns`) the action columns are ``action_<entry>`` for each entry of its action
+(the mecanum base: ``action_v_mps, action_vy_mps, action_w_radps``) and its own info keys (its
+wheels) replace the wheel columns, placed before ``encoder_speed_mps``.
 
 One of ``accel_mps2`` and ``encoder_speed_mps`` is required; when only the speed is logged, the
 acceleration is computed from it as the robot does (finite difference per row).
@@ -48,6 +53,8 @@ __all__ = [
     "META_COLUMNS",
     "REQUIRED_COLUMNS",
     "TEXT_COLUMNS",
+    "WHEEL_COLUMNS",
+    "log_columns",
 ]
 
 META_COLUMNS: tuple[str, ...] = ("policy", "scenario", "seed")
@@ -78,6 +85,7 @@ COLUMNS: tuple[str, ...] = (
     "robot_theta_rad",
     "robot_v_mps",
     "robot_w_radps",
+    "robot_vy_mps",
     "person_x_m",
     "person_y_m",
     "person_theta_rad",
@@ -90,6 +98,38 @@ COLUMNS: tuple[str, ...] = (
     "reward",
     "termination",
 )
+#: The reference robot's wheel columns (its platform's info keys) in :data:`COLUMNS`.
+WHEEL_COLUMNS: tuple[str, ...] = (
+    "wheel_target_r_mps",
+    "wheel_target_l_mps",
+    "wheel_measured_r_mps",
+    "wheel_measured_l_mps",
+    "duty_r_pct",
+    "duty_l_pct",
+    "wheel_true_r_radps",
+    "wheel_true_l_radps",
+)
+
+
+def log_columns(
+    action_names: tuple[str, ...] = ("v_mps", "w_radps"), platform_keys: tuple[str, ...] = ()
+) -> tuple[str, ...]:
+    """The step log's columns on a platform with these action entries and info keys: exactly
+    :data:`COLUMNS` for the reference robot's (or no platform keys given), otherwise its
+    action and wheel columns in their places (module docstring)."""
+    actions = tuple(f"action_{name}" for name in action_names)
+    out: list[str] = []
+    keep_wheels = not platform_keys or set(platform_keys) == set(WHEEL_COLUMNS)
+    for column in COLUMNS:
+        if column == ACTION_COLUMNS[0]:
+            out.extend(actions)
+        elif column == "encoder_speed_mps" and not keep_wheels:
+            out.extend((*platform_keys, column))
+        elif column not in ACTION_COLUMNS and (keep_wheels or column not in WHEEL_COLUMNS):
+            out.append(column)
+    return tuple(out)
+
+
 #: Columns holding text; every other column is numeric.
 TEXT_COLUMNS: frozenset[str] = frozenset({"policy", "scenario", "termination"})
 #: Columns a log must have, with a value in every row.

@@ -114,6 +114,7 @@ _STATE_INFO: dict[str, tuple[str, ...]] = {
     "robot_theta_rad": ("body", "th"),
     "robot_v_mps": ("body", "v"),
     "robot_w_radps": ("body", "w"),
+    "robot_vy_mps": ("body", "vy"),
     "true_distance_m": ("task", "true_d"),
     "true_offset_px": ("task", "true_o"),
     "raw_depth_m": ("task", "raw_depth"),

@@ -1,0 +1,96 @@
+"""Fitting a policy's action onto a platform's, by the entries' names.
+
+A policy names what it commands in ``action_names`` (a guidance law: ``("v_mps", "w_radps")``,
+:data:`policies.base.LAW_ACTION_NAMES`); a platform names its action's entries the same way
+(the differential drive ``v_mps, w_radps``; the mecanum base ``v_mps, vy_mps, w_radps``). The
+rule: each entry of the platform's action takes the policy's entry of the same name, and an
+entry the policy does not command is 0. So PN on the mecanum base drives with ``vy = 0``, and a
+policy that commands an entry the platform lacks (a strafing law on the differential drive) is
+refused, since dropping a command silently would change the law.
+
+The adapter keeps the policy's name, memory and batching (``act_batch``), so evaluation runs it
+exactly as the policy itself.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from policies.base import LAW_ACTION_NAMES, BatchPolicy, Policy
+
+__all__ = ["BatchPlatformAction", "PlatformAction", "action_names", "for_platform"]
+
+
+def action_names(policy: Policy) -> tuple[str, ...]:
+    """The names of ``policy``'s action entries (a law's ``(v_mps, w_radps)`` by default)."""
+    return tuple(getattr(policy, "action_names", LAW_ACTION_NAMES))
+
+
+class PlatformAction:
+    """``policy`` acting in a platform's action ``names`` (module docstring).
+
+    :param policy: the policy. :param names: the platform's action entries, in order.
+    :raises ValueError: if the policy commands an entry the platform does not have.
+    """
+
+    def __init__(self, policy: Policy, names: Sequence[str]) -> None:
+        own = action_names(policy)
+        missing = [n for n in own if n not in names]
+        if missing:
+            raise ValueError(
+                f"policy {policy.name!r} commands {', '.join(missing)}, which a platform acting "
+                f"[{', '.join(names)}] does not have"
+            )
+        self.policy = policy
+        self.name = policy.name
+        self.action_names = tuple(names)
+        self._columns = [list(names).index(n) for n in own]
+
+    def reset(self) -> None:
+        """Reset the policy."""
+        self.policy.reset()
+
+    def act(self, obs: np.ndarray) -> np.ndarray:
+        """The policy's action with its entries in the platform's places (others 0)."""
+        out = np.zeros(len(self.action_names), dtype=np.float32)
+        out[self._columns] = self.policy.act(obs)
+        return out
+
+    def __getattr__(self, name: str) -> Any:
+        # The policy's other attributes (params, ...) as they are.
+        if name.startswith("_") or name in ("reset_batch", "act_batch"):
+            raise AttributeError(name)
+        return getattr(self.policy, name)
+
+    def __repr__(self) -> str:
+        return f"PlatformAction({self.policy!r}, {list(self.action_names)})"
+
+
+class BatchPlatformAction(PlatformAction):
+    """:class:`PlatformAction` of a policy that acts for many lanes at once (``act_batch``)."""
+
+    def reset_batch(self, n: int) -> None:
+        """Start ``n`` lanes' episodes."""
+        self.policy.reset_batch(n)  # type: ignore[attr-defined]
+
+    def act_batch(self, obs: np.ndarray) -> np.ndarray:
+        """The policy's batched actions, entries in the platform's places (others 0)."""
+        inner = np.asarray(self.policy.act_batch(obs))  # type: ignore[attr-defined]
+        out = np.zeros((len(inner), len(self.action_names)), dtype=np.float32)
+        out[:, self._columns] = inner
+        return out
+
+
+def for_platform(policy: Policy, names: Sequence[str]) -> Policy:
+    """``policy`` itself when it acts in ``names`` already, else its adapter (module
+    docstring); a batching policy's adapter batches too.
+
+    :raises ValueError: if the policy commands an entry ``names`` lacks.
+    """
+    if action_names(policy) == tuple(names):
+        return policy
+    cls = BatchPlatformAction if isinstance(policy, BatchPolicy) else PlatformAction
+    return cls(policy, names)  # type: ignore[return-value]

@@ -1,0 +1,144 @@
+"""bridge/perception.py, sources.py, realsense.py: the runner's observation sources."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from bridge.perception import PerceptionError, Replay, SimCamera, perception_address
+from bridge.realsense import PERSON_CLASS, RealSensePerception
+from bridge.sources import open_source
+
+
+class Clock:
+    def __init__(self) -> None:
+        self.t = 100.0
+
+    def __call__(self) -> float:
+        return self.t
+
+
+def test_replay_gives_the_row_of_the_moment(tmp_path: Path) -> None:
+    log = tmp_path / "log.csv"
+    log.write_text(
+        "time_s,obs_distance_m,obs_offset_px,detected\n0,1.0,0,1\n0.1,1.1,5,0\n0.2,1.2,-7,1\n"
+    )
+    clock = Clock()
+    replay = Replay(log, clock=clock)
+    replay.start()
+    assert replay.read().distance_m == 1.0
+    clock.t += 0.15
+    frame = replay.read()
+    assert (frame.distance_m, frame.offset_px, frame.detected, frame.done) == (
+        1.1,
+        5.0,
+        False,
+        False,
+    )
+    clock.t += 0.1
+    last = replay.read()
+    assert last.offset_px == -7.0
+    assert last.done
+    assert last.termination == "replay_over"
+
+
+@pytest.mark.parametrize(
+    ("text", "error"),
+    [
+        ("", "no rows"),
+        ("time_s,obs_distance_m\n0,1\n", "missing column(s) obs_offset_px"),
+        ("time_s,obs_distance_m,obs_offset_px\n0,1,x\n", "line 2: a value is not a number"),
+        ("time_s,obs_distance_m,obs_offset_px\n0,1,inf\n", "line 2: a value is not finite"),
+        ("time_s,obs_distance_m,obs_offset_px\n0,1,0\n0,1,0\n", "line 3: time_s=0.0 does not"),
+    ],
+)
+def test_a_bad_replay_names_the_file_and_the_line(tmp_path: Path, text: str, error: str) -> None:
+    log = tmp_path / "bad.csv"
+    log.write_text(text)
+    with pytest.raises(PerceptionError, match=r"bad\.csv") as info:
+        Replay(log)
+    assert error in str(info.value)
+
+
+def test_open_source_parses_the_perception_argument(tmp_path: Path) -> None:
+    sim = open_source("sim", "socket://127.0.0.1:5760")
+    assert isinstance(sim, SimCamera)
+    assert sim.address == ("127.0.0.1", 5761)
+    other = open_source("sim:10.0.0.2:7000", "/dev/ttyUSB0")
+    assert isinstance(other, SimCamera)
+    assert other.address == ("10.0.0.2", 7000)
+    assert perception_address("socket://robot.local:80") == ("robot.local", 81)
+    for bad, error in (
+        ("sim", "needs --port socket://"),
+        ("sim:nohost", "sim:HOST:PORT"),
+        ("replay", "needs a step log"),
+        ("realsense", "needs a detector model file"),
+        ("lidar", "out of range"),
+    ):
+        with pytest.raises(ValueError, match=error):
+            open_source(bad, "/dev/ttyUSB0")
+
+
+def test_an_absent_emulator_is_named() -> None:
+    camera = SimCamera("127.0.0.1", 1, timeout_s=0.5)
+    with pytest.raises(PerceptionError, match=r"no emulator camera at 127\.0\.0\.1:1"):
+        camera.start()
+    with pytest.raises(PerceptionError, match="not started"):
+        camera.read()
+
+
+# ---- the RealSense camera node, with a fake camera and a fake detector ------------------------
+
+
+class FakeCamera:
+    """A 640 x 480 colour image and a depth image whose value we set per frame."""
+
+    def __init__(self) -> None:
+        self.depth = 2.0
+
+    def __call__(self) -> tuple[np.ndarray, np.ndarray]:
+        depth = np.full((480, 640), 5.0)
+        depth[200:300, 300:400] = self.depth  # the person
+        return np.zeros((480, 640, 3), np.uint8), depth
+
+
+def _node(boxes: list) -> tuple[RealSensePerception, FakeCamera, list]:  # type: ignore[type-arg]
+    camera = FakeCamera()
+    node = RealSensePerception(grab=camera, detect=lambda colour: boxes, filter_history=3)
+    node.start()
+    return node, camera, boxes
+
+
+def test_the_first_person_box_is_measured_at_its_centre_pixel() -> None:
+    chair = (0.0, 0.0, 100.0, 100.0, 56)  # not a person: skipped
+    person = (301.0, 201.0, 399.0, 299.0, PERSON_CLASS)  # centre (350, 250)
+    other = (10.0, 10.0, 50.0, 400.0, PERSON_CLASS)  # a second person, listed later
+    node, _, _ = _node([chair, person, other])
+    frame = node.read()
+    assert frame.detected
+    assert frame.distance_m == 2.0
+    assert frame.offset_px == 350 - 320
+
+
+def test_the_distance_filter_is_the_simulators() -> None:
+    node, camera, boxes = _node([(301.0, 201.0, 399.0, 299.0, PERSON_CLASS)])
+    readings = []
+    for depth in (2.0, 2.3, 2.6, 1.5, 0.0, 1.8):
+        camera.depth = depth
+        readings.append(node.read().distance_m)
+    # receding readings are averaged over the history (3), an approach resets it, an invalid
+    # depth (0) keeps the last value (reference §1.4 step 4)
+    assert readings == pytest.approx([2.0, 2.15, 2.3, 1.5, 1.5, 1.65])
+    boxes.clear()
+    held = node.read()
+    assert not held.detected
+    assert (held.distance_m, held.offset_px) == (1.65, 30.0)  # nothing detected: held
+
+
+def test_the_realsense_node_never_downloads_a_model(tmp_path: Path) -> None:
+    with pytest.raises(PerceptionError, match="is not a file"):
+        RealSensePerception(tmp_path / "yolov8n.pt")
+    with pytest.raises(PerceptionError, match="call start"):
+        RealSensePerception(grab=FakeCamera(), detect=lambda c: []).read()

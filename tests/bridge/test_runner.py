@@ -1,0 +1,221 @@
+"""bridge/runner.py and follow-robot run: a policy drives the emulated robot over a socket."""
+
+from __future__ import annotations
+
+import signal
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from bridge import SerialLink
+from bridge.perception import Replay
+from bridge.runner import Runner, RunnerConfig
+from bridge.sources import open_source
+from eval import episode_metrics, run_episode
+from eval.steplog import read_step_log, write_step_log
+from policies import make_policy
+
+from .conftest import ROOT, EmulatorProcess
+
+Start = Callable[..., EmulatorProcess]
+
+
+@pytest.mark.slow
+def test_the_closed_loop_follows_as_the_simulation_does(
+    emulator_process: Start, tmp_path: Path
+) -> None:
+    # Hardware-in-the-loop on one machine: the emulated MCU (fixed firmware, the simulator's
+    # wheel PID) and its world over socket://, the runner at 10 Hz with the sim camera. The walk
+    # is the simulator's straight walk on seed 0, the same person and the same detector noise.
+    emu = emulator_process("--framing", "robust", "--firmware", "fixed", "--seed", "0")
+    log = tmp_path / "hil.csv"
+    with SerialLink(emu.url, "robust") as link:
+        runner = Runner(
+            link,
+            make_policy("gsmpn:tuned"),
+            open_source("sim", emu.url, seed=0),
+            log=log,
+            meta={"policy": "gsmpn:tuned", "scenario": "straight", "seed": 0},
+        )
+        result = runner.run()
+    assert result.reason == "perception over (walk_over)"
+    assert result.command.startswith("speed targets")
+    hil = episode_metrics(read_step_log(log))
+    sim_log = run_episode("gsmpn:tuned", "straight", 0).log
+    sim = episode_metrics(sim_log)
+    assert abs(result.steps - (len(sim_log) - 1)) <= 2
+    assert hil["in_frame_rate_pct"] == sim["in_frame_rate_pct"] == 100.0
+    # Close, not equal: the runner's commands reach the MCU up to one 10 ms tick later than in
+    # the kernel, and the world moves the body by each period's mean twist.
+    for key, rel in (
+        ("mean_offset_px", 0.15),
+        ("std_offset_px", 0.15),
+        ("mean_accel_mm_s2", 0.25),
+        ("std_accel_mm_s2", 0.25),
+    ):
+        assert hil[key] == pytest.approx(sim[key], rel=rel), key
+    assert hil["rms_distance_error_m"] == pytest.approx(sim["rms_distance_error_m"], abs=0.03)
+
+
+@pytest.mark.slow
+def test_the_reference_firmware_drives_from_the_pcs_pid(emulator_process: Start) -> None:
+    emu = emulator_process("--framing", "reference", "--firmware", "reference")
+    with SerialLink(emu.url, "reference") as link:
+        runner = Runner(
+            link,
+            make_policy("pn"),
+            open_source("sim", emu.url),
+            config=RunnerConfig(duration_s=1.5),
+        )
+        result = runner.run()
+    assert result.reason == "duration 1.5 s reached"
+    assert result.command == "duty (PID on the PC)"
+    info = emu.ask(op="info")
+    assert info["mcu"]["commands"] > 100  # the wheel loop: a duty command every 10 ms
+    assert info["wheels"]["duty_pct"] == [0.0, 0.0]  # stopped at the end
+    assert result.lateness_percentile(99) < 50.0
+
+
+@pytest.mark.slow
+def test_lost_feedback_stops_the_wheels(emulator_process: Start) -> None:
+    emu = emulator_process("--framing", "robust", "--firmware", "fixed")
+    with SerialLink(emu.url, "robust") as link:
+        runner = Runner(link, make_policy("pn"), open_source("sim", emu.url))
+
+        def cut() -> None:
+            time.sleep(1.0)
+            emu.ask(op="cut", seconds=5)
+
+        threading.Thread(target=cut, daemon=True).start()
+        start = time.monotonic()
+        result = runner.run()
+        elapsed = time.monotonic() - start
+    assert result.reason.startswith("no feedback from the MCU for")
+    assert 1.0 < elapsed < 1.6  # 100 ms after the cut, plus the shutdown
+    wheels = emu.ask(op="info")["wheels"]
+    assert wheels["target_mps"] == [0.0, 0.0]  # the stop command arrived (the line is one-way cut)
+
+
+@pytest.mark.slow
+def test_ctrl_c_stops_the_wheels_and_keeps_the_log(emulator_process: Start, tmp_path: Path) -> None:
+    emu = emulator_process("--framing", "robust", "--firmware", "fixed")
+    log = tmp_path / "run.csv"
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "bridge",
+            "run",
+            "--port",
+            emu.url,
+            "--framing",
+            "robust",
+            "--policy",
+            "gsmpn",
+            "--log",
+            str(log),
+        ],
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
+    deadline = time.monotonic() + 60
+    while emu.ask(op="frame")["step"] < 10:  # driving for a second
+        assert time.monotonic() < deadline
+        assert proc.poll() is None
+        time.sleep(0.1)
+    proc.send_signal(signal.SIGINT)
+    out, _ = proc.communicate(timeout=20)
+    assert proc.returncode == 0, out
+    assert "interrupted (Ctrl-C)" in out
+    assert emu.ask(op="info")["wheels"]["target_mps"] == [0.0, 0.0]
+    steps = read_step_log(log)
+    assert len(steps) >= 10
+    assert steps["obs_distance_m"].iloc[0] > 0
+    assert not list(tmp_path.glob(".*"))  # no temporary file left
+
+
+def test_a_replayed_log_drives_the_policy_and_is_logged_as_it_was(tmp_path: Path) -> None:
+    # loop:// echoes our commands, which the PC side reads as feedback: enough for the plumbing.
+    source = tmp_path / "source.csv"
+    write_step_log(run_episode("pn", "curve", 1).log, source)
+    log = tmp_path / "replayed.csv"
+    with SerialLink("loop://", "reference") as link:
+        runner = Runner(
+            link, make_policy("pn"), Replay(source), config=RunnerConfig(duration_s=1.0), log=log
+        )
+        result = runner.run()
+    assert result.reason == "duration 1 s reached"
+    replayed, original = read_step_log(log), read_step_log(source)
+    n = len(replayed) - 1
+    assert n >= 8
+    np.testing.assert_allclose(
+        replayed["obs_offset_px"].to_numpy()[:n], original["obs_offset_px"].to_numpy()[:n]
+    )
+    law = make_policy("pn")
+    law.reset()
+    expected = [
+        law.act(np.array(o, dtype=np.float32))[0]
+        for o in original[["obs_distance_m", "obs_offset_px"]].to_numpy()[:n]
+    ]
+    np.testing.assert_allclose(replayed["action_v_mps"].to_numpy()[:n], expected, rtol=1e-6)
+
+
+def test_runner_settings_are_checked() -> None:
+    with pytest.raises(ValueError, match=r"RunnerConfig.control_dt_s=0 is out of range"):
+        RunnerConfig(control_dt_s=0)
+    with pytest.raises(ValueError, match=r"RunnerConfig.wheel_dt_s=0.2 is out of range"):
+        RunnerConfig(wheel_dt_s=0.2)
+    with pytest.raises(ValueError, match=r"RunnerConfig.command='pwm' is out of range"):
+        RunnerConfig(command="pwm")
+    with pytest.raises(ValueError, match=r"RunnerConfig.duration_s=-1 is out of range"):
+        RunnerConfig(duration_s=-1)
+
+
+def test_a_runner_needs_a_folder_for_its_log(tmp_path: Path) -> None:
+    source = tmp_path / "obs.csv"
+    source.write_text("time_s,obs_distance_m,obs_offset_px\n0,1.0,0\n0.1,1.0,2\n")
+    with SerialLink("loop://") as link, pytest.raises(ValueError, match="does not exist"):
+        Runner(link, make_policy("pn"), Replay(source), log=tmp_path / "no" / "x.csv")
+
+
+RUN = ["run", "--port", "loop://", "--policy", "pn"]
+REPLAY = "replay:" + str(Path(__file__).with_name("data") / "replay_obs.csv")
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["run", "--policy", "pn"], "run needs --port URL"),
+        (["run", "--port", "loop://", "--policy", "nope"], "nope"),
+        ([*RUN, "--perception", "sim"], "socket://HOST:PORT"),
+        ([*RUN, "--perception", "webcam"], "out of range"),
+        ([*RUN, "--perception", "replay:/no/such.csv"], "no such step log"),
+        ([*RUN, "--perception", "realsense:/no/m.pt"], "is not a file"),
+        ([*RUN, "--perception", "replay:" + __file__], "missing column"),
+        ([*RUN, "--duration", "0"], "out of range"),
+        (["run", "--port", "/dev/nonexistent", "--policy", "pn", "--perception", REPLAY], "open"),
+        (["emulate", "--listen", "tcp://x"], "socket://HOST:PORT"),
+        (["emulate", "--scenario", "moon"], "moon"),
+        (["emulate", "--config", '{"motor": {"time_constant_s": -1}}'], "time_constant_s"),
+        (["monitor", "--sim", "--http", "0.0.0.0:0"], "--token"),
+        (["monitor"], "monitor needs --port URL"),
+    ],
+)
+def test_bad_arguments_give_one_line_and_exit_2(
+    argv: list[str], message: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from bridge.cli import main
+
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("follow-robot: error:")
+    assert message in err
+    assert "\n" not in err
