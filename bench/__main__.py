@@ -139,11 +139,19 @@ def bench_serial_link(quick: bool) -> list[tuple[str, float, str]]:
     return bench_bridge(quick)
 
 
+def bench_robot(quick: bool) -> list[tuple[str, float, str]]:
+    """The runner's loop lateness (idle, busy) and the monitor's latency (bench.robot)."""
+    from bench.robot import bench_monitor, bench_runner
+
+    return bench_runner(quick) + bench_monitor(quick)
+
+
 BENCHMARKS: dict[str, Callable[[bool], list[tuple[str, float, str]]]] = {
     "single env (steps/s)": bench_single_env,
     "vector env (env-steps/s)": bench_vector_env,
     "memory (bytes)": bench_memory,
     "serial link": bench_serial_link,
+    "robot: runner and monitor (ms)": bench_robot,
 }
 
 
@@ -158,7 +166,8 @@ def main() -> None:
         print(f"| {'what':<34} | {'value':>14} | {'ratio':>24} |")
         print(f"|{'-' * 36}|{'-' * 16}|{'-' * 26}|")
         for name, rate, ratio in rows:
-            print(f"| {name:<34} | {rate:>14,.0f} | {ratio:>24} |")
+            value = f"{rate:>14,.0f}" if abs(rate) >= 100 or rate != rate else f"{rate:>14.2f}"
+            print(f"| {name:<34} | {value} | {ratio:>24} |")
     print()
 
 

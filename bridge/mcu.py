@@ -90,7 +90,7 @@ class EmulatedMCU:
         framing: str = "reference",
         *,
         gains: tuple[float, float] = (1.0, 1.0),
-        watchdog_s: float = 0.2,
+        watchdog_s: float = 0.1,
     ) -> None:
         if firmware not in FIRMWARES:
             raise ValueError(f"firmware={firmware!r} is out of range: must be one of {FIRMWARES}")

@@ -173,6 +173,28 @@ def test_the_leaves_keep_to_themselves() -> None:
             assert "bridge" not in tops, module
 
 
+# What runs on a robot's PC: the link, the protocol, the runner, the perception sources and the
+# command line. They may read the platform's and the task's definitions, never build a
+# simulation (the emulator, its world and the monitor's --sim driver do, on purpose).
+ROBOT_SIDE = ("bridge.link", "bridge.runner", "bridge.perception", "bridge.sources", "bridge.cli")
+
+
+def test_the_robot_side_of_the_bridge_builds_no_simulation() -> None:
+    import subprocess
+    import sys
+
+    code = (
+        "import sys; import " + ", ".join(ROBOT_SIDE) + "; "
+        "bad = [m for m in sys.modules if m.startswith(('follow_env.sim.runner', "
+        "'follow_env.sim.compose', 'follow_env.tasks.person_follow.kernel', 'torch', "
+        "'stable_baselines3', 'eval', 'train'))]; print(bad)"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, check=True
+    )
+    assert out.stdout.strip() == "[]"
+
+
 def test_no_module_is_over_about_500_lines() -> None:
     long = {m: n for m, p in MODULES.items() if (n := len(p.read_text().splitlines())) > 560}
     assert long == {}

@@ -21,6 +21,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import json
+import math
 import secrets
 import threading
 import time
@@ -41,6 +42,7 @@ STATIC = Path(__file__).with_name("static")
 MAX_MESSAGE_BYTES = 4096
 """Longest client message accepted."""
 LOOPBACK_HOSTS = frozenset({"127.0.0.1", "localhost", "::1"})
+_POLL_S = 0.005  # how often a client's sender looks for a new state, s
 
 Mode = Literal["pn", "mpn", "gsmpn", "ppo", "stop", "manual"]
 assert set(Mode.__args__) == set(MODES)  # one list of modes
@@ -132,20 +134,32 @@ def create_app(hub: MonitorHub, token: str | None = None, rate_hz: float = 10.0)
 
 
 async def _send_states(ws: WebSocket, hub: MonitorHub, period_s: float) -> None:
+    # A new state goes out within a few ms of being published (polled every 5 ms), and no
+    # client gets more than one per period.
     await ws.send_text(json.dumps({"type": "scene", **hub.scene}))
-    last = -1
+    last, last_sent = -1, -math.inf
+    loop = asyncio.get_running_loop()
     while True:
         state = hub.latest()
-        if state is not None and state["seq"] != last:
-            last = state["seq"]
-            await ws.send_text(json.dumps(state, allow_nan=False, default=_jsonable))
-        await asyncio.sleep(period_s)
+        now = loop.time()
+        if state is not None and state["seq"] != last and now - last_sent >= 0.9 * period_s:
+            last, last_sent = state["seq"], now
+            await ws.send_text(json.dumps(_clean(state), allow_nan=False))
+        await asyncio.sleep(min(_POLL_S, period_s))
 
 
-def _jsonable(value: Any) -> Any:
+def _clean(value: Any) -> Any:
+    """JSON-ready: numpy values as Python ones, NaN and infinities as ``null`` (JavaScript's
+    ``JSON.parse`` refuses them)."""
+    if isinstance(value, dict):
+        return {k: _clean(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_clean(v) for v in value]
     if hasattr(value, "tolist"):
-        return value.tolist()
-    raise TypeError(f"cannot send {type(value).__name__}")
+        return _clean(value.tolist())
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
 
 
 async def _receive(ws: WebSocket, hub: MonitorHub) -> None:

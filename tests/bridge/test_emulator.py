@@ -63,8 +63,10 @@ def test_fixed_firmware_streams_feedback_and_says_hello(emulator: Emulator) -> N
     with SerialLink(emulator.url, "robust") as link:
         hello = link.handshake(Hello(PeerRole.PC), timeout_s=1.0)
         assert hello.role == PeerRole.MCU
-        link.send(WheelCommand(400, 400, CommandKind.SPEED_MM_S))
-        stream = _feedback(link, 0.3)
+        stream: list[Feedback] = []
+        for _ in range(10):  # a command every 30 ms keeps the 100 ms watchdog quiet
+            link.send(WheelCommand(400, 400, CommandKind.SPEED_MM_S))
+            stream += _feedback(link, 0.03)
         assert len(stream) >= 15  # every 10 ms (allowing for a loaded machine)
         assert stream[-1].right_mm_s > 0  # the wheel PID is driving the wheel
         assert stream[-1].mcu_time_ms is not None

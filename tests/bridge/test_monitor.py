@@ -124,6 +124,19 @@ def test_a_client_that_leaves_mid_stream_does_not_stop_the_server(hub: MonitorHu
     assert app.state.clients == 0
 
 
+def test_states_with_numpy_values_and_nan_still_reach_the_page(hub: MonitorHub) -> None:
+    import numpy as np
+
+    client = TestClient(create_app(hub, rate_hz=50))
+    with client.websocket_connect("/ws") as ws:
+        _next(ws, "state")
+        hub.publish({"time_s": np.float64(1.5), "obs": np.array([1.0, np.nan]), "duty": [np.inf]})
+        state = _next(ws, "state")
+    assert state["time_s"] == 1.5
+    assert state["obs"] == [1.0, None]
+    assert state["duty"] == [None]
+
+
 def test_a_stale_manual_command_reads_as_zero() -> None:
     hub = MonitorHub("manual", manual_timeout_s=0.05)
     hub.set_manual(0.4, 0.1)
