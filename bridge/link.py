@@ -17,8 +17,10 @@ allows it); the link is not meant to be shared otherwise.
 
 from __future__ import annotations
 
+import socket
 import time
 from collections import deque
+from typing import Any
 
 import serial
 
@@ -117,6 +119,7 @@ class SerialLink:
             )
         except (serial.SerialException, ValueError, OSError) as exc:
             raise LinkOpenError(f"cannot open serial link {url!r}: {exc}") from exc
+        _no_nagle(self._port)
 
     # ---- life cycle ---------------------------------------------------------------------
 
@@ -256,3 +259,16 @@ class SerialLink:
             return bytes(first) + bytes(port.read(_READ_CHUNK))
         except serial.SerialException as exc:
             raise LinkError(f"{self.url}: read failed: {exc}") from exc
+
+
+def _no_nagle(port: Any) -> None:
+    """Send each frame at once on a ``socket://`` link (pyserial leaves Nagle's algorithm on).
+
+    A serial line sends every byte as it is written. Over TCP, Nagle's algorithm holds a small
+    write until the previous one is acknowledged, and the receiver delays an acknowledgement by
+    up to 40 ms when it has nothing to send back: commands to the reference firmware, which
+    answers only some of them, then arrive in bunches of four, and it answers one per bunch.
+    """
+    sock = getattr(port, "_socket", None)
+    if isinstance(sock, socket.socket) and sock.family in (socket.AF_INET, socket.AF_INET6):
+        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)

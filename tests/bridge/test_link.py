@@ -182,6 +182,21 @@ def test_socket_round_trip_with_a_local_mcu(mcu_server: tuple[str, str]) -> None
     assert link.stats.frames_ok == len(commands) + (framing == "robust")
 
 
+def test_a_socket_link_sends_each_frame_at_once() -> None:
+    # Nagle's algorithm with the peer's delayed acknowledgement bunched the runner's 10 ms
+    # commands into fours when the reference firmware answered only some of them.
+    server = socket.socket()
+    server.bind(("127.0.0.1", 0))
+    server.listen(1)
+    host, port = server.getsockname()
+    try:
+        with SerialLink(f"socket://{host}:{port}", "reference") as link:
+            sock = link._port._socket  # pyserial's transport; no public handle
+            assert sock.getsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY) != 0
+    finally:
+        server.close()
+
+
 def test_handshake_with_a_silent_peer_times_out_with_a_clear_error() -> None:
     server = socket.socket()
     server.bind(("127.0.0.1", 0))
