@@ -45,10 +45,20 @@ def test_std_offset_is_population_std_of_signed_observed_offset() -> None:
     assert METRICS["std_offset_px"].fn(log) == pytest.approx(10.0)
 
 
-def test_mean_accel_is_mean_magnitude_in_mm_s2() -> None:
-    # |0.2| + |-0.4| + |0| + |0.2| = 0.8 m/s² over 4 rows = 0.2 m/s² = 200 mm/s²
-    log = make_log(accel_mps2=[0.2, -0.4, 0.0, 0.2])
-    assert METRICS["mean_accel_mm_s2"].fn(log) == pytest.approx(200.0)
+def test_mean_accel_is_the_signed_mean_in_mm_s2() -> None:
+    # (0.2 - 0.4 + 0 + 0.3) / 4 = 0.025 m/s² = 25 mm/s²; the magnitude is its own metric
+    log = make_log(accel_mps2=[0.2, -0.4, 0.0, 0.3])
+    assert METRICS["mean_accel_mm_s2"].fn(log) == pytest.approx(25.0)
+    # |0.2| + |-0.4| + |0| + |0.3| = 0.9 m/s² over 4 rows = 225 mm/s²
+    assert METRICS["mean_abs_accel_mm_s2"].fn(log) == pytest.approx(225.0)
+
+
+def test_the_signed_mean_telescopes_to_the_speed_change_over_the_time() -> None:
+    # a = dv/dt per row: the mean over N rows is (v_end - v_0) / (N dt): here 0 (rest to rest)
+    speed = np.array([0.0, 0.3, 0.8, 0.5, 0.9, 0.0])
+    log = make_log(accel_mps2=np.diff(speed, prepend=0.0) / 0.1)
+    assert METRICS["mean_accel_mm_s2"].fn(log) == pytest.approx(0.0, abs=1e-9)
+    assert METRICS["mean_abs_accel_mm_s2"].fn(log) > 1000
 
 
 def test_std_accel_is_population_std_of_signed_accel_in_mm_s2() -> None:
