@@ -61,7 +61,9 @@ class RunnerConfig:
     """How the runner drives the robot.
 
     :param control_dt_s: control period, s (reference §1.6: 0.1 s).
-    :param wheel_dt_s: wheel loop period, s (choice: the MCU's 10 ms encoder period).
+    :param wheel_dt_s: wheel loop period, s; ``None``: the platform chain's PC timer period
+        (``chain.pc_pid_period_s``) when its PID runs on the PC, else 10 ms (the MCU's
+        encoder period).
     :param feedback_timeout_s: stop the wheels when no feedback came for this long, s.
     :param duration_s: end after this long, s (``None``: at the end of the perception).
     :param command: ``"speed"`` (the MCU runs the wheel PID), ``"duty"`` (the PC does), or
@@ -69,21 +71,21 @@ class RunnerConfig:
     """
 
     control_dt_s: float = 0.1
-    wheel_dt_s: float = 0.01
+    wheel_dt_s: float | None = None
     feedback_timeout_s: float = 0.1
     duration_s: float | None = None
     command: str = "auto"
 
     def __post_init__(self) -> None:
-        for name, lo, hi in (
-            ("control_dt_s", 0.005, 10.0),
-            ("wheel_dt_s", 0.001, 1.0),
-            ("feedback_timeout_s", 0.01, 10.0),
-        ):
+        for name, lo, hi in (("control_dt_s", 0.005, 10.0), ("feedback_timeout_s", 0.01, 10.0)):
             value = getattr(self, name)
             if not (isinstance(value, int | float) and lo <= value <= hi):
                 raise out_of_range(f"RunnerConfig.{name}", value, f"in [{lo}, {hi}] s")
-        if self.wheel_dt_s > self.control_dt_s:
+        if self.wheel_dt_s is not None and not (
+            isinstance(self.wheel_dt_s, int | float) and 0.001 <= self.wheel_dt_s <= 1.0
+        ):
+            raise out_of_range("RunnerConfig.wheel_dt_s", self.wheel_dt_s, "in [0.001, 1.0] s")
+        if self.wheel_dt_s is not None and self.wheel_dt_s > self.control_dt_s:
             raise out_of_range(
                 "RunnerConfig.wheel_dt_s",
                 self.wheel_dt_s,
@@ -106,7 +108,8 @@ class RunResult:
     steps: int = 0
     reason: str = ""
     command: str = ""
-    lateness_ms: list[float] = field(default_factory=list)
+    lateness_ms: list[float] = field(default_factory=list)  # control loop's wake lateness, ms
+    wheel_lateness_ms: list[float] = field(default_factory=list)  # the wheel loop's, ms
     overruns: int = 0
     feedback_frames: int = 0
     log: Path | None = None
@@ -135,6 +138,7 @@ class _Wheels:
         self.duty = [math.nan, math.nan]  # %, the PC PID's output (duty mode)
         self.last_feedback = math.nan  # monotonic time of the newest feedback
         self.frames = 0
+        self.lateness_ms: list[float] = []  # how late each wheel tick woke (the loop's own)
         self.failure = ""  # why the wheel loop stopped the robot
 
 
@@ -205,35 +209,49 @@ class Runner:
         if self.link.framing == "robust":
             cp = [max(-10000, min(10000, round(100.0 * u))) for u in duty]
             return WheelCommand(cp[0], cp[1], CommandKind.DUTY_CENTI_PERCENT)
-        pct = [max(-99, min(99, round(u))) for u in duty]
+        pct = [max(-99, min(99, int(u))) for u in duty]  # int(): as the PID node casts
         return WheelCommand(pct[0], pct[1], CommandKind.DUTY_PERCENT)
 
     # ---- the wheel loop -----------------------------------------------------------------
 
     def _wheel_loop(self, mode: str) -> None:
         cfg, wheels, pid = self.config, self._wheels, self.platform.pid
-        max_duty = self.platform.motor.max_duty_pct
+        chain = self.platform.chain
+        # As listed, the PC's PID has no output clamp (the firmware clamps the command).
+        as_listed = chain.pid_on == "pc" and pid.anti_windup == "none"
+        max_duty = 1e12 if as_listed else self.platform.motor.max_duty_pct
+        wheel_dt = self._wheel_dt()
         anti_windup = pid.anti_windup == "clamp"
         state = [[0.0, 0.0, 0.0], [0.0, 0.0, 0.0]]  # integral, e_prev, d_filt per wheel
         start = time.monotonic()
         last_pid = start
         next_tick = start
         duty = [0.0, 0.0]
+        # The PC's serial reader (reference §1.7): the PID sees the newest frame every
+        # reader_period_s (0: every frame as it arrives); what it sees is also what is logged.
+        reader = chain.reader_period_s if mode == "duty" and chain.pid_on == "pc" else 0.0
+        next_read = start
+        seen = [0.0, 0.0]
         while not self._stop.is_set():
             now = time.monotonic()
+            wheels.lateness_ms.append(1000.0 * (now - next_tick))
             try:
                 for message in self.link.receive(0.0):
                     if isinstance(message, Feedback):
+                        newest = [message.right_mm_s / 1000.0, message.left_mm_s / 1000.0]
                         with wheels.lock:
-                            wheels.measured = [
-                                message.right_mm_s / 1000.0,
-                                message.left_mm_s / 1000.0,
-                            ]
+                            if reader == 0.0:
+                                wheels.measured = newest
                             wheels.last_feedback = now
                             wheels.frames += 1
+                        seen = newest
             except LinkError as exc:
                 self._fail(f"link error: {exc}")
                 return
+            if reader > 0.0 and now >= next_read:
+                next_read += reader
+                with wheels.lock:
+                    wheels.measured = list(seen)
             with wheels.lock:
                 target, measured, last_fb = (
                     list(wheels.target),
@@ -275,12 +293,18 @@ class Runner:
             except LinkError as exc:
                 self._fail(f"link error: {exc}")
                 return
-            next_tick += cfg.wheel_dt_s
+            next_tick += wheel_dt
             delay = next_tick - time.monotonic()
-            if delay < -cfg.wheel_dt_s:  # far behind: start the schedule again from now
+            if delay < -wheel_dt:  # far behind: start the schedule again from now
                 next_tick = time.monotonic()
             elif delay > 0:
                 self._stop.wait(delay)
+
+    def _wheel_dt(self) -> float:
+        if self.config.wheel_dt_s is not None:
+            return self.config.wheel_dt_s
+        chain = self.platform.chain
+        return chain.pc_pid_period_s if chain.pid_on == "pc" else 0.01
 
     def _fail(self, why: str) -> None:
         self._wheels.failure = why
@@ -351,6 +375,7 @@ class Runner:
                 self._record(step, step * cfg.control_dt_s, frame, None, None, prev_speed)
             result.steps = step
             result.feedback_frames = self._wheels.frames
+            result.wheel_lateness_ms = self._wheels.lateness_ms
             if self.log is not None:
                 result.log = write_rows(self._rows, self.log)
         return result

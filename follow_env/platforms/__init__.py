@@ -20,7 +20,7 @@ __all__ = ["PLATFORMS", "available_platforms", "get_platform", "register_platfor
 PLATFORMS: dict[str, Platform] = {}
 """Registered platforms by name."""
 
-_NOT_PLATFORMS = {"base", "wheels"}
+_NOT_PLATFORMS = {"base", "wheels"}  # helpers; a platform may also be a package
 
 
 def register_platform(platform: Platform) -> Platform:

@@ -22,6 +22,7 @@ __all__ = [
     "encoder_count",
     "encoder_speed",
     "lag_factor",
+    "motor_advance",
     "motor_step",
     "pid_step",
     "wheel_tick",
@@ -221,6 +222,34 @@ def motor_step(
     else:
         target = 0.0
     return omega_radps + (target - omega_radps) * alpha
+
+
+@njit(inline="always")
+def motor_advance(
+    omega_radps: float, angle_rad: float, duty_pct: float, gain: float, dt_s: float, motor: tuple
+) -> tuple[float, float]:
+    """The motor of :func:`motor_step` over ``dt_s`` of constant duty, integrated exactly.
+
+    The same model (steady speed, Coulomb friction, static stall) with the lag in closed form:
+    ``omega(t) = ss + (omega0 - ss) exp(-t / tau)`` and its integral for the angle, so that an
+    event-driven chain (:mod:`follow_env.platforms.diff_drive.chain`) may step by any interval.
+
+    :param motor: ``(tau_s, no_load_radps, friction_pct, stall_pct)``.
+    :return: ``(omega rad/s, angle rad)`` at the end.
+    """
+    tau_s, no_load_radps, friction_pct, stall_pct = motor
+    mag = abs(duty_pct)
+    if mag <= stall_pct and abs(omega_radps) < _STICTION_SPEED_RADPS:
+        return 0.0, angle_rad
+    if mag > friction_pct:
+        ss = (
+            gain * no_load_radps * np.sign(duty_pct) * (mag - friction_pct) / (100.0 - friction_pct)
+        )
+    else:
+        ss = 0.0
+    decay = np.exp(-dt_s / tau_s)
+    angle_rad += ss * dt_s + (omega_radps - ss) * tau_s * (1.0 - decay)
+    return ss + (omega_radps - ss) * decay, angle_rad
 
 
 @njit(inline="always")

@@ -31,6 +31,18 @@ from follow_env.platforms.base import (
     motor_gains,
     push_velocity,
 )
+from follow_env.platforms.diff_drive.chain import (
+    ChainConfig,
+    chain_param_fields,
+    chain_state_fields,
+    drive_pc,
+)
+from follow_env.platforms.diff_drive.kinematics import (
+    DiffDrive,
+    diff_drive_fk,
+    diff_drive_ik,
+    euler_pose_step,
+)
 from follow_env.platforms.wheels import (
     EncoderConfig,
     MotorConfig,
@@ -107,6 +119,7 @@ class DiffDriveConfig(PlatformConfig):
     motor: MotorConfig = field(default_factory=MotorConfig)
     encoder: EncoderConfig = field(default_factory=EncoderConfig)
     pid: PIDConfig = field(default_factory=PIDConfig)
+    chain: ChainConfig = field(default_factory=ChainConfig)
 
     @property
     def footprint_length_m(self) -> float:
@@ -154,70 +167,6 @@ class DiffDriveConfig(PlatformConfig):
     def max_turn_rate_radps(self) -> float:
         """Action bound on turn rate ``w`` (rad/s): wheels at top speed in opposite senses."""
         return 2.0 * self.max_wheel_speed_mps / self.robot.track_width_m
-
-
-# --- kinematics (reference §1.1) ----------------------------------------------------------------
-
-
-@njit(inline="always")
-def diff_drive_ik(v: float, w: float, r: float, L: float) -> tuple[float, float]:
-    """Wheel angular speeds (rad/s) for a body twist (reference §1.1).
-
-    ``wR = (v + L w / 2) / r``, ``wL = (v - L w / 2) / r``.
-
-    :param v: forward speed (m/s). :param w: turn rate (rad/s, counter-clockwise positive).
-    :param r: wheel radius (m). :param L: distance between the wheels (m).
-    :return: ``(wR, wL)`` in rad/s.
-    """
-    return (v + 0.5 * L * w) / r, (v - 0.5 * L * w) / r
-
-
-@njit(inline="always")
-def diff_drive_fk(wR: float, wL: float, r: float, L: float) -> tuple[float, float]:
-    """Body twist for wheel angular speeds (reference §1.1): ``v = r/2 (wR + wL)``,
-    ``w = r/L (wR - wL)``. Returns ``(v m/s, w rad/s)``."""
-    return 0.5 * r * (wR + wL), r / L * (wR - wL)
-
-
-@njit(inline="always")
-def euler_pose_step(
-    x: float, y: float, th: float, v: float, w: float, dt: float
-) -> tuple[float, float, float]:
-    """One explicit Euler step of the unicycle pose (reference §1.1):
-    ``x += v cos(th) dt``, ``y += v sin(th) dt``, ``th += w dt`` (th wrapped to (-pi, pi])."""
-    x += v * np.cos(th) * dt
-    y += v * np.sin(th) * dt
-    th += w * dt
-    if th > np.pi:
-        th -= 2.0 * np.pi
-    elif th <= -np.pi:
-        th += 2.0 * np.pi
-    return x, y, th
-
-
-class DiffDrive:
-    """Differential drive with wheel radius ``r`` (m) and track width ``L`` (m).
-
-    Wheel order is (right, left), as in the reference robot's serial protocol.
-    """
-
-    n_wheels: ClassVar[int] = 2
-
-    def __init__(self, wheel_radius_m: float, track_width_m: float) -> None:
-        self.r = float(wheel_radius_m)
-        self.L = float(track_width_m)
-
-    def inverse(self, v: np.ndarray, w: np.ndarray) -> np.ndarray:
-        """Wheel angular speeds (rad/s), shape (..., 2) ordered (right, left)."""
-        v = np.asarray(v, dtype=float)
-        w = np.asarray(w, dtype=float)
-        return np.stack([(v + 0.5 * self.L * w) / self.r, (v - 0.5 * self.L * w) / self.r], -1)
-
-    def forward(self, wheel_radps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Body twist ``(v m/s, w rad/s)`` from wheel speeds of shape (..., 2)."""
-        wheel_radps = np.asarray(wheel_radps, dtype=float)
-        wR, wL = wheel_radps[..., 0], wheel_radps[..., 1]
-        return 0.5 * self.r * (wR + wL), self.r / self.L * (wR - wL)
 
 
 # --- parameters and state of a lane ---------------------------------------------------------
@@ -302,6 +251,7 @@ PARAMS = Block(
             "std of extra encoder counts per tick",
             source="randomization.encoder_noise_counts",
         ),
+        *chain_param_fields(),
     ],
 )
 
@@ -318,6 +268,7 @@ STATE = Block(
         f8("d_filt", "m/s^2", "PID filtered derivative", shape=(2,)),
         f8("duty", "%", "duty applied", shape=(2,)),
         i8("count", "counts", "encoder count", shape=(2,)),
+        *chain_state_fields(),
     ],
 )
 
@@ -331,40 +282,17 @@ def reset(prm: np.void, st: np.void, body: np.void) -> None:
 
 
 @njit(inline="always")
-def drive(
-    prm: np.void, st: np.void, body: np.void, action: np.ndarray, keys: np.ndarray, step: int
+def _drive_mcu(
+    prm: np.void,
+    st: np.void,
+    body: np.void,
+    keys: np.ndarray,
+    step: int,
+    consts: tuple,
+    push: tuple[float, float],
 ) -> None:
-    """One control step under ``action = [v m/s, w rad/s]`` (clipped to the platform's bounds).
-
-    1. Inverse kinematics to wheel targets, as linear wheel speeds (reference §1.1).
-    2. ``sub_steps`` ticks: per wheel PID on the last encoder estimate, the motor, the encoder
-       (reference §1.1, §1.2); forward kinematics with the *true* geometry and an Euler pose step.
-    3. The robot's own speed estimate (mean of the wheels' encoder speeds) and its finite
-       difference over the control step: the acceleration the robot logs.
-    """
-    v_cmd = min(max(action[0], -prm.v_max), prm.v_max)
-    w_cmd = min(max(action[1], -prm.w_max), prm.w_max)
-    r, L = prm.wheel_r, prm.track
-    w_r, w_l = diff_drive_ik(v_cmd, w_cmd, r, L)
-    st.target[0], st.target[1] = w_r * r, w_l * r
+    """The default chain: ``sub_steps`` ticks of wheel PID, motor and encoder on the MCU."""
     dt_in = prm.dt_in
-    # The constants of every wheel tick, in wheels.wheel_tick's order.
-    consts = (
-        prm.kp,
-        prm.ki,
-        prm.kd,
-        prm.tau_d,
-        dt_in,
-        prm.max_duty,
-        prm.anti_windup > 0.0,
-        prm.motor_wmax,
-        prm.motor_alpha,
-        prm.fric,
-        prm.stall,
-        prm.cpr,
-        2.0 * r,
-        prm.speed_q,
-    )
     g_r, g_l = prm.gain[0], prm.gain[1]
     t_r, t_l = st.target[0], st.target[1]
     m_r, m_l = st.meas[0], st.meas[1]
@@ -380,8 +308,7 @@ def drive(
     r_true, L_true = prm.wheel_r_true, prm.track_true
     enc_noise = prm.enc_noise
     k_noise = keys[_RANDOMIZE] ^ ENCODER_NOISE_CONST
-    push_x, push_y = push_velocity(prm.push_p, prm.push_v, keys, step)
-    body.push_vx, body.push_vy = push_x, push_y
+    push_x, push_y = push
     for tick in range(prm.sub_steps):
         n_r, n_l = 0, 0
         if enc_noise > 0.0:  # extra counts read this tick, per wheel
@@ -406,6 +333,52 @@ def drive(
     st.angle[0], st.angle[1] = a_r, a_l
     st.count[0], st.count[1] = c_r, c_l
     body.x, body.y, body.th, body.v, body.w = x, y, th, v, w
+
+
+@njit(inline="always")
+def drive(
+    prm: np.void, st: np.void, body: np.void, action: np.ndarray, keys: np.ndarray, step: int
+) -> None:
+    """One control step under ``action = [v m/s, w rad/s]`` (clipped to the platform's bounds).
+
+    1. Inverse kinematics to wheel targets, as linear wheel speeds (reference §1.1).
+    2. ``sub_steps`` ticks: per wheel PID on the last encoder estimate, the motor, the encoder
+       (reference §1.1, §1.2); forward kinematics with the *true* geometry and an Euler pose step.
+    3. The robot's own speed estimate (mean of the wheels' encoder speeds) and its finite
+       difference over the control step: the acceleration the robot logs.
+
+    With ``chain.pid_on="pc"`` step 2 is the thesis's chain instead (:func:`chain.drive_pc`):
+    the PID on the PC's timer, the firmware measuring per command, the PC's serial reader.
+    """
+    v_cmd = min(max(action[0], -prm.v_max), prm.v_max)
+    w_cmd = min(max(action[1], -prm.w_max), prm.w_max)
+    r, L = prm.wheel_r, prm.track
+    w_r, w_l = diff_drive_ik(v_cmd, w_cmd, r, L)
+    st.target[0], st.target[1] = w_r * r, w_l * r
+    dt_in = prm.dt_in
+    # The constants of every wheel tick, in wheels.wheel_tick's order.
+    consts = (
+        prm.kp,
+        prm.ki,
+        prm.kd,
+        prm.tau_d,
+        dt_in,
+        prm.max_duty,
+        prm.anti_windup > 0.0,
+        prm.motor_wmax,
+        prm.motor_alpha,
+        prm.fric,
+        prm.stall,
+        prm.cpr,
+        2.0 * r,
+        prm.speed_q,
+    )
+    push_x, push_y = push_velocity(prm.push_p, prm.push_v, keys, step)
+    body.push_vx, body.push_vy = push_x, push_y
+    if prm.pid_pc > 0.0:  # the thesis's chain: the PID on the PC (chain.py)
+        drive_pc(prm, st, body, keys, step, (push_x, push_y))
+    else:
+        _drive_mcu(prm, st, body, keys, step, consts, (push_x, push_y))
     # The robot's speed as it computes it, and its finite difference (what it logs).
     body.v_meas_prev = body.v_meas
     body.v_meas = 0.5 * (st.meas[0] + st.meas[1])

@@ -35,7 +35,7 @@ def test_every_numeric_field_documents_unit_range_and_source() -> None:
 
 def test_defaults_are_valid_and_thesis_is_the_default() -> None:
     assert EnvConfig() == THESIS
-    assert set(PRESETS) == {"thesis", "ideal", "noisy", "randomized"}
+    assert set(PRESETS) == {"thesis", "as_built", "as_listed", "ideal", "noisy", "randomized"}
     assert IDEAL.perception.miss_prob == 0.0
     assert IDEAL.perception.latency_frames == 0
 
