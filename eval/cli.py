@@ -116,7 +116,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(
         prog=PROG, description="Compare person-following controllers on identical rollouts."
     )
-    sub = parser.add_subparsers(dest="command", required=True, metavar="{run,metrics}")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="{run,metrics,thesis}")
     run = sub.add_parser(
         "run",
         help="run policies on a scenario x seed grid and write tables, logs and plots",
@@ -196,7 +196,38 @@ def build_parser() -> argparse.ArgumentParser:
     metrics.add_argument(
         "--out", type=Path, default=None, help="also write the tables into this new folder"
     )
+    thesis = sub.add_parser(
+        "thesis",
+        help="the reference robot's Table 4.1 against the as-built and corrected chains",
+        description="Every law x both walks x --episodes seeds under the as-built chain and the "
+        "corrected one, against the thesis's Table 4.1 (eval.thesis).",
+    )
+    thesis.add_argument(
+        "--episodes", type=_positive, default=20, help="seeds per cell (default: %(default)s)"
+    )
+    thesis.add_argument("--seed", type=_non_negative, default=0, help="first seed (default: 0)")
+    thesis.add_argument(
+        "--out", type=Path, default=None, help="output folder (default: runs/thesis-<timestamp>)"
+    )
     return parser
+
+
+def cmd_thesis(args: argparse.Namespace) -> int:
+    """``follow-eval thesis``: the Table 4.1 comparison (:mod:`eval.thesis`)."""
+    from eval import thesis
+
+    _check_grid(len(thesis.LAWS) * len(thesis.CHAINS), len(thesis.WALKS), args.episodes, args.seed)
+    out = args.out or Path("runs") / f"thesis-{datetime.now(UTC):%Y%m%d-%H%M%S}"
+    check_new_folder(out)
+    start = time.perf_counter()
+    tables = {c: thesis.run_chain(c, args.episodes, args.seed) for c in thesis.CHAINS}
+    with atomic_folder(out) as tmp:
+        report = thesis.write_report(tmp, tables, args.seed)
+    print(report["markdown"])
+    n = sum(len(t) for t in tables.values())
+    took = time.perf_counter() - start
+    print(f"{n} episodes in {took:.1f} s. Wrote {out}/: thesis_table.csv|md|json, plots/")
+    return 0
 
 
 def _plural(n: int, one: str, many: str) -> str:
@@ -420,7 +451,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``follow-eval`` and ``python -m eval``; returns the exit status."""
     try:
         args = build_parser().parse_args(argv)
-        return cmd_run(args) if args.command == "run" else cmd_metrics(args)
+        commands = {"run": cmd_run, "metrics": cmd_metrics, "thesis": cmd_thesis}
+        return commands[args.command](args)
     except (UsageError, StepLogError, FileExistsError, OSError, ValueError) as e:
         print(f"{PROG}: error: {e}", file=sys.stderr)
         return USAGE_ERROR
