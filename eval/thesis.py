@@ -225,8 +225,11 @@ def _plots(table: pd.DataFrame, folder: Path) -> None:
             x = np.arange(len(part)) + (k - 1) * 0.25
             mean = part["mean"].to_numpy()
             err = [mean - part["ci_low"].to_numpy(), part["ci_high"].to_numpy() - mean]
-            ax.errorbar(x, mean, yerr=err, fmt="o", capsize=3, label=f"simulation, {chain}")
-            ax.vlines(x, part["band_low"], part["band_high"], alpha=0.3, linewidth=6)
+            bars = ax.errorbar(x, mean, yerr=err, fmt="o", capsize=3, label=f"simulation, {chain}")
+            colour = bars.lines[0].get_color()
+            ax.vlines(
+                x, part["band_low"], part["band_high"], colors=colour, alpha=0.25, linewidth=6
+            )
         thesis = table[(table["metric"] == metric) & (table["chain"] == "as_built")]["thesis"]
         ax.scatter(np.arange(len(thesis)), thesis, marker="*", s=140, c="k", label="thesis")
         ax.set_xticks(np.arange(len(cells)), cells)
