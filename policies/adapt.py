@@ -8,6 +8,11 @@ entry the policy does not command is 0. So PN on the mecanum base drives with ``
 policy that commands an entry the platform lacks (a strafing law on the differential drive) is
 refused, since dropping a command silently would change the law.
 
+A policy made for one platform (a learned agent, trained on that platform's dynamics) says so
+in a ``platform`` attribute: it runs only where the action is exactly its own, so a mecanum agent
+is refused on the differential drive and a differential-drive agent on the mecanum base (whose
+``vy = 0`` would be accepted for a law), each with one error naming the agent's platform.
+
 The adapter keeps the policy's name, memory and batching (``act_batch``), so evaluation runs it
 exactly as the policy itself.
 """
@@ -38,6 +43,13 @@ class PlatformAction:
 
     def __init__(self, policy: Policy, names: Sequence[str]) -> None:
         own = action_names(policy)
+        trained_on = getattr(policy, "platform", None)
+        if trained_on is not None and own != tuple(names):
+            raise ValueError(
+                f"policy {policy.name!r} was trained on the {trained_on} platform, acting "
+                f"[{', '.join(own)}]; it cannot drive a platform acting [{', '.join(names)}] "
+                f"(train an agent for that platform, or run it @{trained_on})"
+            )
         missing = [n for n in own if n not in names]
         if missing:
             raise ValueError(
@@ -88,7 +100,8 @@ def for_platform(policy: Policy, names: Sequence[str]) -> Policy:
     """``policy`` itself when it acts in ``names`` already, else its adapter (module
     docstring); a batching policy's adapter batches too.
 
-    :raises ValueError: if the policy commands an entry ``names`` lacks.
+    :raises ValueError: if the policy commands an entry ``names`` lacks, or was made for one
+        platform (``platform``) and ``names`` are not its action's.
     """
     if action_names(policy) == tuple(names):
         return policy

@@ -13,9 +13,16 @@ The keys rl-zoo3 reads are read here with the same meaning, so the file serves b
       policy_kwargs: {net_arch: [64, 64]}
       learning_rate: lin_3e-4   # a float, or lin_<x>: linear decay from x to 0
       n_steps: 64               # ... and any other PPO argument
+      env_kwargs: {platform: mecanum}   # gym.make keyword arguments (default: none)
 
 rl-zoo3 ``eval``-uates strings for ``normalize`` and ``policy_kwargs``; here they are YAML
-mappings (rl-zoo3 accepts those too), and nothing is evaluated. Project settings that are not
+mappings (rl-zoo3 accepts those too), and nothing is evaluated. ``env_kwargs`` are the env's
+``gym.make`` keyword arguments, as rl-zoo3 saves them with an agent (for its ``train``, give them
+as ``--env-kwargs``): ``platform`` names the robot the agent is trained for (a registered
+platform, default the preset's, the differential drive); ``scenario`` and ``config`` are
+follow-train's own (``--scenarios``, ``--env-config``) and may not be set here. The platform
+decides the action's width and names, which the per-action settings must fit
+(:func:`check_action_fit`). Project settings that are not
 hyperparameters (scenarios, seeds, evaluation and checkpoint intervals) are ``follow-train``
 options (:class:`train.ppo.Args`).
 
@@ -43,6 +50,7 @@ __all__ = [
     "PPO_RULES",
     "ConfigError",
     "Hyperparams",
+    "check_action_fit",
     "import_object",
     "load_hyperparams",
     "parse_hyperparams",
@@ -52,7 +60,17 @@ __all__ = [
 ]
 
 # Keys rl-zoo3 consumes itself; the rest go to the PPO constructor.
-ZOO_KEYS = ("policy", "n_envs", "n_timesteps", "normalize", "frame_stack", "vec_env_wrapper")
+ZOO_KEYS = (
+    "policy",
+    "n_envs",
+    "n_timesteps",
+    "normalize",
+    "frame_stack",
+    "vec_env_wrapper",
+    "env_kwargs",
+)
+# gym.make keyword arguments follow-train sets itself (--scenarios, --env-config; no rendering).
+_ENV_KWARGS_OWN = ("scenario", "config", "render_mode")
 POLICIES = ("MlpPolicy",)  # or a dotted name of an ActorCriticPolicy subclass
 
 Hyperparams = dict[str, Any]
@@ -228,7 +246,8 @@ def parse_hyperparams(
     """Check one env's hyperparameters (a mapping as in the YAML file) and return a copy.
 
     Defaults are filled in for rl-zoo3's keys (``policy`` MlpPolicy, ``normalize`` false,
-    ``frame_stack`` 1, no wrappers, no ``policy_kwargs``); PPO's own defaults stay SB3's.
+    ``frame_stack`` 1, no wrappers, no ``policy_kwargs``; no ``env_kwargs`` is none); PPO's
+    own defaults stay SB3's.
 
     :param section: the mapping under the env id.
     :param where: names the source in error messages.
@@ -253,6 +272,8 @@ def parse_hyperparams(
     hp["frame_stack"] = _integer(where, "frame_stack", hp.setdefault("frame_stack", 1), 1)
     _check_policy_kwargs(where, policy, hp.setdefault("policy_kwargs", {}))
     wrapper_specs(hp.setdefault("vec_env_wrapper", []), where=where)
+    if "env_kwargs" in hp:
+        hp["env_kwargs"] = _check_env_kwargs(where, hp["env_kwargs"])
     unknown = sorted(set(hp) - set(ZOO_KEYS) - {"policy_kwargs"} - set(PPO_RULES))
     if unknown:
         raise ConfigError(f"{where}: unknown key(s) {', '.join(unknown)}")
@@ -282,6 +303,57 @@ def _check_batch(where: str, hp: Hyperparams, name: Callable[[str], str]) -> Non
             f"{where}: batch_size={batch_size} is out of range: must be in [{smallest}, "
             f"n_steps * n_envs = {n_steps} * {hp['n_envs']} = {buffer}]{lanes}"
         )
+
+
+def _check_env_kwargs(where: str, value: Any) -> dict[str, Any]:
+    """``env_kwargs``: a mapping of ``gym.make`` keyword arguments; ``platform`` a registered
+    platform's name (the other values are the env's to check when it is built)."""
+    if value is None:
+        return {}
+    if not isinstance(value, Mapping):
+        raise ConfigError(
+            f"{where}: env_kwargs={value!r} must be a mapping of gym.make keyword arguments"
+        )
+    checked = dict(value)
+    for key in checked:
+        if key in _ENV_KWARGS_OWN:
+            option = {"scenario": "--scenarios", "config": "--env-config"}.get(key)
+            instead = f"give {option}" if option else "follow-train does not render"
+            raise ConfigError(f"{where}: env_kwargs.{key} is set by follow-train ({instead})")
+    if "platform" in checked:
+        from follow_env.platforms import available_platforms
+
+        platform = checked["platform"]
+        if not isinstance(platform, str) or platform not in available_platforms():
+            raise _fail(
+                where,
+                "env_kwargs.platform",
+                platform,
+                f"a platform's name: {', '.join(available_platforms())}",
+            )
+    return checked
+
+
+def check_action_fit(hp: Hyperparams, names: Any, *, where: str = "hyperparameters") -> None:
+    """Check the settings that depend on the env's action against its entries ``names`` (the
+    platform's, e.g. ``v_mps, vy_mps, w_radps``): the mirror policy's ``mirror_action`` must
+    have one sign per entry, each its entry's reflection
+    (:func:`policies.learned.mirror.check_mirror_action`). The wrappers check their own
+    per-action arguments when they are built.
+
+    :raises ConfigError: naming the file and the key.
+    """
+    signs = (hp.get("policy_kwargs") or {}).get("mirror_action")
+    if signs is None or names is None:
+        return
+    from policies.learned.mirror import check_mirror_action
+
+    try:
+        check_mirror_action(signs, names, "policy_kwargs.mirror_action")
+    except ValueError as e:
+        platform = (hp.get("env_kwargs") or {}).get("platform")
+        on = f" (env_kwargs.platform: {platform})" if platform else ""
+        raise ConfigError(f"{where}: {e}{on}") from None
 
 
 def _check_normalize(where: str, value: Any) -> bool | dict[str, Any]:

@@ -36,13 +36,18 @@ def base_env(
     lanes_per_scenario: int,
     config: Any = "thesis",
     env_id: str = "PersonFollow-v0",
+    env_kwargs: dict[str, Any] | None = None,
 ) -> VecEnv:
     """``lanes_per_scenario`` robots on each scenario, as one VecEnv (lanes grouped by scenario).
+
+    Its ``action_names`` are the platform's action entries (the wrappers read them).
 
     :param scenarios: the task's variant names (PersonFollow's scenarios).
     :param lanes_per_scenario: lanes of each scenario's batched core.
     :param config: the env configuration (``gym.make``'s ``config``: a preset name or a dict).
     :param env_id: the Gymnasium id that names the task.
+    :param env_kwargs: further ``gym.make`` keyword arguments (the hyperparameters'
+        ``env_kwargs``, e.g. ``{"platform": "mecanum"}``).
     :raises ValueError: for an unknown scenario (naming the known ones) or a bad lane count.
     """
     task = task_for_env(env_id)
@@ -52,9 +57,12 @@ def base_env(
     for name in scenarios:
         if name not in known:
             raise ValueError(f"unknown scenario {name!r}; known scenarios: {', '.join(known)}")
+    kwargs = dict(env_kwargs or {})
     return ConcatVecEnv(
         [
-            TaskSB3VecEnv(task, lanes_per_scenario, config=config, **{task.variant_key: name})
+            TaskSB3VecEnv(
+                task, lanes_per_scenario, config=config, **kwargs, **{task.variant_key: name}
+            )
             for name in scenarios
         ]
     )

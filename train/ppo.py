@@ -38,6 +38,7 @@ from follow_env.tasks import task_for_env
 from train.config import (
     ConfigError,
     Hyperparams,
+    check_action_fit,
     load_hyperparams,
     parse_hyperparams,
     policy_class,
@@ -197,7 +198,12 @@ def train(args: Args, command: str = PROG) -> Path:
         comparison = None
         if args.final_episodes > 0:
             comparison = report.compare_with_law(
-                str(run), args.compare_with, args.scenarios, seeds, args.env_config
+                str(run),
+                args.compare_with,
+                args.scenarios,
+                seeds,
+                args.env_config,
+                platform=(hp.get("env_kwargs") or {}).get("platform"),
             )
         card = report.model_card(
             run=run,
@@ -225,7 +231,15 @@ def train(args: Args, command: str = PROG) -> Path:
 # -- Helpers ---------------------------------------------------------------------------------
 
 # Keys the trainer consumes itself; the rest of a hyperparameter section goes to PPO().
-_ZOO_ONLY = ("n_envs", "n_timesteps", "normalize", "frame_stack", "vec_env_wrapper", "policy")
+_ZOO_ONLY = (
+    "n_envs",
+    "n_timesteps",
+    "normalize",
+    "frame_stack",
+    "vec_env_wrapper",
+    "policy",
+    "env_kwargs",
+)
 
 
 def _resume_settings(args: Args) -> tuple[Args, Hyperparams, dict[str, Any], str, tuple]:
@@ -393,15 +407,22 @@ def _build(
     from stable_baselines3 import PPO
 
     from train.envs import agent_env, base_env
+    from train.wrappers import env_action_names
 
     lanes = hp["n_envs"] // len(args.scenarios)
     normalization = stats_path if hp["normalize"] and stats_path is not None else None
     try:
-        venv = agent_env(base_env(args.scenarios, lanes, args.env_config, args.env_id), hp,
-                         "train", normalization=normalization)  # fmt: skip
+        env_kwargs = hp.get("env_kwargs")
+        train_base = base_env(args.scenarios, lanes, args.env_config, args.env_id, env_kwargs)
+        check_action_fit(hp, env_action_names(train_base), where=where)
+        venv = agent_env(train_base, hp, "train", normalization=normalization)
         eval_env = agent_env(
-            base_env(args.scenarios, args.eval_episodes, args.env_config, args.env_id), hp, "eval"
+            base_env(args.scenarios, args.eval_episodes, args.env_config, args.env_id, env_kwargs),
+            hp,
+            "eval",
         )
+    except ConfigError:
+        raise
     except (ValueError, TypeError) as e:
         raise ConfigError(f"{where}: the agent's env cannot be built: {e}") from None
     except Exception as e:  # a resume's statistics file: pickle and SB3 raise their own
@@ -443,14 +464,19 @@ def _remove_new_run(run: Path, made: bool) -> None:
 
 def _resolved_config(args: Args, hp: Hyperparams, venv: Any, command: str) -> dict[str, Any]:
     """What ``config.yaml`` holds: enough to rebuild the agent's env and to resume."""
+    from train.wrappers import env_action_names, env_platform
+
     base = venv
     while hasattr(base, "venv"):
         base = base.venv
+    names = env_action_names(base)
     return {
         "command": command,
         "env_id": args.env_id,
         "args": _args_to_dict(args),
         "hyperparams": hp,
+        # The platform the agent drives; policies.learned.ppo refuses any other.
+        "platform": env_platform(base),
         # The env's spaces, so that a policy can rebuild the agent's view without an env.
         "env_spaces": {
             "observation": {
@@ -460,6 +486,7 @@ def _resolved_config(args: Args, hp: Hyperparams, venv: Any, command: str) -> di
             "action": {
                 "low": base.action_space.low.tolist(),
                 "high": base.action_space.high.tolist(),
+                **({"names": list(names)} if names is not None else {}),
             },
         },
         "agent_observation_shape": list(venv.observation_space.shape),

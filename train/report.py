@@ -96,18 +96,26 @@ def plot_learning_curve(run: Path, path: Path) -> Path:
 
 
 def compare_with_law(
-    agent: Any, law: str, scenarios: Sequence[str], seeds: Sequence[int], config: Any
+    agent: Any,
+    law: str,
+    scenarios: Sequence[str],
+    seeds: Sequence[int],
+    config: Any,
+    platform: str | None = None,
 ) -> pd.DataFrame:
     """Paired comparison ``agent - law`` per scenario on :data:`CARD_METRICS`.
 
     :param agent: a policy name (e.g. a run folder path) or a :class:`~policies.Policy`.
     :param law: a policy name, e.g. ``"gsmpn:tuned"``.
+    :param platform: run both on this platform (``eval``'s ``policy@platform``); None: the
+        configuration's.
     :returns: :func:`eval.stats.compare` rows for :data:`CARD_METRICS`, agent as ``policy_a``.
     """
     from eval.rollout import rollout
     from eval.stats import compare, episode_table
 
-    episodes = rollout([agent, law], list(scenarios), list(seeds), config=config, workers=1)
+    policies = [agent, law] if platform is None else [f"{agent}@{platform}", f"{law}@{platform}"]
+    episodes = rollout(policies, list(scenarios), list(seeds), config=config, workers=1)
     table = episode_table(episodes)
     return compare(table, metrics=list(CARD_METRICS))
 
@@ -198,6 +206,8 @@ def model_card(
     steps = sessions[-1]["last_step"] if sessions else 0
     wall_s = sum(s["wall_s"] for s in sessions)  # killed sessions too, to their checkpoint
     rates = [s["env_steps_per_s"] for s in sessions if s.get("env_steps_per_s")]
+    platform = (hp.get("env_kwargs") or {}).get("platform")
+    on = f", platform `{platform}`" if platform else ""
     lines = [
         "# PPO agent for PersonFollow-v0",
         "",
@@ -211,7 +221,7 @@ def model_card(
         *(_session_line(s) for s in sessions),
         f"- total: {steps:,} env steps in {wall_s / 60:.1f} min of training"
         + (f" ({min(rates):,}-{max(rates):,} env-steps/s)" if rates else ""),
-        f"- scenarios: {', '.join(args.scenarios)}; env preset `{args.env_config}`;"
+        f"- scenarios: {', '.join(args.scenarios)}; env preset `{args.env_config}`{on};"
         f" {hp['n_envs']} lanes ({hp['n_envs'] // len(args.scenarios)} per scenario)",
         f"- seeds: training lane j starts from {args.seed} + j (a resumed session from"
         f" {args.seed} + steps + j); held-out evaluation lanes {args.eval_seed} + j; the",

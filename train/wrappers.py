@@ -29,6 +29,10 @@ Innermost first:
 :class:`ConcatVecEnv` joins several VecEnvs, here one batched core per scenario (a core runs one
 scenario for all its lanes), into one VecEnv whose lanes are the sub-envs' lanes in order.
 ``seed(s)`` gives lane ``j`` of the whole the seed ``s + j``, as for one VecEnv.
+
+The action is the platform's, of any width (:func:`env_action_names` reads its entries' names
+from the env): every wrapper keeps the names, and every per-action parameter (``max_change``,
+``rate_weights``, the rescaling's limits) has one value per entry, in the platform's order.
 """
 
 from __future__ import annotations
@@ -62,9 +66,36 @@ __all__ = [
     "VecScaleObservation",
     "VecShapedReward",
     "agent_to_si",
+    "env_action_names",
+    "env_platform",
 ]
 
 # agent_to_si is re-exported: it lives with the features.
+
+
+def _platform(venv: VecEnv) -> Any:
+    base = venv.unwrapped if isinstance(venv, VecEnvWrapper) else venv
+    return getattr(getattr(base, "sim", None), "platform", None)
+
+
+def env_action_names(venv: VecEnv) -> tuple[str, ...] | None:
+    """The names of ``venv``'s action entries (the platform's, e.g. ``v_mps, vy_mps, w_radps``),
+    or None if the env does not say: an ``action_names`` attribute anywhere down the wrapper
+    stack, else the platform of a task's batched core (``sim.platform``)."""
+    names = getattr(venv, "action_names", None)
+    if names is None:
+        actions = getattr(_platform(venv), "actions", None)
+        names = None if actions is None else [a.name for a in actions]
+    return None if names is None else tuple(names)
+
+
+def env_platform(venv: VecEnv) -> str | None:
+    """The name of the platform ``venv`` simulates (``"mecanum"``), or None if it does not say:
+    a ``platform_name`` attribute down the wrapper stack, else its batched core's platform."""
+    name = getattr(venv, "platform_name", None)
+    if name is None:
+        name = getattr(_platform(venv), "name", None)
+    return None if name is None else str(name)
 
 
 class _FeatureWrapper(VecEnvWrapper):
@@ -99,14 +130,17 @@ class _FeatureWrapper(VecEnvWrapper):
         except TypeError as e:
             raise ValueError(f"{name}: {e}") from None
         self.feature.owner = name
+        names = env_action_names(venv)
         obs, act = self.feature.bind(
-            Box(obs_box.low, obs_box.high), Box(act_box.low, act_box.high), venv.num_envs
+            Box(obs_box.low, obs_box.high), Box(act_box.low, act_box.high, names), venv.num_envs
         )
         super().__init__(
             venv,
             observation_space=spaces.Box(obs.low, obs.high, dtype=np.float32),
             action_space=spaces.Box(act.low, act.high, dtype=np.float32),
         )
+        #: The action entries' names (the platform's; every feature keeps them).
+        self.action_names = act.names
 
     def reset(self) -> VecEnvObs:
         return self.feature.start(self.venv.reset())
@@ -126,7 +160,8 @@ class _FeatureWrapper(VecEnvWrapper):
 
 class VecRescaleAction(_FeatureWrapper):
     """:class:`policies.learned.features.RescaleAction`: the agent acts in ``[-1, 1]``, mapped
-    onto SI speeds (``v_max_mps``, ``w_max_radps``: the agent's range, at most the env's)."""
+    onto SI speeds (``v_max_mps`` for the entries in m/s, ``w_max_radps`` for those in rad/s,
+    each a number or one per such entry: the agent's range, at most the env's)."""
 
     feature_class = RescaleAction
 
@@ -165,21 +200,26 @@ class VecShapedReward(VecEnvWrapper):
     - ``alive_bonus``: a constant per step. With the floor at -1 and the bonus at 1 every step is
       worth at least 0, so no exit (lost, collision) is ever better than going on; following
       well is worth about 1.8 a step.
-    - ``v_rate_weight |dv| + w_rate_weight |dw|``: ``dv, dw`` are the change of the (clipped)
-      action since the previous step, in the units of the wrapped action space (``[-1, 1]``
+    - ``sum_k rate_weights[k] |da_k|``: ``da`` is the change of the (clipped) action since the
+      previous step, entry by entry, in the units of the wrapped action space (``[-1, 1]``
       above :class:`VecRescaleAction`); the first step of an episode compares with 0 (the robot
-      starts at rest). The env's own reward charges 0.02 per m/s² of acceleration, a few
-      hundredths of its distance and offset terms, which leaves the agent little reason to be
+      starts at rest). ``v_rate_weight`` and ``w_rate_weight`` name the weights of the entries
+      ``v_mps`` and ``w_radps`` (every platform has them; any other entry weighs 0); or give
+      ``rate_weights``, one per action entry (the mecanum base's ``[v_mps, vy_mps, w_radps]``).
+      The env's own reward charges 0.02 per m/s² of acceleration, a few hundredths of its
+      distance and offset terms, which leaves the agent little reason to be
       smooth; the evaluation's StdAccel asks for exactly that.
 
     Put a ``VecMonitor`` below this wrapper to log the env's own episode returns.
 
-    :param venv: a VecEnv with a ``Box(2,)`` action space whose infos mark truncation with
+    :param venv: a VecEnv with a ``Box`` action space whose infos mark truncation with
         ``TimeLimit.truncated`` (SB3's convention, as the PersonFollow adapter does).
     :param reward_floor: lower clip of a step's env reward, except on terminations; None: none.
     :param alive_bonus: added to every step's reward.
     :param v_rate_weight: weight on ``|dv|`` [reward per agent unit], >= 0.
     :param w_rate_weight: weight on ``|dw|`` [reward per agent unit], >= 0.
+    :param rate_weights: one weight per action entry [reward per agent unit], each >= 0;
+        instead of ``v_rate_weight`` / ``w_rate_weight``.
     :param offset_weight: weight on ``min(|observed offset| / (width / 2), 1)``, >= 0.
     """
 
@@ -194,6 +234,7 @@ class VecShapedReward(VecEnvWrapper):
         v_rate_weight: float = 0.0,
         w_rate_weight: float = 0.0,
         offset_weight: float = 0.0,
+        rate_weights: Sequence[float] | None = None,
     ) -> None:
         for name, value in (
             ("alive_bonus", alive_bonus),
@@ -205,17 +246,50 @@ class VecShapedReward(VecEnvWrapper):
             lo = 0.0 if name.endswith("weight") else None
             check_number(f"VecShapedReward.{name}", value, lo, optional=name == "reward_floor")
         act_box = venv.action_space
-        if not isinstance(act_box, spaces.Box) or act_box.shape != (2,):
-            raise ValueError(f"VecShapedReward needs a Box(2,) action space, got {act_box}")
+        if not isinstance(act_box, spaces.Box) or len(act_box.shape) != 1:
+            raise ValueError(f"VecShapedReward needs a flat Box action space, got {act_box}")
+        names = Box(act_box.low, act_box.high, env_action_names(venv)).entry_names()
+        self.rate_weights = self._weights(names, v_rate_weight, w_rate_weight, rate_weights)
         super().__init__(venv)
         self.reward_floor = -np.inf if reward_floor is None else float(reward_floor)
         self.alive_bonus = float(alive_bonus)
-        self.rate_weights = np.array([v_rate_weight, w_rate_weight], dtype=np.float64)
         self.offset_weight = float(offset_weight)
         self._half_width_px = float(venv.observation_space.high[1]) + 1.0
         self._low, self._high = act_box.low, act_box.high
-        self._prev = np.zeros((venv.num_envs, 2))
-        self._change = np.zeros((venv.num_envs, 2))
+        self._prev = np.zeros((venv.num_envs, len(names)))
+        self._change = np.zeros((venv.num_envs, len(names)))
+
+    @staticmethod
+    def _weights(
+        names: tuple[str, ...], v_weight: float, w_weight: float, given: Sequence[float] | None
+    ) -> np.ndarray:
+        """One rate weight per action entry, from ``rate_weights`` or the named two."""
+        if given is None:
+            weights = np.zeros(len(names))
+            for field, entry, value in (
+                ("v_rate_weight", "v_mps", v_weight),
+                ("w_rate_weight", "w_radps", w_weight),
+            ):
+                if value and entry not in names:
+                    raise ValueError(
+                        f"VecShapedReward.{field}: the env's action [{', '.join(names)}] has no "
+                        f"{entry}; give rate_weights"
+                    )
+                if entry in names:
+                    weights[names.index(entry)] = value
+            return weights
+        if v_weight or w_weight:
+            raise ValueError(
+                "VecShapedReward: give rate_weights or v_rate_weight / w_rate_weight, not both"
+            )
+        rule = f"{len(names)} numbers >= 0, one per action entry [{', '.join(names)}]"
+        if not isinstance(given, list | tuple) or len(given) != len(names):
+            raise ValueError(
+                f"VecShapedReward.rate_weights={given!r} is out of range: must be {rule}"
+            )
+        for k, value in enumerate(given):
+            check_number(f"VecShapedReward.rate_weights[{k}] ({names[k]})", value, 0.0)
+        return np.asarray(given, dtype=np.float64)
 
     def reset(self) -> VecEnvObs:
         self._prev[:] = 0.0
@@ -249,7 +323,9 @@ class ConcatVecEnv(VecEnv):
     the other each step (a core's kernel is fast enough that threads would not pay off at a few
     lanes per scenario).
 
-    :param venvs: the sub-envs; their observation and action spaces must be equal.
+    :param venvs: the sub-envs; their observation and action spaces must be equal, and so
+        their platforms and action entries (:func:`env_platform`, :func:`env_action_names`),
+        which it reports as its own ``platform_name`` and ``action_names``.
     """
 
     def __init__(self, venvs: Sequence[VecEnv]) -> None:
@@ -263,6 +339,14 @@ class ConcatVecEnv(VecEnv):
                 )
             if v.action_space != first.action_space:
                 raise ValueError(f"action spaces differ: {v.action_space} != {first.action_space}")
+        names = {env_action_names(v) for v in venvs}
+        platforms = {env_platform(v) for v in venvs}
+        if len(names) > 1 or len(platforms) > 1:
+            raise ValueError(f"platforms differ: {platforms}, action entries {names}")
+        #: The action entries' names (the sub-envs' platform's), or None if they do not say.
+        self.action_names = names.pop()
+        #: The sub-envs' platform, or None if they do not say.
+        self.platform_name = platforms.pop()
         self.venvs = list(venvs)
         self._bounds = np.cumsum([0, *(v.num_envs for v in self.venvs)])
         super().__init__(int(self._bounds[-1]), first.observation_space, first.action_space)

@@ -25,12 +25,18 @@ agent), actions inwards (agent to env), innermost step first, in the order of th
 The arithmetic is exactly that of the training wrappers (they call these classes), so an agent's
 actions are bitwise the same in training, in an env, and on a robot. :class:`Pipeline` chains
 the steps for inference.
+
+The action is the platform's, of any width: the differential drive's ``[v_mps, w_radps]``, the
+mecanum base's ``[v_mps, vy_mps, w_radps]``. A :class:`Box` carries the entries' names (the
+platform's), every step keeps them, and every per-action parameter has one value per entry
+(``max_change``; ``v_max_mps`` / ``w_max_radps`` per entry of their unit). A box without
+names is an agent saved before names were recorded: two entries, :data:`LEGACY_ACTION_NAMES`.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -38,6 +44,7 @@ from follow_env.sim.checks import check_number, is_integer, out_of_range
 
 __all__ = [
     "FEATURES",
+    "LEGACY_ACTION_NAMES",
     "Box",
     "FrameStack",
     "IncrementalAction",
@@ -50,14 +57,23 @@ __all__ = [
 ]
 
 
+#: The action entries of a two-entry box that names none (an agent saved before the names were
+#: recorded was trained on the differential drive).
+LEGACY_ACTION_NAMES = ("v_mps", "w_radps")
+
+
 class Box:
     """A box of float32 bounds (what a step sees of the spaces around it; numpy only).
 
     :param low: lower bounds. :param high: upper bounds.
+    :param names: the entries' names (an action box: the platform's action names), or None.
     """
 
     def __init__(
-        self, low: Sequence[float] | np.ndarray, high: Sequence[float] | np.ndarray
+        self,
+        low: Sequence[float] | np.ndarray,
+        high: Sequence[float] | np.ndarray,
+        names: Sequence[str] | None = None,
     ) -> None:
         self.low = np.asarray(low, dtype=np.float32)
         self.high = np.asarray(high, dtype=np.float32)
@@ -65,20 +81,35 @@ class Box:
             raise ValueError(
                 f"a Box needs matching flat bounds, got {self.low.shape}, {self.high.shape}"
             )
+        self.names = None if names is None else tuple(str(n) for n in names)
+        if self.names is not None and len(self.names) != self.low.shape[0]:
+            raise ValueError(
+                f"a Box of {self.low.shape[0]} entries needs as many names, got {list(names)}"
+            )
 
     @property
     def shape(self) -> tuple[int, ...]:
         """The box's shape."""
         return self.low.shape
 
+    def entry_names(self) -> tuple[str, ...]:
+        """The entries' names: given ones, or for a two-entry box without names
+        :data:`LEGACY_ACTION_NAMES`, or else ``a0, a1, ...``."""
+        if self.names is not None:
+            return self.names
+        if self.shape == (2,):
+            return LEGACY_ACTION_NAMES
+        return tuple(f"a{k}" for k in range(self.shape[0]))
+
     def __repr__(self) -> str:
-        return f"Box(low={self.low.tolist()}, high={self.high.tolist()})"
+        names = "" if self.names is None else f", names={list(self.names)}"
+        return f"Box(low={self.low.tolist()}, high={self.high.tolist()}{names})"
 
 
 def agent_to_si(action: np.ndarray, low: np.ndarray, high: np.ndarray) -> np.ndarray:
     """Map an agent action in ``[-1, 1]`` (clipped first) linearly onto ``[low, high]``.
 
-    :param action: shape (..., 2), agent units.
+    :param action: shape (..., m), agent units (m: the platform's action entries).
     :param low: the SI box's lower bounds, e.g. ``[-1.44 m/s, -7.2 rad/s]``.
     :param high: the SI box's upper bounds.
     """
@@ -142,35 +173,64 @@ class Feature:
 
 
 class RescaleAction(Feature):
-    """The agent acts in ``[-1, 1]^2``; the env receives SI actions (module docstring).
+    """The agent acts in ``[-1, 1]^m``; the env receives SI actions (module docstring).
 
-    ``[-1, 1]`` maps linearly onto ``[-v_max_mps, v_max_mps] x [-w_max_radps, w_max_radps]``, by
-    default the env's whole action box.
+    Entry ``k`` of ``[-1, 1]`` maps linearly onto ``[-max_k, max_k]``, by default the env's
+    bound of that entry. The agent's ranges are given by unit: ``v_max_mps`` for the entries in
+    m/s (their names end in ``_mps``: the differential drive's ``v_mps``, the mecanum base's
+    ``v_mps`` and ``vy_mps``), ``w_max_radps`` for those in rad/s (``w_radps``). Each is one
+    number for all its entries, or a list of one value per entry, in the platform's order (null:
+    the env's bound), e.g. ``v_max_mps: [null, 1.0]`` for the mecanum base's vx and vy.
 
-    :param v_max_mps: the agent's largest speed [m/s]; None or at most the env's bound.
-    :param w_max_radps: the agent's largest turn rate [rad/s]; None or at most the env's bound.
+    :param v_max_mps: the agent's largest speed(s) [m/s]; None, or each at most the env's bound.
+    :param w_max_radps: the agent's largest turn rate(s) [rad/s]; None, or each at most the
+        env's bound.
     """
 
-    def __init__(self, v_max_mps: float | None = None, w_max_radps: float | None = None) -> None:
+    #: The limits, and the unit suffix of the action entries each bounds.
+    UNITS: ClassVar[dict[str, str]] = {"v_max_mps": "_mps", "w_max_radps": "_radps"}
+
+    def __init__(
+        self,
+        v_max_mps: float | Sequence[float | None] | None = None,
+        w_max_radps: float | Sequence[float | None] | None = None,
+    ) -> None:
         self.limits = (v_max_mps, w_max_radps)
 
     def bind(self, obs: Box, act: Box, n: int) -> tuple[Box, Box]:
-        if (
-            act.shape != (2,)
-            or not np.all(np.isfinite([act.low, act.high]))
-            or not np.allclose(act.low, -act.high)
-        ):
-            raise ValueError(f"{self.owner} needs a bounded symmetric Box(2,), got {act}")
+        if not np.all(np.isfinite([act.low, act.high])) or not np.allclose(act.low, -act.high):
+            raise ValueError(f"{self.owner} needs a bounded symmetric Box, got {act}")
+        names = act.entry_names()
         high = act.high.astype(np.float64).copy()
-        for k, (name, value) in enumerate(
-            zip(("v_max_mps", "w_max_radps"), self.limits, strict=True)
-        ):
-            if value is not None:
-                high[k] = check_number(
-                    f"{self.owner}.{name}", value, 0.0, float(high[k]), lo_open=True
+        for (field, unit), value in zip(self.UNITS.items(), self.limits, strict=True):
+            if value is None:
+                continue
+            entries = [k for k, name in enumerate(names) if name.endswith(unit)]
+            listed = [names[k] for k in entries]
+            if isinstance(value, list | tuple):
+                if len(value) != len(entries):
+                    raise ValueError(
+                        f"{self.owner}.{field}={value!r} is out of range: must be a number or "
+                        f"{len(entries)} entries, one per action entry in {unit[1:]} "
+                        f"[{', '.join(listed)}] (a number or null)"
+                    )
+                pairs = [(f"{field}[{i}] ({names[k]})", k, v) for i, (k, v) in
+                         enumerate(zip(entries, value, strict=True))]  # fmt: skip
+            elif not entries:
+                raise ValueError(
+                    f"{self.owner}.{field}: the env's action [{', '.join(names)}] has no entry "
+                    f"in {unit[1:]}"
                 )
+            else:
+                pairs = [(field, k, value) for k in entries]
+            for label, k, v in pairs:
+                if v is not None:
+                    high[k] = check_number(
+                        f"{self.owner}.{label}", v, 0.0, float(high[k]), lo_open=True
+                    )
         self.si_low, self.si_high = -high, high
-        return obs, Box([-1.0, -1.0], [1.0, 1.0])
+        ones = np.ones(len(names))
+        return obs, Box(-ones, ones, act.names)
 
     def act(self, action: np.ndarray) -> np.ndarray:
         return agent_to_si(action, self.si_low, self.si_high)
@@ -270,7 +330,8 @@ class IncrementalAction(Feature):
     commanded acceleration can never exceed ``max_change / dt``, and PPO's exploration noise
     becomes a random walk of the command instead of a new random command every 0.1 s.
 
-    :param max_change: the largest change per step of each action entry, in inner units.
+    :param max_change: the largest change per step of each action entry, in inner units (one
+        per entry of the platform's action, in its order).
     :param reading_index: the observation entry holding the distance, or None. While it is <= 0
         (no distance reading yet) the command does not change, so the robot stays at rest until
         it first measures the person, as the reference robot and every guidance law do.
@@ -291,7 +352,8 @@ class IncrementalAction(Feature):
         ):
             raise ValueError(
                 f"{self.owner}.max_change={self.given!r} is out of range: must be "
-                f"{act.shape[0]} positive numbers"
+                f"{act.shape[0]} positive numbers, one per action entry "
+                f"[{', '.join(act.entry_names())}]"
             )
         n_obs = obs.shape[0]
         index = self.reading_index
@@ -306,7 +368,7 @@ class IncrementalAction(Feature):
         self._command = np.zeros((n, act.shape[0]))
         self._reading = np.ones(n, dtype=bool)
         outer_obs = Box(np.concatenate([obs.low, act.low]), np.concatenate([obs.high, act.high]))
-        return outer_obs, Box(-np.ones(act.shape), np.ones(act.shape))
+        return outer_obs, Box(-np.ones(act.shape), np.ones(act.shape), act.names)
 
     def start(self, obs: np.ndarray) -> np.ndarray:
         self._command[:] = 0.0

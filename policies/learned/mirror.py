@@ -15,8 +15,11 @@ scale them (:class:`policies.learned.features.ScaleObservation`) rather than shi
 (``VecNormalize``'s ``norm_obs``).
 
 ``policy_kwargs``: ``mirror_obs`` (one ``+1``/``-1`` per entry of one frame; it is repeated
-over stacked frames) and ``mirror_action`` (one per action entry), plus any
-``MlpPolicy`` argument.
+over stacked frames) and ``mirror_action`` (one per action entry of the platform, in its order),
+plus any ``MlpPolicy`` argument. In a left-right reflection the forward speed keeps its sign and
+the sideways speed and the turn rate change it (:data:`ACTION_MIRROR_SIGNS`): the differential
+drive's ``[v_mps, w_radps]`` mirrors as ``[1, -1]``, the mecanum base's ``[v_mps, vy_mps,
+w_radps]`` as ``[1, -1, -1]``; :func:`check_mirror_action` holds a configuration to that.
 """
 
 from __future__ import annotations
@@ -29,7 +32,34 @@ import torch
 from stable_baselines3.common.policies import ActorCriticPolicy
 from torch import nn
 
-__all__ = ["MirrorMlpPolicy"]
+__all__ = ["ACTION_MIRROR_SIGNS", "MirrorMlpPolicy", "check_mirror_action"]
+
+#: How each known action entry behaves in a left-right reflection (REP 103 axes: x forward, y
+#: left, z up): x-components keep their sign, y-components and yaw rates change it.
+ACTION_MIRROR_SIGNS: dict[str, float] = {"v_mps": 1.0, "vy_mps": -1.0, "w_radps": -1.0}
+
+
+def check_mirror_action(signs: Sequence[float], names: Sequence[str], where: str) -> None:
+    """Raise ``ValueError`` naming ``where`` unless ``signs`` has one sign per action entry
+    ``names`` and each known entry's sign is its reflection's (:data:`ACTION_MIRROR_SIGNS`).
+
+    :param signs: the configured ``mirror_action``. :param names: the env's action entries.
+    :param where: the field's name in the message, e.g. ``policy_kwargs.mirror_action``.
+    """
+    names = list(names)
+    if not isinstance(signs, list | tuple) or len(signs) != len(names):
+        raise ValueError(
+            f"{where}={signs!r} is out of range: must be {len(names)} signs, one per action "
+            f"entry [{', '.join(names)}]"
+        )
+    for sign, name in zip(signs, names, strict=True):
+        expected = ACTION_MIRROR_SIGNS.get(name)
+        if expected is not None and sign != expected:
+            verb = "keeps" if expected > 0 else "changes"
+            raise ValueError(
+                f"{where}={list(signs)!r} is out of range: {name} {verb} its sign in a "
+                f"left-right mirror, so its sign must be {expected:+g}"
+            )
 
 
 class _MirrorExtractor(nn.Module):

@@ -14,7 +14,11 @@ The policy rebuilds the agent's view from the configuration with the feature pip
 training wraps (:mod:`policies.learned.features`): extra observation features, normalisation
 with the saved statistics (frozen), stacked frames. So the agent gets exactly the input it was
 trained on, acts deterministically (the mean of its Gaussian), and its action is mapped back to
-SI ``[v_mps, w_radps]`` by the same code. :meth:`PPOPolicy.reset` clears the pipeline's memory
+SI by the same code: the action of the platform it was trained on (``config.yaml``'s
+``platform`` and ``env_spaces.action.names``; an agent saved without them was trained on the
+differential drive, ``[v_mps, w_radps]``). The policy names both (``platform``,
+``action_names``), and :func:`policies.adapt.for_platform` refuses it on a platform whose action
+differs. :meth:`PPOPolicy.reset` clears the pipeline's memory
 (frame stack, command, observation age). No training code is imported.
 
 Batched acting (:meth:`PPOPolicy.act_batch`) runs the feature pipeline over all lanes at once
@@ -41,6 +45,7 @@ from policies.base import validate_obs, validate_obs_batch
 from policies.learned.features import Box, Feature, FrameStack, NormalizeObservation, Pipeline
 
 __all__ = [
+    "AGENTS",
     "DEFAULT_AGENT",
     "AgentFiles",
     "AgentLoadError",
@@ -48,11 +53,16 @@ __all__ = [
     "agent_files",
     "load_agent",
     "load_default",
+    "load_shipped",
     "resolve_path",
 ]
 
+#: The shipped agents' folder: ``agents/<name>`` is built by ``make_policy("<name>")``.
+AGENTS = Path(__file__).parents[1] / "agents"
 #: The shipped agent, trained by ``follow-train --export policies/agents/ppo``.
-DEFAULT_AGENT = Path(__file__).parents[1] / "agents" / "ppo"
+DEFAULT_AGENT = AGENTS / "ppo"
+#: The platform of an agent whose configuration names none (saved before platforms were named).
+LEGACY_PLATFORM = "diff_drive"
 MODEL = "model.zip"
 NORMALIZATION = "vecnormalize.pkl"
 CONFIG = "config.yaml"
@@ -159,8 +169,8 @@ def _wrapper_entries(value: Any, where: Path) -> list[tuple[str, dict[str, Any]]
 
 def _box(spaces: dict[str, Any], key: str, where: Path) -> Box:
     try:
-        return Box(spaces[key]["low"], spaces[key]["high"])
-    except (KeyError, TypeError, ValueError) as e:
+        return Box(spaces[key]["low"], spaces[key]["high"], spaces[key].get("names"))
+    except (KeyError, TypeError, ValueError, AttributeError) as e:
         raise AgentLoadError(f"{where}: env_spaces.{key} is not a box ({e})") from None
 
 
@@ -185,6 +195,10 @@ class _Loaded:
             raise AgentLoadError(f"{where}: not a usable agent configuration (no 'env_spaces')")
         self.observation_box = _box(config["env_spaces"], "observation", where)
         self.action_box = _box(config["env_spaces"], "action", where)
+        self.action_names = self.action_box.entry_names()
+        self.platform = config.get("platform", LEGACY_PLATFORM)
+        if not isinstance(self.platform, str):
+            raise AgentLoadError(f"{where}: platform={self.platform!r} must be a platform's name")
         self.wrappers = _wrapper_entries(hp.get("vec_env_wrapper"), where)
         self.frame_stack = hp.get("frame_stack", 1)
         if (
@@ -303,6 +317,9 @@ class PPOPolicy:
         self.path = str(path)
         self.name = name if name is not None else self.path.rstrip("/")
         self._agent = _loaded(agent_files(path))
+        #: The platform the agent was trained on, and its action's entries (what it commands).
+        self.platform: str = self._agent.platform
+        self.action_names: tuple[str, ...] = self._agent.action_names
         files = self._agent.files
         view = self._agent.pipeline(1)
         try:
@@ -332,7 +349,8 @@ class PPOPolicy:
         self._started = False
 
     def act(self, obs: np.ndarray) -> np.ndarray:
-        """Map ``[distance_m, offset_px]`` to ``[v_mps, w_radps]`` (deterministic).
+        """Map ``[distance_m, offset_px]`` to the platform's action, :attr:`action_names`
+        (``[v_mps, w_radps]`` on the differential drive), deterministically.
 
         :raises ValueError: if ``obs`` is not a finite array of shape (2,).
         """
@@ -353,7 +371,7 @@ class PPOPolicy:
         self._batch_n = n
 
     def act_batch(self, obs: np.ndarray) -> np.ndarray:
-        """Actions ``(n, 2)`` for observations ``(n, 2)``, each lane as :meth:`act` would give
+        """Actions ``(n, m)`` for observations ``(n, 2)``, each lane as :meth:`act` would give
         it alone (the network runs one lane at a time: module docstring)."""
         rows = validate_obs_batch(obs).astype(np.float32)
         if getattr(self, "_batch_n", None) != len(rows):
@@ -384,6 +402,11 @@ def load_agent(path: str | Path, name: str | None = None) -> PPOPolicy:
 def load_default() -> PPOPolicy:
     """The shipped agent, named ``"ppo"``."""
     return PPOPolicy(DEFAULT_AGENT, name="ppo")
+
+
+def load_shipped(name: str) -> PPOPolicy:
+    """The shipped agent ``policies/agents/<name>`` (e.g. ``"ppo_mecanum"``), named ``name``."""
+    return PPOPolicy(AGENTS / name, name=name)
 
 
 def resolve_path(name: str) -> PPOPolicy | None:

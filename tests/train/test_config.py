@@ -7,7 +7,14 @@ from pathlib import Path
 import pytest
 
 from follow_env.tasks.person_follow import ENV_ID
-from train.config import ConfigError, load_hyperparams, parse_hyperparams, policy_class, schedule
+from train.config import (
+    ConfigError,
+    check_action_fit,
+    load_hyperparams,
+    parse_hyperparams,
+    policy_class,
+    schedule,
+)
 from train.ppo import DEFAULT_HYPERPARAMS
 
 MINIMAL = {"n_envs": 4, "n_timesteps": 1000}
@@ -188,3 +195,56 @@ def test_policy_class_imports_a_dotted_name() -> None:
 
     assert policy_class("train.mirror.MirrorMlpPolicy") is MirrorMlpPolicy
     assert policy_class("MlpPolicy") == "MlpPolicy"
+
+
+MECANUM_HYPERPARAMS = DEFAULT_HYPERPARAMS.with_name("ppo_mecanum.yaml")
+
+
+def test_the_mecanum_file_names_its_platform_and_three_entry_settings() -> None:
+    hp = load_hyperparams(MECANUM_HYPERPARAMS, ENV_ID)
+    assert hp["env_kwargs"] == {"platform": "mecanum"}
+    assert hp["policy_kwargs"]["mirror_action"] == [1, -1, -1]
+    check_action_fit(hp, ("v_mps", "vy_mps", "w_radps"))
+
+
+def test_env_kwargs_platform_must_be_a_registered_platform() -> None:
+    with pytest.raises(
+        ConfigError,
+        match=r"env_kwargs\.platform='mecanum4' is out of range: must be a "
+        r"platform's name: diff_drive, mecanum",
+    ):
+        parse_hyperparams(MINIMAL | {"env_kwargs": {"platform": "mecanum4"}})
+
+
+@pytest.mark.parametrize(
+    ("env_kwargs", "message"),
+    [
+        ("mecanum", r"env_kwargs='mecanum' must be a mapping of gym\.make keyword arguments"),
+        (
+            {"scenario": "curve"},
+            r"env_kwargs\.scenario is set by follow-train \(give --scenarios\)",
+        ),
+        ({"config": "noisy"}, r"env_kwargs\.config is set by follow-train \(give --env-config\)"),
+    ],
+)
+def test_env_kwargs_are_checked_naming_the_key(env_kwargs: object, message: str) -> None:
+    with pytest.raises(ConfigError, match=message):
+        parse_hyperparams(MINIMAL | {"env_kwargs": env_kwargs})
+
+
+def test_a_file_without_env_kwargs_stays_as_it_was() -> None:
+    assert "env_kwargs" not in load_hyperparams(DEFAULT_HYPERPARAMS, ENV_ID)
+
+
+def test_mirror_action_must_fit_the_platforms_action() -> None:
+    hp = load_hyperparams(DEFAULT_HYPERPARAMS, ENV_ID)  # mirror_action [1, -1]: two entries
+    hp["env_kwargs"] = {"platform": "mecanum"}
+    with pytest.raises(
+        ConfigError,
+        match=r"policy_kwargs\.mirror_action=\[1, -1\] is out of range: must be 3 "
+        r"signs, one per action entry \[v_mps, vy_mps, w_radps\] \(env_kwargs\.platform: mecanum\)",
+    ):
+        check_action_fit(hp, ("v_mps", "vy_mps", "w_radps"))
+    hp["policy_kwargs"]["mirror_action"] = [1, 1, -1]
+    with pytest.raises(ConfigError, match="vy_mps changes its sign in a left-right mirror"):
+        check_action_fit(hp, ("v_mps", "vy_mps", "w_radps"))

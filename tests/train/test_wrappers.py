@@ -18,6 +18,7 @@ from train.wrappers import (
     VecScaleObservation,
     VecShapedReward,
     agent_to_si,
+    env_action_names,
 )
 
 
@@ -235,3 +236,117 @@ def test_concat_vec_env_lane_j_replays_its_scenario_seeded_s_plus_j() -> None:
 def test_constructors_refuse_bad_arguments_naming_them(build: Any, message: str) -> None:
     with pytest.raises(ValueError, match=message):
         build(ScriptedVecEnv(constant_obs(1)))
+
+
+# -- A platform of three action entries (the mecanum base's [v_mps, vy_mps, w_radps]) --------
+
+MECANUM_NAMES = ("v_mps", "vy_mps", "w_radps")
+
+
+class ThreeEntryVecEnv(ScriptedVecEnv):
+    """:class:`ScriptedVecEnv` acting ``[v_mps, vy_mps, w_radps]`` in ``+-2, +-1, +-4``."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self.action_space = spaces.Box(
+            np.array([-2.0, -1.0, -4.0], np.float32), np.array([2.0, 1.0, 4.0], np.float32)
+        )
+        self.action_names = MECANUM_NAMES
+
+
+def test_wrappers_take_the_action_width_and_names_from_the_env() -> None:
+    env = ThreeEntryVecEnv(constant_obs(1))
+    wrapped = VecIncrementalAction(VecRescaleAction(env), max_change=[0.1, 0.2, 0.3])
+    assert wrapped.action_space.shape == (3,)
+    assert wrapped.action_names == MECANUM_NAMES
+    assert wrapped.observation_space.shape == (5,)  # obs + the three commands
+
+
+def test_rescale_action_takes_one_limit_per_entry_of_its_unit() -> None:
+    env = ThreeEntryVecEnv(constant_obs(2))
+    wrapped = VecRescaleAction(env, v_max_mps=[None, 0.5], w_max_radps=2.0)
+    wrapped.reset()
+    wrapped.step(np.array([[1.0, -1.0, 0.5]]))
+    np.testing.assert_allclose(env.actions[-1], [[2.0, -0.5, 1.0]])
+
+
+def test_rescale_action_one_number_bounds_every_entry_of_its_unit() -> None:
+    env = ThreeEntryVecEnv(constant_obs(2))
+    wrapped = VecRescaleAction(env, v_max_mps=0.5, w_max_radps=1.0)  # w is the third entry here
+    wrapped.reset()
+    wrapped.step(np.array([[1.0, 1.0, 1.0]]))
+    np.testing.assert_allclose(env.actions[-1], [[0.5, 0.5, 1.0]])
+
+
+def test_incremental_action_moves_each_of_three_entries_by_its_own_step() -> None:
+    env = ThreeEntryVecEnv(constant_obs(2))
+    wrapped = VecIncrementalAction(env, max_change=[0.5, 0.25, 1.0])
+    wrapped.reset()
+    wrapped.step(np.array([[1.0, -1.0, 0.5]]))
+    np.testing.assert_allclose(env.actions[-1], [[0.5, -0.25, 0.5]])
+
+
+def test_shaped_reward_charges_each_entry_its_own_rate_weight() -> None:
+    env = ThreeEntryVecEnv(constant_obs(1), rewards=[[0.0]])
+    wrapped = VecShapedReward(env, rate_weights=[1.0, 2.0, 4.0])
+    wrapped.reset()
+    _, r, *_ = wrapped.step(np.array([[0.5, -0.25, 0.125]]))
+    np.testing.assert_allclose(r, [-(0.5 + 0.5 + 0.5)])
+
+
+def test_shaped_reward_named_weights_leave_the_sideways_entry_free() -> None:
+    env = ThreeEntryVecEnv(constant_obs(1), rewards=[[0.0]])
+    wrapped = VecShapedReward(env, v_rate_weight=1.0, w_rate_weight=1.0)
+    wrapped.reset()
+    _, r, *_ = wrapped.step(np.array([[0.5, 1.0, 0.25]]))
+    np.testing.assert_allclose(r, [-0.75])
+
+
+@pytest.mark.parametrize(
+    ("build", "message"),
+    [
+        (
+            lambda e: VecRescaleAction(e, v_max_mps=[1.0, 2.0, 3.0]),
+            r"VecRescaleAction\.v_max_mps=\[1\.0, 2\.0, 3\.0\] is out of range: must be a "
+            r"number or 2 entries, one per action entry in mps \[v_mps, vy_mps\]",
+        ),
+        (
+            lambda e: VecRescaleAction(e, v_max_mps=[None, 5.0]),
+            r"VecRescaleAction\.v_max_mps\[1\] \(vy_mps\)=5\.0 is out of range",
+        ),
+        (
+            lambda e: VecIncrementalAction(e, max_change=[0.1, 0.1]),
+            r"max_change=\[0\.1, 0\.1\] is out of range: must be 3 positive numbers, one per "
+            r"action entry \[v_mps, vy_mps, w_radps\]",
+        ),
+        (
+            lambda e: VecShapedReward(e, rate_weights=[1.0, 1.0]),
+            r"VecShapedReward\.rate_weights=\[1\.0, 1\.0\] is out of range: must be 3 numbers",
+        ),
+        (
+            lambda e: VecShapedReward(e, rate_weights=[1.0, -1.0, 1.0]),
+            r"VecShapedReward\.rate_weights\[1\] \(vy_mps\)=-1\.0 is out of range",
+        ),
+        (
+            lambda e: VecShapedReward(e, rate_weights=[1.0, 1.0, 1.0], v_rate_weight=1.0),
+            "give rate_weights or v_rate_weight / w_rate_weight, not both",
+        ),
+    ],
+)
+def test_three_entry_arguments_are_checked_naming_the_field(build: Any, message: str) -> None:
+    with pytest.raises(ValueError, match=message):
+        build(ThreeEntryVecEnv(constant_obs(1)))
+
+
+def test_concat_vec_env_reports_its_platform_and_action_names() -> None:
+    parts = [follow_env.make_sb3_vec_env(1, scenario="straight", platform="mecanum")] * 2
+    joined = ConcatVecEnv(parts)
+    assert joined.action_names == MECANUM_NAMES
+    assert joined.platform_name == "mecanum"
+    assert env_action_names(VecRescaleAction(joined)) == MECANUM_NAMES
+
+
+def test_concat_vec_env_refuses_envs_of_different_platforms() -> None:
+    mecanum = follow_env.make_sb3_vec_env(1, scenario="straight", platform="mecanum")
+    with pytest.raises(ValueError, match="differ"):
+        ConcatVecEnv([follow_env.make_sb3_vec_env(1, scenario="straight"), mecanum])

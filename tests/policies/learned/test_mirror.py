@@ -7,7 +7,7 @@ import pytest
 import torch
 from gymnasium import spaces
 
-from policies.learned.mirror import MirrorMlpPolicy
+from policies.learned.mirror import MirrorMlpPolicy, check_mirror_action
 
 OBS_SIGN = [1.0, -1.0, 1.0]
 ACT_SIGN = [1.0, -1.0]
@@ -55,3 +55,43 @@ def test_signs_that_do_not_fit_the_spaces_are_rejected() -> None:
             mirror_obs=OBS_SIGN,
             mirror_action=ACT_SIGN,
         )
+
+
+# The mecanum base: [v_mps, vy_mps, w_radps]; vy changes sign in a mirror, like w.
+MECANUM_OBS_SIGN = [1.0, -1.0, 1.0, 1.0, -1.0, -1.0]  # distance, offset, age, vx, vy, w
+MECANUM_ACT_SIGN = [1.0, -1.0, -1.0]
+
+
+def test_a_three_entry_action_mirrors_vy_and_w_but_not_vx() -> None:
+    torch.manual_seed(0)
+    policy = MirrorMlpPolicy(
+        spaces.Box(-5, 5, shape=(12,), dtype=np.float32),
+        spaces.Box(-1, 1, shape=(3,), dtype=np.float32),
+        lambda _: 3e-4,
+        mirror_obs=MECANUM_OBS_SIGN,
+        mirror_action=MECANUM_ACT_SIGN,
+    )
+    x = torch.randn(16, 12)
+    mx = x * torch.tensor(MECANUM_OBS_SIGN * 2)
+    with torch.no_grad():
+        mean = policy.get_distribution(x).distribution.mean
+        mirrored = policy.get_distribution(mx).distribution.mean
+    torch.testing.assert_close(mirrored, mean * torch.tensor(MECANUM_ACT_SIGN))
+    centred = torch.zeros(1, 12)
+    with torch.no_grad():  # a centred person, at rest: no strafe and no turn
+        action = policy.get_distribution(centred).distribution.mean[0]
+    assert action[1].item() == 0.0
+    assert action[2].item() == 0.0
+
+
+def test_mirror_action_signs_are_checked_against_the_action_names() -> None:
+    check_mirror_action([1, -1, -1], ("v_mps", "vy_mps", "w_radps"), "mirror_action")
+    check_mirror_action([1, -1], ("v_mps", "w_radps"), "mirror_action")
+    with pytest.raises(
+        ValueError,
+        match=r"mirror_action=\[1, 1, -1\] is out of range: vy_mps "
+        r"changes its sign in a left-right mirror, so its sign must be -1",
+    ):
+        check_mirror_action([1, 1, -1], ("v_mps", "vy_mps", "w_radps"), "mirror_action")
+    with pytest.raises(ValueError, match=r"must be 3 signs, one per action entry"):
+        check_mirror_action([1, -1], ("v_mps", "vy_mps", "w_radps"), "mirror_action")
