@@ -13,7 +13,7 @@ import yaml
 from stable_baselines3.common.vec_env import VecEnvWrapper
 
 from eval.rollout import run_episode
-from policies import Policy, make_policy
+from policies import Policy, for_platform, make_policy
 from policies.learned.ppo import DEFAULT_AGENT, AgentLoadError, PPOPolicy
 from train.envs import agent_env, base_env
 from train.run import read_config
@@ -198,3 +198,24 @@ def test_act_batch_needs_reset_batch_for_its_lane_count() -> None:
     policy.reset_batch(3)
     with pytest.raises(ValueError, match=r"reset_batch\(2\)"):
         policy.act_batch(np.ones((2, 2), dtype=np.float32))
+
+
+# -- Platforms: an agent records the platform it was trained on and drives only that one -----
+
+MECANUM = ("v_mps", "vy_mps", "w_radps")
+
+
+def test_an_agent_saved_without_a_platform_is_a_differential_drive_agent() -> None:
+    assert "platform" not in read_config(DEFAULT_AGENT)  # saved before platforms were named
+    policy = make_policy("ppo")
+    assert policy.platform == "diff_drive"  # type: ignore[attr-defined]
+    assert policy.action_names == ("v_mps", "w_radps")  # type: ignore[attr-defined]
+
+
+def test_the_differential_drive_agent_is_refused_on_the_mecanum_base() -> None:
+    with pytest.raises(
+        ValueError,
+        match=r"policy 'ppo' was trained on the diff_drive platform, acting "
+        r"\[v_mps, w_radps\]; it cannot drive a platform acting \[v_mps, vy_mps, w_radps\]",
+    ):
+        for_platform(make_policy("ppo"), MECANUM)
