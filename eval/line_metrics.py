@@ -7,9 +7,9 @@ simulation's ground truth (the line's centreline):
   largest progress reached, as a share of the line's length from the start on (100 when the
   episode ended at the track's end).
 - ``lap_time_s``: the time to the track's end; NaN for an episode that did not get there.
-- ``cross_track_mean_m``, ``cross_track_rms_m``, ``max_deviation_m``: mean, root mean square
-  and largest |cross-track error|, the robot's distance to the line (gaps included), over every
-  row: how accurately the robot traced.
+- ``cross_track_mean_mm``, ``cross_track_rms_mm``, ``max_deviation_mm``: mean, root mean
+  square and largest |cross-track error|, the robot's distance to the line's centre (gaps
+  included), over every row, in mm: how accurately the robot traced.
 - ``line_lost_count``: times the grid lost the line, i.e. rows where no spot overlaps the line
   (gaps counted as line) after a row where one did.
 - ``failed_pct``: 100 when the episode ended with the line lost or the field left, else 0 (over
@@ -17,7 +17,8 @@ simulation's ground truth (the line's centreline):
 - ``mean_speed_mps``: progress over time, the speed along the line.
 
 They live in their own registry (:data:`LINE_METRICS`, built with :class:`eval.metrics.Metric`)
-so that PersonFollow's tables keep exactly their columns.
+so that PersonFollow's tables keep exactly their columns; :data:`LINE_TABLES` hands them to
+:mod:`eval.report`. A new line metric is one decorated function here.
 """
 
 from __future__ import annotations
@@ -29,8 +30,15 @@ import numpy as np
 import pandas as pd
 
 from eval.metrics import Metric
+from eval.report import Tables
 
-__all__ = ["LINE_HEADLINE_METRICS", "LINE_METRICS", "line_metric"]
+__all__ = [
+    "LINE_HEADLINE_METRICS",
+    "LINE_METRICS",
+    "LINE_TABLES",
+    "line_episode_metrics",
+    "line_metric",
+]
 
 _REGISTRY: dict[str, Metric] = {}
 FAILURE_ENDINGS = frozenset({"lost", "left_field"})
@@ -53,8 +61,8 @@ def _ending(log: pd.DataFrame) -> str:
     return endings[-1] if endings else ""
 
 
-def _cte(log: pd.DataFrame) -> np.ndarray:
-    values = log["cross_track_m"].to_numpy(dtype=np.float64)
+def _cte_mm(log: pd.DataFrame) -> np.ndarray:
+    values = 1000.0 * log["cross_track_m"].to_numpy(dtype=np.float64)
     return values[np.isfinite(values)]
 
 
@@ -75,24 +83,24 @@ def lap_time_s(log: pd.DataFrame) -> float:
     return float(log["time_s"].iloc[-1]) if _ending(log) == "track_end" else float("nan")
 
 
-@line_metric("cross_track_mean_m", "m", "cross-track mean (m)")
-def cross_track_mean_m(log: pd.DataFrame) -> float:
-    """Mean |cross-track error| [m]."""
-    e = _cte(log)
+@line_metric("cross_track_mean_mm", "mm", "cross-track mean (mm)")
+def cross_track_mean_mm(log: pd.DataFrame) -> float:
+    """Mean |cross-track error| [mm]."""
+    e = _cte_mm(log)
     return float(np.mean(np.abs(e))) if e.size else float("nan")
 
 
-@line_metric("cross_track_rms_m", "m", "cross-track RMS (m)")
-def cross_track_rms_m(log: pd.DataFrame) -> float:
-    """Root mean square of the cross-track error [m]."""
-    e = _cte(log)
+@line_metric("cross_track_rms_mm", "mm", "cross-track RMS (mm)")
+def cross_track_rms_mm(log: pd.DataFrame) -> float:
+    """Root mean square of the cross-track error [mm]."""
+    e = _cte_mm(log)
     return float(np.sqrt(np.mean(e**2))) if e.size else float("nan")
 
 
-@line_metric("max_deviation_m", "m", "max deviation (m)")
-def max_deviation_m(log: pd.DataFrame) -> float:
-    """Largest |cross-track error| [m]."""
-    e = _cte(log)
+@line_metric("max_deviation_mm", "mm", "max deviation (mm)")
+def max_deviation_mm(log: pd.DataFrame) -> float:
+    """Largest |cross-track error| [mm]."""
+    e = _cte_mm(log)
     return float(np.max(np.abs(e))) if e.size else float("nan")
 
 
@@ -123,9 +131,20 @@ LINE_METRICS: MappingProxyType[str, Metric] = MappingProxyType(_REGISTRY)
 LINE_HEADLINE_METRICS: tuple[str, ...] = (
     "completion_pct",
     "lap_time_s",
-    "cross_track_mean_m",
-    "cross_track_rms_m",
-    "max_deviation_m",
+    "cross_track_mean_mm",
+    "cross_track_rms_mm",
+    "max_deviation_mm",
     "line_lost_count",
     "failed_pct",
 )
+LINE_TABLES = Tables(
+    LINE_METRICS,
+    LINE_HEADLINE_METRICS,
+    "Line tracing (LineTrace-v0, reference §2): completion, lap time, cross-track error, losses",
+)
+"""LineTrace's tables for :mod:`eval.report`."""
+
+
+def line_episode_metrics(log: pd.DataFrame) -> dict[str, float]:
+    """Every line metric of one step log, by name, in table order."""
+    return {name: float(m.fn(log)) for name, m in LINE_METRICS.items()}
