@@ -143,7 +143,7 @@ def bench_line(quick: bool) -> list[tuple[str, float, str]]:
     """LineTrace-v0 beside PersonFollow-v0 (bench.line)."""
     from bench.line import bench_line_trace
 
-    return bench_line_trace(quick)
+    return bench_line_trace(quick, single_env_steps_per_s, vector_steps_per_s)
 
 
 def bench_robot(quick: bool) -> list[tuple[str, float, str]]:

@@ -8,25 +8,33 @@ second it takes five steps.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from typing import Any
+
 import gymnasium as gym
 import numpy as np
-
-from bench.__main__ import single_env_steps_per_s, vector_steps_per_s
 
 __all__ = ["bench_line_trace"]
 
 N = 1024
+#: Env-steps per measurement, quick and full (as ``bench/__main__.py``'s vector rows).
+BUDGET = {True: 200_000, False: 2_000_000}
 
 
-def _vector(env_id: str, action: np.ndarray, budget: int, **kwargs: object) -> float:
-    env = gym.make_vec(env_id, num_envs=N, vectorization_mode="vector_entry_point", **kwargs)
-    return vector_steps_per_s(env, np.tile(action, (N, 1)), max(20, budget // N))
-
-
-def bench_line_trace(quick: bool) -> list[tuple[str, float, str]]:
+def bench_line_trace(
+    quick: bool,
+    single_env_steps_per_s: Callable[..., float],
+    vector_steps_per_s: Callable[[Any, Any, int], float],
+) -> list[tuple[str, float, str]]:
     """LineTrace-v0 at N = 1024 (mecanum and differential drive, a fixed and a random track)
-    against PersonFollow-v0 at N = 1024, and its single env against CartPole-v1."""
-    budget = 200_000 if quick else 2_000_000  # env-steps per measurement
+    against PersonFollow-v0 at N = 1024, and its single env against CartPole-v1, timed by
+    ``make bench``'s own measuring functions (passed in: ``bench/__main__.py``'s)."""
+
+    def _vector(env_id: str, action: np.ndarray, budget: int, **kwargs: object) -> float:
+        env = gym.make_vec(env_id, num_envs=N, vectorization_mode="vector_entry_point", **kwargs)
+        return vector_steps_per_s(env, np.tile(action, (N, 1)), max(20, budget // N))
+
+    budget = BUDGET[quick]
     follow = np.array([0.5, 0.0], dtype=np.float32)
     ahead = np.array([0.2, 0.0, 0.0], dtype=np.float32)
     person = _vector("PersonFollow-v0", follow, budget)

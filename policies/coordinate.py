@@ -91,10 +91,16 @@ class CoordinateParams:
 
 
 PRESETS = MappingProxyType(
-    {"signed": CoordinateParams(), "literal": CoordinateParams(turn="literal", turn_gain=1.0)}
+    {
+        "signed": CoordinateParams(),
+        "literal": CoordinateParams(turn="literal", turn_gain=1.0),
+        "tuned": CoordinateParams(speed_mps=0.5, turn_gain=4.0),
+    }
 )
-"""``signed`` (the default reading of wz) and ``literal`` (the paper's wz as written); the
-speed and the turn gain are choices, not tuned."""
+"""``signed`` (the signed reading of wz, speed and turn gain chosen, not tuned), ``literal``
+(the paper's wz as written) and ``tuned`` (the signed reading with the speed and turn gain of
+the best candidate of :mod:`eval.line_tune`'s grid search, the same search that tunes the PID;
+a bare ``coordinate`` means it)."""
 
 
 def fit_line(points: np.ndarray, last_side: float) -> tuple[np.ndarray, np.ndarray]:

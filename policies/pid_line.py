@@ -17,7 +17,10 @@ readings sum below ``lost_sum`` the line is not under them (a gap, a corner, the
 the law turns on the spot towards the side it last saw the line on, at ``search_w_radps``,
 driving at ``search_speed_mps`` (a gap is crossed straight on when the line was centred), and
 its integral is frozen. It commands ``[v, w]``, so it runs on the differential drive and on the
-mecanum base (``vy = 0``). The default gains are hand-set on the ``course`` track, not searched.
+mecanum base (``vy = 0``). Two presets: ``hand`` (0.3 m/s, kp 6, kd 0.15, set by hand: it
+oscillates by up to 40 deg on a straight line and fails on zigzags) and ``tuned`` (0.2 m/s,
+kp 20, kd 0.4: the best of :mod:`eval.line_tune`'s grid search, the same search that tunes
+coordinate control).
 """
 
 from __future__ import annotations
@@ -71,8 +74,12 @@ class PIDLineParams:
         check_number(f"{name}.centred", self.centred, 0.0, 1.0)
 
 
-PRESETS = MappingProxyType({"default": PIDLineParams()})
-"""Hand-set gains (module docstring)."""
+PRESETS = MappingProxyType(
+    {"hand": PIDLineParams(), "tuned": PIDLineParams(speed_mps=0.2, kp=20.0, kd=0.4)}
+)
+"""``hand``: gains set by hand (module docstring); ``tuned``: the best of the search of
+:mod:`eval.line_tune` (the environment's reward on tuning seeds and tracks), which a bare
+``pid`` means."""
 
 
 class PIDLine(LineLaw):
@@ -83,7 +90,7 @@ class PIDLine(LineLaw):
 
     action_names = ("v_mps", "w_radps")
 
-    def __init__(self, params: PIDLineParams = PRESETS["default"], name: str = "pid") -> None:
+    def __init__(self, params: PIDLineParams = PRESETS["hand"], name: str = "pid") -> None:
         self.params = params
         self.name = name
         self.reset()

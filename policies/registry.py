@@ -7,8 +7,9 @@
   different equation, so it is part of the law's name (:mod:`policies.gsmpn` describes them).
   ``holonomic`` (:mod:`policies.holonomic`) also strafes, for a platform that can.
 - line tracing (``LineTrace-v0``): ``coordinate`` (the mecanum paper's coordinate control,
-  presets ``signed``, the default, and ``literal``; :mod:`policies.coordinate`) and ``pid``
-  (the three-sensor PID line follower, preset ``default``; :mod:`policies.pid_line`).
+  presets ``signed``, ``literal`` and ``tuned``; :mod:`policies.coordinate`) and ``pid`` (the
+  three-sensor PID line follower, presets ``hand`` and ``tuned``; :mod:`policies.pid_line`);
+  a bare name means ``tuned``, as for the guidance laws.
 - preset: ``thesis`` (the thesis's values in SI) or ``tuned``. A bare law name means ``tuned``
   (``holonomic`` has one preset, ``default``, which a bare name means).
 
@@ -186,14 +187,8 @@ for _variant in gsmpn.GSMPN_VARIANTS:
 register_law("holonomic", holonomic.Holonomic, holonomic.PRESETS, default_preset="default")
 # Line tracing (LineTrace-v0, reference §2): the paper's coordinate control and the PID line
 # follower it is compared with.
-register_law(
-    "coordinate",
-    coordinate.Coordinate,
-    coordinate.PRESETS,
-    default_preset="signed",
-    task="line_trace",
-)
-register_law("pid", pid_line.PIDLine, pid_line.PRESETS, default_preset="default", task="line_trace")
+register_law("coordinate", coordinate.Coordinate, coordinate.PRESETS, task="line_trace")
+register_law("pid", pid_line.PIDLine, pid_line.PRESETS, task="line_trace")
 # Learned agents: the shipped PPO agent by name, any other by its path (a run folder or a .zip).
 # policies.learned.ppo loads torch and stable-baselines3 only when an agent is built.
 register_policy("ppo", ppo.load_default)

@@ -93,7 +93,7 @@ def test_run_writes_the_tables_logs_and_line_plots(run_dir: Path) -> None:
     tables = {"summary.csv", "summary.md", "summary.json", "summary.tex", "comparisons.csv"}
     logs = {
         f"logs/{p}/{t}/seed_{k}.csv"
-        for p in ("coordinate_signed", "pid_default")
+        for p in ("coordinate_tuned", "pid_tuned")
         for t in ("straight", "gaps")
         for k in (3, 4)
     }

@@ -23,7 +23,7 @@ STRAIGHT = _cells(*((i, 2) for i in range(5)))
 
 
 def test_a_line_straight_ahead_drives_straight_ahead() -> None:
-    v, vy, w = make_policy("coordinate").act(STRAIGHT)
+    v, vy, w = make_policy("coordinate:signed").act(STRAIGHT)
     assert v == pytest.approx(0.3)
     assert vy == pytest.approx(0.0)
     assert w == pytest.approx(0.0)
@@ -35,7 +35,7 @@ def test_the_literal_preset_turns_at_pi_over_4_on_a_straight_line() -> None:
 
 
 def test_a_line_to_the_left_strafes_left() -> None:
-    v, vy, w = make_policy("coordinate").act(_cells(*((i, 1) for i in range(5))))
+    v, vy, w = make_policy("coordinate:signed").act(_cells(*((i, 1) for i in range(5))))
     assert vy > 0.0
     assert v > 0.0
     assert w == pytest.approx(0.0, abs=1e-6)
@@ -45,13 +45,13 @@ def test_a_line_to_the_left_strafes_left() -> None:
 
 def test_a_line_bending_right_turns_clockwise() -> None:
     obs = _cells((4, 2), (3, 2), (2, 2), (1, 3), (0, 4))
-    _v, vy, w = make_policy("coordinate").act(obs)
+    _v, vy, w = make_policy("coordinate:signed").act(obs)
     assert w < 0.0
     assert vy < 0.0
 
 
 def test_without_active_cells_the_last_command_is_kept() -> None:
-    law = make_policy("coordinate")
+    law = make_policy("coordinate:signed")
     law.reset()
     first = law.act(_cells(*((i, 1) for i in range(5))))
     assert np.array_equal(law.act(np.zeros(25, np.float32)), first)
@@ -60,7 +60,7 @@ def test_without_active_cells_the_last_command_is_kept() -> None:
 
 
 def test_the_rear_row_alone_is_taken_as_a_line_along_the_heading() -> None:
-    v, vy, _ = make_policy("coordinate").act(_cells((4, 2)))
+    v, vy, _ = make_policy("coordinate:signed").act(_cells((4, 2)))
     assert v > 0.29
     assert abs(vy) < 1e-6
 
@@ -75,7 +75,7 @@ def test_fit_and_intersection() -> None:
 
 def test_it_commands_vy_so_it_does_not_run_on_the_differential_drive() -> None:
     with pytest.raises(ValueError, match="commands vy_mps"):
-        for_platform(make_policy("coordinate"), ("v_mps", "w_radps"))
+        for_platform(make_policy("coordinate:signed"), ("v_mps", "w_radps"))
 
 
 def test_batched_acting_equals_one_by_one() -> None:
@@ -99,4 +99,4 @@ def test_bad_parameters_name_the_field() -> None:
 
 def test_a_wrong_observation_is_refused() -> None:
     with pytest.raises(ValueError, match=r"shape \(25,\)"):
-        make_policy("coordinate").act(np.zeros(2))
+        make_policy("coordinate:signed").act(np.zeros(2))

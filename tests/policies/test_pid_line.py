@@ -20,20 +20,20 @@ def test_it_reads_the_front_rows_three_middle_cells() -> None:
 
 
 def test_a_centred_line_drives_straight() -> None:
-    v, w = make_policy("pid").act(_front(0.1, 1.0, 0.1))
+    v, w = make_policy("pid:hand").act(_front(0.1, 1.0, 0.1))
     assert v == pytest.approx(0.3)
     assert w == pytest.approx(0.0)
 
 
 def test_a_line_to_the_left_turns_left() -> None:
-    law = make_policy("pid")
+    law = make_policy("pid:hand")
     law.reset()
     _, w = law.act(_front(0.8, 0.6, 0.0))
     assert w == pytest.approx(PIDLineParams().kp * 0.8 / 1.4)
 
 
 def test_the_derivative_acts_on_the_error_change() -> None:
-    law = make_policy("pid")
+    law = make_policy("pid:hand")
     law.reset()
     law.act(_front(0.0, 1.0, 0.0))
     _, w = law.act(_front(0.5, 0.5, 0.0))
@@ -42,7 +42,7 @@ def test_the_derivative_acts_on_the_error_change() -> None:
 
 
 def test_losing_the_line_searches_towards_the_side_it_was_last_seen() -> None:
-    law = make_policy("pid")
+    law = make_policy("pid:hand")
     law.reset()
     law.act(_front(0.0, 0.4, 0.9))  # line to the right
     v, w = law.act(np.zeros(25, np.float32))
@@ -51,7 +51,7 @@ def test_losing_the_line_searches_towards_the_side_it_was_last_seen() -> None:
 
 
 def test_a_gap_after_a_centred_line_is_crossed_straight_on() -> None:
-    law = make_policy("pid")
+    law = make_policy("pid:hand")
     law.reset()
     law.act(_front(0.1, 1.0, 0.1))
     assert law.act(np.zeros(25, np.float32)).tolist() == pytest.approx([0.3, 0.0])

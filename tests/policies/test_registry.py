@@ -169,3 +169,9 @@ def test_policies_are_listed_by_the_task_they_read() -> None:
     assert not set(line) & set(available_policies("person_follow"))
     assert policy_task("pid") == "line_trace"
     assert policy_task("pn") == "person_follow"
+
+
+def test_a_bare_line_follower_name_means_its_tuned_preset() -> None:
+    assert make_policy("coordinate").name == "coordinate:tuned"
+    assert make_policy("pid").name == "pid:tuned"
+    assert {"coordinate:signed", "pid:hand"} <= set(available_policies("line_trace"))
