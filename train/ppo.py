@@ -326,6 +326,12 @@ def _check_options(args: Args, *, run: Path | None) -> None:
     for name in ("eval_episodes", "eval_freq", "checkpoint_freq"):
         _check_int(name, getattr(args, name), 1)
     _check_int("final_episodes", args.final_episodes, 0)
+    if args.final_episodes and task.name != "person_follow":
+        raise ValueError(
+            f"--final-episodes {args.final_episodes}: the model card's comparison with a law is "
+            f"PersonFollow's only so far; give --final-episodes 0 and compare with "
+            f"follow-eval run --task {task.name}"
+        )
     _check_int("threads", args.threads, 1, MAX_THREADS)
     _check_int("seed", args.seed, 0, MAX_SEED)
     _check_int("eval_seed", args.eval_seed, 0, MAX_SEED)
@@ -460,10 +466,18 @@ def _resolved_config(args: Args, hp: Hyperparams, venv: Any, command: str) -> di
             "action": {
                 "low": base.action_space.low.tolist(),
                 "high": base.action_space.high.tolist(),
+                # The platform's action entries, so a loaded agent fits a platform by name.
+                "names": _action_names(base),
             },
         },
         "agent_observation_shape": list(venv.observation_space.shape),
     }
+
+
+def _action_names(base: Any) -> list[str]:
+    """The action entries' names of the (first) batched core under ``base``."""
+    first = base.venvs[0] if hasattr(base, "venvs") else base
+    return [a.name for a in first.sim.platform.actions]
 
 
 def _args_to_dict(args: Args) -> dict[str, Any]:

@@ -14,8 +14,12 @@ The policy rebuilds the agent's view from the configuration with the feature pip
 training wraps (:mod:`policies.learned.features`): extra observation features, normalisation
 with the saved statistics (frozen), stacked frames. So the agent gets exactly the input it was
 trained on, acts deterministically (the mean of its Gaussian), and its action is mapped back to
-SI ``[v_mps, w_radps]`` by the same code. :meth:`PPOPolicy.reset` clears the pipeline's memory
-(frame stack, command, observation age). No training code is imported.
+SI ``[v_mps, w_radps]`` by the same code. An agent of another task or platform (LineTrace-v0's
+25 readings, the mecanum base's ``[v, vy, w]``) works the same way: its observation's size
+comes from the saved ``env_spaces``, its ``action_names`` from the names saved beside the
+action's bounds (an agent saved without them commands ``[v_mps, w_radps]``).
+:meth:`PPOPolicy.reset` clears the pipeline's memory (frame stack, command, observation age).
+No training code is imported.
 
 Batched acting (:meth:`PPOPolicy.act_batch`) runs the feature pipeline over all lanes at once
 but the network one lane at a time: torch's batched matrix products round differently from a
@@ -37,7 +41,7 @@ from typing import Any, NamedTuple
 import numpy as np
 import yaml
 
-from policies.base import validate_obs, validate_obs_batch
+from policies.base import LAW_ACTION_NAMES, OBS_SIZE, validate_obs, validate_obs_batch
 from policies.learned.features import Box, Feature, FrameStack, NormalizeObservation, Pipeline
 
 __all__ = [
@@ -185,6 +189,17 @@ class _Loaded:
             raise AgentLoadError(f"{where}: not a usable agent configuration (no 'env_spaces')")
         self.observation_box = _box(config["env_spaces"], "observation", where)
         self.action_box = _box(config["env_spaces"], "action", where)
+        names = (config["env_spaces"].get("action") or {}).get("names", list(LAW_ACTION_NAMES))
+        if not (
+            isinstance(names, list)
+            and all(isinstance(n, str) for n in names)
+            and len(names) == self.action_box.shape[0]
+        ):
+            raise AgentLoadError(
+                f"{where}: env_spaces.action.names={names!r} must name each of the "
+                f"{self.action_box.shape[0]} action entries"
+            )
+        self.action_names = tuple(names)
         self.wrappers = _wrapper_entries(hp.get("vec_env_wrapper"), where)
         self.frame_stack = hp.get("frame_stack", 1)
         if (
@@ -326,18 +341,36 @@ class PPOPolicy:
         self._view: Pipeline | None = None
         self._batch: Pipeline | None = None
         self._started = False
+        self.action_names = self._agent.action_names
+        self._obs_size = self._agent.observation_box.shape[0]
+
+    def _rows(self, obs: np.ndarray, batch: bool) -> np.ndarray:
+        """Observations as float32 rows, checked: PersonFollow's by its own rules, another
+        task's by the saved observation size."""
+        if self._obs_size == OBS_SIZE:
+            if batch:
+                return validate_obs_batch(obs).astype(np.float32)
+            return np.array([validate_obs(obs)], dtype=np.float32)
+        arr = np.asarray(obs, dtype=np.float64)
+        shape = (arr.shape[0], self._obs_size) if batch and arr.ndim == 2 else (self._obs_size,)
+        if arr.shape != shape or (batch and arr.ndim != 2):
+            want = f"(n, {self._obs_size})" if batch else f"({self._obs_size},)"
+            raise ValueError(f"obs must have shape {want}, got shape {arr.shape}")
+        if not np.all(np.isfinite(arr)):
+            raise ValueError("obs must be finite")
+        return arr.reshape(-1, self._obs_size).astype(np.float32)
 
     def reset(self) -> None:
         """Start a new episode: the next :meth:`act` starts the pipeline afresh."""
         self._started = False
 
     def act(self, obs: np.ndarray) -> np.ndarray:
-        """Map ``[distance_m, offset_px]`` to ``[v_mps, w_radps]`` (deterministic).
+        """Map ``[distance_m, offset_px]`` to ``[v_mps, w_radps]`` (deterministic; another
+        task's observation to its ``action_names``).
 
-        :raises ValueError: if ``obs`` is not a finite array of shape (2,).
+        :raises ValueError: if ``obs`` is not a finite array of the agent's observation shape.
         """
-        distance_m, offset_px = validate_obs(obs)
-        row = np.array([[distance_m, offset_px]], dtype=np.float32)
+        row = self._rows(obs, batch=False)
         if not self._started or self._view is None:
             self._view = self._agent.pipeline(1)
             agent_obs = self._view.start(row)
@@ -355,7 +388,7 @@ class PPOPolicy:
     def act_batch(self, obs: np.ndarray) -> np.ndarray:
         """Actions ``(n, 2)`` for observations ``(n, 2)``, each lane as :meth:`act` would give
         it alone (the network runs one lane at a time: module docstring)."""
-        rows = validate_obs_batch(obs).astype(np.float32)
+        rows = self._rows(obs, batch=True)
         if getattr(self, "_batch_n", None) != len(rows):
             raise ValueError(
                 f"act_batch got {len(rows)} observations: call reset_batch({len(rows)}) first"
