@@ -149,6 +149,13 @@ def bench_serial_link(quick: bool) -> list[tuple[str, float, str]]:
     return bench_bridge(quick)
 
 
+def bench_line(quick: bool) -> list[tuple[str, float, str]]:
+    """LineTrace-v0 beside PersonFollow-v0 (bench.line)."""
+    from bench.line import bench_line_trace
+
+    return bench_line_trace(quick, single_env_steps_per_s, vector_steps_per_s)
+
+
 def bench_robot(quick: bool) -> list[tuple[str, float, str]]:
     """The runner's loop lateness (idle, busy) and the monitor's latency (bench.robot)."""
     from bench.robot import bench_monitor, bench_runner
@@ -159,6 +166,7 @@ def bench_robot(quick: bool) -> list[tuple[str, float, str]]:
 BENCHMARKS: dict[str, Callable[[bool], list[tuple[str, float, str]]]] = {
     "single env (steps/s)": bench_single_env,
     "vector env (env-steps/s)": bench_vector_env,
+    "line tracing (env-steps/s)": bench_line,
     "memory (bytes)": bench_memory,
     "serial link": bench_serial_link,
     "robot: runner and monitor (ms)": bench_robot,

@@ -5,6 +5,7 @@
     follow-eval run --policies pn,mpn,gsmpn --scenarios straight,curve --episodes 20 --seed 0 \\
         --out runs/eval-<timestamp> [--workers auto|N] [--config thesis] [--video] \\
         [--platforms diff_drive,mecanum]
+    follow-eval run --task line_trace --policies coordinate,pid --tracks course,random ...
     follow-eval metrics LOG.csv [LOG.csv | FOLDER ...] [--out DIR]
 
 (also ``python -m eval ...``). ``run`` writes into its output folder::
@@ -16,6 +17,11 @@
     plots/thesis_metrics.png offsets_seed<k>.png trajectories_seed<k>.png
     videos/<policy>_<scenario>_seed<k>.mp4           with --video
     meta.json                                        command, grid, gains, versions, timing
+
+With ``--task line_trace`` (LineTrace-v0) the grid's variants are tracks (``--tracks``), the
+tables hold the line metrics (:mod:`eval.line_metrics`), the logs sit in
+``logs/<policy>/<track>/`` and the plots are ``line_metrics.png``, ``cross_track_seed<k>.png``
+and ``paths_seed<k>.png`` (:mod:`eval.line_report`); everything else is the same.
 
 The folder appears whole when the run succeeds, or not at all. Bad arguments or input give one
 line on stderr (``follow-eval: error: ...``) and exit status 2, never a traceback, and are
@@ -66,10 +72,11 @@ class _Parser(argparse.ArgumentParser):
         raise UsageError(message)
 
 
-def _config(text: str) -> str | dict[str, Any]:
-    """``--config``: a preset name, a JSON object of section overrides, or a file of one."""
+def _config(text: str, read: Any = config_from_text) -> str | dict[str, Any]:
+    """``--config``: a preset name, a JSON object of section overrides, or a file of one (read
+    by the task's ``config_from_text``, PersonFollow's unless told)."""
     try:
-        return config_from_text(text)
+        return read(text)  # type: ignore[no-any-return]
     except ValueError as exc:
         raise argparse.ArgumentTypeError(str(exc)) from None
 
@@ -123,10 +130,16 @@ def build_parser() -> argparse.ArgumentParser:
         description="Run every policy on every scenario and seed (identical rollouts).",
     )
     run.add_argument(
-        "--policies",
-        default="pn,mpn,gsmpn",
-        help="comma-separated policy names, e.g. pn,mpn:thesis,gsmpn-listing "
+        "--task",
+        default="person_follow",
+        help="the task: person_follow (PersonFollow-v0) or line_trace (LineTrace-v0) "
         "(default: %(default)s)",
+    )
+    run.add_argument(
+        "--policies",
+        default=None,
+        help="comma-separated policy names, e.g. pn,mpn:thesis,gsmpn-listing "
+        "(default: pn,mpn,gsmpn; with --task line_trace coordinate,pid)",
     )
     run.add_argument(
         "--platforms",
@@ -136,9 +149,13 @@ def build_parser() -> argparse.ArgumentParser:
         "named as pn@mecanum in --policies (default: the config's platform)",
     )
     run.add_argument(
-        "--scenarios",
-        default="straight,curve",
-        help="comma-separated scenario names (default: %(default)s)",
+        "--scenarios", default=None, help="comma-separated scenario names (default: straight,curve)"
+    )
+    run.add_argument(
+        "--tracks",
+        default=None,
+        help="with --task line_trace: comma-separated track names (default: every built-in "
+        "track: straight,corners,curves,zigzag,gaps,course,random)",
     )
     run.add_argument(
         "--episodes", type=_positive, default=20, help="seeds per scenario (default: %(default)s)"
@@ -151,13 +168,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     run.add_argument(
         "--config",
-        default="thesis",
-        type=_config,
+        default=None,
         help="env preset ("
         + ", ".join(sorted(follow_env.PRESETS))
         + "), a JSON object of config sections applied to 'thesis' (e.g. "
         + """'{"perception": {"association": "tracker"}}'), or a .json/.yaml file of one"""
-        + " (default: %(default)s)",
+        + " (default: thesis; with --task line_trace the presets are ideal, noisy and paper,"
+        + " the default)",
     )
     run.add_argument(
         "--out", type=Path, default=None, help="output folder (default: runs/eval-<timestamp>)"
@@ -252,11 +269,30 @@ def _check_grid(n_policies: int, n_scenarios: int, episodes: int, seed: int) -> 
 
 
 def _check_run_args(args: argparse.Namespace) -> tuple[list[str], list[str]]:
+    """The run's policies and variants (scenarios, tracks), checked; sets ``args.config`` to
+    the task's configuration read from its text and ``args.eval_task`` to the task."""
     from eval.rollout import policy_spec
+    from eval.tasks import eval_task
     from follow_env.platforms import get_platform
-    from policies import for_platform, make_policy
+    from policies import available_policies, for_platform, make_policy
 
-    policies = _names(args.policies, "policies")
+    try:
+        task = eval_task(args.task)
+    except ValueError as e:
+        raise UsageError(f"--task: {e}") from None
+    args.eval_task = task
+    other = "tracks" if task.variant == "scenario" else "scenarios"
+    if getattr(args, other) is not None:
+        raise UsageError(
+            f"--{other} is not an option of the {task.name} task: give --{task.variants_option}"
+        )
+    try:
+        args.config = _config(
+            task.default_config if args.config is None else args.config, task.config_from_text
+        )
+    except argparse.ArgumentTypeError as e:
+        raise UsageError(f"argument --config: {e}") from None
+    policies = _names(args.policies or task.default_policies, "policies")
     if args.platforms is not None:
         platforms = _names(args.platforms, "platforms")
         for name in platforms:
@@ -267,21 +303,34 @@ def _check_run_args(args: argparse.Namespace) -> tuple[list[str], list[str]]:
         if any("@" in p for p in policies):
             raise UsageError("--policies names a platform (policy@platform): leave out --platforms")
         policies = [f"{p}@{m}" for p in policies for m in platforms]
-    scenarios = _names(args.scenarios, "scenarios")
+    given = getattr(args, task.variants_option)
+    scenarios = _names(given or task.default_variants, task.variants_option)
     # Size first: it needs only the counts, and loading a policy is already work.
     _check_grid(len(policies), len(scenarios), args.episodes, args.seed)
+    registered, for_task = set(available_policies()), set(available_policies(task.name))
     for name in policies:
         try:
             spec, platform = policy_spec(name)
+            if spec in registered and spec not in for_task:
+                raise ValueError(
+                    f"policy {spec!r} is not for the {task.name} task; its policies: "
+                    + ", ".join(sorted(for_task))
+                )
             law = make_policy(spec)  # type: ignore[arg-type]
             if platform is not None:
                 for_platform(law, tuple(a.name for a in get_platform(platform).actions))
         except (ValueError, TypeError) as e:
             raise UsageError(f"--policies: {e}") from None
+    from follow_env.tasks import get_task
+
+    known_variants = get_task(task.name).variants()
     for name in scenarios:
-        if name not in follow_env.SCENARIOS:
-            known = ", ".join(sorted(follow_env.SCENARIOS))
-            raise UsageError(f"--scenarios: unknown scenario {name!r}; known scenarios: {known}")
+        if name not in known_variants:
+            known = ", ".join(sorted(known_variants))
+            raise UsageError(
+                f"--{task.variants_option}: unknown {task.variant} {name!r}; known "
+                f"{task.variants_option}: {known}"
+            )
     seeds = range(args.seed, args.seed + args.episodes)
     if args.plot_seed is not None and args.plot_seed not in seeds:
         raise UsageError(
@@ -305,19 +354,12 @@ def _versions() -> dict[str, str]:
 
 def cmd_run(args: argparse.Namespace) -> int:
     """``follow-eval run``: see the module docstring."""
-    from eval.report import (
-        markdown_report,
-        plot_offsets,
-        plot_thesis_metrics,
-        plot_trajectories,
-        safe_name,
-        write_tables,
-        write_video,
-    )
+    from eval.report import markdown_report, safe_name, write_tables, write_video
     from eval.rollout import auto_workers, rollout
     from eval.stats import compare, episode_table, summarize
 
     policies, scenarios = _check_run_args(args)
+    task = args.eval_task
     seeds = list(range(args.seed, args.seed + args.episodes))
     plot_seed = args.seed if args.plot_seed is None else args.plot_seed
     out: Path = args.out or Path("runs") / f"eval-{datetime.now():%Y%m%d-%H%M%S}"
@@ -326,28 +368,38 @@ def cmd_run(args: argparse.Namespace) -> int:
     started = time.perf_counter()
     with atomic_folder(out) as tmp:
         episodes = rollout(
-            policies, scenarios, seeds, config=args.config, workers=workers, progress=True
+            policies,
+            scenarios,
+            seeds,
+            config=args.config,
+            workers=workers,
+            progress=True,
+            task=task.name,
         )
         for ep in episodes:
             folder = tmp / "logs" / safe_name(ep.policy) / safe_name(ep.scenario)
             folder.mkdir(parents=True, exist_ok=True)
             write_step_log(ep.log, folder / f"seed_{ep.seed}.csv")
-        table = episode_table(episodes)
+        table = episode_table(episodes, metrics=task.metrics, variant=task.variant)
         # The bootstrap's default seed, as in `follow-eval metrics`: the same episodes give the
         # same intervals whichever command scores them.
-        summary = summarize(table)
-        comparisons = compare(table)
+        summary = summarize(table, metrics=list(task.metrics))
+        comparisons = compare(table, metrics=list(task.metrics))
         (tmp / "plots").mkdir()
-        plot_thesis_metrics(summary, tmp / "plots" / "thesis_metrics.png")
-        plot_offsets(episodes, plot_seed, tmp / "plots" / f"offsets_seed{plot_seed}.png")
-        plot_trajectories(episodes, plot_seed, tmp / "plots" / f"trajectories_seed{plot_seed}.png")
+        task.plots(summary, episodes, plot_seed, tmp / "plots", args.config)
         if args.video:
             (tmp / "videos").mkdir()
             for policy in dict.fromkeys(ep.policy for ep in episodes):
                 for scenario in scenarios:
                     name = f"{safe_name(policy)}_{safe_name(scenario)}_seed{plot_seed}.mp4"
                     write_video(
-                        policy, scenario, plot_seed, tmp / "videos" / name, config=args.config
+                        policy,
+                        scenario,
+                        plot_seed,
+                        tmp / "videos" / name,
+                        config=args.config,
+                        fps=task.fps,
+                        task=task.name,
                     )
         elapsed = time.perf_counter() - started
         meta: dict[str, Any] = {
@@ -355,16 +407,17 @@ def cmd_run(args: argparse.Namespace) -> int:
             "finished_utc": datetime.now(UTC).isoformat(timespec="seconds"),
             "elapsed_s": round(elapsed, 2),
             "policies": {name: repr(getattr(p, "params", p)) for name, p in _built(policies)},
-            "scenarios": scenarios,
+            "task": task.name,
+            task.variants_option: scenarios,
             "seeds": seeds,
             "config": args.config,
             "workers": workers,
             "plot_seed": plot_seed,
             "versions": _versions(),
         }
-        write_tables(tmp, summary, table, comparisons, meta)
+        write_tables(tmp, summary, table, comparisons, meta, tables=task.tables)
         atomic_write_text(tmp / "meta.json", json.dumps(meta, indent=2) + "\n")
-    print(markdown_report(summary, comparisons))
+    print(markdown_report(summary, comparisons, tables=task.tables))
     plots = ", ".join(sorted(p.name for p in (out / "plots").iterdir()))
     print(
         f"{n_episodes} episodes in {elapsed:.1f} s ({workers} process"

@@ -2,6 +2,10 @@
 
 Every file is written atomically (:mod:`eval.atomic`). The thesis's metrics appear in the
 thesis's units (px, mm/s², %); everything else is SI, as its column name says.
+
+The tables are PersonFollow's unless ``tables=`` says otherwise: a :class:`Tables` names a
+task's metrics, its headline ones and the headline table's title (LineTrace's is
+:data:`eval.line_metrics.LINE_TABLES`).
 """
 
 from __future__ import annotations
@@ -10,6 +14,7 @@ import json
 import math
 import re
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -17,12 +22,16 @@ import numpy as np
 import pandas as pd
 
 from eval.atomic import atomic_path, atomic_write_text
-from eval.metrics import HEADLINE_METRICS, METRICS, THESIS_METRICS
+from eval.metrics import HEADLINE_METRICS, METRICS, THESIS_METRICS, Metric
 from eval.rollout import Episode
+from eval.stats import variant_column
 
 __all__ = [
+    "PERSON_FOLLOW_TABLES",
+    "Tables",
     "comparison_markdown",
     "markdown_report",
+    "plot_metric_bars",
     "plot_offsets",
     "plot_thesis_metrics",
     "plot_trajectories",
@@ -37,6 +46,28 @@ __all__ = [
 SUMMARY_LEADING = ("policy", "scenario", "episodes", *THESIS_METRICS)
 
 
+@dataclass(frozen=True)
+class Tables:
+    """What a task's tables show.
+
+    :param metrics: every metric by name, in column order.
+    :param headline: the headline table's metrics (the rest are "further metrics").
+    :param title: the headline table's title in the Markdown report.
+    """
+
+    metrics: Mapping[str, Metric]
+    headline: tuple[str, ...]
+    title: str
+
+
+PERSON_FOLLOW_TABLES = Tables(
+    METRICS,
+    HEADLINE_METRICS,
+    "Thesis metrics (reference §1.6) with collisions, losses and distance error",
+)
+"""PersonFollow's tables: the thesis's five metrics and the outcomes first."""
+
+
 def safe_name(name: str) -> str:
     """A policy or scenario name as a file name part: ``"pn:tuned"`` -> ``"pn_tuned"``."""
     return re.sub(r"[^A-Za-z0-9._-]+", "_", name).strip("_") or "_"
@@ -47,7 +78,7 @@ def _fmt(value: float, digits: int) -> str:
 
 
 def _digits(name: str) -> int:
-    if name.endswith(("_pct", "_px", "_mm_s2")):
+    if name.endswith(("_pct", "_px", "_mm_s2", "_mm")):
         return 1
     return 3
 
@@ -65,34 +96,43 @@ def _with_ci(summary: pd.DataFrame, name: str) -> pd.Series:
     )
 
 
-def _label(name: str) -> str:
-    return METRICS[name].label if name in METRICS else name
+def _label(name: str, metrics: Mapping[str, Metric] = METRICS) -> str:
+    return metrics[name].label if name in metrics else name
 
 
-def summary_markdown(summary: pd.DataFrame, *, extras: bool = False) -> str:
+def summary_markdown(
+    summary: pd.DataFrame, *, extras: bool = False, tables: Tables = PERSON_FOLLOW_TABLES
+) -> str:
     """The summary as a Markdown table: mean [95 % CI] per cell.
 
     :param summary: from :func:`eval.stats.summarize`.
     :param extras: the further metrics instead of the headline ones (the thesis's five, then
         :data:`eval.metrics.OUTCOME_METRICS`: collisions, losses, distance error).
+    :param tables: the task's metrics (default PersonFollow's).
     """
-    wanted = [m for m in METRICS if m not in HEADLINE_METRICS] if extras else HEADLINE_METRICS
+    wanted = [m for m in tables.metrics if m not in tables.headline] if extras else tables.headline
     names = [m for m in wanted if m in summary]
-    table = summary[["policy", "scenario", "episodes"]].copy()
+    table = summary[["policy", variant_column(summary), "episodes"]].copy()
     for name in names:
-        table[_label(name)] = _with_ci(summary, name)
+        table[_label(name, tables.metrics)] = _with_ci(summary, name)
     return table.to_markdown(index=False, disable_numparse=True)
 
 
 def comparison_markdown(
-    comparisons: pd.DataFrame, metrics: Sequence[str] = HEADLINE_METRICS
+    comparisons: pd.DataFrame,
+    metrics: Sequence[str] | None = None,
+    *,
+    tables: Tables = PERSON_FOLLOW_TABLES,
 ) -> str:
-    """Paired differences A - B on the same seeds: ``diff [95 % CI] (p = Wilcoxon)``."""
+    """Paired differences A - B on the same seeds: ``diff [95 % CI] (p = Wilcoxon)``; the
+    headline metrics unless ``metrics`` names others."""
+    metrics = tables.headline if metrics is None else metrics
+    variant = variant_column(comparisons)
     rows = []
     for (scenario, a, b), group in comparisons.groupby(
-        ["scenario", "policy_a", "policy_b"], sort=False
+        [variant, "policy_a", "policy_b"], sort=False
     ):
-        row = {"scenario": scenario, "A - B": f"{a} - {b}"}
+        row = {variant: scenario, "A - B": f"{a} - {b}"}
         by_metric = group.set_index("metric")
         for name in metrics:
             if name not in by_metric.index:
@@ -105,34 +145,38 @@ def comparison_markdown(
                 if np.isfinite(r["diff_ci_low"])
                 else ""
             )
-            row[_label(name)] = f"{_fmt(r['mean_diff'], d)}{ci} p={p}"
+            row[_label(name, tables.metrics)] = f"{_fmt(r['mean_diff'], d)}{ci} p={p}"
         rows.append(row)
     return pd.DataFrame(rows).to_markdown(index=False, disable_numparse=True) if rows else ""
 
 
-def markdown_report(summary: pd.DataFrame, comparisons: pd.DataFrame | None = None) -> str:
+def markdown_report(
+    summary: pd.DataFrame,
+    comparisons: pd.DataFrame | None = None,
+    *,
+    tables: Tables = PERSON_FOLLOW_TABLES,
+) -> str:
     """The headline table, the further metrics and (if given) the paired comparisons."""
     parts = [
-        "## Thesis metrics (reference §1.6) with collisions, losses and distance error: "
-        "mean [95 % bootstrap CI] over episodes\n",
-        summary_markdown(summary),
-        "\n\n## Further metrics\n",
-        summary_markdown(summary, extras=True),
+        f"## {tables.title}: mean [95 % bootstrap CI] over episodes\n",
+        summary_markdown(summary, tables=tables),
     ]
+    if any(m in summary and m not in tables.headline for m in tables.metrics):
+        parts += ["\n\n## Further metrics\n", summary_markdown(summary, extras=True, tables=tables)]
     if comparisons is not None and not comparisons.empty:
         parts += [
             "\n\n## Paired differences on the same seeds: A - B [95 % CI], Wilcoxon p\n",
-            comparison_markdown(comparisons),
+            comparison_markdown(comparisons, tables=tables),
         ]
     return "".join(parts) + "\n"
 
 
-def summary_latex(summary: pd.DataFrame) -> str:
+def summary_latex(summary: pd.DataFrame, *, tables: Tables = PERSON_FOLLOW_TABLES) -> str:
     """The headline table as a LaTeX ``tabular`` (booktabs): mean [95 % CI] per cell."""
-    table = summary[["policy", "scenario", "episodes"]].copy()
-    for name in HEADLINE_METRICS:
+    table = summary[["policy", variant_column(summary), "episodes"]].copy()
+    for name in tables.headline:
         if name in summary:
-            table[_label(name)] = _with_ci(summary, name)
+            table[_label(name, tables.metrics)] = _with_ci(summary, name)
     return table.to_latex(index=False, escape=True, column_format="ll" + "r" * (table.shape[1] - 2))
 
 
@@ -154,9 +198,12 @@ def write_tables(
     episodes: pd.DataFrame,
     comparisons: pd.DataFrame,
     meta: Mapping[str, Any],
+    *,
+    tables: Tables = PERSON_FOLLOW_TABLES,
 ) -> dict[str, Path]:
     """Write summary.{csv,md,json,tex}, episodes.csv and comparisons.csv into ``out``.
 
+    :param tables: the task's metrics (default PersonFollow's).
     :returns: the written files by kind.
     """
     float_format = "%.6g"
@@ -170,14 +217,16 @@ def write_tables(
             frame.to_csv(tmp, index=False, float_format=float_format, lineterminator="\n")
         files[name] = out / name
     files["summary.md"] = atomic_write_text(
-        out / "summary.md", markdown_report(summary, comparisons)
+        out / "summary.md", markdown_report(summary, comparisons, tables=tables)
     )
-    files["summary.tex"] = atomic_write_text(out / "summary.tex", summary_latex(summary))
+    files["summary.tex"] = atomic_write_text(
+        out / "summary.tex", summary_latex(summary, tables=tables)
+    )
     document = {
         "meta": {k: _json_value(v) for k, v in meta.items()},
         "metrics": {
             name: {"unit": m.unit, "label": m.label, "thesis": m.thesis}
-            for name, m in METRICS.items()
+            for name, m in tables.metrics.items()
         },
         "summary": _records(summary),
         "comparisons": _records(comparisons),
@@ -210,15 +259,30 @@ def _save(fig: Any, path: Path) -> Path:
 
 def plot_thesis_metrics(summary: pd.DataFrame, path: Path) -> Path:
     """Bar charts of the thesis's five metrics: scenarios on x, a bar per policy, 95 % CIs."""
+    return plot_metric_bars(
+        summary, path, THESIS_METRICS, "Thesis metrics, mean over episodes with 95 % bootstrap CI"
+    )
+
+
+def plot_metric_bars(
+    summary: pd.DataFrame,
+    path: Path,
+    metrics: Sequence[str],
+    title: str,
+    labels: Mapping[str, Metric] = METRICS,
+) -> Path:
+    """Bar charts of ``metrics``, a panel each: scenarios (tracks) on x, a bar per policy,
+    95 % CIs; panels titled by the metrics' labels in ``labels``."""
     plt = _pyplot()
+    variant = variant_column(summary)
     policies = list(dict.fromkeys(summary["policy"]))
-    scenarios = list(dict.fromkeys(summary["scenario"]))
-    fig, axes = plt.subplots(1, len(THESIS_METRICS), figsize=(4.0 * len(THESIS_METRICS), 3.8))
+    scenarios = list(dict.fromkeys(summary[variant]))
+    fig, axes = plt.subplots(1, len(metrics), figsize=(4.0 * len(metrics), 3.8))
     width = 0.8 / len(policies)
     x = np.arange(len(scenarios))
-    for ax, name in zip(np.atleast_1d(axes), THESIS_METRICS, strict=True):
+    for ax, name in zip(np.atleast_1d(axes), metrics, strict=True):
         for i, policy in enumerate(policies):
-            rows = summary[summary["policy"] == policy].set_index("scenario").reindex(scenarios)
+            rows = summary[summary["policy"] == policy].set_index(variant).reindex(scenarios)
             mean = rows[name].to_numpy(dtype=float)
             low = rows[f"{name}_ci_low"].to_numpy(dtype=float)
             high = rows[f"{name}_ci_high"].to_numpy(dtype=float)
@@ -232,11 +296,11 @@ def plot_thesis_metrics(summary: pd.DataFrame, path: Path) -> Path:
                 capsize=3,
                 label=policy,
             )
-        ax.set_xticks(x, scenarios)
-        ax.set_title(_label(name))
+        ax.set_xticks(x, scenarios, rotation=30 if len(scenarios) > 3 else 0)
+        ax.set_title(_label(name, labels))
         ax.grid(axis="y", alpha=0.3)
     np.atleast_1d(axes)[0].legend(fontsize="small")
-    fig.suptitle("Thesis metrics, mean over episodes with 95 % bootstrap CI")
+    fig.suptitle(title)
     fig.tight_layout()
     return _save(fig, path)
 
@@ -298,11 +362,19 @@ def plot_trajectories(episodes: Sequence[Episode], seed: int, path: Path) -> Pat
 
 
 def write_video(
-    policy: str, scenario: str, seed: int, path: Path, *, config: Any = "thesis", fps: int = 10
+    policy: str,
+    scenario: str,
+    seed: int,
+    path: Path,
+    *,
+    config: Any = "thesis",
+    fps: int = 10,
+    task: str = "person_follow",
 ) -> Path:
     """Render one episode (identical to the evaluated one) to an mp4 (OpenCV, mp4v).
 
     :param fps: frames per second; 10 plays the 0.1 s control steps in real time.
+    :param task: the task (``"line_trace"``: ``scenario`` is a track).
     """
     import cv2
 
@@ -321,7 +393,7 @@ def write_video(
                         raise OSError(f"cannot open a video writer for {path}")
                 writer.write(cv2.cvtColor(frame, cv2.COLOR_RGB2BGR))  # OpenCV wants BGR
 
-            run_episode(policy, scenario, seed, config=config, on_frame=on_frame)
+            run_episode(policy, scenario, seed, config=config, on_frame=on_frame, task=task)
         finally:
             if writer is not None:
                 writer.release()

@@ -16,11 +16,16 @@ step logs are exactly those of one-by-one episodes, only faster. Work is generat
 batch of at most :data:`BATCH_LANES` seeds at a time, and runs in this process or in a process
 pool (``workers``); either way the results are identical and come back in grid order (policy,
 then scenario, then seed).
+
+The task is PersonFollow's unless ``task=`` names another (``"line_trace"``): its variants (the
+``scenario`` arguments) are then its own (LineTrace's tracks), and its step logs have its layout
+(``follow_env.tasks.<task>.steplog``). Everything else is the same machinery.
 """
 
 from __future__ import annotations
 
 import copy
+import importlib
 import math
 import os
 from collections.abc import Callable, Iterator, Mapping, Sequence
@@ -33,13 +38,11 @@ import gymnasium as gym
 import numpy as np
 import pandas as pd
 
-from eval.steplog import log_columns
 from follow_env.platforms import get_platform
 from follow_env.platforms.base import Platform
 from follow_env.sim.runner import BatchedSim
-from follow_env.tasks.person_follow import ENV_ID
-from follow_env.tasks.person_follow.task import TASK
-from policies import BatchPolicy, Policy, for_platform, make_policy
+from follow_env.tasks import get_task
+from policies import BatchPolicy, Policy, available_policies, for_platform, make_policy
 
 __all__ = [
     "BATCH_LANES",
@@ -56,8 +59,8 @@ PolicySpec = str | Policy
 EnvConfigSpec = str | Mapping[str, Any] | Any
 Reducer = Callable[["Episode"], Any]
 
-# Booleans in info become 0/1 in the log, as a robot's CSV would hold them.
-_FLAG_COLUMNS = ("detected", "in_frame")
+#: The task a rollout runs unless told.
+DEFAULT_TASK = "person_follow"
 
 # Measured on the 2-core development machine (README "Evaluation"): an episode of `straight` or
 # `curve` costs about 5 ms here (stepping, policy, log), while a pool worker needs about 2 s to
@@ -71,7 +74,7 @@ class Episode:
     """One policy's episode on one scenario and seed.
 
     :param policy: the policy's name (``Policy.name``, e.g. ``"pn:tuned"``).
-    :param scenario: the scenario name.
+    :param scenario: the scenario name (the task's variant: LineTrace's track).
     :param seed: the seed passed to ``env.reset``.
     :param log: the step log (columns of :data:`eval.steplog.COLUMNS`).
     """
@@ -92,20 +95,53 @@ class Episode:
         return str(self.log["termination"].iloc[-1])
 
 
+class _Task(NamedTuple):
+    """What a rollout needs of a task: its model (``follow_env.tasks.<name>.task.TASK``), its
+    Gymnasium id and its step-log layout module (``follow_env.tasks.<name>.steplog``: its
+    ``log_columns``, ``META_COLUMNS``, ``OBS_COLUMNS`` and ``FLAG_COLUMNS``)."""
+
+    name: str
+    model: Any
+    env_id: str
+    steplog: Any
+
+
+_TASKS: dict[str, _Task] = {}
+
+
+def _task(name: str) -> _Task:
+    """The task called ``name`` (``ValueError`` listing the known ones)."""
+    task = _TASKS.get(name)
+    if task is None:
+        model = get_task(name)
+        steplog = importlib.import_module(f"follow_env.tasks.{name}.steplog")
+        task = _TASKS[name] = _Task(name, model, model.spec.env_id, steplog)
+    return task
+
+
 class _Layout(NamedTuple):
-    """A platform's step-log layout: the columns, those copied from ``info`` under the same
-    name (eval.steplog.log_columns), and the action's entry names."""
+    """A platform's step-log layout in a task: the columns, those copied from ``info`` under
+    the same name (the task's ``steplog.log_columns``), the action's entry names, the
+    observation's columns, the flag columns (booleans in info, 0/1 in the log, as a robot's
+    CSV would hold them) and the column naming the variant (``scenario``, ``track``)."""
 
     columns: tuple[str, ...]
     info: tuple[str, ...]
     actions: tuple[str, ...]
+    obs: tuple[str, ...]
+    flags: tuple[str, ...]
+    variant: str
 
 
-def _layout(platform: Platform) -> _Layout:
+def _layout(platform: Platform, task: _Task) -> _Layout:
     actions = tuple(a.name for a in platform.actions)
-    columns = log_columns(actions, tuple(key for key, *_ in platform.info))
-    keys = TASK.info_keys(platform)
-    return _Layout(columns, tuple(c for c in columns if c in keys and c != "termination"), actions)
+    log = task.steplog
+    columns = log.log_columns(actions, tuple(key for key, *_ in platform.info))
+    keys = task.model.info_keys(platform)
+    info = tuple(c for c in columns if c in keys and c != "termination")
+    return _Layout(
+        columns, info, actions, tuple(log.OBS_COLUMNS), tuple(log.FLAG_COLUMNS), log.META_COLUMNS[1]
+    )
 
 
 def policy_spec(spec: PolicySpec) -> tuple[PolicySpec, str | None]:
@@ -122,7 +158,7 @@ def policy_spec(spec: PolicySpec) -> tuple[PolicySpec, str | None]:
     return spec, None
 
 
-_ENV_CACHE: dict[tuple[str, str], gym.Env] = {}
+_ENV_CACHE: dict[tuple[str, str, str, str], gym.Env] = {}
 
 #: Most seeds run as the lanes of one batch (bounds the memory of the step logs in flight).
 BATCH_LANES = 256
@@ -131,16 +167,22 @@ BATCH_LANES = 256
 MAX_EPISODES = 1_000_000
 
 
-def _env(scenario: str, config: EnvConfigSpec, render: bool, platform: str | None) -> gym.Env:
-    """One env per (scenario, config, platform) per process: gym.make costs more than an
+def _env(
+    scenario: str, config: EnvConfigSpec, render: bool, platform: str | None, task: _Task
+) -> gym.Env:
+    """One env per (task, scenario, config, platform) per process: gym.make costs more than an
     episode."""
-    kwargs: dict[str, Any] = {"scenario": scenario, "config": config, "platform": platform}
+    kwargs: dict[str, Any] = {
+        task.model.variant_key: scenario,
+        "config": config,
+        "platform": platform,
+    }
     if render:
-        return gym.make(ENV_ID, render_mode="rgb_array", **kwargs)
-    key = (scenario, repr(config), str(platform))
+        return gym.make(task.env_id, render_mode="rgb_array", **kwargs)
+    key = (task.name, scenario, repr(config), str(platform))
     env = _ENV_CACHE.get(key)
     if env is None:
-        env = _ENV_CACHE[key] = gym.make(ENV_ID, **kwargs)
+        env = _ENV_CACHE[key] = gym.make(task.env_id, **kwargs)
     return env
 
 
@@ -157,24 +199,28 @@ def run_episode(
     scenario: str,
     seed: int,
     *,
-    config: EnvConfigSpec = "thesis",
+    config: EnvConfigSpec | None = None,
     on_frame: Callable[[np.ndarray], None] | None = None,
+    task: str = DEFAULT_TASK,
 ) -> Episode:
     """Run one episode on the single env and return its step log (the same log as lane
     ``seed`` of :func:`run_batch`; this path also renders, for videos).
 
     :param policy: a policy name (``make_policy``) or a :class:`~policies.Policy`; it is reset
         before the first step.
-    :param scenario: a registered scenario name.
+    :param scenario: a registered scenario name (of ``task``: LineTrace's are tracks).
     :param seed: the episode's seed (``env.reset(seed=seed)``).
     :param config: the env configuration (``gym.make``'s ``config``): a preset name, a dict of
-        overrides or an ``EnvConfig``.
+        overrides or the task's config object; None is the task's default preset (PersonFollow's
+        ``thesis``).
     :param on_frame: if given, the env renders (``rgb_array``) and each frame, the reset frame
         included, is passed to it (for videos).
+    :param task: the task (``"person_follow"``, ``"line_trace"``).
     """
     spec, platform = policy_spec(policy)
-    env = _env(scenario, config, on_frame is not None, platform)
-    layout = _layout(env.unwrapped.sim.platform)
+    t = _task(task)
+    env = _env(scenario, config, on_frame is not None, platform, t)
+    layout = _layout(env.unwrapped.sim.platform, t)
     law = for_platform(_policy(spec), layout.actions)
     try:
         obs, info = env.reset(seed=int(seed))
@@ -238,7 +284,12 @@ class _Actor:
 
 
 def run_batch(
-    policy: PolicySpec, scenario: str, seeds: Sequence[int], *, config: EnvConfigSpec = "thesis"
+    policy: PolicySpec,
+    scenario: str,
+    seeds: Sequence[int],
+    *,
+    config: EnvConfigSpec | None = None,
+    task: str = DEFAULT_TASK,
 ) -> list[Episode]:
     """Run one episode per seed, the seeds as the lanes of one batched core; returns the step
     logs in seed order, each identical to :func:`run_episode` of that seed (module docstring).
@@ -248,19 +299,22 @@ def run_batch(
     :param scenario: a registered scenario name.
     :param seeds: the episodes' seeds.
     :param config: the env configuration, as for :func:`run_episode`.
+    :param task: the task, as for :func:`run_episode`.
     """
     n = len(seeds)
     spec, platform = policy_spec(policy)
-    cfg = TASK.resolve_config(config, scenario=scenario, platform=platform)
-    sim = BatchedSim(TASK, cfg, n)
-    layout = _layout(sim.platform)
+    t = _task(task)
+    model = t.model
+    cfg = model.resolve_config(config, platform=platform, **{model.variant_key: scenario})
+    sim = BatchedSim(model, cfg, n)
+    layout = _layout(sim.platform, t)
     try:
         sim.reset_lanes(np.arange(n), [int(s) for s in seeds])
         actor = _Actor(spec, n, layout.actions)
         active = np.ones(n, dtype=bool)
         ended_at = np.zeros(n, dtype=np.int64)  # the step each lane's episode ended at
-        observations = [TASK.observations(sim)]
-        infos = [TASK.batch_info(sim)]
+        observations = [model.observations(sim)]
+        infos = [model.batch_info(sim)]
         actions: list[np.ndarray] = []
         rewards: list[np.ndarray] = []
         step = 0
@@ -269,8 +323,8 @@ def run_batch(
             sim.step(action.astype(np.float64), active)
             step += 1
             actions.append(action)
-            observations.append(TASK.observations(sim))
-            infos.append(TASK.batch_info(sim))
+            observations.append(model.observations(sim))
+            infos.append(model.batch_info(sim))
             rewards.append(sim.episode["reward"].copy())
             ep = sim.episode
             ended = active & ((ep["terminated"] > 0.0) | (ep["truncated"] > 0.0))
@@ -278,7 +332,7 @@ def run_batch(
             active &= ~ended
     finally:
         sim.close()
-    obs_all = np.stack(observations).astype(np.float64)  # (steps + 1, n, 2)
+    obs_all = np.stack(observations).astype(np.float64)  # (steps + 1, n, observation size)
     act_all = np.stack(actions).astype(np.float64)  # (steps, n, action size)
     rew_all = np.stack(rewards)  # (steps, n)
     keys = (*layout.info, "termination")
@@ -313,24 +367,25 @@ def _step_log(
     info: dict[str, Any],
     rewards: list[float],
 ) -> pd.DataFrame:
-    """One episode's step log: rows of observations ``(n, 2)``, actions ``(n - 1, m)`` (the
-    final row has none), info columns of length n, rewards (NaN in the reset row)."""
+    """One episode's step log: rows of observations ``(n, observation size)``, actions
+    ``(n - 1, m)`` (the final row has none), info columns of length n, rewards (NaN in the
+    reset row)."""
     n = len(obs)
     act = np.full((n, len(layout.actions)), np.nan)
     act[: len(actions)] = actions
     data: dict[str, Any] = {
         "policy": policy,
-        "scenario": scenario,
+        layout.variant: scenario,
         "seed": int(seed),
-        "obs_distance_m": obs[:, 0],
-        "obs_offset_px": obs[:, 1],
         "reward": np.asarray(rewards, dtype=np.float64),
     }
+    for k, column in enumerate(layout.obs):
+        data[column] = obs[:, k]
     for k, entry in enumerate(layout.actions):
         data[f"action_{entry}"] = act[:, k]
     for column in layout.info:
         values = np.asarray(info[column])
-        data[column] = values.astype(np.int64) if column in _FLAG_COLUMNS else values
+        data[column] = values.astype(np.int64) if column in layout.flags else values
     # termination is only ever set in the final row; earlier rows are blank in the CSV.
     termination = np.full(n, "", dtype=object)
     termination[-1] = info["termination"][-1]
@@ -349,9 +404,12 @@ def auto_workers(episodes: int) -> int:
     return max(1, min(cores, episodes // _EPISODES_PER_WORKER_START))
 
 
-def _run_task(task: tuple[PolicySpec, str, tuple[int, ...], EnvConfigSpec, Reducer | None]) -> Any:
-    policy, scenario, seeds, config, reduce = task
-    episodes = run_batch(policy, scenario, seeds, config=config)
+_Work = tuple[PolicySpec, str, tuple[int, ...], EnvConfigSpec, Reducer | None, str]
+
+
+def _run_task(work: _Work) -> Any:
+    policy, scenario, seeds, config, reduce, task = work
+    episodes = run_batch(policy, scenario, seeds, config=config, task=task)
     return episodes if reduce is None else [reduce(e) for e in episodes]
 
 
@@ -360,16 +418,17 @@ def rollout(
     scenarios: Sequence[str],
     seeds: Sequence[int],
     *,
-    config: EnvConfigSpec = "thesis",
+    config: EnvConfigSpec | None = None,
     workers: int | None = None,
     progress: bool = False,
     reduce: Reducer | None = None,
+    task: str = DEFAULT_TASK,
 ) -> list[Any]:
     """Run every policy on every (scenario, seed) pair: identical rollouts.
 
     :param policies: policy names (``make_policy``; every tool's way of naming them) or
         :class:`~policies.Policy` objects. Episodes never share a policy's memory.
-    :param scenarios: registered scenario names.
+    :param scenarios: registered scenario names (``task``'s variants: LineTrace's tracks).
     :param seeds: the seeds; seed ``s`` gives the same person and noise to every policy.
     :param config: the env configuration, as for :func:`run_episode`.
     :param workers: processes to use; 1 runs here, None picks :func:`auto_workers`.
@@ -378,17 +437,19 @@ def rollout(
         its results are returned instead of the episodes (a search that needs one number per
         episode then never holds thousands of step logs). Must be picklable for a pool (a
         module-level function).
+    :param task: the task (``"person_follow"``, ``"line_trace"``); a policy registered for
+        another task is refused.
     :returns: the episodes (or their reductions) in grid order: policy, scenario, seed.
     :raises ValueError: for an unknown policy or scenario, an empty or too large grid, a
         non-integer seed, or workers < 1, before any episode runs.
     """
-    _check_grid(policies, scenarios, seeds)
+    _check_grid(policies, scenarios, seeds, task)
     total = len(policies) * len(scenarios) * len(seeds)
     if workers is None:
         workers = auto_workers(total)
     if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
         raise ValueError(f"workers={workers!r} is out of range: must be an integer >= 1")
-    tasks = _tasks(policies, scenarios, seeds, config, reduce, workers)
+    tasks = _tasks(policies, scenarios, seeds, config, reduce, workers, task)
     from tqdm import tqdm
 
     bar = tqdm(total=total, desc="episodes", unit="ep", disable=None if progress else True)
@@ -411,7 +472,10 @@ def rollout(
 
 
 def _check_grid(
-    policies: Sequence[PolicySpec], scenarios: Sequence[str], seeds: Sequence[int]
+    policies: Sequence[PolicySpec],
+    scenarios: Sequence[str],
+    seeds: Sequence[int],
+    task: str = DEFAULT_TASK,
 ) -> None:
     if isinstance(policies, str) or isinstance(scenarios, str):
         raise ValueError("policies and scenarios must be sequences of names, not one string")
@@ -424,9 +488,16 @@ def _check_grid(
             f"the grid holds {total:,} episodes ({len(policies)} policies x {len(scenarios)} "
             f"scenarios x {len(seeds)} seeds): at most {MAX_EPISODES:,} are run at once"
         )
+    t = _task(task)  # an unknown task raises
+    registered, for_task = set(available_policies()), set(available_policies(task))
     for given in policies:
         spec, platform = policy_spec(given)  # an unknown platform raises
         if isinstance(spec, str):
+            if spec in registered and spec not in for_task:
+                raise ValueError(
+                    f"policy {spec!r} is not for the {task} task; its policies: "
+                    + ", ".join(sorted(for_task))
+                )
             law = make_policy(spec)  # raises ValueError listing the known names
         elif not isinstance(spec, Policy):
             raise ValueError(f"policy {spec!r} is neither a policy name nor a Policy")
@@ -434,10 +505,10 @@ def _check_grid(
             law = spec
         if platform is not None:  # a law the platform cannot run raises
             for_platform(law, tuple(a.name for a in get_platform(platform).actions))
-    known = TASK.variants()
+    known, what = t.model.variants(), t.model.variant_key
     for scenario in scenarios:
         if scenario not in known:
-            raise ValueError(f"unknown scenario {scenario!r}; known scenarios: {', '.join(known)}")
+            raise ValueError(f"unknown {what} {scenario!r}; known {what}s: {', '.join(known)}")
     if isinstance(seeds, range):
         if seeds.start < 0 or seeds.step < 1:
             raise ValueError(f"seeds={seeds!r} is out of range: must count up from >= 0")
@@ -454,9 +525,10 @@ def _tasks(
     config: EnvConfigSpec,
     reduce: Reducer | None,
     workers: int,
-) -> Iterator[tuple[PolicySpec, str, tuple[int, ...], EnvConfigSpec, Reducer | None]]:
+    task: str = DEFAULT_TASK,
+) -> Iterator[_Work]:
     """The work units in grid order, made as they are taken: (policy, scenario, a chunk of at
-    most :data:`BATCH_LANES` seeds, config, reducer). With a pool the chunks are smaller, so
+    most :data:`BATCH_LANES` seeds, config, reducer, task). With a pool the chunks are smaller, so
     that every worker gets several."""
     size = BATCH_LANES
     if workers > 1:
@@ -465,4 +537,4 @@ def _tasks(
         for s in scenarios:
             for start in range(0, len(seeds), size):
                 chunk = tuple(int(x) for x in seeds[start : start + size])
-                yield p, s, chunk, config, reduce
+                yield p, s, chunk, config, reduce, task

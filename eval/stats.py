@@ -17,6 +17,9 @@ B - A resample alike), over the cell's episodes in seed order. So an interval de
 the episodes it summarises: not on the other cells of the table, nor on the order the episodes
 or log files came in (``follow-eval run`` and ``follow-eval metrics`` on its logs print the
 same intervals).
+
+Another task's metrics (LineTrace's, :mod:`eval.line_metrics`) are passed as ``metrics=``; its
+tables then name their variant column as its logs do (``track`` for ``scenario``).
 """
 
 from __future__ import annotations
@@ -24,22 +27,39 @@ from __future__ import annotations
 import itertools
 import warnings
 import zlib
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 import pandas as pd
 from scipy import stats
 
-from eval.metrics import METRICS, THESIS_METRICS, episode_metrics, extra_metrics
+from eval.metrics import METRICS, THESIS_METRICS, Metric, episode_metrics, extra_metrics
 from eval.rollout import Episode
 
-__all__ = ["CONFIDENCE", "compare", "episode_table", "metric_columns", "summarize"]
+__all__ = [
+    "CONFIDENCE",
+    "compare",
+    "episode_table",
+    "metric_columns",
+    "summarize",
+    "variant_column",
+]
 
 #: Confidence level of every interval.
 CONFIDENCE = 0.95
 #: Bootstrap resamples (scipy's default); 9999 keeps the interval ends stable to ~1 % here.
 N_RESAMPLES = 9999
 KEY_COLUMNS = ("policy", "scenario")
+#: Names a table's variant column may have (PersonFollow's scenario, LineTrace's track).
+VARIANT_COLUMNS = ("scenario", "track")
+
+
+def variant_column(table: pd.DataFrame) -> str:
+    """The column of ``table`` naming the grid's variant: ``scenario`` or ``track``."""
+    for name in VARIANT_COLUMNS:
+        if name in table:
+            return name
+    return VARIANT_COLUMNS[0]
 
 
 def metric_columns() -> list[str]:
@@ -47,22 +67,34 @@ def metric_columns() -> list[str]:
     return [*THESIS_METRICS, *extra_metrics()]
 
 
-def episode_table(episodes: Sequence[Episode]) -> pd.DataFrame:
-    """One row per episode: ``policy, scenario, seed, steps, termination`` and every metric."""
+def episode_table(
+    episodes: Sequence[Episode],
+    *,
+    metrics: Mapping[str, Metric] | None = None,
+    variant: str = "scenario",
+) -> pd.DataFrame:
+    """One row per episode: ``policy, scenario, seed, steps, termination`` and every metric.
+
+    :param metrics: the metrics by name, in table order (default: :data:`eval.metrics.METRICS`).
+    :param variant: the name of the ``scenario`` column (``"track"`` for LineTrace).
+    """
     rows = [
         {
             "policy": ep.policy,
-            "scenario": ep.scenario,
+            variant: ep.scenario,
             "seed": ep.seed,
             "steps": ep.steps,
             "termination": ep.termination,
-            **episode_metrics(ep.log),
+            **(
+                episode_metrics(ep.log)
+                if metrics is None
+                else {name: float(m.fn(ep.log)) for name, m in metrics.items()}
+            ),
         }
         for ep in episodes
     ]
-    return pd.DataFrame(
-        rows, columns=["policy", "scenario", "seed", "steps", "termination", *METRICS]
-    )
+    names = list(METRICS if metrics is None else metrics)
+    return pd.DataFrame(rows, columns=["policy", variant, "seed", "steps", "termination", *names])
 
 
 def _stream(seed: int, *names: str) -> np.random.Generator:
@@ -105,21 +137,25 @@ def _ci(values: np.ndarray, rng: np.random.Generator) -> tuple[float, float]:
     return (float(low), float(high))
 
 
-def summarize(table: pd.DataFrame, *, seed: int = 0) -> pd.DataFrame:
+def summarize(
+    table: pd.DataFrame, *, seed: int = 0, metrics: Sequence[str] | None = None
+) -> pd.DataFrame:
     """Mean and 95 % bootstrap CI of every metric per (policy, scenario).
 
     :param table: an :func:`episode_table`.
     :param seed: seeds the bootstrap resampling, so a report is reproducible.
+    :param metrics: the metric columns, in order (default: :func:`metric_columns`).
     :returns: columns ``policy, scenario, episodes``, the metric means in
         :func:`metric_columns` order, then ``<metric>_ci_low`` and ``<metric>_ci_high`` for each
         metric. Rows keep the order the cells first appear in ``table``.
     """
-    metrics = [m for m in metric_columns() if m in table]
+    metrics = [m for m in (metrics or metric_columns()) if m in table]
+    variant = variant_column(table)
     rows = []
-    for (policy, scenario), cell in table.groupby(list(KEY_COLUMNS), sort=False):
+    for (policy, scenario), cell in table.groupby(["policy", variant], sort=False):
         if "seed" in cell:
             cell = cell.sort_values("seed", kind="stable")
-        row: dict[str, object] = {"policy": policy, "scenario": scenario, "episodes": len(cell)}
+        row: dict[str, object] = {"policy": policy, variant: scenario, "episodes": len(cell)}
         bounds: dict[str, float] = {}
         for m in metrics:
             values = cell[m].to_numpy(dtype=np.float64)
@@ -128,7 +164,7 @@ def summarize(table: pd.DataFrame, *, seed: int = 0) -> pd.DataFrame:
             rng = _stream(seed, str(policy), str(scenario), m)
             bounds[f"{m}_ci_low"], bounds[f"{m}_ci_high"] = _ci(values, rng)
         rows.append({**row, **bounds})
-    columns = ["policy", "scenario", "episodes", *metrics]
+    columns = ["policy", variant, "episodes", *metrics]
     columns += [f"{m}_ci_{end}" for m in metrics for end in ("low", "high")]
     return pd.DataFrame(rows, columns=columns)
 
@@ -146,10 +182,11 @@ def compare(
         ``diff_ci_high`` and ``wilcoxon_p`` (NaN when every difference is 0 or n < 2).
     """
     metrics = [m for m in (metrics or metric_columns()) if m in table]
+    variant = variant_column(table)
     policies = list(dict.fromkeys(table["policy"]))
     rows = []
-    for scenario in dict.fromkeys(table["scenario"]):
-        in_scenario = table[table["scenario"] == scenario]
+    for scenario in dict.fromkeys(table[variant]):
+        in_scenario = table[table[variant] == scenario]
         for a, b in itertools.combinations(policies, 2):
             pa = in_scenario[in_scenario["policy"] == a].set_index("seed")
             pb = in_scenario[in_scenario["policy"] == b].set_index("seed")
@@ -164,7 +201,7 @@ def compare(
                 low, high = _ci(diff, _stream(seed, str(scenario), *sorted((str(a), str(b))), m))
                 rows.append(
                     {
-                        "scenario": scenario,
+                        variant: scenario,
                         "policy_a": a,
                         "policy_b": b,
                         "metric": m,
@@ -177,7 +214,7 @@ def compare(
                         "wilcoxon_p": _wilcoxon_p(diff),
                     }
                 )
-    columns = ["scenario", "policy_a", "policy_b", "metric", "n", "mean_a", "mean_b"]
+    columns = [variant, "policy_a", "policy_b", "metric", "n", "mean_a", "mean_b"]
     columns += ["mean_diff", "diff_ci_low", "diff_ci_high", "wilcoxon_p"]
     return pd.DataFrame(rows, columns=columns)
 

@@ -6,6 +6,10 @@
 - law: ``pn``, ``mpn``, ``gsmpn``, ``gsmpn-listing``, ``gsmpn-equation``. A GS-MPN variant is a
   different equation, so it is part of the law's name (:mod:`policies.gsmpn` describes them).
   ``holonomic`` (:mod:`policies.holonomic`) also strafes, for a platform that can.
+- line tracing (``LineTrace-v0``): ``coordinate`` (the mecanum paper's coordinate control,
+  presets ``signed``, ``literal`` and ``tuned``; :mod:`policies.coordinate`) and ``pid`` (the
+  three-sensor PID line follower, presets ``hand`` and ``tuned``; :mod:`policies.pid_line`);
+  a bare name means ``tuned``, as for the guidance laws.
 - preset: ``thesis`` (the thesis's values in SI) or ``tuned``. A bare law name means ``tuned``
   (``holonomic`` has one preset, ``default``, which a bare name means).
 
@@ -35,7 +39,7 @@ from dataclasses import replace
 from functools import partial
 from typing import TypeVar
 
-from policies import gsmpn, holonomic, mpn, pn
+from policies import coordinate, gsmpn, holonomic, mpn, pid_line, pn
 from policies.base import Policy
 from policies.learned import ppo
 
@@ -44,6 +48,7 @@ PolicyResolver = Callable[[str], Policy | None]
 P = TypeVar("P")
 
 DEFAULT_PRESET = "tuned"
+DEFAULT_TASK = "person_follow"
 
 
 class PolicyRegistry:
@@ -51,10 +56,12 @@ class PolicyRegistry:
 
     def __init__(self) -> None:
         self._factories: dict[str, PolicyFactory] = {}
+        self._tasks: dict[str, str] = {}
         self._resolvers: list[PolicyResolver] = []
 
-    def register(self, name: str, factory: PolicyFactory) -> None:
-        """Make ``name`` build a policy with ``factory()``.
+    def register(self, name: str, factory: PolicyFactory, task: str = DEFAULT_TASK) -> None:
+        """Make ``name`` build a policy with ``factory()``, for ``task`` (whose observation
+        it reads: ``"person_follow"`` unless told).
 
         :raises ValueError: if the name is empty, contains whitespace or is already taken
             (re-registering would silently change what a name means in earlier results).
@@ -64,6 +71,7 @@ class PolicyRegistry:
         if name in self._factories:
             raise ValueError(f"policy name {name!r} is already registered")
         self._factories[name] = factory
+        self._tasks[name] = task
 
     def register_law(
         self,
@@ -71,6 +79,7 @@ class PolicyRegistry:
         build: Callable[[P, str], Policy],
         presets: Mapping[str, P],
         default_preset: str = DEFAULT_PRESET,
+        task: str = DEFAULT_TASK,
     ) -> None:
         """Register ``law:<preset>`` for every preset, and ``law`` for the default preset.
 
@@ -78,15 +87,16 @@ class PolicyRegistry:
         :param build: called as ``build(params, name)``; a law class fits.
         :param presets: preset name -> parameters.
         :param default_preset: the preset a bare ``law`` name stands for.
+        :param task: the task whose observation the law reads.
         """
         if default_preset not in presets:
             raise ValueError(
                 f"law {law!r} has no preset {default_preset!r}; presets: {sorted(presets)}"
             )
         for preset, params in presets.items():
-            self.register(f"{law}:{preset}", partial(build, params, f"{law}:{preset}"))
+            self.register(f"{law}:{preset}", partial(build, params, f"{law}:{preset}"), task)
         default_name = f"{law}:{default_preset}"
-        self.register(law, partial(build, presets[default_preset], default_name))
+        self.register(law, partial(build, presets[default_preset], default_name), task)
 
     def register_resolver(self, resolver: PolicyResolver) -> None:
         """Offer names that are not registered exactly (e.g. model paths) to ``resolver``."""
@@ -111,9 +121,15 @@ class PolicyRegistry:
             raise TypeError(f"the factory for {name!r} returned {policy!r}, which is no Policy")
         return policy
 
-    def names(self) -> list[str]:
-        """All exactly registered names, sorted (names only resolvers accept are not listed)."""
-        return sorted(self._factories)
+    def names(self, task: str | None = None) -> list[str]:
+        """All exactly registered names, sorted (names only resolvers accept are not listed);
+        with ``task``, only those for that task."""
+        return sorted(n for n in self._factories if task is None or self._tasks[n] == task)
+
+    def task_of(self, name: str) -> str:
+        """The task a registered name's policy is for (a resolved name, a model path, is
+        PersonFollow's)."""
+        return self._tasks.get(name, DEFAULT_TASK)
 
 
 REGISTRY = PolicyRegistry()
@@ -127,9 +143,14 @@ def make_policy(name: str) -> Policy:
     return REGISTRY.make(name)
 
 
-def available_policies() -> list[str]:
-    """All registered policy names, sorted."""
-    return REGISTRY.names()
+def available_policies(task: str | None = None) -> list[str]:
+    """All registered policy names, sorted; with ``task`` (``"line_trace"``), those for it."""
+    return REGISTRY.names(task)
+
+
+def policy_task(name: str) -> str:
+    """The task whose observation the policy called ``name`` reads."""
+    return REGISTRY.task_of(name)
 
 
 def register_policy(name: str, factory: PolicyFactory) -> None:
@@ -142,9 +163,10 @@ def register_law(
     build: Callable[[P, str], Policy],
     presets: Mapping[str, P],
     default_preset: str = DEFAULT_PRESET,
+    task: str = "person_follow",
 ) -> None:
     """Register ``law`` and ``law:<preset>``; see :meth:`PolicyRegistry.register_law`."""
-    REGISTRY.register_law(law, build, presets, default_preset)
+    REGISTRY.register_law(law, build, presets, default_preset, task)
 
 
 def register_resolver(resolver: PolicyResolver) -> None:
@@ -163,6 +185,10 @@ for _variant in gsmpn.GSMPN_VARIANTS:
     )
 # A base that strafes (the mecanum platform); no tuned preset yet.
 register_law("holonomic", holonomic.Holonomic, holonomic.PRESETS, default_preset="default")
+# Line tracing (LineTrace-v0, reference §2): the paper's coordinate control and the PID line
+# follower it is compared with.
+register_law("coordinate", coordinate.Coordinate, coordinate.PRESETS, task="line_trace")
+register_law("pid", pid_line.PIDLine, pid_line.PRESETS, task="line_trace")
 # Learned agents: the shipped PPO agent by name, any other by its path (a run folder or a .zip).
 # policies.learned.ppo loads torch and stable-baselines3 only when an agent is built.
 register_policy("ppo", ppo.load_default)

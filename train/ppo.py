@@ -340,6 +340,12 @@ def _check_options(args: Args, *, run: Path | None) -> None:
     for name in ("eval_episodes", "eval_freq", "checkpoint_freq"):
         _check_int(name, getattr(args, name), 1)
     _check_int("final_episodes", args.final_episodes, 0)
+    if args.final_episodes and task.name != "person_follow":
+        raise ValueError(
+            f"--final-episodes {args.final_episodes}: the model card's comparison with a law is "
+            f"PersonFollow's only so far; give --final-episodes 0 and compare with "
+            f"follow-eval run --task {task.name}"
+        )
     _check_int("threads", args.threads, 1, MAX_THREADS)
     _check_int("seed", args.seed, 0, MAX_SEED)
     _check_int("eval_seed", args.eval_seed, 0, MAX_SEED)

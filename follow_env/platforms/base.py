@@ -22,7 +22,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from follow_env.sim import body, streams
-from follow_env.sim.config import Sections
+from follow_env.sim.config import Sections, Validated, param
 from follow_env.sim.jit import njit
 from follow_env.sim.rng import LaneRandom, uniform_at
 from follow_env.sim.schema import Block, Field, f8
@@ -38,6 +38,7 @@ __all__ = [
     "ActionField",
     "Platform",
     "PlatformConfig",
+    "PlatformRandomization",
     "push_velocity",
 ]
 
@@ -129,6 +130,33 @@ def push_velocity(push_p: float, push_v: float, keys: np.ndarray, step: int) -> 
         ang = 2.0 * np.pi * uniform_at(krand, step * _PUSH_STRIDE + 1)
         return push_v * np.cos(ang), push_v * np.sin(ang)
     return 0.0, 0.0
+
+
+@dataclass(frozen=True)
+class PlatformRandomization(Validated):
+    """The randomisation every platform reads (``cfg.randomization``): a task's randomisation
+    section subclasses this and adds its own fields. All off by default.
+
+    (PersonFollow's ``RandomizationConfig`` declares the same fields itself, in an order its
+    run folders already record.)
+    """
+
+    wheel_radius_error: float = param(
+        0.0, 0.0, 0.2, "", "std of the real/assumed wheel radius ratio minus 1"
+    )
+    track_width_error: float = param(
+        0.0, 0.0, 0.2, "", "std of the real/assumed track width ratio minus 1"
+    )
+    encoder_noise_counts: float = param(
+        0.0, 0.0, 100.0, "counts", "std of extra counts read per 10 ms tick"
+    )
+    friction_spread: float = param(
+        0.0, 0.0, 0.9, "", "motor friction and stall duty scale by U(1 - s, 1 + s) (floor)"
+    )
+    push_prob: float = param(0.0, 0.0, 1.0, "/step", "chance of a push in a control step")
+    push_speed_mps: float = param(
+        0.3, 0.0, 5.0, "m/s", "a push moves the robot at this speed for one step"
+    )
 
 
 @dataclass(frozen=True)

@@ -24,6 +24,7 @@ __all__ = [
     "Trail",
     "blend_poly",
     "dashed_polyline",
+    "draw_robot",
     "fit_view",
     "grid_step_m",
     "put_text",
@@ -180,3 +181,32 @@ def dashed_polyline(
         cv2.polylines(
             img, list(np.concatenate(dashes)), False, color, thickness, cv2.LINE_AA, SHIFT
         )
+
+
+def draw_robot(
+    img: np.ndarray,
+    view: MapView,
+    pose: tuple[float, float, float],
+    footprint: tuple[float, float],
+    wheels: np.ndarray,
+    body_color: tuple[int, int, int],
+    edge_color: tuple[int, int, int],
+) -> None:
+    """A robot seen from above: its footprint ``(length, width)`` (m) centred on ``pose``
+    ``(x m, y m, heading rad)``, and its wheels (rows ``(x, y, length, width, roller slope)``
+    in the body frame, as platforms describe them), with a stroke along a mecanum wheel's
+    rollers."""
+    rx, ry, rth = pose
+    c, s = math.cos(rth), math.sin(rth)
+    poly = view.px(rect_corners(rx, ry, rth, footprint[0], footprint[1]))
+    cv2.fillPoly(img, [poly], body_color, cv2.LINE_AA, SHIFT)
+    cv2.polylines(img, [poly], True, edge_color, 1, cv2.LINE_AA, SHIFT)
+    for wx, wy, wl, ww, slope in wheels:
+        cx, cy = rx + wx * c - wy * s, ry + wx * s + wy * c
+        wheel = view.px(rect_corners(cx, cy, rth, wl, ww))
+        cv2.fillPoly(img, [wheel], edge_color, cv2.LINE_AA, SHIFT)
+        if slope:
+            half = 0.35 * wl / math.hypot(1.0, slope)
+            dx, dy = half * (c - slope * s), half * (s + slope * c)
+            cv2.line(img, view.pt(cx - dx, cy - dy), view.pt(cx + dx, cy + dy), body_color, 1,
+                     cv2.LINE_AA, SHIFT)  # fmt: skip

@@ -102,11 +102,13 @@ class LaneRandom:
     instead, so components that share a stream never depend on each other's draws.
 
     :param keys: one key per lane, shape (n,), dtype uint64.
+    :param start: draw sequentially from this per-episode allocation's first counter on
+        (default: from ``EPISODE_COUNTER0``), for a component that shares its stream.
     """
 
-    def __init__(self, keys: np.ndarray) -> None:
+    def __init__(self, keys: np.ndarray, start: Allocation | None = None) -> None:
         self.keys = np.ascontiguousarray(keys, dtype=np.uint64)
-        self._counter = EPISODE_COUNTER0
+        self._counter = EPISODE_COUNTER0 if start is None else start.start
 
     @property
     def n(self) -> int:

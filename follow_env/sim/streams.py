@@ -74,7 +74,12 @@ DEPTH = Stream("depth", 2, "depth noise and invalid pixels")
 MOTOR = Stream("motor", 3, "per-episode motor gain spread")
 WORLD = Stream("world", 4, "maps, obstacles and bystanders of a scenario")
 RANDOMIZE = Stream("randomize", 5, "domain randomisation and disturbances")
-STREAMS: tuple[Stream, ...] = (PERSON, DETECTOR, DEPTH, MOTOR, WORLD, RANDOMIZE)
+# Streams added later take the next columns: an episode's first keys stay what they were (the
+# words of SeedSequence.generate_state do not depend on how many are asked for), so adding one
+# changes no earlier draw.
+LIGHT = Stream("light", 6, "light sensors on the floor: reading noise, ambient light, gains")
+TRACK = Stream("track", 7, "a course on the floor: random tracks and the start pose on them")
+STREAMS: tuple[Stream, ...] = (PERSON, DETECTOR, DEPTH, MOTOR, WORLD, RANDOMIZE, LIGHT, TRACK)
 N_STREAMS = len(STREAMS)
 """Keys per episode (words drawn from its ``SeedSequence``)."""
 

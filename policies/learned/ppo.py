@@ -16,10 +16,12 @@ with the saved statistics (frozen), stacked frames. So the agent gets exactly th
 trained on, acts deterministically (the mean of its Gaussian), and its action is mapped back to
 SI by the same code: the action of the platform it was trained on (``config.yaml``'s
 ``platform`` and ``env_spaces.action.names``; an agent saved without them was trained on the
-differential drive, ``[v_mps, w_radps]``). The policy names both (``platform``,
-``action_names``), and :func:`policies.adapt.for_platform` refuses it on a platform whose action
-differs. :meth:`PPOPolicy.reset` clears the pipeline's memory
-(frame stack, command, observation age). No training code is imported.
+differential drive, ``[v_mps, w_radps]``). An agent of another task (LineTrace-v0's 25
+readings) works the same way: its observation's size comes from the saved ``env_spaces``. The
+policy names its platform and action (``platform``, ``action_names``), and
+:func:`policies.adapt.for_platform` refuses it on a platform whose action differs.
+:meth:`PPOPolicy.reset` clears the pipeline's memory (frame stack, command, observation age).
+No training code is imported.
 
 Batched acting (:meth:`PPOPolicy.act_batch`) runs the feature pipeline over all lanes at once
 but the network one lane at a time: torch's batched matrix products round differently from a
@@ -41,7 +43,7 @@ from typing import Any, NamedTuple
 import numpy as np
 import yaml
 
-from policies.base import validate_obs, validate_obs_batch
+from policies.base import OBS_SIZE, validate_obs, validate_obs_batch
 from policies.learned.features import Box, Feature, FrameStack, NormalizeObservation, Pipeline
 
 __all__ = [
@@ -343,19 +345,37 @@ class PPOPolicy:
         self._view: Pipeline | None = None
         self._batch: Pipeline | None = None
         self._started = False
+        self.action_names = self._agent.action_names
+        self._obs_size = self._agent.observation_box.shape[0]
+
+    def _rows(self, obs: np.ndarray, batch: bool) -> np.ndarray:
+        """Observations as float32 rows, checked: PersonFollow's by its own rules, another
+        task's by the saved observation size."""
+        if self._obs_size == OBS_SIZE:
+            if batch:
+                return validate_obs_batch(obs).astype(np.float32)
+            return np.array([validate_obs(obs)], dtype=np.float32)
+        arr = np.asarray(obs, dtype=np.float64)
+        shape = (arr.shape[0], self._obs_size) if batch and arr.ndim == 2 else (self._obs_size,)
+        if arr.shape != shape or (batch and arr.ndim != 2):
+            want = f"(n, {self._obs_size})" if batch else f"({self._obs_size},)"
+            raise ValueError(f"obs must have shape {want}, got shape {arr.shape}")
+        if not np.all(np.isfinite(arr)):
+            raise ValueError("obs must be finite")
+        return arr.reshape(-1, self._obs_size).astype(np.float32)
 
     def reset(self) -> None:
         """Start a new episode: the next :meth:`act` starts the pipeline afresh."""
         self._started = False
 
     def act(self, obs: np.ndarray) -> np.ndarray:
-        """Map ``[distance_m, offset_px]`` to the platform's action, :attr:`action_names`
-        (``[v_mps, w_radps]`` on the differential drive), deterministically.
+        """Map an observation (``[distance_m, offset_px]`` for PersonFollow) to the platform's
+        action, :attr:`action_names` (``[v_mps, w_radps]`` on the differential drive),
+        deterministically.
 
-        :raises ValueError: if ``obs`` is not a finite array of shape (2,).
+        :raises ValueError: if ``obs`` is not a finite array of the agent's observation shape.
         """
-        distance_m, offset_px = validate_obs(obs)
-        row = np.array([[distance_m, offset_px]], dtype=np.float32)
+        row = self._rows(obs, batch=False)
         if not self._started or self._view is None:
             self._view = self._agent.pipeline(1)
             agent_obs = self._view.start(row)
@@ -373,7 +393,7 @@ class PPOPolicy:
     def act_batch(self, obs: np.ndarray) -> np.ndarray:
         """Actions ``(n, m)`` for observations ``(n, 2)``, each lane as :meth:`act` would give
         it alone (the network runs one lane at a time: module docstring)."""
-        rows = validate_obs_batch(obs).astype(np.float32)
+        rows = self._rows(obs, batch=True)
         if getattr(self, "_batch_n", None) != len(rows):
             raise ValueError(
                 f"act_batch got {len(rows)} observations: call reset_batch({len(rows)}) first"

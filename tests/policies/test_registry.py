@@ -28,14 +28,14 @@ def obs(distance_m: float, offset_px: float) -> np.ndarray:
 
 def test_every_law_and_law_preset_name_is_available() -> None:
     expected = {*LAWS, *(f"{law}:{preset}" for law in LAWS for preset in PRESETS)}
-    assert expected <= set(available_policies())
+    assert expected <= set(available_policies("person_follow"))
 
 
 def test_available_policies_are_sorted() -> None:
     assert available_policies() == sorted(available_policies())
 
 
-@pytest.mark.parametrize("name", available_policies())
+@pytest.mark.parametrize("name", available_policies("person_follow"))
 def test_every_available_name_builds_a_working_policy(name: str) -> None:
     policy = make_policy(name)
     policy.reset()
@@ -102,7 +102,7 @@ def test_each_call_builds_a_fresh_policy() -> None:
 def test_unknown_name_error_lists_the_known_names() -> None:
     with pytest.raises(ValueError, match="unknown policy 'lqr'") as error:
         make_policy("lqr")
-    for name in available_policies():
+    for name in available_policies("person_follow"):
         assert name in str(error.value)
 
 
@@ -159,3 +159,19 @@ def test_factory_returning_a_non_policy_is_a_type_error() -> None:
     registry.register("broken", lambda: 42)  # type: ignore[arg-type, return-value]
     with pytest.raises(TypeError, match="no Policy"):
         registry.make("broken")
+
+
+def test_policies_are_listed_by_the_task_they_read() -> None:
+    from policies import policy_task
+
+    line = available_policies("line_trace")
+    assert {"coordinate", "coordinate:literal", "pid"} <= set(line)
+    assert not set(line) & set(available_policies("person_follow"))
+    assert policy_task("pid") == "line_trace"
+    assert policy_task("pn") == "person_follow"
+
+
+def test_a_bare_line_follower_name_means_its_tuned_preset() -> None:
+    assert make_policy("coordinate").name == "coordinate:tuned"
+    assert make_policy("pid").name == "pid:tuned"
+    assert {"coordinate:signed", "pid:hand"} <= set(available_policies("line_trace"))

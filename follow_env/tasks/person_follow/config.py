@@ -15,21 +15,17 @@ allow; the default), :data:`IDEAL` (perfect sensing, for debugging and tests), :
 
 from __future__ import annotations
 
-import json
-from collections.abc import Mapping
 from dataclasses import dataclass, field
-from pathlib import Path
-from typing import Any, ClassVar
+from typing import Any
 
-import yaml
-
-from follow_env.platforms import get_platform
 from follow_env.platforms.base import PlatformConfig
 from follow_env.platforms.diff_drive import DiffDriveConfig
 from follow_env.sensors.camera import CameraConfig
 from follow_env.sensors.detector import PerceptionConfig
 from follow_env.sim.checks import out_of_range
-from follow_env.sim.config import Sections, Validated, param
+from follow_env.sim.config import Validated, param
+from follow_env.tasks.config import TaskConfig
+from follow_env.tasks.config import config_from_text as task_config_from_text
 
 __all__ = [
     "AS_BUILT",
@@ -211,10 +207,9 @@ class EpisodeConfig(Validated):
 
 
 @dataclass(frozen=True)
-class EnvConfig(Sections):
-    """Everything one simulated robot, its sensors and its task need."""
-
-    NESTED: ClassVar[str | None] = "platform"
+class EnvConfig(TaskConfig):
+    """Everything one simulated robot, its sensors and its task need (the platform may be
+    named in overrides, see :class:`~follow_env.tasks.config.TaskConfig`)."""
 
     platform: PlatformConfig = field(default_factory=DiffDriveConfig)
     camera: CameraConfig = field(default_factory=CameraConfig)
@@ -227,7 +222,6 @@ class EnvConfig(Sections):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        self.platform.check_control_period(self.episode.control_dt_s)
         lat_max = self.randomization.latency_frames_max
         if lat_max and lat_max < self.perception.latency_frames:
             raise out_of_range(
@@ -235,44 +229,6 @@ class EnvConfig(Sections):
                 lat_max,
                 f"0 or >= perception.latency_frames ({self.perception.latency_frames})",
             )
-
-    @property
-    def control_dt_s(self) -> float:
-        """The control period (s)."""
-        return self.episode.control_dt_s
-
-    @classmethod
-    def from_overrides(cls, base: Any, overrides: Mapping[str, Any]) -> Any:
-        """As :meth:`Sections.from_overrides`; the platform may also be named: ``"platform":
-        "mecanum"`` (its default configuration), ``"platform": {"name": "mecanum", "motor":
-        {...}}`` (the form ``to_dict`` writes) or ``"platform.name": "mecanum"``. A named
-        platform replaces the current one where it appears, so later keys may use its
-        sections (``{"platform": "mecanum", "floor": {...}}``)."""
-        cfg, pending = base, {}
-        for key, value in overrides.items():
-            platform = _named_platform(key, value)
-            if platform is None:
-                pending[key] = value
-                continue
-            cfg = super().from_overrides(cfg, pending) if pending else cfg
-            cfg, pending = super().from_overrides(cfg, {"platform": platform}), {}
-        return super().from_overrides(cfg, pending)
-
-
-def _named_platform(key: str, value: Any) -> PlatformConfig | None:
-    """The platform config a ``platform`` override names, or None if it names none."""
-    if key == "platform.name" or (key == "platform" and isinstance(value, str)):
-        if not isinstance(value, str):
-            raise ValueError(f"platform name {value!r} is out of range: must be a string")
-        return get_platform(value).config()
-    if key == "platform" and isinstance(value, Mapping) and "name" in value:
-        name = value["name"]
-        if not isinstance(name, str):
-            raise ValueError(f"platform name {name!r} is out of range: must be a string")
-        default = get_platform(name).config()
-        rest = {k: v for k, v in value.items() if k != "name"}
-        return type(default).from_overrides(default, rest) if rest else default
-    return None
 
 
 THESIS = EnvConfig()
@@ -370,30 +326,4 @@ def config_from_text(text: str) -> str | dict[str, Any]:
     :raises ValueError: naming the file or the text and what is wrong (unreadable, not
         YAML/JSON, not a mapping, or a config value out of range).
     """
-    if text in PRESETS:
-        return text
-    path = Path(text)
-    if path.suffix.lower() in (".json", ".yaml", ".yml"):
-        try:
-            overrides = yaml.safe_load(path.read_text(encoding="utf-8"))
-        except OSError as exc:
-            raise ValueError(f"cannot read {path}: {exc.strerror}") from None
-        except yaml.YAMLError as exc:
-            raise ValueError(f"{path} is not valid YAML/JSON: {exc}") from None
-        where = str(path)
-    else:
-        try:
-            overrides = json.loads(text)
-        except json.JSONDecodeError:
-            raise ValueError(
-                f"{text!r} is not a preset ({', '.join(sorted(PRESETS))}), a JSON object, or a "
-                ".json/.yaml file"
-            ) from None
-        where = "the JSON object"
-    if not isinstance(overrides, dict):
-        raise ValueError(f"{where} must be a mapping of config sections")
-    try:
-        EnvConfig.from_overrides(THESIS, overrides)
-    except ValueError as exc:
-        raise ValueError(f"{where}: {exc}") from None
-    return overrides
+    return task_config_from_text(text, EnvConfig, PRESETS, THESIS)

@@ -50,7 +50,9 @@ __all__ = [
     "ACCEL_SOURCES",
     "ACTION_COLUMNS",
     "COLUMNS",
+    "FLAG_COLUMNS",
     "META_COLUMNS",
+    "OBS_COLUMNS",
     "REQUIRED_COLUMNS",
     "TEXT_COLUMNS",
     "WHEEL_COLUMNS",
@@ -136,3 +138,7 @@ TEXT_COLUMNS: frozenset[str] = frozenset({"policy", "scenario", "termination"})
 REQUIRED_COLUMNS: tuple[str, ...] = ("time_s", "obs_distance_m", "obs_offset_px")
 #: One of these must be present (module docstring).
 ACCEL_SOURCES: tuple[str, ...] = ("accel_mps2", "encoder_speed_mps")
+#: The observation's columns, in the observation's order.
+OBS_COLUMNS: tuple[str, ...] = ("obs_distance_m", "obs_offset_px")
+#: info flags written as 0/1.
+FLAG_COLUMNS: tuple[str, ...] = ("detected", "in_frame")

@@ -18,9 +18,9 @@ from follow_env.platforms import get_platform
 from follow_env.platforms.base import Platform, PlatformConfig
 from follow_env.sensors import camera, depth, detector
 from follow_env.sensors.detector import PEOPLE_MAX
-from follow_env.sim.checks import out_of_range
 from follow_env.sim.runner import BatchedSim
 from follow_env.sim.schema import Block, f8, float_column, i8, nested
+from follow_env.tasks.config import resolve_config
 from follow_env.tasks.person_follow import reward
 from follow_env.tasks.person_follow.config import PRESETS, THESIS, EnvConfig
 from follow_env.tasks.person_follow.people import PERSON, WAYPOINT
@@ -183,32 +183,15 @@ class PersonFollowTask:
             object; sections of the platform may still be overridden (``robot={...}``).
         :param overrides: sections (``perception={...}``) or ``section__field=value`` pairs.
         """
-        if config is None:
-            cfg = THESIS
-        elif isinstance(config, EnvConfig):
-            cfg = config
-        elif isinstance(config, str):
-            if config not in PRESETS:
-                raise out_of_range(
-                    "config",
-                    config,
-                    "one of " + ", ".join(repr(p) for p in PRESETS) + " or an EnvConfig",
-                )
-            cfg = PRESETS[config]
-        elif isinstance(config, dict):
-            cfg = EnvConfig.from_overrides(THESIS, config)
-        else:
-            raise out_of_range("config", config, "a preset name, an EnvConfig or a dict")
-        flat: dict[str, Any] = {}
-        if platform is not None:
-            if isinstance(platform, str):
-                platform = get_platform(platform).config()
-            flat["platform"] = platform
-        for key, value in overrides.items():
-            flat[key.replace("__", ".")] = value
-        if scenario is not None:
-            flat["scenario.name"] = scenario
-        return EnvConfig.from_overrides(cfg, flat) if flat else cfg
+        return resolve_config(
+            EnvConfig,
+            PRESETS,
+            THESIS,
+            config,
+            platform,
+            shorthands={"scenario.name": scenario},
+            overrides=overrides,
+        )
 
     def spaces(self, cfg: EnvConfig, platform: Platform) -> tuple[spaces.Box, spaces.Box]:
         """``(observation_space, action_space)`` of one robot, float32: ``[distance_m,

@@ -1,0 +1,127 @@
+"""What ``follow-eval run`` needs to know of each task, in one place per task.
+
+The rollout, the statistics and the tables are the same machinery for every task
+(:mod:`eval.rollout`, :mod:`eval.stats`, :mod:`eval.report`); an :class:`EvalTask` says what
+differs: the name of the grid's variant (PersonFollow's scenarios, LineTrace's tracks), the
+default policies and variants, the metrics and tables, how a ``--config`` text is read, the
+video's frame rate and the plots. :func:`eval_task` gives one by name; a new task adds one entry
+to :data:`EVAL_TASKS`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+
+from eval.metrics import METRICS, Metric
+from eval.report import PERSON_FOLLOW_TABLES, Tables
+from eval.rollout import Episode
+
+__all__ = ["EVAL_TASKS", "EvalTask", "eval_task"]
+
+#: ``plots(summary, episodes, seed, folder, config)`` writes the task's plots into ``folder``.
+PlotsFn = Callable[[pd.DataFrame, Sequence[Episode], int, Path, Any], None]
+
+
+@dataclass(frozen=True)
+class EvalTask:
+    """One task as the evaluation sees it.
+
+    :param name: the task (``follow_env.tasks.<name>``).
+    :param variant: the grid's variant, singular (``scenario``, ``track``): the tables' column.
+    :param default_policies: ``--policies`` when not given.
+    :param default_variants: ``--scenarios`` / ``--tracks`` when not given.
+    :param default_config: the preset ``--config`` means when not given.
+    :param metrics: the metrics by name, in table order.
+    :param tables: what the tables show (:class:`eval.report.Tables`).
+    :param config_from_text: reads a ``--config`` text (``ValueError`` when bad).
+    :param presets: the preset names, for the help text.
+    :param fps: the video's frames per second (one frame per control step: real time).
+    :param plots: writes the task's plots.
+    """
+
+    name: str
+    variant: str
+    default_policies: str
+    default_variants: str
+    default_config: str
+    metrics: Mapping[str, Metric]
+    tables: Tables
+    config_from_text: Callable[[str], Any]
+    presets: Sequence[str]
+    fps: int
+    plots: PlotsFn
+
+    @property
+    def variants_option(self) -> str:
+        """The command line's option naming the variants: ``scenarios`` or ``tracks``."""
+        return f"{self.variant}s"
+
+
+def _person_follow() -> EvalTask:
+    from eval.report import plot_offsets, plot_thesis_metrics, plot_trajectories
+    from follow_env.tasks.person_follow.config import PRESETS, config_from_text
+
+    def plots(summary: pd.DataFrame, episodes: Any, seed: int, folder: Path, config: Any) -> None:
+        plot_thesis_metrics(summary, folder / "thesis_metrics.png")
+        plot_offsets(episodes, seed, folder / f"offsets_seed{seed}.png")
+        plot_trajectories(episodes, seed, folder / f"trajectories_seed{seed}.png")
+
+    return EvalTask(
+        "person_follow",
+        "scenario",
+        "pn,mpn,gsmpn",
+        "straight,curve",
+        "thesis",
+        METRICS,
+        PERSON_FOLLOW_TABLES,
+        config_from_text,
+        sorted(PRESETS),
+        10,
+        plots,
+    )
+
+
+def _line_trace() -> EvalTask:
+    from eval.line_metrics import LINE_METRICS, LINE_TABLES
+    from eval.line_report import plot_cross_track, plot_line_metrics, plot_line_paths
+    from follow_env.tasks.line_trace.config import PRESETS, config_from_text
+
+    def plots(summary: pd.DataFrame, episodes: Any, seed: int, folder: Path, config: Any) -> None:
+        plot_line_metrics(summary, folder / "line_metrics.png")
+        plot_cross_track(episodes, seed, folder / f"cross_track_seed{seed}.png")
+        plot_line_paths(episodes, seed, folder / f"paths_seed{seed}.png", config=config)
+
+    return EvalTask(
+        "line_trace",
+        "track",
+        "coordinate,pid",
+        "straight,corners,curves,zigzag,gaps,course,random",
+        "paper",
+        LINE_METRICS,
+        LINE_TABLES,
+        config_from_text,
+        sorted(PRESETS),
+        50,
+        plots,
+    )
+
+
+EVAL_TASKS: dict[str, Callable[[], EvalTask]] = {
+    "person_follow": _person_follow,
+    "line_trace": _line_trace,
+}
+"""Every task the evaluation runs, by name (built on first use: imports stay light)."""
+
+
+def eval_task(name: str) -> EvalTask:
+    """The task called ``name``; ``ValueError`` listing the known ones."""
+    if name not in EVAL_TASKS:
+        raise ValueError(
+            f"task {name!r} is out of range: must be one of " + ", ".join(sorted(EVAL_TASKS))
+        )
+    return EVAL_TASKS[name]()

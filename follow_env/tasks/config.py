@@ -1,0 +1,170 @@
+"""What every task's configuration shares: a platform that may be named, and how ``gym.make``'s
+keyword arguments, presets and ``--config`` texts become a configuration.
+
+:class:`TaskConfig` is the base of a task's tree of sections (its first field is ``platform``,
+whose sections are reached at the top level too, see :class:`~follow_env.sim.config.Sections`);
+a platform may be given by name anywhere a section may (``"platform": "mecanum"``,
+``{"platform": {"name": "mecanum", ...}}``). :func:`resolve_config` turns a task's
+``gym.make`` arguments into its configuration, and :func:`config_from_text` reads a command
+line's ``--config``; both are the same for every task, given its presets.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, ClassVar
+
+import yaml
+
+from follow_env.platforms import get_platform
+from follow_env.platforms.base import PlatformConfig
+from follow_env.sim.checks import out_of_range
+from follow_env.sim.config import Sections
+
+__all__ = ["TaskConfig", "config_from_text", "named_platform", "resolve_config"]
+
+
+@dataclass(frozen=True)
+class TaskConfig(Sections):
+    """Base of a task's configuration: subclasses declare ``platform`` (a
+    :class:`PlatformConfig`) and an ``episode`` section with ``control_dt_s``, then their own
+    sections; the platform is checked against the control period."""
+
+    NESTED: ClassVar[str | None] = "platform"
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        self.platform.check_control_period(self.episode.control_dt_s)  # type: ignore[attr-defined]
+
+    @property
+    def control_dt_s(self) -> float:
+        """The control period (s)."""
+        return self.episode.control_dt_s  # type: ignore[attr-defined,no-any-return]
+
+    @classmethod
+    def from_overrides(cls, base: Any, overrides: Mapping[str, Any]) -> Any:
+        """As :meth:`Sections.from_overrides`; the platform may also be named: ``"platform":
+        "mecanum"`` (its default configuration), ``"platform": {"name": "mecanum", "motor":
+        {...}}`` (the form ``to_dict`` writes) or ``"platform.name": "mecanum"``. A named
+        platform replaces the current one where it appears, so later keys may use its
+        sections (``{"platform": "mecanum", "floor": {...}}``)."""
+        cfg, pending = base, {}
+        for key, value in overrides.items():
+            platform = named_platform(key, value)
+            if platform is None:
+                pending[key] = value
+                continue
+            cfg = super().from_overrides(cfg, pending) if pending else cfg
+            cfg, pending = super().from_overrides(cfg, {"platform": platform}), {}
+        return super().from_overrides(cfg, pending)
+
+
+def named_platform(key: str, value: Any) -> PlatformConfig | None:
+    """The platform config a ``platform`` override names, or None if it names none."""
+    if key == "platform.name" or (key == "platform" and isinstance(value, str)):
+        if not isinstance(value, str):
+            raise ValueError(f"platform name {value!r} is out of range: must be a string")
+        return get_platform(value).config()
+    if key == "platform" and isinstance(value, Mapping) and "name" in value:
+        name = value["name"]
+        if not isinstance(name, str):
+            raise ValueError(f"platform name {name!r} is out of range: must be a string")
+        default = get_platform(name).config()
+        rest = {k: v for k, v in value.items() if k != "name"}
+        return type(default).from_overrides(default, rest) if rest else default
+    return None
+
+
+def resolve_config(
+    cls: type[TaskConfig],
+    presets: Mapping[str, TaskConfig],
+    default: TaskConfig,
+    config: Any = None,
+    platform: str | PlatformConfig | None = None,
+    shorthands: Mapping[str, Any] | None = None,
+    overrides: Mapping[str, Any] | None = None,
+) -> Any:
+    """A task's configuration from ``gym.make`` keyword arguments.
+
+    :param cls: the task's config class. :param presets: its presets by name.
+    :param default: the preset a dict of overrides applies to (and ``config=None`` means).
+    :param config: a preset name, a config object, or a mapping of section overrides.
+    :param platform: a platform name (its default configuration) or a platform config object;
+        the platform's sections may still be overridden (``motor={...}``).
+    :param shorthands: dotted fields set by the task's shorthand arguments, applied last (e.g.
+        ``{"scenario.name": "curve"}``); ``None`` values are left out.
+    :param overrides: sections (``sensor={...}``) or ``section__field=value`` pairs.
+    """
+    if config is None:
+        cfg = default
+    elif isinstance(config, cls):
+        cfg = config
+    elif isinstance(config, str):
+        if config not in presets:
+            raise out_of_range(
+                "config",
+                config,
+                "one of " + ", ".join(repr(p) for p in presets) + f" or {_a(cls.__name__)}",
+            )
+        cfg = presets[config]
+    elif isinstance(config, dict):
+        cfg = cls.from_overrides(default, config)
+    else:
+        raise out_of_range("config", config, f"a preset name, {_a(cls.__name__)} or a dict")
+    flat: dict[str, Any] = {}
+    if platform is not None:
+        if isinstance(platform, str):
+            platform = get_platform(platform).config()
+        flat["platform"] = platform
+    for key, value in (overrides or {}).items():
+        flat[key.replace("__", ".")] = value
+    for key, value in (shorthands or {}).items():
+        if value is not None:
+            flat[key] = value
+    return cls.from_overrides(cfg, flat) if flat else cfg
+
+
+def _a(noun: str) -> str:
+    return ("an " if noun[0] in "AEIOU" else "a ") + noun
+
+
+def config_from_text(
+    text: str, cls: type[TaskConfig], presets: Mapping[str, TaskConfig], default: TaskConfig
+) -> str | dict[str, Any]:
+    """A command line's ``--config``: a preset name, a JSON object of section overrides, or a
+    ``.json``/``.yaml`` file holding one; checked against ``default`` and returned as the
+    preset name or the overrides (what ``config=`` takes).
+
+    :raises ValueError: naming the file or the text and what is wrong (unreadable, not
+        YAML/JSON, not a mapping, or a config value out of range).
+    """
+    if text in presets:
+        return text
+    path = Path(text)
+    if path.suffix.lower() in (".json", ".yaml", ".yml"):
+        try:
+            overrides = yaml.safe_load(path.read_text(encoding="utf-8"))
+        except OSError as exc:
+            raise ValueError(f"cannot read {path}: {exc.strerror}") from None
+        except yaml.YAMLError as exc:
+            raise ValueError(f"{path} is not valid YAML/JSON: {exc}") from None
+        where = str(path)
+    else:
+        try:
+            overrides = json.loads(text)
+        except json.JSONDecodeError:
+            raise ValueError(
+                f"{text!r} is not a preset ({', '.join(sorted(presets))}), a JSON object, or a "
+                ".json/.yaml file"
+            ) from None
+        where = "the JSON object"
+    if not isinstance(overrides, dict):
+        raise ValueError(f"{where} must be a mapping of config sections")
+    try:
+        cls.from_overrides(default, overrides)
+    except ValueError as exc:
+        raise ValueError(f"{where}: {exc}") from None
+    return overrides

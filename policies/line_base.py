@@ -1,0 +1,98 @@
+"""The shared part of the line-tracing laws: the observation they read and how they act.
+
+A line law sees LineTrace-v0 only through its spec (:mod:`follow_env.tasks.line_trace.spec`):
+the 25 readings of the 5 x 5 light-sensor grid, row-major, row 0 the front row and column 0 the
+leftmost cell, 0 over white floor and 1 on the line; :func:`cell_positions` gives each cell's
+place in cells (x forward, y to the left). It acts in the body twist's entries by name
+(``action_names``), which :func:`policies.for_platform` fits onto a platform's action: a law
+commanding ``vy_mps`` runs only on a base that strafes.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from follow_env.tasks.line_trace.spec import SPEC, cell_offsets
+
+__all__ = ["CELL_XY", "LINE_OBS_SIZE", "LineLaw", "validate_readings"]
+
+LINE_OBS_SIZE = SPEC.observation_size
+"""Readings in one observation (25)."""
+CELL_XY = np.array(cell_offsets())
+"""Each cell's ``(x forward, y left)`` from the grid's centre, in cells, observation order."""
+
+
+def validate_readings(obs: ArrayLike) -> np.ndarray:
+    """The readings as float64 ``(25,)``; ``ValueError`` on another shape or a NaN/inf."""
+    arr = np.asarray(obs, dtype=np.float64)
+    if arr.shape != (LINE_OBS_SIZE,):
+        raise ValueError(
+            f"obs must have shape ({LINE_OBS_SIZE},): the 5 x 5 grid's readings "
+            f"(cell_00 .. cell_44), got shape {arr.shape}"
+        )
+    if not np.all(np.isfinite(arr)):
+        raise ValueError("obs must be finite readings in [0, 1]")
+    return arr
+
+
+class LineLaw(ABC):
+    """Base of the line-tracing laws: validates the readings, runs the law, remembers per lane.
+
+    A law sets ``name``, ``params`` and ``action_names`` and implements :meth:`_command`
+    (readings to the command's entries, in ``action_names`` order) and, if it has memory,
+    :meth:`reset`, :meth:`_memory` and :meth:`_set_memory`.
+    """
+
+    name: str
+    params: Any
+    action_names: tuple[str, ...]
+    task = "line_trace"
+    """The task whose observation this law reads."""
+
+    def reset(self) -> None:  # noqa: B027 - memoryless laws keep the no-op
+        """Forget what earlier steps left behind."""
+
+    def act(self, obs: np.ndarray) -> np.ndarray:
+        """Map the 25 readings to the command (``action_names`` order), float32.
+
+        :raises ValueError: if ``obs`` is not 25 finite readings.
+        """
+        return np.asarray(self._command(validate_readings(obs)), dtype=np.float32)
+
+    @abstractmethod
+    def _command(self, readings: np.ndarray) -> tuple[float, ...]:
+        """The command for these readings (SI)."""
+
+    def _memory(self) -> Any:
+        return None
+
+    def _set_memory(self, memory: Any) -> None:  # noqa: B027 - memoryless laws keep none
+        """Restore what :meth:`_memory` returned."""
+
+    def reset_batch(self, n: int) -> None:
+        """Start ``n`` lanes' episodes: every lane's memory as after :meth:`reset`."""
+        self.reset()
+        self._lanes = [self._memory() for _ in range(n)]
+
+    def act_batch(self, obs: np.ndarray) -> np.ndarray:
+        """Actions ``(n, m)`` float32: :meth:`act` for each lane with that lane's memory, so a
+        lane's actions equal a run of its episode alone."""
+        rows = np.asarray(obs, dtype=np.float64)
+        lanes = getattr(self, "_lanes", None)
+        if lanes is None or len(lanes) != len(rows):
+            raise ValueError(
+                f"act_batch got {len(rows)} observations: call reset_batch({len(rows)}) first"
+            )
+        out = np.empty((len(rows), len(self.action_names)), dtype=np.float32)
+        for i, row in enumerate(rows):
+            self._set_memory(lanes[i])
+            out[i] = self.act(row)
+            lanes[i] = self._memory()
+        return out
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}(name={self.name!r}, params={self.params!r})"
