@@ -186,7 +186,46 @@ class LawParams:
         check_range(self, "w_max_radps", gt=0, optional=True)
 
 
-class GuidanceLaw(ABC):
+class LaneMemory:
+    """Batched acting for a scalar law: :meth:`act` per lane, each lane with its own memory, so
+    each lane's actions equal a run of its episode alone (the scalar arithmetic is reused, not
+    re-derived in numpy, for bitwise equality). A law with memory overrides :meth:`_memory` and
+    :meth:`_set_memory`; its class provides ``act``, ``reset`` and ``action_names``."""
+
+    action_names: tuple[str, ...]
+    act: Any  # the law's own: one observation to one action
+
+    def reset(self) -> None:
+        """Forget remembered state; a memoryless law has nothing to forget."""
+
+    def _memory(self) -> Any:
+        """What the law remembers between steps (restored per lane by ``act_batch``)."""
+        return None
+
+    def _set_memory(self, memory: Any) -> None:
+        """Restore what :meth:`_memory` returned."""
+
+    def reset_batch(self, n: int) -> None:
+        """Start ``n`` lanes' episodes: every lane's memory as after :meth:`reset`."""
+        self.reset()
+        self._lanes = [self._memory() for _ in range(n)]
+
+    def _act_lanes(self, rows: np.ndarray) -> np.ndarray:
+        """Actions ``(n, m)`` float32 for validated observation rows ``(n, k)``."""
+        lanes = getattr(self, "_lanes", None)
+        if lanes is None or len(lanes) != len(rows):
+            raise ValueError(
+                f"act_batch got {len(rows)} observations: call reset_batch({len(rows)}) first"
+            )
+        out = np.empty((len(rows), len(self.action_names)), dtype=np.float32)
+        for i, row in enumerate(rows):
+            self._set_memory(lanes[i])
+            out[i] = self.act(row)
+            lanes[i] = self._memory()
+        return out
+
+
+class GuidanceLaw(LaneMemory, ABC):
     """Base of the classical laws: validates the observation, runs the law, clips the output.
 
     A new law subclasses this, sets ``params`` (a :class:`LawParams` subclass) and ``name``,
@@ -196,9 +235,6 @@ class GuidanceLaw(ABC):
     name: str
     params: LawParams
     action_names: tuple[str, ...] = LAW_ACTION_NAMES
-
-    def reset(self) -> None:  # noqa: B027 - an optional hook: memoryless laws keep the no-op
-        """Forget remembered state; a memoryless law has nothing to forget."""
 
     def act(self, obs: np.ndarray) -> np.ndarray:
         """Map ``[distance_m, offset_px]`` to ``[v_mps, w_radps]``; offset > 0 gives w < 0.
@@ -226,34 +262,10 @@ class GuidanceLaw(ABC):
 
     # -- many lanes at once: the same scalar law per lane, each with its own memory ---------
 
-    def _memory(self) -> Any:
-        """What the law remembers between steps (restored per lane by :meth:`act_batch`)."""
-        return None
-
-    def _set_memory(self, memory: Any) -> None:  # noqa: B027 - memoryless laws keep none
-        """Restore what :meth:`_memory` returned."""
-
-    def reset_batch(self, n: int) -> None:
-        """Start ``n`` lanes' episodes: every lane's memory as after :meth:`reset`."""
-        self.reset()
-        self._lanes = [self._memory() for _ in range(n)]
-
     def act_batch(self, obs: np.ndarray) -> np.ndarray:
         """Actions ``(n, m)`` float32 for observations ``(n, 2)``: :meth:`act` for each lane
-        with that lane's memory, so each lane's actions equal a run of its episode alone (the
-        scalar arithmetic is reused, not re-derived in numpy, for bitwise equality)."""
-        rows = validate_obs_batch(obs)
-        lanes = getattr(self, "_lanes", None)
-        if lanes is None or len(lanes) != len(rows):
-            raise ValueError(
-                f"act_batch got {len(rows)} observations: call reset_batch({len(rows)}) first"
-            )
-        out = np.empty((len(rows), len(self.action_names)), dtype=np.float32)
-        for i, row in enumerate(rows):
-            self._set_memory(lanes[i])
-            out[i] = self.act(row)
-            lanes[i] = self._memory()
-        return out
+        with that lane's memory (:class:`LaneMemory`)."""
+        return self._act_lanes(validate_obs_batch(obs))
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}(name={self.name!r}, params={self.params!r})"

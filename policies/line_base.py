@@ -17,6 +17,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from follow_env.tasks.line_trace.spec import SPEC, cell_offsets
+from policies.base import LaneMemory
 
 __all__ = ["CELL_XY", "LINE_OBS_SIZE", "LineLaw", "validate_readings"]
 
@@ -39,7 +40,7 @@ def validate_readings(obs: ArrayLike) -> np.ndarray:
     return arr
 
 
-class LineLaw(ABC):
+class LineLaw(LaneMemory, ABC):
     """Base of the line-tracing laws: validates the readings, runs the law, remembers per lane.
 
     A law sets ``name``, ``params`` and ``action_names`` and implements :meth:`_command`
@@ -53,9 +54,6 @@ class LineLaw(ABC):
     task = "line_trace"
     """The task whose observation this law reads."""
 
-    def reset(self) -> None:  # noqa: B027 - memoryless laws keep the no-op
-        """Forget what earlier steps left behind."""
-
     def act(self, obs: np.ndarray) -> np.ndarray:
         """Map the 25 readings to the command (``action_names`` order), float32.
 
@@ -67,32 +65,10 @@ class LineLaw(ABC):
     def _command(self, readings: np.ndarray) -> tuple[float, ...]:
         """The command for these readings (SI)."""
 
-    def _memory(self) -> Any:
-        return None
-
-    def _set_memory(self, memory: Any) -> None:  # noqa: B027 - memoryless laws keep none
-        """Restore what :meth:`_memory` returned."""
-
-    def reset_batch(self, n: int) -> None:
-        """Start ``n`` lanes' episodes: every lane's memory as after :meth:`reset`."""
-        self.reset()
-        self._lanes = [self._memory() for _ in range(n)]
-
     def act_batch(self, obs: np.ndarray) -> np.ndarray:
-        """Actions ``(n, m)`` float32: :meth:`act` for each lane with that lane's memory, so a
-        lane's actions equal a run of its episode alone."""
-        rows = np.asarray(obs, dtype=np.float64)
-        lanes = getattr(self, "_lanes", None)
-        if lanes is None or len(lanes) != len(rows):
-            raise ValueError(
-                f"act_batch got {len(rows)} observations: call reset_batch({len(rows)}) first"
-            )
-        out = np.empty((len(rows), len(self.action_names)), dtype=np.float32)
-        for i, row in enumerate(rows):
-            self._set_memory(lanes[i])
-            out[i] = self.act(row)
-            lanes[i] = self._memory()
-        return out
+        """Actions ``(n, m)`` float32: :meth:`act` for each lane with that lane's memory
+        (:class:`~policies.base.LaneMemory`)."""
+        return self._act_lanes(np.asarray(obs, dtype=np.float64))
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}(name={self.name!r}, params={self.params!r})"

@@ -20,11 +20,12 @@ from typing import Any, ClassVar
 import yaml
 
 from follow_env.platforms import get_platform
-from follow_env.platforms.base import PlatformConfig
+from follow_env.platforms.base import Platform, PlatformConfig
 from follow_env.sim.checks import out_of_range
 from follow_env.sim.config import Sections
+from follow_env.tasks.spec import TaskSpec
 
-__all__ = ["TaskConfig", "config_from_text", "named_platform", "resolve_config"]
+__all__ = ["TaskConfig", "TaskPlatforms", "config_from_text", "named_platform", "resolve_config"]
 
 
 @dataclass(frozen=True)
@@ -168,3 +169,18 @@ def config_from_text(
     except ValueError as exc:
         raise ValueError(f"{where}: {exc}") from None
     return overrides
+
+
+class TaskPlatforms:
+    """What every task model answers the same way about its platform (a mixin of the task
+    classes, which set ``spec``)."""
+
+    spec: TaskSpec
+
+    def platform_of(self, cfg: Any) -> Platform:
+        """The registered platform of ``cfg.platform``."""
+        return get_platform(cfg.platform.NAME)
+
+    def info_keys(self, platform: Platform) -> tuple[str, ...]:
+        """Every key of the ``info`` dict on ``platform``."""
+        return self.spec.info_keys(tuple(key for key, *_ in platform.info))

@@ -15,14 +15,13 @@ from typing import Any, NamedTuple
 import numpy as np
 from gymnasium import spaces
 
-from follow_env.platforms import get_platform
 from follow_env.platforms.base import Platform, PlatformConfig
 from follow_env.sensors import light_grid
 from follow_env.sim import streams
 from follow_env.sim.rng import LaneRandom
 from follow_env.sim.runner import BatchedSim
 from follow_env.sim.schema import Block, f8, float_column, i8, nested
-from follow_env.tasks.config import resolve_config
+from follow_env.tasks.config import TaskPlatforms, resolve_config
 from follow_env.tasks.line_trace import reward
 from follow_env.tasks.line_trace.config import PAPER, PRESETS, LineTraceConfig
 from follow_env.tasks.line_trace.spec import N_CELLS, SPEC
@@ -139,7 +138,7 @@ def _int_column(dtype: np.dtype, path: tuple[str, ...]) -> int:
     return offset // 8
 
 
-class LineTraceTask:
+class LineTraceTask(TaskPlatforms):
     """The line-tracing task (reference §2) for the runner and the env faces."""
 
     name = SPEC.name
@@ -228,14 +227,6 @@ class LineTraceTask:
                 f"< the {track.name!r} track's length less finish_margin_m "
                 f"({track.length_m - cfg.episode.finish_margin_m:.3f} m)"
             )
-
-    def platform_of(self, cfg: LineTraceConfig) -> Platform:
-        """The registered platform of ``cfg.platform``."""
-        return get_platform(cfg.platform.NAME)
-
-    def info_keys(self, platform: Platform) -> tuple[str, ...]:
-        """Every key of the ``info`` dict on ``platform``."""
-        return SPEC.info_keys(tuple(key for key, *_ in platform.info))
 
     # -- the runner's side -----------------------------------------------------------------------
 

@@ -14,13 +14,12 @@ from typing import Any, NamedTuple
 import numpy as np
 from gymnasium import spaces
 
-from follow_env.platforms import get_platform
 from follow_env.platforms.base import Platform, PlatformConfig
 from follow_env.sensors import camera, depth, detector
 from follow_env.sensors.detector import PEOPLE_MAX
 from follow_env.sim.runner import BatchedSim
 from follow_env.sim.schema import Block, f8, float_column, i8, nested
-from follow_env.tasks.config import resolve_config
+from follow_env.tasks.config import TaskPlatforms, resolve_config
 from follow_env.tasks.person_follow import reward
 from follow_env.tasks.person_follow.config import PRESETS, THESIS, EnvConfig
 from follow_env.tasks.person_follow.people import PERSON, WAYPOINT
@@ -150,7 +149,7 @@ def _int_column(dtype: np.dtype, path: tuple[str, ...]) -> int:
     return offset // 8
 
 
-class PersonFollowTask:
+class PersonFollowTask(TaskPlatforms):
     """The person-following task (reference §1) for the runner and the env faces."""
 
     def __init__(self) -> None:
@@ -231,14 +230,6 @@ class PersonFollowTask:
                 f"scenario {spec.name!r} declares {spec.max_people} people; the detector "
                 f"tracks at most {PEOPLE_MAX}"
             )
-
-    def platform_of(self, cfg: EnvConfig) -> Platform:
-        """The registered platform of ``cfg.platform``."""
-        return get_platform(cfg.platform.NAME)
-
-    def info_keys(self, platform: Platform) -> tuple[str, ...]:
-        """Every key of the ``info`` dict on ``platform``."""
-        return SPEC.info_keys(tuple(key for key, *_ in platform.info))
 
     # -- the runner's side -----------------------------------------------------------------------
 
