@@ -32,6 +32,7 @@ scenarios x episodes), and its seeds stay within :data:`MAX_SEED`.
 from __future__ import annotations
 
 import argparse
+import csv
 import json
 import platform
 import sys
@@ -212,6 +213,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     metrics.add_argument(
         "--out", type=Path, default=None, help="also write the tables into this new folder"
+    )
+    metrics.add_argument(
+        "--task",
+        default=None,
+        help="the task the logs are of: person_follow or line_trace (default: line_trace for "
+        "logs with a track column, else person_follow)",
     )
     thesis = sub.add_parser(
         "thesis",
@@ -449,9 +456,10 @@ def cmd_metrics(args: argparse.Namespace) -> int:
 
     :raises UsageError: when two logs are the same (policy, scenario, seed) episode.
     """
-    from eval.report import markdown_report, plot_thesis_metrics, write_tables
+    from eval.report import markdown_report, write_tables
     from eval.rollout import Episode
     from eval.stats import compare, episode_table, summarize
+    from eval.tasks import eval_task
 
     if args.out is not None:
         check_new_folder(args.out)  # before scoring: a bad --out should not cost the work
@@ -460,37 +468,62 @@ def cmd_metrics(args: argparse.Namespace) -> int:
         raise UsageError(f"no *.csv step logs under {', '.join(map(str, args.logs))}")
     episodes = []
     seen: dict[tuple[str, str, int], Path] = {}
+    task = None
     for i, path in enumerate(files):
-        log = read_step_log(path)
+        if task is None:  # the first log's header decides, unless --task says
+            task = eval_task(args.task or _task_of_log(path))
+        log = read_step_log(path, task.name)
         policy = _first_text(log, "policy") or args.policy
-        scenario = _first_text(log, "scenario") or args.scenario
+        variant = _first_text(log, task.variant) or args.scenario
         seed = int(log["seed"].iloc[0]) if "seed" in log and log["seed"].notna().all() else i
-        key = (policy, scenario, seed)
+        key = (policy, variant, seed)
         if key in seen:
             raise UsageError(
-                f"{seen[key]} and {path} are both policy {policy!r}, scenario {scenario!r}, "
-                f"seed {seed}: give each episode once"
+                f"{seen[key]} and {path} are both policy {policy!r}, {task.variant} "
+                f"{variant!r}, seed {seed}: give each episode once"
             )
         seen[key] = path
         if "termination" not in log:
             log = log.assign(termination="")
-        episodes.append(Episode(policy, scenario, seed, log))
+        episodes.append(Episode(policy, variant, seed, log))
+    assert task is not None
     policy_order = {p: k for k, p in enumerate(dict.fromkeys(ep.policy for ep in episodes))}
     scenario_order = {s: k for k, s in enumerate(dict.fromkeys(ep.scenario for ep in episodes))}
     episodes.sort(key=lambda ep: (policy_order[ep.policy], scenario_order[ep.scenario], ep.seed))
-    table = episode_table(episodes)
-    summary = summarize(table)
-    comparisons = compare(table)
+    try:
+        table = episode_table(episodes, metrics=task.metrics, variant=task.variant)
+    except KeyError as e:
+        raise UsageError(
+            f"the logs lack the column {e} that the {task.name} task's metrics need "
+            f"(--task {task.name}; the first log: {files[0]})"
+        ) from None
+    summary = summarize(table, metrics=list(task.metrics))
+    comparisons = compare(table, metrics=list(task.metrics))
     if args.out is not None:
         with atomic_folder(args.out) as tmp:
-            meta = {"command": " ".join([PROG, *sys.argv[1:]]), "logs": [str(f) for f in files]}
-            write_tables(tmp, summary, table, comparisons, meta)
+            meta = {
+                "command": " ".join([PROG, *sys.argv[1:]]),
+                "task": task.name,
+                "logs": [str(f) for f in files],
+            }
+            write_tables(tmp, summary, table, comparisons, meta, tables=task.tables)
             (tmp / "plots").mkdir()
-            plot_thesis_metrics(summary, tmp / "plots" / "thesis_metrics.png")
-    print(markdown_report(summary, comparisons))
+            task.summary_plot(summary, tmp / "plots")
+    print(markdown_report(summary, comparisons, tables=task.tables))
     where = f"; wrote {args.out}/" if args.out is not None else ""
     print(f"{len(files)} step log{'s' if len(files) != 1 else ''} scored{where}")
     return 0
+
+
+def _task_of_log(path: Path) -> str:
+    """``line_trace`` for a log whose header has a ``track`` column, else ``person_follow``
+    (a file that cannot be read is left for :func:`read_step_log` to report)."""
+    try:
+        with path.open(newline="", encoding="utf-8") as f:
+            header = next(csv.reader(f), [])
+    except (OSError, UnicodeDecodeError, csv.Error):
+        return "person_follow"
+    return "line_trace" if "track" in (cell.strip() for cell in header) else "person_follow"
 
 
 def _first_text(log: Any, column: str) -> str | None:

@@ -7,7 +7,8 @@ encoder speeds) is read and scored by the same code as a simulated one; every ot
 optional and the metrics that need it give NaN without it.
 
 The columns, their units and their order are the task's
-(:mod:`follow_env.tasks.person_follow.steplog`); this module reads, validates and writes them.
+(:mod:`follow_env.tasks.person_follow.steplog`, :mod:`follow_env.tasks.line_trace.steplog`);
+this module reads, validates and writes them (:data:`LAYOUTS`: what each task's log needs).
 """
 
 from __future__ import annotations
@@ -16,12 +17,14 @@ import csv
 import math
 import re
 from collections.abc import Iterable
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
 from eval.atomic import atomic_path
+from follow_env.tasks.line_trace import steplog as line_steplog
 from follow_env.tasks.person_follow.steplog import (
     ACCEL_SOURCES,
     ACTION_COLUMNS,
@@ -36,10 +39,12 @@ from follow_env.tasks.person_follow.steplog import (
 __all__ = [
     "ACTION_COLUMNS",
     "COLUMNS",
+    "LAYOUTS",
     "META_COLUMNS",
     "REQUIRED_COLUMNS",
     "TEXT_COLUMNS",
     "WHEEL_COLUMNS",
+    "LogLayout",
     "StepLogError",
     "accel_from_speed",
     "log_columns",
@@ -59,6 +64,28 @@ class StepLogError(ValueError):
     """A step log file is missing, unreadable or malformed; the message names file and row."""
 
 
+@dataclass(frozen=True)
+class LogLayout:
+    """What a task's step log must hold.
+
+    :param required: columns every log has, with a value in every row.
+    :param text: columns holding text (every other one is numeric).
+    :param accel: whether a log needs ``accel_mps2`` or ``encoder_speed_mps`` (the thesis's
+        acceleration metrics; derived from the speed when only that is logged).
+    """
+
+    required: tuple[str, ...]
+    text: frozenset[str]
+    accel: bool
+
+
+LAYOUTS: dict[str, LogLayout] = {
+    "person_follow": LogLayout(REQUIRED_COLUMNS, TEXT_COLUMNS, True),
+    "line_trace": LogLayout(line_steplog.REQUIRED_COLUMNS, line_steplog.TEXT_COLUMNS, False),
+}
+"""Each task's step-log layout, by task name."""
+
+
 def write_step_log(log: pd.DataFrame, path: str | Path) -> Path:
     """Write ``log`` as CSV atomically (a temporary file renamed into place).
 
@@ -73,8 +100,8 @@ def write_step_log(log: pd.DataFrame, path: str | Path) -> Path:
     return path
 
 
-def read_step_log(path: str | Path) -> pd.DataFrame:
-    """Read and validate a step log.
+def read_step_log(path: str | Path, task: str = "person_follow") -> pd.DataFrame:
+    """Read and validate a step log of ``task`` (its :data:`LAYOUTS` entry).
 
     Cells may be empty (not recorded) except in the required columns. Text columns come back
     as strings (empty string when blank), every other column as float64.
@@ -101,20 +128,24 @@ def read_step_log(path: str | Path) -> pd.DataFrame:
     if not rows or not any(cell.strip() for cell in rows[0]):
         raise StepLogError(f"{path}: empty file; expected a header line with the columns")
     header = [cell.strip() for cell in rows[0]]
-    return _to_frame(path, header, rows[1:])
+    return _to_frame(path, header, rows[1:], LAYOUTS[task])
 
 
-def _to_frame(path: Path, header: list[str], rows: list[list[str]]) -> pd.DataFrame:
+def _to_frame(
+    path: Path, header: list[str], rows: list[list[str]], layout: LogLayout
+) -> pd.DataFrame:
     dupes = sorted({c for c in header if header.count(c) > 1})
     if dupes:
         raise StepLogError(f"{path}: duplicate column(s) {', '.join(dupes)} in the header")
-    missing = [c for c in REQUIRED_COLUMNS if c not in header]
-    if not any(c in header for c in _ACCEL_SOURCES):
+    missing = [c for c in layout.required if c not in header]
+    if layout.accel and not any(c in header for c in _ACCEL_SOURCES):
         missing.append(" or ".join(_ACCEL_SOURCES))
     if missing:
+        needs = ", ".join(layout.required)
+        if layout.accel:
+            needs += " and accel_mps2 or encoder_speed_mps"
         raise StepLogError(
-            f"{path}: missing column(s) {', '.join(missing)}; a step log needs "
-            f"{', '.join(REQUIRED_COLUMNS)} and accel_mps2 or encoder_speed_mps"
+            f"{path}: missing column(s) {', '.join(missing)}; a step log needs {needs}"
         )
     # Skip blank lines (a trailing newline at the end of a hand-written file).
     numbered = [(i + 2, r) for i, r in enumerate(rows) if any(cell.strip() for cell in r)]
@@ -130,7 +161,7 @@ def _to_frame(path: Path, header: list[str], rows: list[list[str]]) -> pd.DataFr
     data = {name: [row[j].strip() for _, row in numbered] for j, name in enumerate(header) if name}
     frame = pd.DataFrame(index=pd.RangeIndex(len(numbered)))
     for name, cells in data.items():
-        if name in TEXT_COLUMNS:
+        if name in layout.text:
             frame[name] = cells
             continue
         values = pd.to_numeric(pd.Series(cells).replace("", np.nan), errors="coerce")
@@ -148,12 +179,12 @@ def _to_frame(path: Path, header: list[str], rows: list[list[str]]) -> pd.DataFr
             raise StepLogError(
                 f"{path}: line {lines[k]}, column {name}: {cells[k]!r} is not a finite number"
             )
-        if name in REQUIRED_COLUMNS and values.isna().any():
+        if name in layout.required and values.isna().any():
             k = int(np.flatnonzero(values.isna().to_numpy())[0])
             raise StepLogError(f"{path}: line {lines[k]}, column {name}: value is missing")
         frame[name] = values.astype(np.float64)
     validate_step_log(frame, path, lines)
-    if "accel_mps2" not in frame:
+    if "accel_mps2" not in frame and "encoder_speed_mps" in frame:
         frame["accel_mps2"] = accel_from_speed(frame["time_s"], frame["encoder_speed_mps"])
     return frame
 

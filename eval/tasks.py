@@ -42,6 +42,8 @@ class EvalTask:
     :param presets: the preset names, for the help text.
     :param fps: the video's frames per second (one frame per control step: real time).
     :param plots: writes the task's plots.
+    :param summary_plot: writes the chart of the summary alone into a folder (what
+        ``follow-eval metrics`` draws from logs, without the run's world).
     """
 
     name: str
@@ -55,6 +57,7 @@ class EvalTask:
     presets: Sequence[str]
     fps: int
     plots: PlotsFn
+    summary_plot: Callable[[pd.DataFrame, Path], None]
 
     @property
     def variants_option(self) -> str:
@@ -66,8 +69,11 @@ def _person_follow() -> EvalTask:
     from eval.report import plot_offsets, plot_thesis_metrics, plot_trajectories
     from follow_env.tasks.person_follow.config import PRESETS, config_from_text
 
-    def plots(summary: pd.DataFrame, episodes: Any, seed: int, folder: Path, config: Any) -> None:
+    def summary_plot(summary: pd.DataFrame, folder: Path) -> None:
         plot_thesis_metrics(summary, folder / "thesis_metrics.png")
+
+    def plots(summary: pd.DataFrame, episodes: Any, seed: int, folder: Path, config: Any) -> None:
+        summary_plot(summary, folder)
         plot_offsets(episodes, seed, folder / f"offsets_seed{seed}.png")
         plot_trajectories(episodes, seed, folder / f"trajectories_seed{seed}.png")
 
@@ -83,6 +89,7 @@ def _person_follow() -> EvalTask:
         sorted(PRESETS),
         10,
         plots,
+        summary_plot,
     )
 
 
@@ -91,8 +98,11 @@ def _line_trace() -> EvalTask:
     from eval.line_report import plot_cross_track, plot_line_metrics, plot_line_paths
     from follow_env.tasks.line_trace.config import PRESETS, config_from_text
 
-    def plots(summary: pd.DataFrame, episodes: Any, seed: int, folder: Path, config: Any) -> None:
+    def summary_plot(summary: pd.DataFrame, folder: Path) -> None:
         plot_line_metrics(summary, folder / "line_metrics.png")
+
+    def plots(summary: pd.DataFrame, episodes: Any, seed: int, folder: Path, config: Any) -> None:
+        summary_plot(summary, folder)
         plot_cross_track(episodes, seed, folder / f"cross_track_seed{seed}.png")
         plot_line_paths(episodes, seed, folder / f"paths_seed{seed}.png", config=config)
 
@@ -108,6 +118,7 @@ def _line_trace() -> EvalTask:
         sorted(PRESETS),
         50,
         plots,
+        summary_plot,
     )
 
 

@@ -148,3 +148,30 @@ def test_an_unknown_task_or_tracks_on_person_follow_give_one_line(
     assert "--task: task 'sumo' is out of range" in one_line_error(capsys)
     assert main(["run", "--tracks", "course"]) == 2
     assert "--tracks is not an option of the person_follow task" in one_line_error(capsys)
+
+
+def test_follow_eval_metrics_scores_line_logs_as_the_run_did(
+    tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
+    run = tmp_path / "run"
+    grid = ["--task", "line_trace", "--policies", "coordinate,pid", "--tracks", "curves,gaps"]
+    assert main(["run", *grid, "--episodes", "3", "--out", str(run)]) == 0
+    capsys.readouterr()
+    # the task is read from the logs' track column; --task says it outright
+    for extra in ([], ["--task", "line_trace"]):
+        scored = tmp_path / f"scored{len(extra)}"
+        assert main(["metrics", str(run / "logs"), *extra, "--out", str(scored)]) == 0
+        assert "12 step logs scored" in capsys.readouterr().out  # 2 policies x 2 tracks x 3
+        keys = ["policy", "track"]
+        ran = pd.read_csv(run / "summary.csv").sort_values(keys).reset_index(drop=True)
+        got = pd.read_csv(scored / "summary.csv").sort_values(keys).reset_index(drop=True)
+        assert list(got.columns) == list(ran.columns)
+        means = [c for c in ran.columns if not c.endswith(("_ci_low", "_ci_high"))]
+        pd.testing.assert_frame_equal(got[means], ran[means], check_exact=False, rtol=1e-6)
+        assert json.loads((scored / "summary.json").read_text())
+        assert (scored / "plots" / "line_metrics.png").stat().st_size > 5000
+    # line logs read as PersonFollow's: one line naming what is missing, exit 2
+    assert main(["metrics", str(run / "logs"), "--task", "person_follow"]) == 2
+    assert "missing column(s) obs_distance_m" in one_line_error(capsys)
+    assert main(["metrics", str(run / "logs"), "--task", "nope"]) == 2
+    assert "task 'nope' is out of range" in one_line_error(capsys)
