@@ -36,6 +36,7 @@ __all__ = [
     "LINE_HEADLINE_METRICS",
     "LINE_METRICS",
     "LINE_TABLES",
+    "LINE_TASK_METRICS",
     "line_episode_metrics",
     "line_metric",
 ]
@@ -127,16 +128,17 @@ def mean_speed_mps(log: pd.DataFrame) -> float:
 
 LINE_METRICS: MappingProxyType[str, Metric] = MappingProxyType(_REGISTRY)
 """Every line-tracing metric by name, in table order."""
-#: The line-tracing table's leading metrics (the issue's, then failures).
-LINE_HEADLINE_METRICS: tuple[str, ...] = (
+#: The six metrics of the task's definition, in its order (the bar chart's).
+LINE_TASK_METRICS: tuple[str, ...] = (
     "completion_pct",
     "lap_time_s",
     "cross_track_mean_mm",
     "cross_track_rms_mm",
     "max_deviation_mm",
     "line_lost_count",
-    "failed_pct",
 )
+#: The line-tracing table's leading metrics (the task's, then failures).
+LINE_HEADLINE_METRICS: tuple[str, ...] = (*LINE_TASK_METRICS, "failed_pct")
 LINE_TABLES = Tables(
     LINE_METRICS,
     LINE_HEADLINE_METRICS,

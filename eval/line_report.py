@@ -18,21 +18,14 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from eval.line_metrics import LINE_METRICS
+from eval.line_metrics import LINE_METRICS, LINE_TASK_METRICS
 from eval.report import _one_seed, _pyplot, _save, plot_metric_bars
 from eval.rollout import Episode
 
 __all__ = ["LINE_PLOTTED_METRICS", "plot_cross_track", "plot_line_metrics", "plot_line_paths"]
 
-#: The metrics of the bar chart (the issue's, in its order).
-LINE_PLOTTED_METRICS: tuple[str, ...] = (
-    "completion_pct",
-    "lap_time_s",
-    "cross_track_mean_mm",
-    "cross_track_rms_mm",
-    "max_deviation_mm",
-    "line_lost_count",
-)
+#: The metrics of the bar chart (the task's six, in its order).
+LINE_PLOTTED_METRICS: tuple[str, ...] = LINE_TASK_METRICS
 
 
 def plot_line_metrics(summary: pd.DataFrame, path: Path) -> Path:

@@ -17,7 +17,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar
 
+import numpy as np
 import yaml
+from gymnasium import spaces
 
 from follow_env.platforms import get_platform
 from follow_env.platforms.base import Platform, PlatformConfig
@@ -184,3 +186,8 @@ class TaskPlatforms:
     def info_keys(self, platform: Platform) -> tuple[str, ...]:
         """Every key of the ``info`` dict on ``platform``."""
         return self.spec.info_keys(tuple(key for key, *_ in platform.info))
+
+    def action_space(self, cfg: Any, platform: Platform) -> spaces.Box:
+        """The platform's action, float32, bounded by what it can do."""
+        top = platform.action_high(cfg).astype(np.float32)
+        return spaces.Box(-top, top, dtype=np.float32)

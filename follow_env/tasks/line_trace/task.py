@@ -186,8 +186,7 @@ class LineTraceTask(TaskPlatforms):
         """``(observation_space, action_space)``, float32: the 25 readings in [0, 1] and the
         platform's action, bounded by what it can do."""
         observation = spaces.Box(0.0, 1.0, shape=(N_CELLS,), dtype=np.float32)
-        top = platform.action_high(cfg).astype(np.float32)
-        return observation, spaces.Box(-top, top, dtype=np.float32)
+        return observation, self.action_space(cfg, platform)
 
     def variants(self) -> list[str]:
         """The registered tracks (``variant_key`` is their ``gym.make`` keyword)."""

@@ -199,8 +199,7 @@ class PersonFollowTask(TaskPlatforms):
         observation = spaces.Box(
             np.array(low, np.float32), np.array(high, np.float32), dtype=np.float32
         )
-        top = platform.action_high(cfg).astype(np.float32)
-        return observation, spaces.Box(-top, top, dtype=np.float32)
+        return observation, self.action_space(cfg, platform)
 
     def variants(self) -> list[str]:
         """The task's registered variants (here: scenarios), which training spreads lanes over
