@@ -12,10 +12,10 @@ The episodes of one (policy, scenario, config) run together as the lanes of one 
 (:func:`run_batch`): lane ``i`` seeded ``s_i`` is bit-for-bit the single env reset with
 ``seed=s_i``, and a policy that acts for many lanes at once (``act_batch``) gives each lane the
 action it would give that episode alone (a policy without it gets one copy per lane). So the
-step logs are exactly those of one-by-one episodes, only faster. Work is generated lazily, one
-batch of at most :data:`BATCH_LANES` seeds at a time, and runs in this process or in a process
-pool (``workers``); either way the results are identical and come back in grid order (policy,
-then scenario, then seed).
+step logs are exactly those of one-by-one episodes, only faster. The work units (:func:`work_units`:
+one policy, scenario and chunk of at most :data:`BATCH_LANES` seeds each) run on an
+:class:`execution.Backend`: this process, a process pool (``workers``) or Ray tasks; whichever,
+the results are identical and come back in grid order (policy, then scenario, then seed).
 
 The task is PersonFollow's unless ``task=`` names another (``"line_trace"``): its variants (the
 ``scenario`` arguments) are then its own (LineTrace's tracks), and its step logs have its layout
@@ -28,16 +28,15 @@ import copy
 import importlib
 import math
 import os
-from collections.abc import Callable, Iterator, Mapping, Sequence
-from concurrent.futures import ProcessPoolExecutor
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from multiprocessing import get_context
 from typing import Any, NamedTuple
 
 import gymnasium as gym
 import numpy as np
 import pandas as pd
 
+from execution import Backend, execute
 from follow_env.platforms import get_platform
 from follow_env.platforms.base import Platform
 from follow_env.sim.runner import BatchedSim
@@ -49,10 +48,12 @@ __all__ = [
     "MAX_EPISODES",
     "Episode",
     "auto_workers",
+    "chunk_size",
     "policy_spec",
     "rollout",
     "run_batch",
     "run_episode",
+    "work_units",
 ]
 
 PolicySpec = str | Policy
@@ -423,6 +424,10 @@ def rollout(
     progress: bool = False,
     reduce: Reducer | None = None,
     task: str = DEFAULT_TASK,
+    backend: Backend | None = None,
+    chunk: int | None = None,
+    done: Mapping[int, list[Any]] | None = None,
+    on_unit: Callable[[int, list[Any]], None] | None = None,
 ) -> list[Any]:
     """Run every policy on every (scenario, seed) pair: identical rollouts.
 
@@ -431,7 +436,7 @@ def rollout(
     :param scenarios: registered scenario names (``task``'s variants: LineTrace's tracks).
     :param seeds: the seeds; seed ``s`` gives the same person and noise to every policy.
     :param config: the env configuration, as for :func:`run_episode`.
-    :param workers: processes to use; 1 runs here, None picks :func:`auto_workers`.
+    :param workers: local processes (1 runs here, None :func:`auto_workers`) without ``backend``.
     :param progress: show a progress bar (tqdm, on stderr; hidden when not a terminal).
     :param reduce: if given, applied to each :class:`Episode` in the process that ran it, and
         its results are returned instead of the episodes (a search that needs one number per
@@ -439,36 +444,43 @@ def rollout(
         module-level function).
     :param task: the task (``"person_follow"``, ``"line_trace"``); a policy registered for
         another task is refused.
+    :param backend: where the work units run (:class:`execution.Backend`: this process, a
+        pool, Ray); the results are the same whichever.
+    :param chunk: seeds per work unit (default :func:`chunk_size` for the backend's slots); a
+        resumed run passes the chunking it started with, so its unit indices still match.
+    :param done: results of units already run, by unit index (:func:`work_units`' order): a
+        resumed run skips them.
+    :param on_unit: called with (unit index, its episodes) as each unit finishes.
     :returns: the episodes (or their reductions) in grid order: policy, scenario, seed.
     :raises ValueError: for an unknown policy or scenario, an empty or too large grid, a
         non-integer seed, or workers < 1, before any episode runs.
     """
     _check_grid(policies, scenarios, seeds, task)
     total = len(policies) * len(scenarios) * len(seeds)
-    if workers is None:
-        workers = auto_workers(total)
-    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
-        raise ValueError(f"workers={workers!r} is out of range: must be an integer >= 1")
-    tasks = _tasks(policies, scenarios, seeds, config, reduce, workers, task)
+    if backend is None:
+        if workers is None:
+            workers = auto_workers(total)
+        if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+            raise ValueError(f"workers={workers!r} is out of range: must be an integer >= 1")
+        backend = Backend("local", workers=workers)
+    if chunk is None:
+        chunk = chunk_size(len(seeds), backend.slots())
+    units = work_units(policies, scenarios, seeds, config, reduce, chunk, task)
     from tqdm import tqdm
 
     bar = tqdm(total=total, desc="episodes", unit="ep", disable=None if progress else True)
-    results: list[Any] = []
+    bar.update(sum(len(units[i][2]) for i in (done or {})))
+
+    def finished(i: int, chunk: list[Any]) -> None:
+        bar.update(len(chunk))
+        if on_unit is not None:
+            on_unit(i, chunk)
+
     try:
-        if workers == 1:
-            for task in tasks:
-                results.extend(_run_task(task))
-                bar.update(len(task[2]))
-            return results
-        # spawn, not fork: a forked child of a process with live threads (tqdm's monitor, BLAS
-        # pools) can deadlock; spawned workers load the cached kernels in about 2 s.
-        with ProcessPoolExecutor(workers, mp_context=get_context("spawn")) as pool:
-            for chunk in pool.map(_run_task, tasks):
-                results.extend(chunk)
-                bar.update(len(chunk))
-            return results
+        chunks = execute(_run_task, units, backend, done=done, on_result=finished)
     finally:
         bar.close()
+    return [result for chunk in chunks for result in chunk]
 
 
 def _check_grid(
@@ -518,23 +530,31 @@ def _check_grid(
             raise ValueError(f"seed={seed!r} is out of range: must be an integer >= 0")
 
 
-def _tasks(
+def chunk_size(seeds: int, slots: int) -> int:
+    """Seeds per work unit for ``seeds`` seeds on ``slots`` slots (pool workers, Ray CPUs): at
+    most :data:`BATCH_LANES`, and small enough that every slot gets about two units. The
+    episodes do not depend on it (lane ``i`` of a batch is the single env seeded ``s_i``)."""
+    if slots <= 1:
+        return BATCH_LANES
+    return max(1, min(BATCH_LANES, math.ceil(seeds / (2 * slots))))
+
+
+def work_units(
     policies: Sequence[PolicySpec],
     scenarios: Sequence[str],
     seeds: Sequence[int],
     config: EnvConfigSpec,
     reduce: Reducer | None,
-    workers: int,
+    size: int,
     task: str = DEFAULT_TASK,
-) -> Iterator[_Work]:
-    """The work units in grid order, made as they are taken: (policy, scenario, a chunk of at
-    most :data:`BATCH_LANES` seeds, config, reducer, task). With a pool the chunks are smaller, so
-    that every worker gets several."""
-    size = BATCH_LANES
-    if workers > 1:
-        size = max(1, min(BATCH_LANES, math.ceil(len(seeds) / (2 * workers))))
-    for p in policies:
-        for s in scenarios:
-            for start in range(0, len(seeds), size):
-                chunk = tuple(int(x) for x in seeds[start : start + size])
-                yield p, s, chunk, config, reduce, task
+) -> list[_Work]:
+    """The work units in grid order: (policy, scenario, a chunk of at most ``size`` seeds,
+    config, reducer, task)."""
+    if isinstance(size, bool) or not isinstance(size, int) or size < 1:
+        raise ValueError(f"chunk={size!r} is out of range: must be an integer >= 1")
+    return [
+        (p, s, tuple(int(x) for x in seeds[start : start + size]), config, reduce, task)
+        for p in policies
+        for s in scenarios
+        for start in range(0, len(seeds), size)
+    ]

@@ -24,3 +24,16 @@ def _quiet_action_space_advice() -> None:
     # Gymnasium and SB3 advise a [-1, 1] action space; ours is SI by design (see README).
     warnings.filterwarnings("ignore", message=".*symmetric and normalized.*")
     warnings.filterwarnings("ignore", message=".*normalized.*action space.*")
+
+
+@pytest.fixture(scope="session")
+def local_ray():
+    """A local Ray with 2 CPUs, started once for the session (about 5 s) and shut down after.
+
+    :mod:`execution` uses the running instance instead of starting its own.
+    """
+    ray = pytest.importorskip("ray", reason="Ray is a dev dependency: pip install -e '.[dev]'")
+    os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
+    ray.init(address="local", num_cpus=2, include_dashboard=False, logging_level="warning")
+    yield ray
+    ray.shutdown()

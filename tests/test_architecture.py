@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-PACKAGES = ("follow_env", "policies", "train", "eval", "bench", "bridge")
+PACKAGES = ("execution", "follow_env", "policies", "train", "eval", "bench", "bridge")
 # follow_env's layers, lowest first: a module may import its own layer and the ones below.
 # experiments (reproductions of the sources' hardware experiments) may use every layer.
 LAYERS = ("sim", "world", "platforms", "sensors", "tasks", "experiments")
@@ -143,6 +143,15 @@ def test_follow_env_imports_no_policy_training_evaluation_or_bridge() -> None:
     for module, targets in GRAPH.items():
         if module.startswith("follow_env"):
             bad = {t for t in targets if t.split(".")[0] in ("policies", "train", "eval", "bridge")}
+            assert not bad, f"{module} imports {bad}"
+
+
+def test_the_execution_layer_imports_nothing_of_the_project() -> None:
+    # Evaluation, tuning and training all place their work through it: it knows none of them.
+    ours = set(PACKAGES) - {"execution"}
+    for module, targets in GRAPH.items():
+        if module.startswith("execution"):
+            bad = {t for t in targets if t.split(".")[0] in ours}
             assert not bad, f"{module} imports {bad}"
 
 

@@ -1,0 +1,80 @@
+"""What every ``follow-eval`` command shares: its name, limits, one-line errors and the
+parsers of its option values."""
+
+from __future__ import annotations
+
+import argparse
+from typing import Any, NoReturn
+
+from follow_env.tasks.person_follow.config import config_from_text
+
+__all__ = ["MAX_EPISODES", "MAX_SEED", "PROG", "USAGE_ERROR", "UsageError"]
+
+PROG = "follow-eval"
+USAGE_ERROR = 2
+#: The most episodes one ``follow-eval run`` takes (policies x scenarios x episodes). A run holds
+#: every episode's step log in memory until its tables are written (50-200 kB an episode,
+#: measured: 135-450 rows of 41 columns) and writes one CSV of 40-140 kB per episode, so 50,000
+#: episodes can take 10 GB of memory and 7 GB of disk. Larger searches use ``eval.rollout``
+#: with a ``reduce`` function, as ``eval.tune`` does.
+MAX_EPISODES = 50_000
+#: The largest seed the env accepts: ``reset(seed=s)`` takes 0 <= s < 2**256 (follow_env seeds
+#: numpy's SeedSequence with up to eight 32-bit words; a test pins this).
+MAX_SEED = 2**256 - 1
+
+
+class UsageError(Exception):
+    """Bad arguments or input: reported as one line, exit status 2."""
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse that reports errors as one line (no usage dump), exit status 2."""
+
+    def error(self, message: str) -> NoReturn:
+        raise UsageError(message)
+
+
+def _config(text: str, read: Any = config_from_text) -> str | dict[str, Any]:
+    """``--config``: a preset name, a JSON object of section overrides, or a file of one (read
+    by the task's ``config_from_text``, PersonFollow's unless told)."""
+    try:
+        return read(text)  # type: ignore[no-any-return]
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def _names(text: str, what: str) -> list[str]:
+    names = [n.strip() for n in text.split(",") if n.strip()]
+    if not names:
+        raise UsageError(f"--{what} is empty: give a comma-separated list of names")
+    return list(dict.fromkeys(names))  # drop repeats, keep order
+
+
+def _workers(text: str) -> int | None:
+    if text == "auto":
+        return None
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not 'auto' or an integer >= 1") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"{value} is out of range: must be 'auto' or >= 1")
+    return value
+
+
+def _integer(text: str, low: int) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+    if value < low:
+        raise argparse.ArgumentTypeError(f"{value} is out of range: must be >= {low}")
+    return value
+
+
+def _non_negative(text: str) -> int:
+    return _integer(text, 0)
+
+
+def _positive(text: str) -> int:
+    return _integer(text, 1)

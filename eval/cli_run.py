@@ -1,0 +1,265 @@
+"""``follow-eval run``: the identical-rollout comparison on a backend, resumable (see
+:mod:`eval.cli`)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import sys
+import time
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+from eval.atomic import atomic_folder, atomic_write_text, check_new_folder
+from eval.cli_base import MAX_EPISODES, MAX_SEED, PROG, UsageError, _config, _names
+from eval.steplog import write_step_log
+from execution import Backend, backend_from_args
+
+__all__ = ["cmd_run"]
+
+
+def _plural(n: int, one: str, many: str) -> str:
+    return one if n == 1 else many
+
+
+def _check_grid(n_policies: int, n_scenarios: int, episodes: int, seed: int) -> None:
+    """Refuse a grid larger than :data:`MAX_EPISODES` or seeds beyond :data:`MAX_SEED`."""
+    total = n_policies * n_scenarios * episodes
+    if total > MAX_EPISODES:
+        raise UsageError(
+            f"--episodes {episodes:,}: {n_policies} {_plural(n_policies, 'policy', 'policies')} "
+            f"x {n_scenarios} {_plural(n_scenarios, 'scenario', 'scenarios')} x "
+            f"{episodes:,} episodes = {total:,} episodes is out of range: a run takes at most "
+            f"{MAX_EPISODES:,} episodes (every step log is held in memory and written to disk)"
+        )
+    if seed + episodes - 1 > MAX_SEED:
+        raise UsageError(
+            f"--seed {seed} with --episodes {episodes:,} is out of range: the seeds "
+            f"seed .. seed + episodes - 1 must stay within 0 .. 2**256 - 1 (the env's seeds)"
+        )
+
+
+def _check_run_args(args: argparse.Namespace) -> tuple[list[str], list[str]]:
+    """The run's policies and variants (scenarios, tracks), checked; sets ``args.config`` to
+    the task's configuration read from its text and ``args.eval_task`` to the task."""
+    from eval.rollout import policy_spec
+    from eval.tasks import eval_task
+    from follow_env.platforms import get_platform
+    from policies import available_policies, for_platform, make_policy
+
+    try:
+        task = eval_task(args.task)
+    except ValueError as e:
+        raise UsageError(f"--task: {e}") from None
+    args.eval_task = task
+    other = "tracks" if task.variant == "scenario" else "scenarios"
+    if getattr(args, other) is not None:
+        raise UsageError(
+            f"--{other} is not an option of the {task.name} task: give --{task.variants_option}"
+        )
+    try:
+        args.config = _config(
+            task.default_config if args.config is None else args.config, task.config_from_text
+        )
+    except argparse.ArgumentTypeError as e:
+        raise UsageError(f"argument --config: {e}") from None
+    policies = _names(args.policies or task.default_policies, "policies")
+    if args.platforms is not None:
+        platforms = _names(args.platforms, "platforms")
+        for name in platforms:
+            try:
+                get_platform(name)
+            except ValueError as e:
+                raise UsageError(f"--platforms: {e}") from None
+        if any("@" in p for p in policies):
+            raise UsageError("--policies names a platform (policy@platform): leave out --platforms")
+        policies = [f"{p}@{m}" for p in policies for m in platforms]
+    given = getattr(args, task.variants_option)
+    scenarios = _names(given or task.default_variants, task.variants_option)
+    # Size first: it needs only the counts, and loading a policy is already work.
+    _check_grid(len(policies), len(scenarios), args.episodes, args.seed)
+    registered, for_task = set(available_policies()), set(available_policies(task.name))
+    for name in policies:
+        try:
+            spec, platform = policy_spec(name)
+            if spec in registered and spec not in for_task:
+                raise ValueError(
+                    f"policy {spec!r} is not for the {task.name} task; its policies: "
+                    + ", ".join(sorted(for_task))
+                )
+            law = make_policy(spec)  # type: ignore[arg-type]
+            if platform is not None:
+                for_platform(law, tuple(a.name for a in get_platform(platform).actions))
+        except (ValueError, TypeError) as e:
+            raise UsageError(f"--policies: {e}") from None
+    from follow_env.tasks import get_task
+
+    known_variants = get_task(task.name).variants()
+    for name in scenarios:
+        if name not in known_variants:
+            known = ", ".join(sorted(known_variants))
+            raise UsageError(
+                f"--{task.variants_option}: unknown {task.variant} {name!r}; known "
+                f"{task.variants_option}: {known}"
+            )
+    seeds = range(args.seed, args.seed + args.episodes)
+    if args.plot_seed is not None and args.plot_seed not in seeds:
+        raise UsageError(
+            f"--plot-seed {args.plot_seed} is out of range: must be one of the run's seeds "
+            f"{seeds.start}..{seeds.stop - 1}"
+        )
+    return policies, scenarios
+
+
+def _versions() -> dict[str, str]:
+    from importlib.metadata import PackageNotFoundError, version
+
+    out = {"python": platform.python_version()}
+    for package in ("personfollow", "gymnasium", "numpy", "numba", "scipy", "pandas"):
+        try:
+            out[package] = version(package)
+        except PackageNotFoundError:
+            out[package] = "not installed"
+    return out
+
+
+def _backend(args: argparse.Namespace, n_episodes: int) -> Backend:
+    """The run's execution backend from --backend, --workers and --address."""
+    from eval.rollout import auto_workers
+
+    if args.address is not None and args.backend != "ray":
+        raise UsageError("--address is for --backend ray")
+    workers = args.workers
+    if args.backend == "local" and workers is None:
+        workers = auto_workers(n_episodes)
+    return backend_from_args(args.backend, workers=workers, address=args.address)
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    """``follow-eval run``: see the module docstring."""
+    from eval.journal import UnitJournal, journal_folder
+    from eval.report import markdown_report, safe_name, write_tables, write_video
+    from eval.rollout import chunk_size, rollout
+    from eval.stats import compare, episode_table, summarize
+
+    policies, scenarios = _check_run_args(args)
+    task = args.eval_task
+    seeds = list(range(args.seed, args.seed + args.episodes))
+    plot_seed = args.seed if args.plot_seed is None else args.plot_seed
+    out: Path = args.out or Path("runs") / f"eval-{datetime.now():%Y%m%d-%H%M%S}"
+    n_episodes = len(policies) * len(scenarios) * len(seeds)
+    check_new_folder(out)
+    backend = _backend(args, n_episodes)
+    started = time.perf_counter()
+    run = {"task": task.name, "policies": policies, task.variants_option: scenarios}
+    run |= {"seeds": [seeds[0], seeds[-1]], "config": args.config}
+    folder = journal_folder(out)
+    chunk = _journal_chunk(folder) or chunk_size(len(seeds), backend.slots())
+    journal = UnitJournal(folder, run | {"chunk": chunk})
+    done = journal.load()
+    if done:
+        print(f"{PROG}: resuming: {len(done)} work units already done in {folder}", file=sys.stderr)
+    try:
+        episodes = rollout(
+            policies,
+            scenarios,
+            seeds,
+            config=args.config,
+            backend=backend,
+            progress=True,
+            task=task.name,
+            chunk=chunk,
+            done=done,
+            on_unit=journal.put,
+        )
+    except KeyboardInterrupt:
+        kept = len(list(folder.glob("unit-*.pkl")))
+        print(
+            f"{PROG}: interrupted; {out} was not written. {kept} finished work units are kept "
+            f"in {folder}: run the same command again to resume",
+            file=sys.stderr,
+        )
+        return 130
+    with atomic_folder(out) as tmp:
+        for ep in episodes:
+            folder = tmp / "logs" / safe_name(ep.policy) / safe_name(ep.scenario)
+            folder.mkdir(parents=True, exist_ok=True)
+            write_step_log(ep.log, folder / f"seed_{ep.seed}.csv")
+        table = episode_table(episodes, metrics=task.metrics, variant=task.variant)
+        # The bootstrap's default seed, as in `follow-eval metrics`: the same episodes give the
+        # same intervals whichever command scores them.
+        summary = summarize(table, metrics=list(task.metrics))
+        comparisons = compare(table, metrics=list(task.metrics))
+        (tmp / "plots").mkdir()
+        task.plots(summary, episodes, plot_seed, tmp / "plots", args.config)
+        if args.video:
+            (tmp / "videos").mkdir()
+            for policy in dict.fromkeys(ep.policy for ep in episodes):
+                for scenario in scenarios:
+                    name = f"{safe_name(policy)}_{safe_name(scenario)}_seed{plot_seed}.mp4"
+                    write_video(
+                        policy,
+                        scenario,
+                        plot_seed,
+                        tmp / "videos" / name,
+                        config=args.config,
+                        fps=task.fps,
+                        task=task.name,
+                    )
+        elapsed = time.perf_counter() - started
+        meta: dict[str, Any] = {
+            "command": " ".join([PROG, *sys.argv[1:]]),
+            "finished_utc": datetime.now(UTC).isoformat(timespec="seconds"),
+            "elapsed_s": round(elapsed, 2),
+            "policies": {name: repr(getattr(p, "params", p)) for name, p in _built(policies)},
+            "task": task.name,
+            task.variants_option: scenarios,
+            "seeds": seeds,
+            "config": args.config,
+            "backend": {"kind": backend.kind, "workers": backend.workers, "chunk": chunk},
+            "plot_seed": plot_seed,
+            "versions": _versions(),
+        }
+        write_tables(tmp, summary, table, comparisons, meta, tables=task.tables)
+        atomic_write_text(tmp / "meta.json", json.dumps(meta, indent=2) + "\n")
+    journal.remove()
+    print(markdown_report(summary, comparisons, tables=task.tables))
+    plots = ", ".join(sorted(p.name for p in (out / "plots").iterdir()))
+    print(
+        f"{n_episodes} episodes in {elapsed:.1f} s ({_where(backend)}). Wrote {out}/: "
+        "summary.csv|md|json|tex, "
+        f"comparisons.csv, episodes.csv, logs/, plots/ ({plots})"
+        + (", videos/" if args.video else "")
+    )
+    return 0
+
+
+def _journal_chunk(folder: Path) -> int | None:
+    """The chunking an interrupted run started with (its journal's), so its units still match."""
+    try:
+        chunk = json.loads((folder / "run.json").read_text(encoding="utf-8")).get("chunk")
+    except (OSError, ValueError, AttributeError):
+        return None  # no journal, or one UnitJournal will refuse with a message
+    return chunk if isinstance(chunk, int) and chunk >= 1 else None
+
+
+def _where(backend: Backend) -> str:
+    if backend.kind == "ray":
+        return f"Ray, {backend.slots()} slots"
+    n = backend.workers or 1
+    return f"{n} process" + ("es" if n > 1 else "")
+
+
+def _built(policies: list[str]) -> list[tuple[str, Any]]:
+    """``(episode label, policy)`` of every policy spec (``pn@mecanum`` included)."""
+    from eval.rollout import policy_spec
+    from policies import make_policy
+
+    out = []
+    for name in policies:
+        spec, platform = policy_spec(name)
+        law = make_policy(spec)  # type: ignore[arg-type]
+        out.append((law.name if platform is None else f"{law.name}@{platform}", law))
+    return out

@@ -1,0 +1,37 @@
+"""One execution layer for evaluation, tuning and training: work units on a backend.
+
+A *work unit* is a picklable argument for a module-level function: (policy, scenario, config,
+seed chunk) for an evaluation, (trial parameters, seed chunk) for a tuning trial, (training
+config, seed) for a training run. :func:`execute` runs ``fn(unit)`` for every unit on a
+:class:`Backend` and returns the results in the units' order, whichever finished first:
+
+- ``local``: in this process (``workers=1``) or a pool of spawned processes;
+- ``ray``: tasks on ``ray.init()``: a local Ray sized to this machine when no cluster is named,
+  ``address=`` (``--address``) or ``RAY_ADDRESS`` for a cluster. Ray is an optional extra
+  (``pip install 'personfollow[ray]'``).
+
+Every task pins its numba, torch and OpenMP threads to the CPUs it was given
+(:func:`pin_threads`), so two tasks on one machine never oversubscribe it. A worker that dies
+mid-task is retried (Ray's task retries; a rebuilt pool locally); units are pure functions of
+their arguments, so a retried unit returns exactly what the first attempt would have.
+
+This package imports nothing else of the project: every layer above may use it.
+"""
+
+from execution.backend import (
+    BACKENDS,
+    Backend,
+    BackendUnavailableError,
+    backend_from_args,
+    execute,
+    pin_threads,
+)
+
+__all__ = [
+    "BACKENDS",
+    "Backend",
+    "BackendUnavailableError",
+    "backend_from_args",
+    "execute",
+    "pin_threads",
+]

@@ -1,0 +1,170 @@
+"""The execution layer: every backend returns the units' results in order, the same ones."""
+
+from __future__ import annotations
+
+import multiprocessing
+import operator
+import os
+import signal
+import sys
+from pathlib import Path
+
+import pytest
+
+from execution import Backend, BackendUnavailableError, backend_from_args, execute, pin_threads
+from execution.backend import WorkerLostError
+
+UNITS = list(range(12))
+EXPECTED = [operator.neg(u) for u in UNITS]
+
+
+@pytest.mark.parametrize(
+    ("field", "value"),
+    [
+        ("kind", "slurm"),
+        ("workers", 0),
+        ("workers", 1.5),
+        ("cpus_per_task", 0),
+        ("max_retries", -1),
+    ],
+)
+def test_a_bad_backend_field_is_refused_by_name(field: str, value: object) -> None:
+    with pytest.raises(ValueError, match=field if field != "kind" else "backend"):
+        Backend(**{field: value})
+
+
+def test_an_address_is_only_for_ray() -> None:
+    with pytest.raises(ValueError, match="address"):
+        Backend("local", address="127.0.0.1:6379")
+
+
+def test_in_process_results_come_in_unit_order() -> None:
+    assert execute(operator.neg, UNITS) == EXPECTED
+
+
+def test_a_pool_returns_the_same_results_in_unit_order() -> None:
+    seen: list[int] = []
+    got = execute(
+        operator.neg, UNITS, Backend("local", workers=2), on_result=lambda i, r: seen.append(i)
+    )
+    assert got == EXPECTED
+    assert sorted(seen) == list(range(len(UNITS)))
+
+
+def test_done_units_are_not_run_again() -> None:
+    ran: list[int] = []
+    done = {0: "kept", 5: "kept"}
+    got = execute(operator.neg, UNITS, done=done, on_result=lambda i, r: ran.append(i))
+    assert got[0] == got[5] == "kept"
+    assert got[1] == -1
+    assert set(ran) == set(range(len(UNITS))) - {0, 5}
+
+
+def test_a_units_own_error_reaches_the_caller_unchanged() -> None:
+    with pytest.raises(TypeError, match="bad operand"):
+        execute(operator.neg, [1, "x"], Backend("local", workers=2))
+
+
+def test_a_pool_worker_killed_mid_run_is_replaced_and_the_results_are_unchanged() -> None:
+    killed: list[int] = []
+
+    def kill_a_worker(i: int, result: int) -> None:
+        if not killed:  # after the first unit: the other worker is busy or about to be
+            victim = multiprocessing.active_children()[0]
+            os.kill(victim.pid, signal.SIGKILL)
+            killed.append(victim.pid)
+
+    units = list(range(40))
+    got = execute(
+        _slow_neg, units, Backend("local", workers=2, max_retries=2), on_result=kill_a_worker
+    )
+    assert killed
+    assert got == [-u for u in units]
+
+
+def test_workers_that_keep_dying_give_up_after_the_retries() -> None:
+    with pytest.raises(WorkerLostError, match="max_retries=1"):
+        execute(os._exit, [3, 3], Backend("local", workers=2, max_retries=1))
+
+
+def test_a_pool_worker_pins_its_threads_to_its_cpus() -> None:
+    got = execute(_thread_counts, [0, 1], Backend("local", workers=2, cpus_per_task=1))
+    assert got == [(1, 1, "1"), (1, 1, "1")]
+
+
+def test_pinning_limits_numba_and_torch_in_this_process() -> None:
+    import numba
+    import torch
+
+    before = (numba.get_num_threads(), torch.get_num_threads(), os.environ.get("OMP_NUM_THREADS"))
+    try:
+        pin_threads(1)
+        assert (numba.get_num_threads(), torch.get_num_threads()) == (1, 1)
+    finally:
+        numba.set_num_threads(before[0])
+        torch.set_num_threads(before[1])
+        if before[2] is None:
+            os.environ.pop("OMP_NUM_THREADS", None)
+        else:
+            os.environ["OMP_NUM_THREADS"] = before[2]
+
+
+def test_ray_without_ray_installed_says_how_to_install_it(monkeypatch) -> None:
+    monkeypatch.setitem(sys.modules, "ray", None)  # import ray now raises ImportError
+    with pytest.raises(BackendUnavailableError, match=r"pip install 'personfollow\[ray\]'"):
+        backend_from_args("ray")
+
+
+@pytest.mark.slow
+def test_ray_returns_what_the_local_backend_returns(local_ray) -> None:
+    assert execute(operator.neg, UNITS, Backend("ray")) == EXPECTED
+    with pytest.raises(TypeError, match="bad operand"):
+        execute(operator.neg, [1, "x"], Backend("ray"))
+    assert Backend("ray").slots() == 2  # the session's Ray has 2 CPUs
+
+
+@pytest.mark.slow
+def test_ray_retries_a_unit_whose_worker_was_killed(local_ray) -> None:
+    killed = []
+
+    def kill_a_busy_worker(i: int, result: int) -> None:
+        if not killed:
+            pids = _busy_ray_workers()
+            if pids:
+                os.kill(pids[0], signal.SIGKILL)
+                killed.append(pids[0])
+
+    units = list(range(40))
+    got = execute(_slow_neg, units, Backend("ray", max_retries=3), on_result=kill_a_busy_worker)
+    assert killed, "no Ray worker was seen running a unit"
+    assert got == [-u for u in units]
+
+
+def _busy_ray_workers() -> list[int]:
+    """Ray worker processes running a unit now (Ray titles them ``ray::<task>``)."""
+    pids = []
+    for proc in Path("/proc").iterdir():
+        try:
+            title = (proc / "cmdline").read_bytes().split(b"\0")[0]
+        except OSError:
+            continue
+        if title.startswith(b"ray::_call"):
+            pids.append(int(proc.name))
+    return pids
+
+
+# Unit functions must be importable by a worker: library functions, or these from this module,
+# which pytest imports as tests.execution.test_backend from the project's root (a spawned pool
+# worker and a local Ray worker import it by that name from the same folder).
+def _slow_neg(x: int) -> int:
+    import time
+
+    time.sleep(0.05)
+    return -x
+
+
+def _thread_counts(_: int) -> tuple[int, int, str | None]:
+    import numba
+    import torch
+
+    return numba.get_num_threads(), torch.get_num_threads(), os.environ.get("OMP_NUM_THREADS")
