@@ -29,7 +29,10 @@ browser:
 	  apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium >/dev/null; } || \
 	echo "note: no chromium and no root apt-get here: the monitor's browser test will be skipped"
 
+# The simulation kernels compile once per source version, one to two minutes each: compiled
+# here side by side, one per core, instead of one after another inside the tests.
 test: $(STAMP) browser
+	$(BIN)/python -m follow_env.tasks.warm
 	$(BIN)/python -m pytest
 
 bench: $(STAMP)

@@ -163,6 +163,13 @@ def bench_robot(quick: bool) -> list[tuple[str, float, str]]:
     return bench_runner(quick) + bench_monitor(quick)
 
 
+def bench_scale_out(quick: bool) -> list[tuple[str, float, str]]:
+    """Evaluation throughput in this process, on a pool and on a local Ray (bench.scale)."""
+    from bench.scale import bench_scale
+
+    return bench_scale(quick)
+
+
 BENCHMARKS: dict[str, Callable[[bool], list[tuple[str, float, str]]]] = {
     "single env (steps/s)": bench_single_env,
     "vector env (env-steps/s)": bench_vector_env,
@@ -170,6 +177,7 @@ BENCHMARKS: dict[str, Callable[[bool], list[tuple[str, float, str]]]] = {
     "memory (bytes)": bench_memory,
     "serial link": bench_serial_link,
     "robot: runner and monitor (ms)": bench_robot,
+    "scale-out: evaluation (episodes/s)": bench_scale_out,
 }
 
 

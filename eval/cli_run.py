@@ -156,7 +156,9 @@ def cmd_run(args: argparse.Namespace) -> int:
     run = {"task": task.name, "policies": policies, task.variants_option: scenarios}
     run |= {"seeds": [seeds[0], seeds[-1]], "config": args.config}
     folder = journal_folder(out)
-    chunk = _journal_chunk(folder) or chunk_size(len(seeds), backend.slots())
+    chunk = _journal_chunk(folder) or chunk_size(
+        len(seeds), backend.slots(), len(policies) * len(scenarios)
+    )
     journal = UnitJournal(folder, run | {"chunk": chunk})
     done = journal.load()
     if done:

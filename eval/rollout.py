@@ -464,7 +464,7 @@ def rollout(
             raise ValueError(f"workers={workers!r} is out of range: must be an integer >= 1")
         backend = Backend("local", workers=workers)
     if chunk is None:
-        chunk = chunk_size(len(seeds), backend.slots())
+        chunk = chunk_size(len(seeds), backend.slots(), len(policies) * len(scenarios))
     units = work_units(policies, scenarios, seeds, config, reduce, chunk, task)
     from tqdm import tqdm
 
@@ -530,13 +530,13 @@ def _check_grid(
             raise ValueError(f"seed={seed!r} is out of range: must be an integer >= 0")
 
 
-def chunk_size(seeds: int, slots: int) -> int:
-    """Seeds per work unit for ``seeds`` seeds on ``slots`` slots (pool workers, Ray CPUs): at
-    most :data:`BATCH_LANES`, and small enough that every slot gets about two units. The
-    episodes do not depend on it (lane ``i`` of a batch is the single env seeded ``s_i``)."""
-    if slots <= 1:
-        return BATCH_LANES
-    return max(1, min(BATCH_LANES, math.ceil(seeds / (2 * slots))))
+def chunk_size(seeds: int, slots: int, cells: int = 1) -> int:
+    """Seeds per work unit for ``cells`` (policy, scenario) cells of ``seeds`` seeds on ``slots``
+    slots (pool workers, Ray CPUs): as many as a batch takes (:data:`BATCH_LANES`: the lanes of
+    one batch step together, far faster than apart) while every slot still gets about two
+    units. The episodes do not depend on it (lane ``i`` of a batch is the env seeded ``s_i``)."""
+    splits = math.ceil(2 * slots / max(cells, 1)) if slots > 1 else 1
+    return max(1, min(BATCH_LANES, math.ceil(seeds / splits)))
 
 
 def work_units(

@@ -12,8 +12,10 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import NoReturn
 
+from execution import BACKENDS, Backend, BackendUnavailableError, backend_from_args
 from train.config import ConfigError
 from train.ppo import MAX_THREADS, PROG, USAGE_ERROR, Args, Interrupted, TrainingError, train
+from train.seeds import parse_seeds, train_seeds
 
 __all__ = ["build_parser", "main", "parse_args"]
 
@@ -73,11 +75,82 @@ def build_parser() -> argparse.ArgumentParser:
         "were changed: only files named like the agent's are replaced, none is deleted",
     )
     p.add_argument("--no-progress", dest="progress", action="store_false", default=None)
+    study = p.add_argument_group(
+        "several training seeds (train.seeds): one run per seed in OUT/seed-<k>, and a summary"
+    )
+    study.add_argument(
+        "--seeds",
+        help="training seeds, e.g. 0-4 or 0,3,7: seed k trains from --seed + k * 10**8; the "
+        "same command again resumes the study",
+    )
+    study.add_argument(
+        "--backend",
+        choices=BACKENDS,
+        help="with --seeds: where the runs train, local or ray (default: local)",
+    )
+    study.add_argument(
+        "--workers",
+        type=int,
+        help="with --seeds: runs at once (local default 1: one after another; ray default: the "
+        "cluster's CPUs / --threads)",
+    )
+    study.add_argument("--address", help="with --backend ray: the cluster (default: RAY_ADDRESS)")
     return p
 
 
 # Options that may accompany --resume (the rest come from the run's config.yaml).
 _RESUME_OPTIONS = {"resume", "n_timesteps", "threads", "progress", "export", "force"}
+
+
+# Options of a study (--seeds), not of one run.
+_STUDY_OPTIONS = ("seeds", "backend", "workers", "address")
+
+
+def parse_study(argv: Sequence[str] | None = None) -> tuple[Args, tuple[int, ...], Backend] | None:
+    """The study a command line asks for (``--seeds``), or None for a single run.
+
+    :raises UsageError: for a study option without --seeds, or one a study cannot take.
+    """
+    ns = build_parser().parse_args(argv)
+    given = {k: getattr(ns, k) for k in _STUDY_OPTIONS if getattr(ns, k) is not None}
+    if "seeds" not in given:
+        if given:
+            raise UsageError(", ".join(f"--{k}" for k in given) + " applies to --seeds only")
+        return None
+    for option in ("resume", "export", "force"):
+        if getattr(ns, option) is not None:
+            raise UsageError(
+                f"--{option} takes one run, not a study: run the same --seeds command again to "
+                f"resume it; export a seed's agent with follow-train --resume OUT/seed-K --export"
+            )
+    try:
+        seeds = parse_seeds(given["seeds"])
+    except ValueError as e:
+        raise UsageError(str(e)) from None
+    args = parse_args(_without_study_options(list(argv or [])))
+    kind = given.get("backend", "local")
+    workers = given.get("workers", 1 if kind == "local" else None)
+    try:
+        backend = backend_from_args(
+            kind, workers=workers, address=given.get("address"), cpus_per_task=args.threads
+        )
+    except ValueError as e:
+        raise UsageError(str(e)) from None
+    return args, seeds, backend
+
+
+def _without_study_options(argv: list[str]) -> list[str]:
+    out, skip = [], False
+    for a in argv:
+        if skip:
+            skip = False
+            continue
+        name = a.split("=", 1)[0]
+        if name in {f"--{k}" for k in _STUDY_OPTIONS}:
+            skip = "=" not in a
+            continue
+        out.append(a)
+    return out
 
 
 def parse_args(argv: Sequence[str] | None = None) -> Args:
@@ -86,7 +159,7 @@ def parse_args(argv: Sequence[str] | None = None) -> Args:
     :raises UsageError: for unknown or conflicting options.
     """
     ns = build_parser().parse_args(argv)
-    given = {k: v for k, v in vars(ns).items() if v is not None}
+    given = {k: v for k, v in vars(ns).items() if v is not None and k not in _STUDY_OPTIONS}
     if "resume" in given and set(given) - _RESUME_OPTIONS:
         extra = ", ".join("--" + k.replace("_", "-") for k in sorted(set(given) - _RESUME_OPTIONS))
         raise UsageError(
@@ -122,6 +195,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``follow-train`` and ``python -m train``; returns the exit status."""
     argv = sys.argv[1:] if argv is None else list(argv)
     try:
+        study = parse_study(argv)
+        if study is not None:
+            return _main_study(*study, command=" ".join([PROG, *argv]))
         args = parse_args(argv)
         run = train(args, command=" ".join([PROG, *argv]))
     except Interrupted as e:
@@ -133,7 +209,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except TrainingError as e:
         print(f"{PROG}: error: {e}", file=sys.stderr)
         return 1
-    except (UsageError, ConfigError, ValueError, FileNotFoundError) as e:
+    except (UsageError, ConfigError, ValueError, FileNotFoundError, BackendUnavailableError) as e:
         print(f"{PROG}: error: {e}", file=sys.stderr)
         return USAGE_ERROR
     from train.run import read_sessions
@@ -144,6 +220,26 @@ def main(argv: Sequence[str] | None = None) -> int:
         f"{last['wall_s']:.0f} s ({last['env_steps_per_s'] or 0:,} env-steps/s). Wrote {run}/: "
         + _written(run)
         + (f"; exported the agent to {args.export}/" if args.export else "")
+    )
+    return 0
+
+
+def _main_study(args: Args, seeds: tuple[int, ...], backend: Backend, command: str) -> int:
+    """``follow-train --seeds``: see :mod:`train.seeds`."""
+    from train.seeds import SEEDS_CSV, SUMMARY_MD
+
+    try:
+        study = train_seeds(args, seeds, backend, command=command)
+    except KeyboardInterrupt:
+        print(
+            f"{PROG}: interrupted; the finished seeds are kept and the interrupted ones resume "
+            "from their checkpoints: run the same command again",
+            file=sys.stderr,
+        )
+        return 130
+    print((study / SUMMARY_MD).read_text(encoding="utf-8"))
+    print(
+        f"Trained {len(seeds)} seeds. Wrote {study}/: seed-<k>/ (runs), {SEEDS_CSV}, {SUMMARY_MD}"
     )
     return 0
 

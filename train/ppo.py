@@ -47,7 +47,7 @@ from train.config import (
 )
 from train.export import AGENT_FILES, EXPORT_EXTRAS, check_export, export_agent
 
-__all__ = ["AGENT_FILES", "EXPORT_EXTRAS", "Args", "Interrupted", "train"]
+__all__ = ["AGENT_FILES", "EXPORT_EXTRAS", "Args", "Interrupted", "check_new_run", "train"]
 
 PROG = "follow-train"
 USAGE_ERROR = 2
@@ -114,12 +114,7 @@ def train(args: Args, command: str = PROG) -> Path:
         _check_options(args, run=run)
     else:
         run, saved, model_path, stats_path, start_step = None, None, None, None, 0
-        args = _with_defaults(args)
-        _check_options(args, run=None)
-        if args.n_envs is not None:  # before the file: its batch size may not fit either
-            _check_lanes(args.n_envs, args.scenarios)
-        given = {k: v for k in ("n_timesteps", "n_envs") if (v := getattr(args, k)) is not None}
-        hp = load_hyperparams(args.hyperparams, args.env_id, overrides=given)
+        args, hp = check_new_run(args)
         where = f"{args.hyperparams} [{args.env_id}]"
     _check_against_hyperparams(args, hp)
     torch.set_num_threads(args.threads)
@@ -226,6 +221,22 @@ def train(args: Args, command: str = PROG) -> Path:
         except ValueError as e:  # the folder changed during training: the run stays whole
             raise ValueError(f"{e} (training finished: the run is complete in {run})") from None
     return run
+
+
+def check_new_run(args: Args) -> tuple[Args, Hyperparams]:
+    """Check a new run's options and hyperparameters without building or writing anything.
+
+    :returns: the options with their defaults filled in, and the hyperparameters.
+    :raises ValueError: naming the option or YAML key, its value and what it may be.
+    """
+    args = _with_defaults(args)
+    _check_options(args, run=None)
+    if args.n_envs is not None:  # before the file: its batch size may not fit either
+        _check_lanes(args.n_envs, args.scenarios)
+    given = {k: v for k in ("n_timesteps", "n_envs") if (v := getattr(args, k)) is not None}
+    hp = load_hyperparams(args.hyperparams, args.env_id, overrides=given)
+    _check_against_hyperparams(args, hp)
+    return args, hp
 
 
 # -- Helpers ---------------------------------------------------------------------------------

@@ -60,14 +60,6 @@ def test_ray_writes_the_same_files_byte_for_byte(
     assert json.loads((out / "meta.json").read_text())["backend"]["kind"] == "ray"
 
 
-def test_a_pool_writes_the_same_files_byte_for_byte(
-    reference: dict[str, bytes], tmp_path: Path
-) -> None:
-    out = tmp_path / "pool"
-    assert main(["run", *GRID, "--out", str(out), "--workers", "2"]) == 0
-    assert _files(out) == reference
-
-
 @pytest.mark.slow
 def test_ctrl_c_writes_nothing_and_the_same_command_resumes(
     reference: dict[str, bytes], tmp_path: Path, capsys: pytest.CaptureFixture

@@ -42,13 +42,18 @@ def test_in_process_results_come_in_unit_order() -> None:
     assert execute(operator.neg, UNITS) == EXPECTED
 
 
-def test_a_pool_returns_the_same_results_in_unit_order() -> None:
+def test_a_pool_returns_the_same_results_in_unit_order_from_pinned_workers() -> None:
     seen: list[int] = []
     got = execute(
-        operator.neg, UNITS, Backend("local", workers=2), on_result=lambda i, r: seen.append(i)
+        _neg_and_threads,
+        UNITS,
+        Backend("local", workers=2, cpus_per_task=1),
+        on_result=lambda i, r: seen.append(i),
     )
-    assert got == EXPECTED
+    assert [r[0] for r in got] == EXPECTED
     assert sorted(seen) == list(range(len(UNITS)))
+    # numba's and torch's threads and OpenMP's, in the worker: the CPUs it was given
+    assert {r[1:] for r in got} == {(1, 1, "1")}
 
 
 def test_done_units_are_not_run_again() -> None:
@@ -85,11 +90,6 @@ def test_a_pool_worker_killed_mid_run_is_replaced_and_the_results_are_unchanged(
 def test_workers_that_keep_dying_give_up_after_the_retries() -> None:
     with pytest.raises(WorkerLostError, match="max_retries=1"):
         execute(os._exit, [3, 3], Backend("local", workers=2, max_retries=1))
-
-
-def test_a_pool_worker_pins_its_threads_to_its_cpus() -> None:
-    got = execute(_thread_counts, [0, 1], Backend("local", workers=2, cpus_per_task=1))
-    assert got == [(1, 1, "1"), (1, 1, "1")]
 
 
 def test_pinning_limits_numba_and_torch_in_this_process() -> None:
@@ -163,8 +163,9 @@ def _slow_neg(x: int) -> int:
     return -x
 
 
-def _thread_counts(_: int) -> tuple[int, int, str | None]:
+def _neg_and_threads(x: int) -> tuple[int, int, int, str | None]:
     import numba
     import torch
 
-    return numba.get_num_threads(), torch.get_num_threads(), os.environ.get("OMP_NUM_THREADS")
+    threads = numba.get_num_threads(), torch.get_num_threads(), os.environ.get("OMP_NUM_THREADS")
+    return (-x, *threads)

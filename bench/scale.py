@@ -1,0 +1,76 @@
+"""Scale-out's rows in ``make bench``: evaluation throughput on each backend, in this process.
+
+The grid is the issue's: 4 policies (pn, mpn, gsmpn, ppo) x every scenario x 100 seeds, each
+episode reduced to its summed reward in the process that ran it (as a tuning search does), so
+the figure is the backends' and not the step logs'. Each rate is set against the same grid run
+in this process just before (``(l)``), and Ray's start-up is reported on its own: a command that
+starts a local Ray pays it once. The scheduling overhead per task is the wall time per unit of
+``execute`` over units that do nothing, on a pool and on Ray.
+"""
+
+from __future__ import annotations
+
+import operator
+import time
+
+from eval.rollout import Episode, rollout
+from execution import Backend, execute
+
+__all__ = ["bench_scale"]
+
+POLICIES = ("pn", "mpn", "gsmpn", "ppo")
+#: Seeds per (policy, scenario), full and quick.
+SEEDS = {False: 100, True: 10}
+#: Units of the overhead measurement, full and quick.
+EMPTY_UNITS = {False: 2000, True: 200}
+
+
+def episode_reward(episode: Episode) -> float:
+    """An episode's summed reward (the reducer run where the episode ran)."""
+    return float(episode.log["reward"].sum())
+
+
+def _grid_rate(backend: Backend, seeds: int) -> tuple[float, list[float]]:
+    from follow_env.tasks import get_task
+
+    scenarios = get_task("person_follow").variants()
+    started = time.perf_counter()
+    got = rollout(list(POLICIES), scenarios, range(seeds), backend=backend, reduce=episode_reward)
+    return len(got) / (time.perf_counter() - started), got
+
+
+def _overhead_ms(backend: Backend, units: int) -> float:
+    started = time.perf_counter()
+    execute(operator.neg, range(units), backend)
+    return 1000.0 * (time.perf_counter() - started) / units
+
+
+def bench_scale(quick: bool) -> list[tuple[str, float, str]]:
+    """Episodes/s of the grid in this process, on a 2-process pool and on a local Ray (its
+    start-up apart), and the milliseconds of scheduling per unit; the results must agree."""
+    try:
+        import ray
+    except ImportError:
+        return [("scale-out", float("nan"), "Ray not installed: pip install -e '.[ray]'")]
+    seeds = SEEDS[quick]
+    here, base = _grid_rate(Backend("local", workers=1), seeds)
+    pool, on_pool = _grid_rate(Backend("local", workers=2), seeds)
+    started = time.perf_counter()
+    Backend("ray").slots()  # starts a local Ray with this machine's CPUs
+    startup = time.perf_counter() - started
+    on_ray_rate, on_ray = _grid_rate(Backend("ray"), seeds)
+    if not base == on_pool == on_ray:
+        raise AssertionError("the backends gave different episodes for the same grid")
+    n = len(base)
+    rows = [
+        (f"(l) {n} episodes, this process", here, "1.00x (l)"),
+        (f"{n} episodes, pool of 2", pool, f"{pool / here:.2f}x (l)"),
+        (f"{n} episodes, local Ray", on_ray_rate, f"{on_ray_rate / here:.2f}x (l)"),
+        ("local Ray start-up (s)", startup, "once per command"),
+    ]
+    units = EMPTY_UNITS[quick]
+    pool_ms = _overhead_ms(Backend("local", workers=2), units)
+    rows.append(("pool, per empty unit (ms)", pool_ms, "its 2 s start included"))
+    rows.append(("Ray, per empty unit (ms)", _overhead_ms(Backend("ray"), units), ""))
+    ray.shutdown()
+    return rows

@@ -1,0 +1,126 @@
+"""train/seeds.py: ``follow-train --seeds``, one run per training seed and a summary."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import pandas as pd
+import pytest
+import yaml
+
+from train.cli import main
+from train.seeds import SEED_STRIDE, parse_seeds
+
+TINY = [
+    "--scenarios", "straight",
+    "--n-envs", "4",
+    "--n-timesteps", "600",
+    "--eval-freq", "300",
+    "--checkpoint-freq", "300",
+    "--eval-episodes", "2",
+    "--final-episodes", "0",
+    "--no-progress",
+]  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    ("text", "seeds"),
+    [("0-4", (0, 1, 2, 3, 4)), ("3", (3,)), ("0,2,7", (0, 2, 7)), ("0-1,5", (0, 1, 5))],
+)
+def test_seeds_are_read_as_lists_and_ranges(text: str, seeds: tuple[int, ...]) -> None:
+    assert parse_seeds(text) == seeds
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--seeds", "4-2"], "counts down"),
+        (["--seeds", "1,1"], "names a seed twice"),
+        (["--seeds", "0-99"], "training seeds are 0..40"),
+        (["--seeds", "x"], "is not a seed or a range"),
+        (["--workers", "2"], "--workers applies to --seeds only"),
+        (["--seeds", "0-1", "--resume", "runs/x"], "--resume takes one run, not a study"),
+        (["--seeds", "0-1", "--workers", "0"], "workers=0 is out of range"),
+    ],
+)
+def test_bad_study_options_give_one_line_and_status_2(
+    argv: list[str], message: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main([*argv, "--out", str(tmp_path / "study")]) == 2
+    err = capsys.readouterr().err
+    assert message in err
+    assert err.count("\n") == 1
+    assert not (tmp_path / "study").exists()
+
+
+@pytest.fixture(scope="module")
+def study(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("seeds") / "study"
+    assert main([*TINY, "--seeds", "0-1", "--out", str(out)]) == 0
+    # as first trained (a later test resumes seed 1, which changes its agent)
+    shutil.copy(out / "seeds.csv", out.parent / "first-seeds.csv")
+    return out
+
+
+def test_each_seed_is_a_run_of_its_own_seeds(study: Path) -> None:
+    seeds = [yaml.safe_load((study / f"seed-{k}" / "config.yaml").read_text()) for k in (0, 1)]
+    assert [s["args"]["seed"] for s in seeds] == [10_000, 10_000 + SEED_STRIDE]
+    # judged on the same held-out episodes
+    assert seeds[0]["args"]["eval_seed"] == seeds[1]["args"]["eval_seed"]
+    for k in (0, 1):
+        assert (study / f"seed-{k}" / "model.zip").is_file()
+
+
+def test_the_summary_has_a_row_per_seed_and_the_statistics_across(study: Path) -> None:
+    rows = pd.read_csv(study / "seeds.csv")
+    assert rows["seed"].tolist() == [0, 1]
+    assert rows["env_steps"].tolist() == [768, 768]  # 600 rounded up to whole rollouts of 256
+    assert rows["heldout_return"].notna().all()
+    summary = json.loads((study / "summary.json").read_text())
+    assert summary["seeds"] == 2
+    assert summary["heldout_return_mean"] == pytest.approx(rows["heldout_return"].mean(), abs=1e-3)
+    assert "IQM" in (study / "summary.md").read_text()
+
+
+def test_the_same_command_skips_finished_seeds_and_more_seeds_extend_the_study(study: Path) -> None:
+    before = (study / "seed-0" / "sessions.json").read_text()
+    assert main([*TINY, "--seeds", "0-2", "--out", str(study)]) == 0
+    assert (study / "seed-0" / "sessions.json").read_text() == before  # not trained again
+    assert pd.read_csv(study / "seeds.csv")["seed"].tolist() == [0, 1, 2]
+    assert json.loads((study / "study.json").read_text())["seeds"] == [0, 1, 2]
+
+
+def test_an_interrupted_seed_resumes_from_its_checkpoint(study: Path) -> None:
+    run = study / "seed-1"
+    sessions = json.loads((run / "sessions.json").read_text())
+    kept = sorted((run / "checkpoints").glob("ppo_*_steps.zip"))
+    first = int(kept[0].stem.split("_")[1])
+    for late in kept[1:]:
+        late.unlink()
+    sessions[-1] |= {"status": "interrupted", "last_step": first}
+    (run / "sessions.json").write_text(json.dumps(sessions))
+    (run / "model.zip").unlink()
+    assert main([*TINY, "--seeds", "0-1", "--out", str(study)]) == 0
+    sessions = json.loads((run / "sessions.json").read_text())
+    assert sessions[-1]["status"] == "finished"
+    assert sessions[-1]["first_step"] == first
+
+
+def test_another_study_in_the_same_folder_is_refused(
+    study: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main([*TINY, "--seeds", "0", "--eval-seed", "7", "--out", str(study)]) == 2
+    assert "holds another study" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_ray_trains_the_same_agents_as_one_after_another(
+    study: Path, local_ray, tmp_path: Path
+) -> None:
+    out = tmp_path / "ray"
+    assert main([*TINY, "--seeds", "0-1", "--out", str(out), "--backend", "ray"]) == 0
+    local = pd.read_csv(study.parent / "first-seeds.csv").set_index("seed")["heldout_return"]
+    ray = pd.read_csv(out / "seeds.csv").set_index("seed")["heldout_return"]
+    assert ray.tolist() == local.tolist()

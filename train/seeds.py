@@ -1,0 +1,268 @@
+"""``follow-train --seeds 0-4``: one training run per seed on a backend, and a summary.
+
+::
+
+    follow-train --seeds 0-4 --out runs/ppo-study            # one seed after another
+    follow-train --seeds 0-4 --out runs/ppo-study --workers 2 --threads 1
+    follow-train --seeds 0-4 --out runs/ppo-study --backend ray [--address HOST:PORT]
+
+Training seed ``k`` is an ordinary run (:func:`train.ppo.train`) in ``<out>/seed-<k>/`` whose
+training lanes and network start from ``seed + k * SEED_STRIDE`` (so no two seeds share an
+episode, and no seed meets the held-out or evaluation episodes); every seed is judged on the
+same held-out seeds (``eval_seed + j``). The runs are work units of :mod:`execution`: in this
+process, ``--workers`` at once in a process pool, or Ray tasks, each given ``--threads`` CPUs.
+
+When every seed has finished, ``<out>/seeds.csv`` (one row per seed: its folder, env steps,
+wall time, env-steps/s, final held-out return) and ``<out>/summary.md`` / ``summary.json``
+(mean, standard deviation, median and interquartile mean of the final held-out return over the
+seeds, with a bootstrap 95 % CI of the mean) are written, atomically. ``<out>/study.json``
+records the command's settings: the same command run again skips the finished seeds, resumes
+an interrupted one from its newest checkpoint (:mod:`train.run`) and starts the missing ones
+(so ``--seeds 0-9`` after ``--seeds 0-4`` trains five more); other settings pointed at the same
+folder are refused.
+
+On a cluster the run folders are written by the nodes that train them: give ``--runs`` /
+``--out`` on a file system every node shares.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import re
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from eval.atomic import atomic_write_text
+from execution import Backend, execute
+from train import run as runs
+from train.ppo import MAX_SEED, Args, check_new_run, train
+
+__all__ = ["MAX_SEEDS", "SEED_STRIDE", "parse_seeds", "seed_args", "train_seeds"]
+
+#: Training seed k's lanes start this many seeds after seed k - 1's: more than any run's
+#: env steps plus lanes (a run of n_timesteps steps uses seed .. seed + n_timesteps + n_envs).
+SEED_STRIDE = 100_000_000
+#: The largest training seed: seed + k * SEED_STRIDE + n_timesteps must stay below 2**32.
+MAX_SEEDS = 40
+STUDY = "study.json"
+SEEDS_CSV = "seeds.csv"
+SUMMARY_MD = "summary.md"
+SUMMARY_JSON = "summary.json"
+
+
+def parse_seeds(text: str) -> tuple[int, ...]:
+    """Training seeds from ``"0-4"``, ``"0,2,7"``, ``"3"`` or a mix (``"0-2,5"``).
+
+    :raises ValueError: for anything else, a seed beyond :data:`MAX_SEEDS` or a repeat.
+    """
+    seeds: list[int] = []
+    for part in str(text).split(","):
+        part = part.strip()
+        if m := re.fullmatch(r"(\d+)-(\d+)", part):
+            low, high = int(m[1]), int(m[2])
+            if high < low:
+                raise ValueError(f"--seeds {text!r}: the range {part} counts down")
+            seeds += range(low, high + 1)
+        elif part.isdigit():
+            seeds.append(int(part))
+        else:
+            raise ValueError(f"--seeds {text!r}: {part!r} is not a seed or a range like 0-4")
+    if len(set(seeds)) != len(seeds):
+        raise ValueError(f"--seeds {text!r} names a seed twice")
+    if max(seeds) > MAX_SEEDS:
+        raise ValueError(f"--seeds {text!r} is out of range: training seeds are 0..{MAX_SEEDS}")
+    return tuple(seeds)
+
+
+def seed_args(args: Args, k: int, study: Path) -> Args:
+    """The options of training seed ``k``'s run in ``study`` (see the module docstring)."""
+    return dataclasses.replace(
+        args, seed=args.seed + k * SEED_STRIDE, out=study / f"seed-{k}", progress=False
+    )
+
+
+def _settings(args: Args, seeds: Sequence[int]) -> dict[str, Any]:
+    """What a study is, as ``study.json`` keeps it (paths as text, the seeds as a list)."""
+    out: dict[str, Any] = {"seeds": list(seeds)}
+    for f in dataclasses.fields(args):
+        if f.name in ("out", "resume", "export", "force", "progress", "threads", "n_timesteps"):
+            continue  # where it goes and how fast, not what is trained (a resume may lengthen)
+        value = getattr(args, f.name)
+        out[f.name] = str(value) if isinstance(value, Path) else value
+    return json.loads(json.dumps(out))
+
+
+def _finished(folder: Path) -> bool:
+    if not (folder / runs.MODEL).is_file():
+        return False
+    sessions = runs.read_sessions(folder)
+    return bool(sessions) and sessions[-1].get("status") == "finished"
+
+
+def _row(k: int, folder: Path) -> dict[str, Any]:
+    """Seed ``k``'s line of ``seeds.csv``, read from its finished run folder."""
+    sessions = runs.read_sessions(folder)
+    wall = sum(float(s.get("wall_s") or 0.0) for s in sessions)
+    steps = int(sessions[-1]["last_step"])
+    heldout = float("nan")
+    path = folder / runs.EVALUATIONS
+    if path.is_file():
+        with np.load(path) as log:
+            if len(log["results"]):
+                heldout = float(np.mean(log["results"][-1]))
+    return {
+        "seed": k,
+        "run": folder.name,
+        "env_steps": steps,
+        "wall_s": round(wall, 1),
+        "env_steps_per_s": round(steps / wall) if wall > 0 else None,
+        "heldout_return": heldout,
+    }
+
+
+def _train_unit(unit: tuple[int, Args, str]) -> dict[str, Any]:
+    """One seed's run (a work unit: in this process, a pool worker or a Ray task)."""
+    k, args, command = unit
+    folder = train(args, command=command)
+    return _row(k, folder)
+
+
+def train_seeds(
+    args: Args, seeds: Sequence[int], backend: Backend | None = None, command: str = ""
+) -> Path:
+    """Train every seed (skipping finished ones, resuming interrupted ones); returns the study
+    folder, with its summary written.
+
+    :raises ValueError: for bad options (every seed's are checked before any trains), or a
+        study folder that holds another study.
+    """
+    backend = backend or Backend("local", workers=1, cpus_per_task=args.threads)
+    study = args.out if args.out is not None else _new_study_path(args.runs)
+    settings = _settings(args, seeds)
+    units: list[tuple[int, Args, str]] = []
+    done: dict[int, dict[str, Any]] = {}
+    for i, k in enumerate(seeds):
+        folder = study / f"seed-{k}"
+        if _finished(folder):
+            done[i] = _row(k, folder)
+            units.append((k, args, command))  # a placeholder: done[i] stands for it
+        elif folder.is_dir() and any(folder.iterdir()):
+            resume = Args(resume=folder, threads=args.threads, progress=False)
+            units.append((k, resume, f"{command} [seed {k}, resumed]"))
+        else:
+            one = seed_args(args, k, study)
+            if one.seed > MAX_SEED:
+                raise ValueError(f"--seeds: seed {k} is out of range with --seed {args.seed}")
+            check_new_run(one)  # every option, before any seed trains
+            units.append((k, one, f"{command} [seed {k}]"))
+    _claim(study, settings)
+    rows = execute(_train_unit, units, backend, done=done)
+    write_summary(study, rows)
+    return study
+
+
+def _claim(study: Path, settings: dict[str, Any]) -> None:
+    """Write ``study.json``, or check that the folder's is this study's."""
+    path = study / STUDY
+    if path.exists():
+        try:
+            had = json.loads(path.read_text(encoding="utf-8"))
+        except (OSError, ValueError) as e:
+            raise ValueError(f"{path}: not a readable study description ({e})") from None
+        changed = sorted(
+            k
+            for k in settings.keys() | had.keys()
+            if k != "seeds" and had.get(k) != settings.get(k)
+        )
+        if changed:
+            raise ValueError(
+                f"{study} holds another study (its {STUDY} differs in {', '.join(changed)}); "
+                "give another --out, or the same options to resume it"
+            )
+        had["seeds"] = sorted(set(had.get("seeds", [])) | set(settings["seeds"]))
+        atomic_write_text(path, json.dumps(had, indent=1) + "\n")
+        return
+    if study.exists() and any(study.iterdir()):
+        raise ValueError(f"--out {study} already exists and is not an empty folder or a study")
+    study.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(path, json.dumps(settings, indent=1) + "\n")
+
+
+def _new_study_path(root: Path) -> Path:
+    """``root/ppo-seeds-<timestamp>[-k]``, not yet made (nothing is written before the checks)."""
+    from datetime import datetime
+
+    stamp = f"ppo-seeds-{datetime.now():%Y%m%d-%H%M%S}"
+    for k in range(1000):
+        path = root / (stamp if k == 0 else f"{stamp}-{k}")
+        if not path.exists():
+            return path
+    raise FileExistsError(f"{root}: no free study folder name for {stamp}")
+
+
+def write_summary(study: Path, rows: Sequence[dict[str, Any]]) -> pd.DataFrame:
+    """``seeds.csv``, ``summary.json`` and ``summary.md`` of a study (atomically); returns the
+    one-row summary."""
+    table = pd.DataFrame(list(rows))
+    returns = table["heldout_return"].to_numpy(dtype=float)
+    returns = returns[np.isfinite(returns)]
+    summary = {
+        "seeds": len(table),
+        "heldout_return_mean": _num(returns.mean()) if len(returns) else None,
+        "heldout_return_std": _num(returns.std(ddof=1)) if len(returns) > 1 else None,
+        "heldout_return_median": _num(np.median(returns)) if len(returns) else None,
+        "heldout_return_iqm": _num(_iqm(returns)) if len(returns) else None,
+        "heldout_return_mean_ci95": _ci(returns),
+        "env_steps_per_s_mean": _num(table["env_steps_per_s"].astype(float).mean()),
+    }
+    atomic_write_text(study / SEEDS_CSV, table.to_csv(index=False))
+    atomic_write_text(study / SUMMARY_JSON, json.dumps(summary, indent=2) + "\n")
+    ci = summary["heldout_return_mean_ci95"]
+    lines = [
+        f"# {study.name}: {summary['seeds']} training seeds",
+        "",
+        "Final held-out return (the mean over the held-out episodes of the last evaluation), per "
+        "seed and across seeds. The interval is a bootstrap 95 % CI of the mean over seeds.",
+        "",
+        table.to_markdown(index=False),
+        "",
+        f"- mean {_fmt(summary['heldout_return_mean'])}"
+        + (f" [{_fmt(ci[0])}, {_fmt(ci[1])}]" if ci else "")
+        + f", std {_fmt(summary['heldout_return_std'])}, median "
+        f"{_fmt(summary['heldout_return_median'])}, IQM {_fmt(summary['heldout_return_iqm'])}",
+        "",
+    ]
+    atomic_write_text(study / SUMMARY_MD, "\n".join(lines))
+    return pd.DataFrame([summary])
+
+
+def _num(x: float) -> float | None:
+    return None if not np.isfinite(x) else round(float(x), 3)
+
+
+def _fmt(x: float | None) -> str:
+    return "n/a" if x is None else f"{x:.1f}"
+
+
+def _iqm(x: np.ndarray) -> float:
+    """The interquartile mean: the mean of the middle 50 % (scipy's trimmed mean)."""
+    from scipy.stats import trim_mean
+
+    return float(trim_mean(x, 0.25))
+
+
+def _ci(x: np.ndarray) -> list[float] | None:
+    if len(x) < 2 or np.ptp(x) == 0.0:
+        return None
+    from scipy.stats import bootstrap
+
+    res = bootstrap((x,), np.mean, confidence_level=0.95, n_resamples=10_000, random_state=0)
+    return [
+        round(float(res.confidence_interval.low), 3),
+        round(float(res.confidence_interval.high), 3),
+    ]
