@@ -28,7 +28,10 @@
 reference, reference §1.5; true distance when logged, else the published one where it is > 0),
 ``reacquire_time_s``, ``jerk_rms_m_s3``,
 ``turn_accel_rms_rad_s2``, ``lost_rate_pct`` and ``collision_rate_pct`` (per episode 100 or 0,
-so their mean over episodes is a rate), ``path_length_ratio``.
+so their mean over episodes is a rate), ``target_swap_rate_pct``, the social-navigation
+benchmarks' ``success_pct`` (neither collided nor lost; 100 or 0 per episode) and
+``following_rate_pct`` (steps within 0.5-1.5 m of the person and facing them), and
+``path_length_ratio``.
 
 A metric whose columns a log lacks is NaN for that log. Adding a metric is one decorated
 function here::
@@ -288,6 +291,36 @@ def target_swap_rate_pct(log: pd.DataFrame) -> float:
     picked = log["detected_person"].to_numpy(dtype=float)
     picked = picked[np.isfinite(picked) & (picked >= 0)]
     return 100.0 * float(np.mean(picked > 0)) if picked.size else float("nan")
+
+
+#: The following band of the social-navigation benchmarks [m]: near enough to follow, not so
+#: near as to crowd the person (our reference distance, 1.0 m, is its middle).
+FOLLOW_BAND_M = (0.5, 1.5)
+
+
+@metric("success_pct", "%", "success (%)")
+def success_pct(log: pd.DataFrame) -> float:
+    """100 if the episode ended with neither a collision nor the person lost, else 0: the
+    social-navigation benchmarks' success. Averaged over episodes it is the success rate in %.
+    NaN without a ``termination`` column."""
+    ending = _ending(log)
+    if ending is None:
+        return float("nan")
+    return 100.0 * (ending != LOST_ENDING and ending not in COLLISION_ENDINGS)
+
+
+@metric("following_rate_pct", "%", "following rate (%)")
+def following_rate_pct(log: pd.DataFrame) -> float:
+    """Share (%) of the steps with the person within :data:`FOLLOW_BAND_M` (true distance) and
+    in the camera's field of view (``in_frame``: the robot faces them), the reset row left out:
+    the social-navigation benchmarks' following rate. NaN without ground truth (a robot log)."""
+    if "true_distance_m" not in log or "in_frame" not in log:
+        return float("nan")
+    steps = log.iloc[1:] if len(log) > 1 else log
+    d = steps["true_distance_m"].to_numpy(dtype=float)
+    near = (d >= FOLLOW_BAND_M[0]) & (d <= FOLLOW_BAND_M[1])
+    facing = steps["in_frame"].to_numpy(dtype=float) > 0.5
+    return 100.0 * float(np.mean(near & facing)) if len(steps) else float("nan")
 
 
 def _path_length_m(x: pd.Series, y: pd.Series) -> float:
