@@ -46,6 +46,7 @@ from typing import Literal, get_args
 
 from policies.base import LawParams, OffsetRateLaw, check_range
 from policies.mpn import DISTANCE_FLOOR_M
+from policies.space import ParamRange
 
 GSMPNVariant = Literal["default", "listing", "equation"]
 GSMPN_VARIANTS: tuple[str, ...] = get_args(GSMPNVariant)
@@ -138,6 +139,19 @@ GSMPN_TUNED = GSMPNParams(
 #: Presets of the default variant; the registry derives the other variants' presets by
 #: replacing ``variant`` only.
 PRESETS = MappingProxyType({"thesis": GSMPN_THESIS, "tuned": GSMPN_TUNED})
+
+#: What ``follow-tune gsmpn`` searches (:mod:`policies.space`; the default variant's units), all
+#: on a log scale: PN's kv 1..15 1/s and kw 0.01..0.3 rad/s/px, the largest derivative gain
+#: lambda_d 1e-5..3e-2 rad/px and the schedule's steepness a 1e-4..1 s/px (a gain that ramps
+#: over ~20,000 px/s of offset rate down to one saturated at ~2 px/s).
+SEARCH_SPACE = MappingProxyType(
+    {
+        "kv_per_s": ParamRange(1.0, 15.0, log=True),
+        "kw_rad_per_s_px": ParamRange(0.01, 0.3, log=True),
+        "lambda_d": ParamRange(1e-5, 3e-2, log=True),
+        "a": ParamRange(1e-4, 1.0, log=True),
+    }
+)
 
 
 class GSMPN(OffsetRateLaw):

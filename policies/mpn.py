@@ -22,6 +22,7 @@ from dataclasses import dataclass
 from types import MappingProxyType
 
 from policies.base import LawParams, OffsetRateLaw, check_range
+from policies.space import ParamRange
 
 # Guards the division by d (reference §1.5 writes a bare "/ d"); see the module docstring.
 DISTANCE_FLOOR_M = 0.1
@@ -69,6 +70,17 @@ MPN_TUNED = MPNParams(
 )
 
 PRESETS = MappingProxyType({"thesis": MPN_THESIS, "tuned": MPN_TUNED})
+
+#: What ``follow-tune mpn`` searches (:mod:`policies.space`): PN's kv 1..15 1/s and kw
+#: 0.01..0.3 rad/s/px (log scale), and lambda 0..5e-3 rad/px on a linear scale so that 0 (no
+#: derivative term) is in the range; 5e-3 rad/px turns at 1.5 rad/s on 300 px/s of offset rate.
+SEARCH_SPACE = MappingProxyType(
+    {
+        "kv_per_s": ParamRange(1.0, 15.0, log=True),
+        "kw_rad_per_s_px": ParamRange(0.01, 0.3, log=True),
+        "lambda_rad_per_px": ParamRange(0.0, 5e-3),
+    }
+)
 
 
 class MPN(OffsetRateLaw):

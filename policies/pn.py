@@ -22,6 +22,7 @@ from dataclasses import dataclass
 from types import MappingProxyType
 
 from policies.base import GuidanceLaw, LawParams, check_range
+from policies.space import ParamRange
 
 # reference §1.5: PN divides by max(d, 1.0). (d <= 0, "no valid reading yet", gives a zero action
 # before the law runs; see policies.base.)
@@ -60,6 +61,16 @@ PN_THESIS = PNParams(kv_per_s=5.0, d_ref_m=1.0, nav_n=0.1, kw_rad_per_s_px=0.05)
 PN_TUNED = PNParams(kv_per_s=5.0, d_ref_m=1.0, nav_n=0.1, kw_rad_per_s_px=0.05)
 
 PRESETS = MappingProxyType({"thesis": PN_THESIS, "tuned": PN_TUNED})
+
+#: What ``follow-tune pn`` searches (:mod:`policies.space`): kv 1..15 1/s and kw
+#: 0.01..0.3 rad/s/px (N kw 1..30 mrad/s/px), both on a log scale, around the thesis's 5 1/s and
+#: 0.05 rad/s/px; N and d_ref stay as preset (only N kw matters, so kw carries the gain).
+SEARCH_SPACE = MappingProxyType(
+    {
+        "kv_per_s": ParamRange(1.0, 15.0, log=True),
+        "kw_rad_per_s_px": ParamRange(0.01, 0.3, log=True),
+    }
+)
 
 
 class PN(GuidanceLaw):
