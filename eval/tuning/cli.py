@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import shlex
 import sys
 import time
 from collections.abc import Sequence
@@ -220,7 +221,7 @@ def run(args: argparse.Namespace) -> int:
     elapsed = time.perf_counter() - started
     states = [t.state.name.lower() for t in study.trials]
     summary = {
-        "command": " ".join([PROG, *sys.argv[1:]]),
+        "command": shlex.join([PROG, *args.argv]),
         "finished_utc": datetime.now(UTC).isoformat(timespec="seconds"),
         "study": args.study,
         "storage": str(args.storage),
@@ -259,8 +260,11 @@ def _counts(trials: dict[str, int]) -> str:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``follow-tune``; returns the exit status."""
+    argv = sys.argv[1:] if argv is None else list(argv)
     try:
-        return run(build_parser().parse_args(argv))
+        args = build_parser().parse_args(argv)
+        args.argv = argv
+        return run(args)
     except (UsageError, OSError, ValueError, BackendUnavailableError) as e:
         print(f"{PROG}: error: {e}", file=sys.stderr)
         return 2
