@@ -7,9 +7,12 @@ episodes, and each gets its mean reward per episode with a 95 % bootstrap CI and
 difference from the current preset with a CI (:func:`eval.stats.mean_ci`).
 
 The choice (:func:`choose`) is the one-standard-error rule, as the grid search before it made
-it: every candidate whose paired shortfall against the held-out top scorer is within one
-standard error of that shortfall is "as good" (``within_1se``), and of those the one that turns
-most smoothly (lowest mean turn accel RMS) is ``chosen``. The current preset is a candidate,
+it, with one addition: every candidate whose paired shortfall against the held-out top scorer is
+within one standard error of that shortfall, and that failed (lost the person or the line,
+collided) in no more episodes than the top scorer, is "as good" (``within_1se``); of those the
+one that turns most smoothly (lowest mean turn accel RMS) is ``chosen``. (Without the failure
+clause a candidate could pass *because* of a failure: its one very bad episode widens the very
+standard error it is measured against.) The current preset is a candidate,
 and a trial replaces it only with evidence: a held-out mean above the preset's (the paired
 difference's CI above 0), or within one standard error of the best and a smoother turn than the
 preset's. So the preset stays unless a trial scored better, or as well and more smoothly, on
@@ -117,7 +120,10 @@ def choose(
     top = int(np.argmax(means))
     gaps = scores[top] - scores  # paired shortfall per episode
     se = gaps.std(axis=1, ddof=1) / np.sqrt(n) if n > 1 else np.zeros(len(candidates))
-    within = gaps.mean(axis=1) <= se + 1e-12
+    failed = np.stack([np.asarray(e["failed"], dtype=np.float64) for e in episodes]).sum(axis=1)
+    # A failure costs more than neighbouring gains do, and inflates the candidate's own standard
+    # error: one that failed more often than the top scorer is not "as good", however wide its SE.
+    within = (gaps.mean(axis=1) <= se + 1e-12) & (failed <= failed[top])
     current = scores[-1]
     rows = []
     for i, (c, e) in enumerate(zip(candidates, episodes, strict=True)):

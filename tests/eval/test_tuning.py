@@ -151,6 +151,20 @@ def test_choose_replaces_the_preset_only_on_evidence() -> None:
     assert smoother[1]["within_1se"]
 
 
+def test_a_candidate_that_failed_more_often_than_the_top_is_not_as_good() -> None:
+    top = {"score": np.full(20, 100.0), "turn_accel_rms_rad_s2": np.full(20, 2.0)}
+    crash = np.full(20, 100.5)
+    crash[0] = 60.0  # one failed episode: its mean is close, its standard error wide
+    rough = {"score": crash, "turn_accel_rms_rad_s2": np.full(20, 1.0)}
+    failed = np.zeros(20)
+    rows = choose(
+        [Candidate("trial 1", {"x": 1.0}, trial=1), Candidate("preset", {"x": 0.0})],
+        [{**rough, "failed": np.eye(20)[0]}, {**top, "failed": failed}],
+    )
+    assert not rows[0]["within_1se"]
+    assert rows[1]["chosen"]
+
+
 def _cli(tmp_path: Path, *extra: str) -> list[str]:
     return [
         "pn",
