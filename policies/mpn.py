@@ -59,12 +59,14 @@ class MPNParams(LawParams):
 MPN_THESIS = MPNParams(
     kv_per_s=5.0, d_ref_m=1.0, nav_n=0.1, kw_rad_per_s_px=0.05, lambda_rad_per_px=1e-4, dt_s=0.1
 )
-# Tuned in simulation by `python -m eval.tune` (eval/tune.py): a grid search scoring each
-# candidate by the env's summed reward on straight, curve and random x tuning seeds 1000..1019
-# (disjoint from the evaluation seeds), default robot, picking per law the smoothest-turning
-# candidate within one standard error of the top score. Result of that command, pasted: the
-# thesis's kv and kw, and no derivative term: lambda = 0 scored best of 0 .. 3e-3 rad/px and
-# turned most smoothly (the detector's jitter makes the offset rate mostly noise).
+# Tuned in simulation by a grid search (formerly `python -m eval.tune`), scoring each candidate
+# by the env's summed reward on straight, curve and random x tuning seeds 1000..1019 (disjoint
+# from the evaluation seeds), default robot, picking per law the smoothest-turning candidate
+# within one standard error of the top score. Checked by `follow-tune mpn --trials 150 --seeds
+# 20 --holdout-seeds 50` (`python -m eval.tune`, README "Tuning"): no trial beat it on the
+# held-out seeds 2000..2049, so it stands. The grid's result: the thesis's kv and kw, and no
+# derivative term: lambda = 0 scored best of 0 .. 3e-3 rad/px and turned most smoothly (the
+# detector's jitter makes the offset rate mostly noise).
 MPN_TUNED = MPNParams(
     kv_per_s=5.0, d_ref_m=1.0, nav_n=0.1, kw_rad_per_s_px=0.05, lambda_rad_per_px=0.0, dt_s=0.1
 )

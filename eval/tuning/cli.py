@@ -16,6 +16,7 @@ import shlex
 import sys
 import time
 from collections.abc import Sequence
+from dataclasses import replace
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
@@ -65,6 +66,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--holdout-seeds", type=_positive, default=20, help="held-out seeds 2000.. (default 20)"
     )
+    p.add_argument(
+        "--holdout-scenarios",
+        default=None,
+        help="variants of the held-out check (default: the tuned ones); e.g. a line task's "
+        "mixed courses, to check that a trial generalises beyond the tracks it was tuned on",
+    )
     p.add_argument("--top", type=_positive, default=3, help="trials re-evaluated (default 3)")
     p.add_argument("--write-preset", type=Path, default=None, help="also write the preset here")
     p.add_argument("--out", type=Path, default=None, help="output folder (default runs/tune-LAW)")
@@ -85,12 +92,16 @@ def _check(args: argparse.Namespace) -> dict[str, Any]:
     if task != law.task:
         raise UsageError(f"--task {task}: {args.law!r} is a law of the {law.task} task")
     variants = _names(args.scenarios, "scenarios") if args.scenarios else DEFAULT_VARIANTS[task]
+    given = args.holdout_scenarios
+    args.holdout_variants = _names(given, "holdout-scenarios") if given else list(variants)
     known = get_task(task).variants()
-    for name in variants:
-        if name not in known:
-            raise UsageError(
-                f"--scenarios: unknown {task} variant {name!r}; known: " + ", ".join(sorted(known))
-            )
+    for option, names in (("scenarios", variants), ("holdout-scenarios", args.holdout_variants)):
+        for name in names:
+            if name not in known:
+                raise UsageError(
+                    f"--{option}: unknown {task} variant {name!r}; known: "
+                    + ", ".join(sorted(known))
+                )
     for option in ("seeds", "holdout_seeds"):
         if getattr(args, option) > MAX_SEEDS:
             raise UsageError(
@@ -217,7 +228,8 @@ def run(args: argparse.Namespace) -> int:
     current = Candidate(f"{law.law}:{law.default_preset}", base)
     candidates = holdout_candidates(study, current, args.top)
     holdout = tuple(range(HOLDOUT_SEED0, HOLDOUT_SEED0 + args.holdout_seeds))
-    rows = reevaluate(objective, candidates, holdout)
+    check = replace(objective, variants=tuple(args.holdout_variants))
+    rows = reevaluate(check, candidates, holdout)
     elapsed = time.perf_counter() - started
     states = [t.state.name.lower() for t in study.trials]
     summary = {
@@ -232,6 +244,7 @@ def run(args: argparse.Namespace) -> int:
         "sampler_seed": args.seed,
         "tuning_seeds": [config.seeds[0], config.seeds[-1]],
         "holdout_seeds": [holdout[0], holdout[-1]],
+        "holdout_variants": list(args.holdout_variants),
         "search_s": round(searched, 1),
         "elapsed_s": round(elapsed, 1),
         "backend": {"kind": backend.kind, "workers": backend.workers},

@@ -19,9 +19,10 @@ def table_text(rows: Sequence[Mapping[str, Any]], summary: Mapping[str, Any]) ->
     reward per episode [95 % CI], paired difference from the current preset [CI], the
     one-standard-error flag, turn accel RMS and failures; then the verdict."""
     a, b = summary["holdout_seeds"]
-    n_variants = len(summary["search"]["variants"])
+    n_variants = len(summary["holdout_variants"])
     head = (
-        f"Held-out check: seeds {a}..{b} x {n_variants} variants = {(b - a + 1) * n_variants} "
+        f"Held-out check: seeds {a}..{b} x {n_variants} variants "
+        f"({', '.join(summary['holdout_variants'])}) = {(b - a + 1) * n_variants} "
         "episodes per candidate; mean summed reward per episode [95 % bootstrap CI]"
     )
     lines = [

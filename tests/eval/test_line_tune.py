@@ -17,9 +17,12 @@ def test_both_controllers_run_the_same_search_on_line_trace() -> None:
         assert args[args.index("--task") + 1] == "line_trace"
 
 
-def test_the_tuning_tracks_leave_out_the_evaluation_mixed_courses() -> None:
+def test_the_tuning_tracks_leave_out_the_mixed_courses_which_the_check_adds() -> None:
     assert "course" not in line_tune.TRACKS
     assert "random" not in line_tune.TRACKS
+    args = line_tune.commands()[0]
+    checked = args[args.index("--holdout-scenarios") + 1].split(",")
+    assert set(checked) == {*line_tune.TRACKS, "course", "random"}
 
 
 @pytest.mark.parametrize("law", ["coordinate", "pid"])

@@ -216,6 +216,7 @@ def test_rerunning_the_command_resumes_the_study_and_runs_only_the_rest(
         (["pn", "--storage", "nosuchdb://x"], "cannot open the storage"),
         (["pn", "--task", "line_trace"], "is a law of the person_follow task"),
         (["pid", "--scenarios", "curve"], "unknown line_trace variant 'curve'"),
+        (["pid", "--holdout-scenarios", "gaps,moon"], "--holdout-scenarios: unknown"),
         (["pn", "--address", "auto"], "--address is for --backend ray"),
         (["pn", "--seeds", "1001"], "at most 1000"),
     ],
