@@ -184,9 +184,11 @@ def _cli(tmp_path: Path, *extra: str) -> list[str]:
 def test_rerunning_the_command_resumes_the_study_and_runs_only_the_rest(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    assert main(_cli(tmp_path, "--trials", "2")) == 0
+    copy = tmp_path / "preset.txt"
+    assert main(_cli(tmp_path, "--trials", "2", "--write-preset", str(copy))) == 0
     first = json.loads((tmp_path / "out" / "result.json").read_text())
     assert first["ran_now"] == 2
+    assert copy.read_text() == (tmp_path / "out" / "preset.txt").read_text()
     assert main(_cli(tmp_path, "--trials", "3")) == 0
     result = json.loads((tmp_path / "out" / "result.json").read_text())
     assert result["ran_now"] == 1
