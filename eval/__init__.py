@@ -8,6 +8,8 @@
   (:mod:`eval.metrics`); :func:`episode_metrics` computes them all.
 - :func:`summarize` and :func:`compare` give bootstrap CIs and paired tests (:mod:`eval.stats`);
   :mod:`eval.report` writes tables, plots and videos; ``follow-eval`` (:mod:`eval.cli`) fronts it.
+- ``follow-tune`` (:mod:`eval.tuning`) searches a registered law's parameters with Optuna on the
+  same rollouts and checks the best on held-out seeds: the search behind the ``tuned`` presets.
 
 Example::
 

@@ -16,7 +16,7 @@ USAGE_ERROR = 2
 #: every episode's step log in memory until its tables are written (50-200 kB an episode,
 #: measured: 135-450 rows of 41 columns) and writes one CSV of 40-140 kB per episode, so 50,000
 #: episodes can take 10 GB of memory and 7 GB of disk. Larger searches use ``eval.rollout``
-#: with a ``reduce`` function, as ``eval.tune`` does.
+#: with a ``reduce`` function, as ``follow-tune`` (:mod:`eval.tuning`) does.
 MAX_EPISODES = 50_000
 #: The largest seed the env accepts: ``reset(seed=s)`` takes 0 <= s < 2**256 (follow_env seeds
 #: numpy's SeedSequence with up to eight 32-bit words; a test pins this).

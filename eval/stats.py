@@ -40,6 +40,7 @@ __all__ = [
     "CONFIDENCE",
     "compare",
     "episode_table",
+    "mean_ci",
     "metric_columns",
     "summarize",
     "variant_column",
@@ -135,6 +136,14 @@ def _ci(values: np.ndarray, rng: np.random.Generator) -> tuple[float, float]:
             )
             low, high = res.confidence_interval
     return (float(low), float(high))
+
+
+def mean_ci(values: np.ndarray, seed: int, *names: str) -> tuple[float, float]:
+    """The 95 % bootstrap CI (BCa) of the mean of ``values`` (NaNs dropped), resampled from the
+    stream keyed by ``seed`` and ``names`` (as every interval of the tables is); (NaN, NaN) for
+    fewer than two values."""
+    values = np.asarray(values, dtype=np.float64)
+    return _ci(values[np.isfinite(values)], _stream(seed, *names))
 
 
 def summarize(

@@ -37,7 +37,10 @@ from policies.registry import (
     register_law,
     register_policy,
     register_resolver,
+    tunable_law,
+    tunable_laws,
 )
+from policies.space import ParamRange, SearchSpace
 
 __all__ = [
     "GSMPN",
@@ -59,9 +62,11 @@ __all__ = [
     "MPNParams",
     "OffsetRateLaw",
     "PNParams",
+    "ParamRange",
     "PlatformAction",
     "Policy",
     "PolicyRegistry",
+    "SearchSpace",
     "available_policies",
     "for_platform",
     "make_policy",
@@ -69,6 +74,8 @@ __all__ = [
     "register_law",
     "register_policy",
     "register_resolver",
+    "tunable_law",
+    "tunable_laws",
     "validate_obs",
     "validate_obs_batch",
 ]

@@ -55,8 +55,9 @@ import numpy as np
 
 from follow_env.sim.checks import check_number, out_of_range
 from policies.line_base import CELL_XY, LineLaw
+from policies.space import ParamRange
 
-__all__ = ["PRESETS", "Coordinate", "CoordinateParams", "fit_line", "intersection"]
+__all__ = ["PRESETS", "SEARCH_SPACE", "Coordinate", "CoordinateParams", "fit_line", "intersection"]
 
 ACROSS = 0.3
 """A fitted line whose direction is less than this ahead (cos, about 73 deg from the heading)
@@ -101,6 +102,13 @@ PRESETS = MappingProxyType(
 (the paper's wz as written) and ``tuned`` (the signed reading with the speed and turn gain of
 the best candidate of :mod:`eval.line_tune`'s grid search, the same search that tunes the PID;
 a bare ``coordinate`` means it)."""
+
+SEARCH_SPACE = MappingProxyType(
+    {"speed_mps": ParamRange(0.1, 0.8), "turn_gain": ParamRange(0.5, 32.0, log=True)}
+)
+"""What ``follow-tune coordinate --task line_trace`` searches (:mod:`policies.space`): the
+speed 0.1..0.8 m/s and the signed reading's turn gain 0.5..32 rad/s per rad of theta1 (log
+scale); the threshold, the circle and the reading of wz stay as preset."""
 
 
 def fit_line(points: np.ndarray, last_side: float) -> tuple[np.ndarray, np.ndarray]:

@@ -22,6 +22,7 @@ from dataclasses import dataclass
 from types import MappingProxyType
 
 from policies.base import LawParams, OffsetRateLaw, check_range
+from policies.space import ParamRange
 
 # Guards the division by d (reference §1.5 writes a bare "/ d"); see the module docstring.
 DISTANCE_FLOOR_M = 0.1
@@ -58,17 +59,30 @@ class MPNParams(LawParams):
 MPN_THESIS = MPNParams(
     kv_per_s=5.0, d_ref_m=1.0, nav_n=0.1, kw_rad_per_s_px=0.05, lambda_rad_per_px=1e-4, dt_s=0.1
 )
-# Tuned in simulation by `python -m eval.tune` (eval/tune.py): a grid search scoring each
-# candidate by the env's summed reward on straight, curve and random x tuning seeds 1000..1019
-# (disjoint from the evaluation seeds), default robot, picking per law the smoothest-turning
-# candidate within one standard error of the top score. Result of that command, pasted: the
-# thesis's kv and kw, and no derivative term: lambda = 0 scored best of 0 .. 3e-3 rad/px and
-# turned most smoothly (the detector's jitter makes the offset rate mostly noise).
+# Tuned in simulation by a grid search (formerly `python -m eval.tune`), scoring each candidate
+# by the env's summed reward on straight, curve and random x tuning seeds 1000..1019 (disjoint
+# from the evaluation seeds), default robot, picking per law the smoothest-turning candidate
+# within one standard error of the top score. Checked by `follow-tune mpn --trials 150 --seeds
+# 20 --holdout-seeds 50` (`python -m eval.tune`, README "Tuning"): no trial beat it on the
+# held-out seeds 2000..2049, so it stands. The grid's result: the thesis's kv and kw, and no
+# derivative term: lambda = 0 scored best of 0 .. 3e-3 rad/px and turned most smoothly (the
+# detector's jitter makes the offset rate mostly noise).
 MPN_TUNED = MPNParams(
     kv_per_s=5.0, d_ref_m=1.0, nav_n=0.1, kw_rad_per_s_px=0.05, lambda_rad_per_px=0.0, dt_s=0.1
 )
 
 PRESETS = MappingProxyType({"thesis": MPN_THESIS, "tuned": MPN_TUNED})
+
+#: What ``follow-tune mpn`` searches (:mod:`policies.space`): PN's kv 1..15 1/s and kw
+#: 0.01..0.3 rad/s/px (log scale), and lambda 0..5e-3 rad/px on a linear scale so that 0 (no
+#: derivative term) is in the range; 5e-3 rad/px turns at 1.5 rad/s on 300 px/s of offset rate.
+SEARCH_SPACE = MappingProxyType(
+    {
+        "kv_per_s": ParamRange(1.0, 15.0, log=True),
+        "kw_rad_per_s_px": ParamRange(0.01, 0.3, log=True),
+        "lambda_rad_per_px": ParamRange(0.0, 5e-3),
+    }
+)
 
 
 class MPN(OffsetRateLaw):

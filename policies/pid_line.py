@@ -33,8 +33,9 @@ import numpy as np
 from follow_env.sim.checks import check_number
 from follow_env.tasks.line_trace.spec import cell_index
 from policies.line_base import LineLaw
+from policies.space import ParamRange
 
-__all__ = ["PID_SENSORS", "PRESETS", "PIDLine", "PIDLineParams"]
+__all__ = ["PID_SENSORS", "PRESETS", "SEARCH_SPACE", "PIDLine", "PIDLineParams"]
 
 PID_SENSORS = (cell_index(0, 1), cell_index(0, 2), cell_index(0, 3))
 """The three cells read: front row, left of centre, centre, right of centre."""
@@ -80,6 +81,17 @@ PRESETS = MappingProxyType(
 """``hand``: gains set by hand (module docstring); ``tuned``: the best of the search of
 :mod:`eval.line_tune` (the environment's reward on tuning seeds and tracks), which a bare
 ``pid`` means."""
+
+SEARCH_SPACE = MappingProxyType(
+    {
+        "speed_mps": ParamRange(0.1, 0.8),
+        "kp": ParamRange(1.0, 80.0, log=True),
+        "kd": ParamRange(0.0, 2.0),
+    }
+)
+"""What ``follow-tune pid --task line_trace`` searches (:mod:`policies.space`): the speed
+0.1..0.8 m/s, kp 1..80 rad/s per unit of e (log scale) and kd 0..2 rad per unit of e per s
+(linear, so that 0 is in it); ki and the search behaviour stay as preset."""
 
 
 class PIDLine(LineLaw):

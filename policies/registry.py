@@ -23,7 +23,8 @@ the path as its name (:mod:`policies.learned.ppo`).
 
 ## Extending
 - A new law: one module with a :class:`~policies.base.GuidanceLaw` subclass and its ``PRESETS``,
-  plus one ``register_law(...)`` line at the bottom of this file.
+  plus one ``register_law(...)`` line at the bottom of this file. Give it a ``SEARCH_SPACE``
+  (:mod:`policies.space`) and pass ``search_space=`` there, and ``follow-tune <law>`` tunes it.
 - A learned agent: ``register_policy("ppo", factory)``, where the factory imports
   torch/stable-baselines3 and loads the model only when called (:mod:`policies.learned.ppo`).
 - A filesystem path (``runs/x/model.zip`` or a run folder): ``register_resolver(resolver)``;
@@ -35,13 +36,14 @@ the path as its name (:mod:`policies.learned.ppo`).
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from functools import partial
-from typing import TypeVar
+from typing import Any, Generic, TypeVar
 
 from policies import coordinate, gsmpn, holonomic, mpn, pid_line, pn
 from policies.base import Policy
 from policies.learned import ppo
+from policies.space import SearchSpace, check_space
 
 PolicyFactory = Callable[[], Policy]
 PolicyResolver = Callable[[str], Policy | None]
@@ -51,6 +53,34 @@ DEFAULT_PRESET = "tuned"
 DEFAULT_TASK = "person_follow"
 
 
+@dataclass(frozen=True)
+class TunableLaw(Generic[P]):
+    """A registered law with a search space: what a tuner needs to build its candidates.
+
+    :param law: the law's name (``"pn"``).
+    :param build: ``build(params, name)`` makes a policy.
+    :param base: the parameters of the default preset; fields outside the space keep these.
+    :param space: field -> range (:mod:`policies.space`).
+    :param task: the task whose observation the law reads.
+    :param default_preset: the preset the tuner's result would replace (``"tuned"``).
+    """
+
+    law: str
+    build: Callable[[P, str], Policy]
+    base: P
+    space: SearchSpace
+    task: str
+    default_preset: str
+
+    def params(self, values: Mapping[str, Any]) -> P:
+        """The base parameters with ``values`` (field -> value) put in (validated by them)."""
+        return replace(self.base, **dict(values))  # type: ignore[type-var]
+
+    def policy(self, values: Mapping[str, Any], name: str) -> Policy:
+        """A policy with the base parameters and ``values`` put in, called ``name``."""
+        return self.build(self.params(values), name)
+
+
 class PolicyRegistry:
     """A mapping from names to policy factories, plus resolvers for open-ended names."""
 
@@ -58,6 +88,7 @@ class PolicyRegistry:
         self._factories: dict[str, PolicyFactory] = {}
         self._tasks: dict[str, str] = {}
         self._resolvers: list[PolicyResolver] = []
+        self._tunable: dict[str, TunableLaw[Any]] = {}
 
     def register(self, name: str, factory: PolicyFactory, task: str = DEFAULT_TASK) -> None:
         """Make ``name`` build a policy with ``factory()``, for ``task`` (whose observation
@@ -80,6 +111,7 @@ class PolicyRegistry:
         presets: Mapping[str, P],
         default_preset: str = DEFAULT_PRESET,
         task: str = DEFAULT_TASK,
+        search_space: SearchSpace | None = None,
     ) -> None:
         """Register ``law:<preset>`` for every preset, and ``law`` for the default preset.
 
@@ -88,15 +120,41 @@ class PolicyRegistry:
         :param presets: preset name -> parameters.
         :param default_preset: the preset a bare ``law`` name stands for.
         :param task: the task whose observation the law reads.
+        :param search_space: the ranges a tuner may search (:mod:`policies.space`), around
+            the default preset; a law without one cannot be tuned by ``follow-tune``.
+        :raises ValueError: for a missing default preset, or a space that does not fit the
+            parameters (a field they lack, a range whose ends they refuse).
         """
         if default_preset not in presets:
             raise ValueError(
                 f"law {law!r} has no preset {default_preset!r}; presets: {sorted(presets)}"
             )
+        if search_space is not None:
+            check_space(search_space, presets[default_preset])
         for preset, params in presets.items():
             self.register(f"{law}:{preset}", partial(build, params, f"{law}:{preset}"), task)
         default_name = f"{law}:{default_preset}"
         self.register(law, partial(build, presets[default_preset], default_name), task)
+        if search_space is not None:
+            base = presets[default_preset]
+            self._tunable[law] = TunableLaw(law, build, base, search_space, task, default_preset)
+
+    def tunable(self, law: str) -> TunableLaw[Any]:
+        """The law called ``law`` with its search space.
+
+        :raises ValueError: for an unknown law, or one registered without a search space
+            (the message lists the tunable ones).
+        """
+        found = self._tunable.get(law)
+        if found is None:
+            known = ", ".join(sorted(self._tunable))
+            why = "has no search space" if law in self._factories else "is not a registered law"
+            raise ValueError(f"{law!r} {why}; laws that can be tuned: {known}")
+        return found
+
+    def tunable_laws(self, task: str | None = None) -> list[str]:
+        """The laws registered with a search space, sorted; with ``task``, those for it."""
+        return sorted(n for n, t in self._tunable.items() if task is None or t.task == task)
 
     def register_resolver(self, resolver: PolicyResolver) -> None:
         """Offer names that are not registered exactly (e.g. model paths) to ``resolver``."""
@@ -164,9 +222,20 @@ def register_law(
     presets: Mapping[str, P],
     default_preset: str = DEFAULT_PRESET,
     task: str = "person_follow",
+    search_space: SearchSpace | None = None,
 ) -> None:
     """Register ``law`` and ``law:<preset>``; see :meth:`PolicyRegistry.register_law`."""
-    REGISTRY.register_law(law, build, presets, default_preset, task)
+    REGISTRY.register_law(law, build, presets, default_preset, task, search_space)
+
+
+def tunable_law(law: str) -> TunableLaw[Any]:
+    """The registered law ``law`` with its search space; see :meth:`PolicyRegistry.tunable`."""
+    return REGISTRY.tunable(law)
+
+
+def tunable_laws(task: str | None = None) -> list[str]:
+    """The laws ``follow-tune`` can tune; see :meth:`PolicyRegistry.tunable_laws`."""
+    return REGISTRY.tunable_laws(task)
 
 
 def register_resolver(resolver: PolicyResolver) -> None:
@@ -175,20 +244,30 @@ def register_resolver(resolver: PolicyResolver) -> None:
 
 
 # The built-in laws: one line per law.
-register_law("pn", pn.PN, pn.PRESETS)
-register_law("mpn", mpn.MPN, mpn.PRESETS)
+register_law("pn", pn.PN, pn.PRESETS, search_space=pn.SEARCH_SPACE)
+register_law("mpn", mpn.MPN, mpn.PRESETS, search_space=mpn.SEARCH_SPACE)
 for _variant in gsmpn.GSMPN_VARIANTS:
+    # The space is in the default variant's units; the other readings are not tuned.
     register_law(
         "gsmpn" if _variant == "default" else f"gsmpn-{_variant}",
         gsmpn.GSMPN,
         {preset: replace(p, variant=_variant) for preset, p in gsmpn.PRESETS.items()},
+        search_space=gsmpn.SEARCH_SPACE if _variant == "default" else None,
     )
 # A base that strafes (the mecanum platform); no tuned preset yet.
 register_law("holonomic", holonomic.Holonomic, holonomic.PRESETS, default_preset="default")
 # Line tracing (LineTrace-v0, reference §2): the paper's coordinate control and the PID line
 # follower it is compared with.
-register_law("coordinate", coordinate.Coordinate, coordinate.PRESETS, task="line_trace")
-register_law("pid", pid_line.PIDLine, pid_line.PRESETS, task="line_trace")
+register_law(
+    "coordinate",
+    coordinate.Coordinate,
+    coordinate.PRESETS,
+    task="line_trace",
+    search_space=coordinate.SEARCH_SPACE,
+)
+register_law(
+    "pid", pid_line.PIDLine, pid_line.PRESETS, task="line_trace", search_space=pid_line.SEARCH_SPACE
+)
 # Learned agents: the shipped PPO agent by name, any other by its path (a run folder or a .zip).
 # policies.learned.ppo loads torch and stable-baselines3 only when an agent is built.
 register_policy("ppo", ppo.load_default)

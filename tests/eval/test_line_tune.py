@@ -1,26 +1,33 @@
-"""eval/line_tune.py: the line followers' search, on a grid of two."""
+"""eval/line_tune.py: the line followers' committed search, follow-tune for both."""
 
-from eval.line_tune import TRACKS, TUNE_SEED0, candidates, search
-from policies import make_policy
+from __future__ import annotations
 
+import pytest
 
-def test_the_grid_names_every_candidate_once_for_both_controllers() -> None:
-    grid = candidates()
-    names = [p.name for _, p in grid]
-    assert len(set(names)) == len(names)
-    assert {c for c, _ in grid} == {"coordinate", "pid"}
+from eval import line_tune
+from policies import make_policy, tunable_law
+from policies.space import params_in_space
 
 
-def test_the_tuned_presets_are_candidates_of_the_grid() -> None:
-    params = {repr(p.params) for _, p in candidates()}  # type: ignore[attr-defined]
-    for name in ("coordinate:tuned", "pid:tuned"):
-        assert repr(make_policy(name).params) in params  # type: ignore[attr-defined]
+def test_both_controllers_run_the_same_search_on_line_trace() -> None:
+    runs = line_tune.commands()
+    assert [r[0] for r in runs] == ["coordinate", "pid"]
+    for args in runs:
+        assert args[1 : 1 + len(line_tune.BUDGET)] == list(line_tune.BUDGET)
+        assert args[args.index("--task") + 1] == "line_trace"
 
 
-def test_search_scores_each_candidate_on_the_tuning_tracks() -> None:
-    grid = [next(c for c in candidates() if c[0] == k) for k in ("coordinate", "pid")]
-    table = search(grid, 1, workers=1)
-    assert list(table["controller"]) == ["coordinate", "pid"]
-    assert table["finished"].between(0.0, 1.0).all()
-    assert TUNE_SEED0 >= 1000  # disjoint from the evaluation's seeds 0..19
-    assert "course" not in TRACKS
+def test_the_tuning_tracks_leave_out_the_mixed_courses_which_the_check_adds() -> None:
+    assert "course" not in line_tune.TRACKS
+    assert "random" not in line_tune.TRACKS
+    args = line_tune.commands()[0]
+    checked = args[args.index("--holdout-scenarios") + 1].split(",")
+    assert set(checked) == {*line_tune.TRACKS, "course", "random"}
+
+
+@pytest.mark.parametrize("law", ["coordinate", "pid"])
+def test_the_tuned_presets_lie_in_their_search_spaces(law: str) -> None:
+    tuned = make_policy(f"{law}:tuned").params  # type: ignore[attr-defined]
+    found = tunable_law(law)
+    assert found.base == tuned
+    assert params_in_space(found.space, tuned)

@@ -1,0 +1,287 @@
+"""``follow-tune``: tune a registered law's parameters with Optuna (see :mod:`eval.tuning`).
+
+    follow-tune pn --trials 100 --seeds 12 --workers 2 --out runs/tune-pn
+    follow-tune pid --task line_trace --trials 60 --seeds 4
+    follow-tune gsmpn --storage postgresql://user@db/tune --backend ray --address auto
+
+Bad arguments give one line on stderr (``follow-tune: error: ...``) and exit status 2 before
+any episode runs or any file is written.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shlex
+import sys
+import time
+from collections.abc import Sequence
+from dataclasses import replace
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+from eval.atomic import atomic_write_text, file_on_path
+from eval.cli_base import UsageError, _names, _Parser, _positive
+from execution import BACKENDS, BackendUnavailableError, backend_from_args
+
+__all__ = ["PROG", "build_parser", "main"]
+
+PROG = "follow-tune"
+#: Most tuning or held-out seeds: 1000 + k and 2000 + k must never meet.
+MAX_SEEDS = 1000
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The ``follow-tune`` argument parser (errors raise :class:`UsageError`)."""
+    p = _Parser(
+        prog=PROG,
+        description="Tune a registered law's parameters with Optuna (TPE, pruning on partial "
+        "seed sets), then check the best on held-out seeds.",
+    )
+    p.add_argument("law", help="a registered law with a search space (pn, mpn, gsmpn, ...)")
+    p.add_argument("--task", default=None, help="person_follow or line_trace (default: the law's)")
+    p.add_argument("--trials", type=_positive, default=100, help="finished trials (default 100)")
+    p.add_argument(
+        "--seeds", type=_positive, default=12, help="tuning seeds 1000.. per variant (default 12)"
+    )
+    p.add_argument(
+        "--scenarios", default=None, help="comma-separated scenarios (tracks for line_trace)"
+    )
+    p.add_argument("--config", default=None, help="env config: a preset, JSON or a YAML file")
+    p.add_argument(
+        "--storage",
+        default=None,
+        help="a journal file (default OUT/study.journal) or an RDB URL (sqlite:///x.db, "
+        "postgresql://...) shared by several machines",
+    )
+    p.add_argument("--study", default=None, help="the study's name (default LAW-TASK)")
+    p.add_argument("--backend", choices=BACKENDS, default="local", help="where episodes run")
+    p.add_argument("--address", default=None, help="--backend ray: the cluster (auto, host:port)")
+    p.add_argument("--workers", type=_positive, default=None, help="processes or Ray slots")
+    p.add_argument(
+        "--batch", type=_positive, default=None, help="trials evaluated together (default: slots)"
+    )
+    p.add_argument("--seed", type=int, default=0, help="the TPE sampler's seed (default 0)")
+    p.add_argument(
+        "--holdout-seeds", type=_positive, default=20, help="held-out seeds 2000.. (default 20)"
+    )
+    p.add_argument(
+        "--holdout-scenarios",
+        default=None,
+        help="variants of the held-out check (default: the tuned ones); e.g. a line task's "
+        "mixed courses, to check that a trial generalises beyond the tracks it was tuned on",
+    )
+    p.add_argument("--top", type=_positive, default=3, help="trials re-evaluated (default 3)")
+    p.add_argument("--write-preset", type=Path, default=None, help="also write the preset here")
+    p.add_argument("--out", type=Path, default=None, help="output folder (default runs/tune-LAW)")
+    return p
+
+
+def _check(args: argparse.Namespace) -> dict[str, Any]:
+    """Everything checked before anything runs or is written; returns the search's identity."""
+    from eval.tuning.objective import DEFAULT_VARIANTS
+    from follow_env.tasks import get_task
+    from policies import tunable_law
+
+    try:
+        law = tunable_law(args.law)
+    except ValueError as e:
+        raise UsageError(str(e)) from None
+    task = args.task or law.task
+    if task != law.task:
+        raise UsageError(f"--task {task}: {args.law!r} is a law of the {law.task} task")
+    variants = _names(args.scenarios, "scenarios") if args.scenarios else DEFAULT_VARIANTS[task]
+    given = args.holdout_scenarios
+    args.holdout_variants = _names(given, "holdout-scenarios") if given else list(variants)
+    known = get_task(task).variants()
+    for option, names in (("scenarios", variants), ("holdout-scenarios", args.holdout_variants)):
+        for name in names:
+            if name not in known:
+                raise UsageError(
+                    f"--{option}: unknown {task} variant {name!r}; known: "
+                    + ", ".join(sorted(known))
+                )
+    for option in ("seeds", "holdout_seeds"):
+        if getattr(args, option) > MAX_SEEDS:
+            raise UsageError(
+                f"--{option.replace('_', '-')} {getattr(args, option)} is out of range: at most "
+                f"{MAX_SEEDS} (tuning and held-out seeds stay apart)"
+            )
+    if args.address is not None and args.backend != "ray":
+        raise UsageError("--address is for --backend ray")
+    config = None
+    if args.config is not None:
+        from eval.cli_base import _config
+        from eval.tasks import eval_task
+
+        try:
+            config = _config(args.config, eval_task(task).config_from_text)
+        except argparse.ArgumentTypeError as e:
+            raise UsageError(f"argument --config: {e}") from None
+    args.out = args.out or Path("runs") / f"tune-{args.law}"
+    blocker = file_on_path(args.out)
+    if blocker is not None:
+        raise UsageError(f"--out {args.out}: {blocker} is a file, not a folder")
+    if args.storage is None:
+        args.storage = str(args.out / "study.journal")
+    else:
+        from eval.tuning.driver import is_url
+
+        if not is_url(args.storage):
+            _check_journal_path(Path(args.storage))
+    if args.write_preset is not None:
+        parent = args.write_preset.parent
+        if args.write_preset.is_dir() or not parent.is_dir():
+            raise UsageError(
+                f"--write-preset {args.write_preset}: not a file in an existing folder"
+            )
+    args.study = args.study or f"{args.law}-{task}"
+    space = {k: [r.low, r.high, r.log] for k, r in law.space.items()}
+    return {
+        "law": args.law,
+        "task": task,
+        "variants": list(variants),
+        "seeds": args.seeds,
+        "config": config,
+        "space": space,
+    }
+
+
+def _check_journal_path(path: Path) -> None:
+    if path.is_dir():
+        raise UsageError(f"--storage {path}: a folder; give a journal file's path or an RDB URL")
+    blocker = file_on_path(path.parent)
+    if blocker is not None or not path.parent.is_dir():
+        raise UsageError(f"--storage {path}: its folder {path.parent} does not exist")
+
+
+def _open(args: argparse.Namespace, identity: dict[str, Any]) -> Any:
+    """The study (created, or loaded to resume); removes an output folder it made on failure."""
+    from eval.tuning.driver import SearchConfig, open_study
+
+    made = not args.out.exists()
+    args.out.mkdir(parents=True, exist_ok=True)
+    try:
+        config = SearchConfig(args.trials, _tune_seeds(args.seeds), 1, args.seed)
+        study = open_study(args.storage, args.study, config)
+        had = study.user_attrs.get("search")
+        if had is None:
+            study.set_user_attr("search", identity)
+        elif had != json.loads(json.dumps(identity)):
+            raise UsageError(
+                f"--study {args.study}: the study in {args.storage} was run with other settings "
+                f"({had}); give another --study or --storage"
+            )
+        return study
+    except BaseException:
+        if made and args.out.is_dir() and not any(args.out.iterdir()):
+            args.out.rmdir()
+        raise
+
+
+def _tune_seeds(n: int) -> tuple[int, ...]:
+    from eval.tuning.objective import TUNE_SEED0
+
+    return tuple(range(TUNE_SEED0, TUNE_SEED0 + n))
+
+
+def run(args: argparse.Namespace) -> int:
+    """Check, search, re-evaluate, write; see the module docstring."""
+    from eval.tuning.driver import SearchConfig, run_search
+    from eval.tuning.holdout import Candidate, holdout_candidates, reevaluate, verdict
+    from eval.tuning.objective import HOLDOUT_SEED0, LawObjective
+    from eval.tuning.report import preset_text, table_text
+    from policies import tunable_law
+
+    identity = _check(args)
+    law = tunable_law(args.law)
+    workers = args.workers if args.backend == "ray" else args.workers or 1
+    backend = backend_from_args(args.backend, workers=workers, address=args.address)
+    study = _open(args, identity)
+    batch = args.batch or backend.slots()
+    config = SearchConfig(args.trials, _tune_seeds(args.seeds), batch, args.seed)
+    objective = LawObjective(law, tuple(identity["variants"]), backend, identity["config"])
+    started = time.perf_counter()
+    base = {k: float(getattr(law.base, k)) for k in law.space}
+
+    def progress(trials: list[Any]) -> None:
+        for t in trials:
+            value = "" if t.value is None else f" {t.value:.2f}"
+            params = ", ".join(f"{k}={v:.3g}" for k, v in t.params.items())
+            print(
+                f"{PROG}: trial {t.number} {t.state.name.lower()}{value} after "
+                f"{t.user_attrs.get('seeds', 0)} seeds: {params}",
+                file=sys.stderr,
+            )
+
+    try:
+        ran = run_search(study, law.space, config, objective, enqueue=base, on_batch=progress)
+    except KeyboardInterrupt:
+        print(
+            f"{PROG}: interrupted; the study {args.study} in {args.storage} keeps its finished "
+            "trials: run the same command again to resume",
+            file=sys.stderr,
+        )
+        return 130
+    searched = time.perf_counter() - started
+    current = Candidate(f"{law.law}:{law.default_preset}", base)
+    candidates = holdout_candidates(study, current, args.top)
+    holdout = tuple(range(HOLDOUT_SEED0, HOLDOUT_SEED0 + args.holdout_seeds))
+    check = replace(objective, variants=tuple(args.holdout_variants))
+    rows = reevaluate(check, candidates, holdout)
+    elapsed = time.perf_counter() - started
+    states = [t.state.name.lower() for t in study.trials]
+    summary = {
+        "command": shlex.join([PROG, *args.argv]),
+        "finished_utc": datetime.now(UTC).isoformat(timespec="seconds"),
+        "study": args.study,
+        "storage": str(args.storage),
+        "search": identity,
+        "trials": {s: states.count(s) for s in sorted(set(states))},
+        "ran_now": ran,
+        "batch": batch,
+        "sampler_seed": args.seed,
+        "tuning_seeds": [config.seeds[0], config.seeds[-1]],
+        "holdout_seeds": [holdout[0], holdout[-1]],
+        "holdout_variants": list(args.holdout_variants),
+        "search_s": round(searched, 1),
+        "elapsed_s": round(elapsed, 1),
+        "backend": {"kind": backend.kind, "workers": backend.workers},
+        "holdout": rows,
+        "verdict": verdict(rows),
+    }
+    chosen = next(r for r in rows if r["chosen"])
+    text = preset_text(law, chosen["values"], summary)
+    atomic_write_text(args.out / "preset.txt", text)
+    if args.write_preset is not None:
+        atomic_write_text(args.write_preset, text)
+    atomic_write_text(args.out / "result.json", json.dumps(summary, indent=2) + "\n")
+    print(table_text(rows, summary))
+    print(
+        f"{ran} trials run now ({_counts(summary['trials'])} in the study), search "
+        f"{searched:.0f} s, "
+        f"held-out check {elapsed - searched:.0f} s. Wrote {args.out}/result.json, preset.txt"
+    )
+    return 0
+
+
+def _counts(trials: dict[str, int]) -> str:
+    """``{"complete": 5, "pruned": 1}`` as ``5 complete, 1 pruned``."""
+    return ", ".join(f"{n} {state}" for state, n in trials.items())
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``follow-tune``; returns the exit status."""
+    argv = sys.argv[1:] if argv is None else list(argv)
+    try:
+        args = build_parser().parse_args(argv)
+        args.argv = argv
+        return run(args)
+    except (UsageError, OSError, ValueError, BackendUnavailableError) as e:
+        print(f"{PROG}: error: {e}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,262 @@
+"""The search driver: an Optuna study asked in batches, each trial scored on growing seed sets.
+
+:func:`run_search` knows nothing of laws or environments: it asks the study for a batch of
+trials, hands their parameters with a set of seeds to an ``evaluate`` function (which places
+the episodes on an execution backend), reports each trial's mean score after every rung, lets
+the study's pruner stop the poor ones, and tells the study the final score of the rest. So the
+same driver can tune anything whose score is a mean over seeded episodes.
+
+Rungs (:func:`rungs`): a trial is scored on the first quarter of the tuning seeds, then on the
+first half, then on all of them; after each rung its mean so far is ``trial.report``-ed at step
+= seeds so far, and Optuna's :class:`~optuna.pruners.MedianPruner` prunes it when that mean is
+below the median of the finished trials at the same step. Every trial meets the same seeds in
+the same order, so the means compared at one step are over the same episodes.
+
+Reproducibility: the sampler is a seeded :class:`~optuna.samplers.TPESampler`, the trials of a
+batch are asked, evaluated and told in trial order, and the evaluation is exact (identical
+rollouts), so the same seed, batch size and budget give the same trials on any backend. A
+resumed study seeds its sampler with ``seed + trials already in the study``, so it never
+replays the first trials' random draws.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import socket
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import optuna
+from optuna.distributions import BaseDistribution, FloatDistribution
+from optuna.trial import TrialState
+
+from policies.space import SearchSpace
+
+__all__ = [
+    "FINISHED",
+    "Evaluate",
+    "SearchConfig",
+    "distributions",
+    "is_url",
+    "open_study",
+    "run_search",
+    "rungs",
+]
+
+#: Trial states that count towards the budget once reached.
+FINISHED = (TrialState.COMPLETE, TrialState.PRUNED)
+
+Evaluate = Callable[[Sequence[Mapping[str, float]], Sequence[int]], list[dict[str, np.ndarray]]]
+"""``evaluate(params of each trial, seeds)`` -> per trial a dict of arrays shaped (variants,
+seeds): ``"score"`` (required: the summed reward of each episode) and any further per-episode
+numbers (their mean over the trial's episodes is stored as a user attribute of the trial)."""
+
+
+@dataclass(frozen=True)
+class SearchConfig:
+    """How a search runs.
+
+    :param trials: the study's budget of finished (complete or pruned) trials, >= 1.
+    :param seeds: the tuning seeds, in the order the rungs take them.
+    :param batch: trials asked and evaluated together (the backend's slots), >= 1.
+    :param sampler_seed: the TPE sampler's seed.
+    :param startup_trials: finished trials before the pruner prunes anything, >= 0.
+    """
+
+    trials: int
+    seeds: tuple[int, ...]
+    batch: int = 1
+    sampler_seed: int = 0
+    startup_trials: int = 5
+
+    def __post_init__(self) -> None:
+        for name, low in (("trials", 1), ("batch", 1), ("startup_trials", 0)):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < low:
+                raise ValueError(f"{name}={value!r} is out of range: must be an integer >= {low}")
+        if not self.seeds:
+            raise ValueError("seeds is empty: give at least one tuning seed")
+        if len(set(self.seeds)) != len(self.seeds):
+            raise ValueError("seeds holds a seed twice")
+
+
+def rungs(n_seeds: int) -> tuple[int, ...]:
+    """Cumulative seed counts after which a trial is reported: a quarter, a half, all of them
+    (fewer rungs when they coincide), e.g. 12 -> (3, 6, 12), 2 -> (1, 2), 1 -> (1,)."""
+    if n_seeds < 1:
+        raise ValueError(f"n_seeds={n_seeds!r} is out of range: must be >= 1")
+    return tuple(sorted({math.ceil(n_seeds / 4), math.ceil(n_seeds / 2), n_seeds}))
+
+
+def distributions(space: SearchSpace) -> dict[str, BaseDistribution]:
+    """Optuna's distributions for a search space (:mod:`policies.space`)."""
+    return {
+        name: FloatDistribution(float(r.low), float(r.high), log=r.log) for name, r in space.items()
+    }
+
+
+def is_url(storage: str) -> bool:
+    """Whether ``--storage`` names a database (``sqlite:///x.db``, ``postgresql://...``)
+    rather than a journal file."""
+    return "://" in storage
+
+
+def _storage(storage: str | Path) -> Any:
+    if isinstance(storage, str) and is_url(storage):
+        return optuna.storages.RDBStorage(storage)
+    from optuna.storages.journal import JournalFileBackend, JournalStorage
+
+    return JournalStorage(JournalFileBackend(str(storage)))
+
+
+def open_study(storage: str | Path, name: str, config: SearchConfig) -> optuna.Study:
+    """Create the study ``name`` in ``storage`` (a journal file path or an RDB URL), or load
+    it to resume: maximising, a seeded TPE sampler (:data:`SearchConfig.sampler_seed` plus the
+    trials already there), a median pruner after ``startup_trials`` trials.
+
+    :raises ValueError: if the storage cannot be opened (the message says why).
+    """
+    optuna.logging.set_verbosity(optuna.logging.WARNING)
+    try:
+        backend = _storage(storage)
+        existing = optuna.get_all_study_names(backend)
+        n = (
+            len(optuna.load_study(study_name=name, storage=backend).trials)
+            if name in existing
+            else 0
+        )
+        return optuna.create_study(
+            storage=backend,
+            study_name=name,
+            direction="maximize",
+            load_if_exists=True,
+            sampler=optuna.samplers.TPESampler(seed=config.sampler_seed + n),
+            pruner=optuna.pruners.MedianPruner(
+                n_startup_trials=config.startup_trials, n_warmup_steps=0
+            ),
+        )
+    except (OSError, ImportError, ValueError, RuntimeError) as e:
+        raise ValueError(f"cannot open the storage {storage}: {e}") from None
+    except Exception as e:  # SQLAlchemy's errors (a bad URL, an unreachable server)
+        if type(e).__module__.startswith("sqlalchemy"):
+            raise ValueError(f"cannot open the storage {storage}: {e}") from None
+        raise
+
+
+_OWNER = "owner"
+
+
+def _owner() -> str:
+    return f"{socket.gethostname()}:{os.getpid()}"
+
+
+def _alive(owner: str) -> bool:
+    """Whether the process that owns a running trial still runs (unknown hosts: assumed so)."""
+    host, _, pid = owner.rpartition(":")
+    if host != socket.gethostname() or not pid.isdigit():
+        return True
+    try:
+        os.kill(int(pid), 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def fail_stale(study: optuna.Study) -> int:
+    """Mark as failed the running trials left by a process of this machine that is gone (an
+    interrupted run); returns how many. Running trials of other machines are left alone."""
+    stale = [
+        t.number
+        for t in study.get_trials(deepcopy=False, states=(TrialState.RUNNING,))
+        if not _alive(str(t.user_attrs.get(_OWNER, "")))
+    ]
+    for number in stale:
+        study.tell(number, state=TrialState.FAIL, skip_if_finished=True)
+    return len(stale)
+
+
+def _counted(study: optuna.Study) -> int:
+    """Trials that count towards the budget: finished ones and those running elsewhere."""
+    return len(study.get_trials(deepcopy=False, states=(*FINISHED, TrialState.RUNNING)))
+
+
+def run_search(
+    study: optuna.Study,
+    space: SearchSpace,
+    config: SearchConfig,
+    evaluate: Evaluate,
+    *,
+    enqueue: Mapping[str, float] | None = None,
+    on_batch: Callable[[list[optuna.trial.FrozenTrial]], None] | None = None,
+) -> int:
+    """Run trials until the study holds ``config.trials`` finished ones; returns how many
+    trials this call ran (0 when a resumed study was already complete).
+
+    :param study: from :func:`open_study`.
+    :param space: the parameters' ranges (each trial's params are sampled from them on ask).
+    :param config: the budget, seeds, batch size.
+    :param evaluate: scores a batch of trials on a set of seeds (:data:`Evaluate`).
+    :param enqueue: parameters to try first in a new study (the current preset).
+    :param on_batch: called with the batch's finished trials after each batch (progress).
+    """
+    fail_stale(study)
+    dists = distributions(space)
+    if enqueue is not None and not study.trials:
+        study.enqueue_trial(dict(enqueue))
+    steps = rungs(len(config.seeds))
+    ran = 0
+    while (left := config.trials - _counted(study)) > 0:
+        batch = [study.ask(dists) for _ in range(min(config.batch, left))]
+        for trial in batch:
+            trial.set_user_attr(_OWNER, _owner())
+        _evaluate_batch(study, batch, steps, config.seeds, evaluate)
+        ran += len(batch)
+        if on_batch is not None:
+            on_batch([study.trials[t.number] for t in batch])
+    return ran
+
+
+def _evaluate_batch(
+    study: optuna.Study,
+    batch: list[optuna.Trial],
+    steps: tuple[int, ...],
+    seeds: Sequence[int],
+    evaluate: Evaluate,
+) -> None:
+    """Score the batch rung by rung; prune or finish each trial."""
+    active = list(batch)
+    kept: dict[int, dict[str, list[np.ndarray]]] = {t.number: {} for t in batch}
+    start = 0
+    try:
+        for step in steps:
+            results = evaluate([t.params for t in active], seeds[start:step])
+            survivors = []
+            for trial, result in zip(active, results, strict=True):
+                arrays = kept[trial.number]
+                for key, values in result.items():
+                    arrays.setdefault(key, []).append(np.asarray(values, dtype=np.float64))
+                joined = {k: np.concatenate(v, axis=-1) for k, v in arrays.items()}
+                for key, values in joined.items():
+                    trial.set_user_attr(key, float(np.nanmean(values)))
+                trial.set_user_attr("seeds", step)
+                trial.report(float(joined["score"].mean()), step)
+                if step < steps[-1] and trial.should_prune():
+                    study.tell(trial, state=TrialState.PRUNED)
+                else:
+                    survivors.append(trial)
+            active = survivors
+            start = step
+            if not active:
+                return
+        for trial in active:
+            study.tell(trial, float(np.concatenate(kept[trial.number]["score"], axis=-1).mean()))
+    except BaseException:
+        for trial in batch:  # an error or Ctrl-C: the batch's unfinished trials failed
+            study.tell(trial, state=TrialState.FAIL, skip_if_finished=True)
+        raise

@@ -1,0 +1,43 @@
+"""train/tune.py: PPO hyperparameters searched with follow-tune's driver."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+import yaml
+
+from train.tune import PPO_SPACE, hyperparams_for, main
+
+
+def test_integer_keys_are_rounded_and_the_minibatch_fits_one_rollout() -> None:
+    hp = hyperparams_for({"n_steps": 16.4, "batch_size": 900.0, "gamma": 0.99}, n_envs=11)
+    assert hp == {"n_steps": 16, "batch_size": 176, "gamma": 0.99}
+
+
+def test_bad_arguments_give_one_line_and_exit_2(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main(["--scenarios", "moon", "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("python -m train.tune: error: --scenarios")
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.slow
+def test_a_tiny_search_trains_and_scores_each_trial(tmp_path: Path) -> None:
+    out = tmp_path / "out"
+    argv = ["--trials", "2", "--n-timesteps", "256", "--n-envs", "11", "--seeds", "1"]
+    assert main([*argv, "--scenarios", "straight", "--out", str(out)]) == 0
+    result = json.loads((out / "result.json").read_text())
+    assert result["trials"] == 2
+    best = result["best_hyperparams"]
+    assert isinstance(best["n_steps"], int)
+    assert best["learning_rate"] in PPO_SPACE["learning_rate"]
+    assert best["gamma"] in PPO_SPACE["gamma"]
+    files = sorted(out.glob("trials/*/hyperparams.yaml"))
+    assert len(files) == 2
+    section = yaml.safe_load(files[0].read_text())["PersonFollow-v0"]
+    assert isinstance(section["batch_size"], int)
+    assert all((f.parent / "run" / "model.zip").exists() for f in files)

@@ -1,0 +1,233 @@
+"""PPO hyperparameters searched with ``follow-tune``'s driver: ``python -m train.tune``.
+
+    python -m train.tune --trials 20 --n-timesteps 200000 --seeds 4 --out runs/tune-ppo
+
+The same search as ``follow-tune`` (:mod:`eval.tuning.driver`: a seeded TPE sampler, trials
+asked in batches, a journal file or RDB URL to resume from, a median pruner on partial seed
+sets), with a training run as each trial: the hyperparameters of :data:`PPO_SPACE` put into the
+hyperparameter file's section (``train/configs/ppo.yaml`` unless told), a ``follow-train`` run
+of ``--n-timesteps`` env steps (as a work unit on the execution backend, one per trial of a
+batch), then the trained agent scored by the env's own reward summed per episode on the tuning
+variants x seeds 1000 + k (:class:`eval.tuning.objective.LawObjective`'s numbers). The pruner
+spares evaluation episodes only: a trial is trained once, at its first rung.
+
+Left out: the held-out check and the one-standard-error choice that ``follow-tune`` makes for
+a law (a trained agent is judged by ``follow-eval`` on held-out seeds instead), and pruning on
+partial *training* budgets, which is where most of a PPO trial's time goes.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import hashlib
+import json
+import shutil
+import sys
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from types import MappingProxyType
+from typing import Any
+
+import numpy as np
+import yaml
+
+from eval.atomic import atomic_write_text
+from eval.cli_base import UsageError, _names, _Parser, _positive
+from eval.rollout import rollout
+from eval.tuning.driver import SearchConfig, open_study, run_search
+from eval.tuning.objective import DEFAULT_VARIANTS, SCORE_KEYS, TUNE_SEED0, episode_score
+from execution import Backend, BackendUnavailableError, backend_from_args, execute
+from policies.space import ParamRange
+from train.ppo import DEFAULT_HYPERPARAMS, Args
+
+__all__ = ["INTEGER_KEYS", "PPO_SPACE", "PPOObjective", "hyperparams_for", "main"]
+
+PROG = "python -m train.tune"
+
+PPO_SPACE = MappingProxyType(
+    {
+        "learning_rate": ParamRange(1e-5, 1e-3, log=True),
+        "n_steps": ParamRange(16.0, 512.0, log=True),
+        "batch_size": ParamRange(64.0, 2048.0, log=True),
+        "gamma": ParamRange(0.95, 0.999),
+        "ent_coef": ParamRange(0.0, 0.01),
+    }
+)
+"""What is searched: the learning rate (log), the rollout length per lane ``n_steps`` and the
+minibatch ``batch_size`` (log, rounded to integers), the discount ``gamma`` and the entropy
+coefficient ``ent_coef``; every other key keeps the hyperparameter file's value."""
+#: Keys of :data:`PPO_SPACE` that PPO takes as integers.
+INTEGER_KEYS = ("n_steps", "batch_size")
+
+
+def hyperparams_for(values: Mapping[str, float], n_envs: int) -> dict[str, Any]:
+    """The PPO keys a trial's ``values`` set: integers rounded, the minibatch at most one
+    rollout (``n_steps x n_envs``, SB3's buffer)."""
+    out: dict[str, Any] = {k: float(v) for k, v in values.items()}
+    for key in INTEGER_KEYS:
+        if key in out:
+            out[key] = max(1, round(out[key]))
+    if "batch_size" in out and "n_steps" in out:
+        out["batch_size"] = min(out["batch_size"], out["n_steps"] * n_envs)
+    return out
+
+
+def _train_unit(unit: tuple[Args, str]) -> str:
+    """Train one trial's run (a work unit); returns its folder. Skips a run already finished."""
+    from train.ppo import train
+
+    args, _ = unit
+    out = Path(str(args.out))
+    if not (out / "model.zip").exists():
+        if out.exists():  # a run that did not finish (interrupted): train it afresh
+            shutil.rmtree(out)
+        train(args, command=PROG)
+    return str(out)
+
+
+@dataclass(frozen=True)
+class PPOObjective:
+    """Trains and scores batches of PPO hyperparameters (an :data:`eval.tuning.driver.Evaluate`).
+
+    :param base: the training options every trial shares (``n_timesteps``, ``n_envs``, the
+        hyperparameter file and its section); ``out`` and ``hyperparams`` are set per trial.
+    :param folder: where the trials' runs go (``<folder>/trial-<hash>/``).
+    :param variants: the scenarios the trained agents are scored on.
+    :param backend: where the training runs and the episodes run.
+    """
+
+    base: Args
+    folder: Path
+    variants: tuple[str, ...]
+    backend: Backend
+
+    def section(self) -> dict[str, Any]:
+        """The hyperparameter file's section the trials start from."""
+        env_id = self.base.env_id or "PersonFollow-v0"
+        document = yaml.safe_load(Path(self.base.hyperparams).read_text(encoding="utf-8"))
+        if not isinstance(document, dict) or env_id not in document:
+            raise ValueError(f"{self.base.hyperparams}: no section {env_id!r}")
+        return dict(document[env_id])
+
+    def n_envs(self) -> int:
+        """Lanes of every trial's training."""
+        return self.base.n_envs or int(self.section()["n_envs"])
+
+    def _unit(self, values: Mapping[str, float]) -> tuple[Args, str]:
+        env_id = self.base.env_id or "PersonFollow-v0"
+        section = self.section()
+        section.update(hyperparams_for(values, self.n_envs()))
+        text = yaml.safe_dump({env_id: section}, sort_keys=False)
+        key = hashlib.sha256(text.encode()).hexdigest()[:12]
+        trial = self.folder / f"trial-{key}"
+        trial.mkdir(parents=True, exist_ok=True)
+        if not (trial / "hyperparams.yaml").exists():
+            atomic_write_text(trial / "hyperparams.yaml", text)
+        args = dataclasses.replace(
+            self.base, hyperparams=trial / "hyperparams.yaml", env_id=env_id, out=trial / "run"
+        )
+        return args, text
+
+    def __call__(
+        self, params: Sequence[Mapping[str, float]], seeds: Sequence[int]
+    ) -> list[dict[str, np.ndarray]]:
+        """Per trial, the per-episode :data:`~eval.tuning.objective.SCORE_KEYS` of its
+        trained agent, each shaped (variants, seeds)."""
+        units = [self._unit(p) for p in params]
+        unique = list(dict.fromkeys(units))  # the same hyperparameters train once
+        trained = dict(zip(unique, execute(_train_unit, unique, self.backend), strict=True))
+        runs = [trained[u] for u in units]
+        results = rollout(
+            runs,
+            list(self.variants),
+            [int(s) for s in seeds],
+            reduce=episode_score,
+            backend=self.backend,
+        )
+        shape = (len(runs), len(self.variants), len(seeds), len(SCORE_KEYS))
+        table = np.asarray(results, dtype=np.float64).reshape(shape)
+        return [{k: table[i, :, :, j] for j, k in enumerate(SCORE_KEYS)} for i in range(shape[0])]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The command line (errors raise :class:`UsageError`)."""
+    p = _Parser(prog=PROG, description="Search PPO hyperparameters with follow-tune's driver.")
+    p.add_argument("--trials", type=_positive, default=20, help="finished trials (default 20)")
+    p.add_argument("--n-timesteps", type=_positive, default=200_000, help="env steps per trial")
+    p.add_argument("--n-envs", type=_positive, default=None, help="lanes (default: the file's)")
+    p.add_argument("--hyperparams", type=Path, default=DEFAULT_HYPERPARAMS, help="base YAML")
+    p.add_argument("--seeds", type=_positive, default=4, help="scoring seeds 1000.. per scenario")
+    p.add_argument("--scenarios", default=None, help="scored on (default straight,curve,random)")
+    p.add_argument("--storage", default=None, help="journal file or RDB URL (OUT/study.journal)")
+    p.add_argument("--study", default="ppo", help="the study's name (default ppo)")
+    p.add_argument("--backend", choices=("local", "ray"), default="local")
+    p.add_argument("--address", default=None, help="--backend ray: the cluster")
+    p.add_argument("--workers", type=_positive, default=None, help="processes or Ray slots")
+    p.add_argument("--seed", type=int, default=0, help="the TPE sampler's seed (default 0)")
+    p.add_argument("--out", type=Path, default=Path("runs") / "tune-ppo", help="output folder")
+    return p
+
+
+def run(args: argparse.Namespace) -> int:
+    """Search, then write ``OUT/result.json`` and print the best trial's hyperparameters."""
+    from follow_env.tasks import get_task
+
+    variants = (
+        _names(args.scenarios, "scenarios") if args.scenarios else DEFAULT_VARIANTS["person_follow"]
+    )
+    for name in variants:
+        if name not in get_task("person_follow").variants():
+            raise UsageError(f"--scenarios: unknown scenario {name!r}")
+    if not Path(args.hyperparams).is_file():
+        raise UsageError(f"--hyperparams {args.hyperparams}: no such file")
+    if args.address is not None and args.backend != "ray":
+        raise UsageError("--address is for --backend ray")
+    workers = args.workers if args.backend == "ray" else args.workers or 1
+    backend = backend_from_args(args.backend, workers=workers, address=args.address)
+    base = Args(
+        hyperparams=args.hyperparams,
+        n_timesteps=args.n_timesteps,
+        n_envs=args.n_envs,
+        final_episodes=0,
+        eval_episodes=1,
+        eval_freq=max(args.n_timesteps, 1),
+        checkpoint_freq=max(args.n_timesteps, 1),
+        progress=False,
+    )
+    args.out.mkdir(parents=True, exist_ok=True)
+    storage = args.storage or str(args.out / "study.journal")
+    seeds = tuple(range(TUNE_SEED0, TUNE_SEED0 + args.seeds))
+    config = SearchConfig(args.trials, seeds, backend.slots(), args.seed)
+    study = open_study(storage, args.study, config)
+    objective = PPOObjective(base, args.out / "trials", tuple(variants), backend)
+    n_envs = objective.n_envs()
+    ran = run_search(study, PPO_SPACE, config, objective)
+    best = study.best_trial
+    summary = {
+        "study": args.study,
+        "storage": storage,
+        "ran_now": ran,
+        "trials": len(study.trials),
+        "n_timesteps": args.n_timesteps,
+        "best_trial": best.number,
+        "best_score": best.value,
+        "best_hyperparams": hyperparams_for(best.params, n_envs),
+    }
+    atomic_write_text(args.out / "result.json", json.dumps(summary, indent=2) + "\n")
+    print(json.dumps(summary, indent=2))
+    return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point; returns the exit status (2 with one line on stderr for bad arguments)."""
+    try:
+        return run(build_parser().parse_args(argv))
+    except (UsageError, OSError, ValueError, BackendUnavailableError) as e:
+        print(f"{PROG}: error: {e}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())
