@@ -22,6 +22,7 @@ import argparse
 import dataclasses
 import hashlib
 import json
+import math
 import shutil
 import sys
 from collections.abc import Mapping, Sequence
@@ -63,14 +64,17 @@ INTEGER_KEYS = ("n_steps", "batch_size")
 
 
 def hyperparams_for(values: Mapping[str, float], n_envs: int) -> dict[str, Any]:
-    """The PPO keys a trial's ``values`` set: integers rounded, the minibatch at most one
-    rollout (``n_steps x n_envs``, SB3's buffer)."""
+    """The PPO keys a trial's ``values`` set: integers rounded, and the minibatch the divisor of
+    one rollout (``n_steps x n_envs``, SB3's buffer) nearest to it on a log scale, so that no
+    epoch ends in a truncated minibatch (SB3 warns of those)."""
     out: dict[str, Any] = {k: float(v) for k, v in values.items()}
     for key in INTEGER_KEYS:
         if key in out:
             out[key] = max(1, round(out[key]))
     if "batch_size" in out and "n_steps" in out:
-        out["batch_size"] = min(out["batch_size"], out["n_steps"] * n_envs)
+        buffer = out["n_steps"] * n_envs
+        divisors = [d for d in range(2, buffer + 1) if buffer % d == 0] or [buffer]
+        out["batch_size"] = min(divisors, key=lambda d: abs(math.log(d / out["batch_size"])))
     return out
 
 

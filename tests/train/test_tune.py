@@ -16,6 +16,12 @@ def test_integer_keys_are_rounded_and_the_minibatch_fits_one_rollout() -> None:
     assert hp == {"n_steps": 16, "batch_size": 176, "gamma": 0.99}
 
 
+def test_the_minibatch_divides_the_rollout_nearest_to_the_sampled_size() -> None:
+    hp = hyperparams_for({"n_steps": 191.0, "batch_size": 517.0}, n_envs=11)
+    assert hp["n_steps"] * 11 % hp["batch_size"] == 0
+    assert hp["batch_size"] == 191  # 2101 = 11 x 191: the divisors are 11, 191 and 2101
+
+
 def test_bad_arguments_give_one_line_and_exit_2(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
