@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import logging
 import os
+import socket
 import sys
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
@@ -279,6 +280,7 @@ def _connect(backend: Backend) -> Any:
             cpus = backend.workers * backend.cpus_per_task
         options["num_cpus"] = cpus
     else:
+        _check_reachable(address)
         options["address"] = address
     try:
         ray.init(**options)
@@ -286,6 +288,29 @@ def _connect(backend: Backend) -> Any:
         where = address or "a local Ray"
         raise BackendUnavailableError(f"cannot start or reach Ray at {where}: {e}") from None
     return ray
+
+
+def _check_reachable(address: str, timeout_s: float = 5.0) -> None:
+    """Fail fast on a cluster address nothing listens at: ``ray.init`` would retry for minutes.
+
+    ``auto`` and ``local`` are Ray's own words (no host to try); ``ray://host:port`` is Ray
+    Client's form of ``host:port``.
+    """
+    if address in ("auto", "local"):
+        return
+    host, sep, port = address.removeprefix("ray://").rpartition(":")
+    if not sep or not port.isdigit() or not host:
+        raise BackendUnavailableError(
+            f"address={address!r} is not a Ray cluster address: give HOST:PORT (e.g. "
+            "127.0.0.1:6379), ray://HOST:PORT or auto"
+        )
+    try:
+        socket.create_connection((host.strip("[]"), int(port)), timeout=timeout_s).close()
+    except OSError as e:
+        raise BackendUnavailableError(
+            f"cannot reach the Ray cluster at {address}: {e.strerror or e} (is `ray start "
+            "--head` running there? see --address and RAY_ADDRESS)"
+        ) from None
 
 
 def _run_ray(

@@ -6,13 +6,14 @@ import multiprocessing
 import operator
 import os
 import signal
+import socket
 import sys
 from pathlib import Path
 
 import pytest
 
 from execution import Backend, BackendUnavailableError, backend_from_args, execute, pin_threads
-from execution.backend import WorkerLostError
+from execution.backend import WorkerLostError, _check_reachable
 
 UNITS = list(range(12))
 EXPECTED = [operator.neg(u) for u in UNITS]
@@ -169,3 +170,20 @@ def _neg_and_threads(x: int) -> tuple[int, int, int, str | None]:
 
     threads = numba.get_num_threads(), torch.get_num_threads(), os.environ.get("OMP_NUM_THREADS")
     return (-x, *threads)
+
+
+# The checks ray.init is preceded by for a named cluster (a Ray already running in this process,
+# the session's, would be used instead of connecting, so they are called directly).
+def test_an_unreachable_cluster_fails_at_once_naming_it() -> None:
+    with socket.socket() as s:  # a port nothing listens at: bound, never listening
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+        where = f"cannot reach the Ray cluster at 127.0.0.1:{port}"
+        with pytest.raises(BackendUnavailableError, match=where):
+            _check_reachable(f"127.0.0.1:{port}")
+
+
+def test_a_malformed_cluster_address_is_refused() -> None:
+    with pytest.raises(BackendUnavailableError, match="not a Ray cluster address"):
+        _check_reachable("headnode")
+    _check_reachable("auto")  # Ray's own word: nothing to try
