@@ -176,11 +176,20 @@ def cmd_run(args: argparse.Namespace) -> int:
             done=done,
             on_unit=journal.put,
         )
-    except KeyboardInterrupt:
+    except BaseException as e:
         kept = len(list(folder.glob("unit-*.pkl")))
+        if not kept:
+            journal.remove()  # nothing to resume: leave nothing behind
+        if not isinstance(e, KeyboardInterrupt):
+            raise
         print(
-            f"{PROG}: interrupted; {out} was not written. {kept} finished work units are kept "
-            f"in {folder}: run the same command again to resume",
+            f"{PROG}: interrupted; {out} was not written. "
+            + (
+                f"{kept} finished work units are kept in {folder}: run the same command "
+                "again to resume"
+                if kept
+                else "No work unit had finished; nothing was kept"
+            ),
             file=sys.stderr,
         )
         return 130

@@ -187,3 +187,18 @@ def _wait_for_nodes(ray: Path, address: str, env: dict[str, str], n: int) -> Non
             return
         time.sleep(1)
     pytest.fail(f"the loopback cluster at {address} did not show {n} nodes within 90 s")
+
+
+def test_a_run_that_fails_before_any_unit_leaves_no_journal(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    rollout_module = sys.modules["eval.rollout"]  # `eval.rollout` is also the function's name
+
+    def broken(work: object) -> list:
+        raise RuntimeError("a unit failed")
+
+    monkeypatch.setattr(rollout_module, "_run_task", broken)
+    out = tmp_path / "run"
+    with pytest.raises(RuntimeError, match="a unit failed"):
+        main(["run", *GRID, "--out", str(out), "--workers", "1"])
+    assert not any(tmp_path.iterdir())  # neither the output folder nor its journal
