@@ -157,6 +157,13 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument(
         "--video", action="store_true", help="also write an mp4 per policy and scenario"
     )
+    run.add_argument(
+        "--ideal-baseline",
+        action="store_true",
+        help="also run every policy under perfect sensing (the ideal preset's detector and "
+        "depth, or light sensors, on the run's config), labelled <policy>+ideal: the paired "
+        "differences say what sensing noise costs each controller",
+    )
     metrics = sub.add_parser(
         "metrics",
         help="compute the same tables from step-log CSVs (simulated or recorded on a robot)",

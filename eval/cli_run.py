@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import platform
 import sys
@@ -79,7 +80,8 @@ def _check_run_args(args: argparse.Namespace) -> tuple[list[str], list[str]]:
     given = getattr(args, task.variants_option)
     scenarios = _names(given or task.default_variants, task.variants_option)
     # Size first: it needs only the counts, and loading a policy is already work.
-    _check_grid(len(policies), len(scenarios), args.episodes, args.seed)
+    runs = 2 if getattr(args, "ideal_baseline", False) else 1  # the grid again, perfect sensing
+    _check_grid(len(policies) * runs, len(scenarios), args.episodes, args.seed)
     registered, for_task = set(available_policies()), set(available_policies(task.name))
     for name in policies:
         try:
@@ -149,7 +151,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     seeds = list(range(args.seed, args.seed + args.episodes))
     plot_seed = args.seed if args.plot_seed is None else args.plot_seed
     out: Path = args.out or Path("runs") / f"eval-{datetime.now():%Y%m%d-%H%M%S}"
-    n_episodes = len(policies) * len(scenarios) * len(seeds)
+    n_episodes = len(policies) * len(scenarios) * len(seeds) * (2 if args.ideal_baseline else 1)
     check_new_folder(out)
     backend = _backend(args, n_episodes)
     started = time.perf_counter()
@@ -159,27 +161,39 @@ def cmd_run(args: argparse.Namespace) -> int:
     chunk = _journal_chunk(folder) or chunk_size(
         len(seeds), backend.slots(), len(policies) * len(scenarios)
     )
-    journal = UnitJournal(folder, run | {"chunk": chunk})
-    done = journal.load()
-    if done:
-        print(f"{PROG}: resuming: {len(done)} work units already done in {folder}", file=sys.stderr)
+    # The run's grid, and with --ideal-baseline the same grid again under perfect sensing
+    # (its units kept in a journal of their own, inside the run's).
+    grids = [("", args.config, UnitJournal(folder, run | {"chunk": chunk}))]
+    if args.ideal_baseline:
+        perfect = task.perfect_sensing(args.config)
+        ideal = UnitJournal(folder / "ideal", run | {"chunk": chunk, "baseline": IDEAL_SUFFIX})
+        grids.append((IDEAL_SUFFIX, perfect, ideal))
+    episodes: list[Any] = []
     try:
-        episodes = rollout(
-            policies,
-            scenarios,
-            seeds,
-            config=args.config,
-            backend=backend,
-            progress=True,
-            task=task.name,
-            chunk=chunk,
-            done=done,
-            on_unit=journal.put,
-        )
+        for suffix, config, journal in grids:
+            done = journal.load()
+            if done:
+                print(
+                    f"{PROG}: resuming: {len(done)} work units already done in {journal.folder}",
+                    file=sys.stderr,
+                )
+            got = rollout(
+                policies,
+                scenarios,
+                seeds,
+                config=config,
+                backend=backend,
+                progress=True,
+                task=task.name,
+                chunk=chunk,
+                done=done,
+                on_unit=journal.put,
+            )
+            episodes += [_labelled(ep, suffix) for ep in got] if suffix else got
     except BaseException as e:
-        kept = len(list(folder.glob("unit-*.pkl")))
+        kept = len(list(folder.rglob("unit-*.pkl")))
         if not kept:
-            journal.remove()  # nothing to resume: leave nothing behind
+            grids[0][2].remove()  # nothing to resume: leave nothing behind
         if not isinstance(e, KeyboardInterrupt):
             raise
         print(
@@ -193,6 +207,7 @@ def cmd_run(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
         return 130
+    journal = grids[0][2]
     with atomic_folder(out) as tmp:
         for ep in episodes:
             folder = tmp / "logs" / safe_name(ep.policy) / safe_name(ep.scenario)
@@ -231,6 +246,7 @@ def cmd_run(args: argparse.Namespace) -> int:
             "config": args.config,
             "backend": {"kind": backend.kind, "workers": backend.workers, "chunk": chunk},
             "plot_seed": plot_seed,
+            "ideal_baseline": bool(args.ideal_baseline),
             "versions": _versions(),
         }
         write_tables(tmp, summary, table, comparisons, meta, tables=task.tables)
@@ -245,6 +261,16 @@ def cmd_run(args: argparse.Namespace) -> int:
         + (", videos/" if args.video else "")
     )
     return 0
+
+
+#: What ``--ideal-baseline`` appends to a policy's label: the policy under perfect sensing.
+IDEAL_SUFFIX = "+ideal"
+
+
+def _labelled(episode: Any, suffix: str) -> Any:
+    """The episode under another policy label (its step log's ``policy`` column too)."""
+    label = episode.policy + suffix
+    return dataclasses.replace(episode, policy=label, log=episode.log.assign(policy=label))
 
 
 def _journal_chunk(folder: Path) -> int | None:

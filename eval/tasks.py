@@ -44,6 +44,9 @@ class EvalTask:
     :param plots: writes the task's plots.
     :param summary_plot: writes the chart of the summary alone into a folder (what
         ``follow-eval metrics`` draws from logs, without the run's world).
+    :param perfect_sensing: the run's ``--config`` (as :attr:`config_from_text` returns it)
+        made perfectly sensed: the task's ``ideal`` preset's sensing fields over it, nothing
+        else changed (``--ideal-baseline``).
     """
 
     name: str
@@ -58,6 +61,7 @@ class EvalTask:
     fps: int
     plots: PlotsFn
     summary_plot: Callable[[pd.DataFrame, Path], None]
+    perfect_sensing: Callable[[Any], Any]
 
     @property
     def variants_option(self) -> str:
@@ -65,9 +69,35 @@ class EvalTask:
         return f"{self.variant}s"
 
 
+def _with_sensing_of(ideal: Any, sections: Sequence[str]) -> Callable[[Any], Any]:
+    """``config -> config`` with ``ideal``'s fields of ``sections`` wherever ``ideal`` differs
+    from the default preset (its sensing changes), everything else as given."""
+    from dataclasses import fields
+
+    base = type(ideal)()
+
+    def perfect(config: Any, presets: Mapping[str, Any]) -> Any:
+        given = presets[config] if isinstance(config, str) else base.replace(**config)
+        changes: dict[str, dict[str, Any]] = {}
+        for section in sections:
+            mine, theirs = getattr(base, section), getattr(ideal, section)
+            changed = {
+                f.name: getattr(theirs, f.name)
+                for f in fields(theirs)
+                if getattr(theirs, f.name) != getattr(mine, f.name)
+            }
+            if changed:
+                changes[section] = changed
+        return given.replace(**changes)
+
+    return perfect  # type: ignore[return-value]
+
+
 def _person_follow() -> EvalTask:
+    from functools import partial
+
     from eval.report import plot_offsets, plot_thesis_metrics, plot_trajectories
-    from follow_env.tasks.person_follow.config import PRESETS, config_from_text
+    from follow_env.tasks.person_follow.config import IDEAL, PRESETS, config_from_text
 
     def summary_plot(summary: pd.DataFrame, folder: Path) -> None:
         plot_thesis_metrics(summary, folder / "thesis_metrics.png")
@@ -90,13 +120,17 @@ def _person_follow() -> EvalTask:
         10,
         plots,
         summary_plot,
+        # the detector's noise and latency, the depth's: the camera and perception sections
+        partial(_with_sensing_of(IDEAL, ("camera", "perception")), presets=PRESETS),
     )
 
 
 def _line_trace() -> EvalTask:
+    from functools import partial
+
     from eval.line_metrics import LINE_METRICS, LINE_TABLES
     from eval.line_report import plot_cross_track, plot_line_metrics, plot_line_paths
-    from follow_env.tasks.line_trace.config import PRESETS, config_from_text
+    from follow_env.tasks.line_trace.config import IDEAL, PRESETS, config_from_text
 
     def summary_plot(summary: pd.DataFrame, folder: Path) -> None:
         plot_line_metrics(summary, folder / "line_metrics.png")
@@ -119,6 +153,7 @@ def _line_trace() -> EvalTask:
         50,
         plots,
         summary_plot,
+        partial(_with_sensing_of(IDEAL, ("sensor",)), presets=PRESETS),  # the light grid's noise
     )
 
 
