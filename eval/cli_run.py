@@ -91,7 +91,7 @@ def _check_run_args(args: argparse.Namespace) -> tuple[list[str], list[str]]:
                     f"policy {spec!r} is not for the {task.name} task; its policies: "
                     + ", ".join(sorted(for_task))
                 )
-            law = make_policy(spec)  # type: ignore[arg-type]
+            law = make_policy(spec, task.name)  # type: ignore[arg-type]
             if platform is not None:
                 for_platform(law, tuple(a.name for a in get_platform(platform).actions))
         except (ValueError, TypeError) as e:
@@ -239,7 +239,9 @@ def cmd_run(args: argparse.Namespace) -> int:
             "command": " ".join([PROG, *sys.argv[1:]]),
             "finished_utc": datetime.now(UTC).isoformat(timespec="seconds"),
             "elapsed_s": round(elapsed, 2),
-            "policies": {name: repr(getattr(p, "params", p)) for name, p in _built(policies)},
+            "policies": {
+                name: repr(getattr(p, "params", p)) for name, p in _built(policies, task.name)
+            },
             "task": task.name,
             task.variants_option: scenarios,
             "seeds": seeds,
@@ -289,7 +291,7 @@ def _where(backend: Backend) -> str:
     return f"{n} process" + ("es" if n > 1 else "")
 
 
-def _built(policies: list[str]) -> list[tuple[str, Any]]:
+def _built(policies: list[str], task: str) -> list[tuple[str, Any]]:
     """``(episode label, policy)`` of every policy spec (``pn@mecanum`` included)."""
     from eval.rollout import policy_spec
     from policies import make_policy
@@ -297,6 +299,6 @@ def _built(policies: list[str]) -> list[tuple[str, Any]]:
     out = []
     for name in policies:
         spec, platform = policy_spec(name)
-        law = make_policy(spec)  # type: ignore[arg-type]
+        law = make_policy(spec, task)  # type: ignore[arg-type]
         out.append((law.name if platform is None else f"{law.name}@{platform}", law))
     return out

@@ -187,8 +187,9 @@ def _env(
     return env
 
 
-def _policy(spec: PolicySpec) -> Policy:
-    return make_policy(spec) if isinstance(spec, str) else spec
+def _policy(spec: PolicySpec, task: str = DEFAULT_TASK) -> Policy:
+    # the task's policy of a name several tasks have (``ppo``: each task's shipped agent)
+    return make_policy(spec, task) if isinstance(spec, str) else spec
 
 
 def _label(name: str, platform: str | None) -> str:
@@ -222,7 +223,7 @@ def run_episode(
     t = _task(task)
     env = _env(scenario, config, on_frame is not None, platform, t)
     layout = _layout(env.unwrapped.sim.platform, t)
-    law = for_platform(_policy(spec), layout.actions)
+    law = for_platform(_policy(spec, task), layout.actions)
     try:
         obs, info = env.reset(seed=int(seed))
         law.reset()
@@ -255,8 +256,8 @@ class _Actor:
     """Actions for n lanes: the policy's own ``act_batch`` (one object, per-lane memory), or
     one copy of the policy per lane for a policy that acts for one robot only."""
 
-    def __init__(self, spec: PolicySpec, n: int, actions: tuple[str, ...]) -> None:
-        first = for_platform(_policy(spec), actions)
+    def __init__(self, spec: PolicySpec, n: int, actions: tuple[str, ...], task: str) -> None:
+        first = for_platform(_policy(spec, task), actions)
         self.name = first.name
         self.size = len(actions)
         if isinstance(first, BatchPolicy):
@@ -267,7 +268,7 @@ class _Actor:
             self.batch = None
             # A name builds fresh copies; an object is copied so lanes never share memory.
             self.lanes = [first] + [
-                for_platform(make_policy(spec), actions)
+                for_platform(make_policy(spec, task), actions)
                 if isinstance(spec, str)
                 else copy.deepcopy(first)
                 for _ in range(n - 1)
@@ -311,7 +312,7 @@ def run_batch(
     layout = _layout(sim.platform, t)
     try:
         sim.reset_lanes(np.arange(n), [int(s) for s in seeds])
-        actor = _Actor(spec, n, layout.actions)
+        actor = _Actor(spec, n, layout.actions, task)
         active = np.ones(n, dtype=bool)
         ended_at = np.zeros(n, dtype=np.int64)  # the step each lane's episode ended at
         observations = [model.observations(sim)]
@@ -448,9 +449,8 @@ def rollout(
         pool, Ray); the results are the same whichever.
     :param chunk: seeds per work unit (default :func:`chunk_size` for the backend's slots); a
         resumed run passes the chunking it started with, so its unit indices still match.
-    :param done: results of units already run, by unit index (:func:`work_units`' order): a
-        resumed run skips them.
-    :param on_unit: called with (unit index, its episodes) as each unit finishes.
+    :param done: results of units already run, by unit index (:func:`work_units`' order).
+    :param on_unit: called with (unit index, its episodes) as each finishes (a journal).
     :returns: the episodes (or their reductions) in grid order: policy, scenario, seed.
     :raises ValueError: for an unknown policy or scenario, an empty or too large grid, a
         non-integer seed, or workers < 1, before any episode runs.
@@ -510,7 +510,7 @@ def _check_grid(
                     f"policy {spec!r} is not for the {task} task; its policies: "
                     + ", ".join(sorted(for_task))
                 )
-            law = make_policy(spec)  # raises ValueError listing the known names
+            law = make_policy(spec, task)  # raises ValueError listing the known names
         elif not isinstance(spec, Policy):
             raise ValueError(f"policy {spec!r} is neither a policy name nor a Policy")
         else:

@@ -85,8 +85,9 @@ class PolicyRegistry:
     """A mapping from names to policy factories, plus resolvers for open-ended names."""
 
     def __init__(self) -> None:
-        self._factories: dict[str, PolicyFactory] = {}
-        self._tasks: dict[str, str] = {}
+        # name -> task -> factory: a name may mean one policy per task (``ppo`` is each task's
+        # shipped agent); a law's name is one task's only.
+        self._factories: dict[str, dict[str, PolicyFactory]] = {}
         self._resolvers: list[PolicyResolver] = []
         self._tunable: dict[str, TunableLaw[Any]] = {}
 
@@ -94,15 +95,15 @@ class PolicyRegistry:
         """Make ``name`` build a policy with ``factory()``, for ``task`` (whose observation
         it reads: ``"person_follow"`` unless told).
 
-        :raises ValueError: if the name is empty, contains whitespace or is already taken
-            (re-registering would silently change what a name means in earlier results).
+        :raises ValueError: if the name is empty, contains whitespace or is already taken for
+            ``task`` (re-registering would silently change what a name means in earlier
+            results).
         """
         if not name or name != "".join(name.split()):
             raise ValueError(f"policy name {name!r} must be non-empty and without whitespace")
-        if name in self._factories:
-            raise ValueError(f"policy name {name!r} is already registered")
-        self._factories[name] = factory
-        self._tasks[name] = task
+        if task in self._factories.get(name, {}):
+            raise ValueError(f"policy name {name!r} is already registered for {task}")
+        self._factories.setdefault(name, {})[task] = factory
 
     def register_law(
         self,
@@ -160,12 +161,16 @@ class PolicyRegistry:
         """Offer names that are not registered exactly (e.g. model paths) to ``resolver``."""
         self._resolvers.append(resolver)
 
-    def make(self, name: str) -> Policy:
-        """Build a fresh policy by name.
+    def make(self, name: str, task: str | None = None) -> Policy:
+        """Build a fresh policy by name: ``task``'s when the name is registered for several
+        tasks (``ppo``), else PersonFollow's; a name of one task only is that task's.
 
         :raises ValueError: for an unknown name; the message lists the known names.
         """
-        factory = self._factories.get(name)
+        by_task = self._factories.get(name, {})
+        factory = by_task.get(task or DEFAULT_TASK) or (
+            next(iter(by_task.values())) if len(by_task) == 1 else None
+        )
         if factory is not None:
             policy = factory()
         else:
@@ -182,23 +187,26 @@ class PolicyRegistry:
     def names(self, task: str | None = None) -> list[str]:
         """All exactly registered names, sorted (names only resolvers accept are not listed);
         with ``task``, only those for that task."""
-        return sorted(n for n in self._factories if task is None or self._tasks[n] == task)
+        return sorted(n for n, tasks in self._factories.items() if task is None or task in tasks)
 
     def task_of(self, name: str) -> str:
-        """The task a registered name's policy is for (a resolved name, a model path, is
-        PersonFollow's)."""
-        return self._tasks.get(name, DEFAULT_TASK)
+        """The task a registered name's policy is for: PersonFollow's for a name several tasks
+        have, and for a resolved name (a model path)."""
+        tasks = self._factories.get(name, {})
+        return next(iter(tasks)) if len(tasks) == 1 else DEFAULT_TASK
 
 
 REGISTRY = PolicyRegistry()
 
 
-def make_policy(name: str) -> Policy:
-    """Build a fresh policy by name (module docstring lists the scheme), e.g. ``"pn:thesis"``.
+def make_policy(name: str, task: str | None = None) -> Policy:
+    """Build a fresh policy by name (module docstring lists the scheme), e.g. ``"pn:thesis"``;
+    ``task`` picks among the policies of a name several tasks have (``ppo``: each task's
+    shipped agent; default PersonFollow's).
 
     :raises ValueError: for an unknown name; the message lists the known names.
     """
-    return REGISTRY.make(name)
+    return REGISTRY.make(name, task)
 
 
 def available_policies(task: str | None = None) -> list[str]:
@@ -211,9 +219,10 @@ def policy_task(name: str) -> str:
     return REGISTRY.task_of(name)
 
 
-def register_policy(name: str, factory: PolicyFactory) -> None:
-    """Make ``name`` build a policy with ``factory()``; see :meth:`PolicyRegistry.register`."""
-    REGISTRY.register(name, factory)
+def register_policy(name: str, factory: PolicyFactory, task: str = DEFAULT_TASK) -> None:
+    """Make ``name`` build a policy with ``factory()`` for ``task``; see
+    :meth:`PolicyRegistry.register`."""
+    REGISTRY.register(name, factory, task)
 
 
 def register_law(
@@ -271,4 +280,5 @@ register_law(
 # Learned agents: the shipped PPO agent by name, any other by its path (a run folder or a .zip).
 # policies.learned.ppo loads torch and stable-baselines3 only when an agent is built.
 register_policy("ppo", ppo.load_default)
+register_policy("ppo", partial(ppo.load_shipped, "ppo_line", name="ppo"), task="line_trace")
 register_resolver(ppo.resolve_path)

@@ -21,6 +21,7 @@ import pandas as pd
 
 from eval.atomic import atomic_path
 from eval.metrics import METRICS, OUTCOME_METRICS
+from follow_env.tasks import task_for_env
 
 __all__ = [
     "CARD_METRICS",
@@ -208,12 +209,15 @@ def model_card(
     rates = [s["env_steps_per_s"] for s in sessions if s.get("env_steps_per_s")]
     platform = (hp.get("env_kwargs") or {}).get("platform")
     on = f", platform `{platform}`" if platform else ""
+    env_id = getattr(args, "env_id", None) or "PersonFollow-v0"
+    task = task_for_env(env_id).name
+    shipped = '"ppo"' if task == "person_follow" else f'"ppo", task="{task}"'
     lines = [
-        "# PPO agent for PersonFollow-v0",
+        f"# PPO agent for {env_id}",
         "",
-        "A learned person-following controller: stable-baselines3 PPO (MlpPolicy), trained by",
+        f"A learned controller for {env_id}: stable-baselines3 PPO (MlpPolicy), trained by",
         "the project's own command on the batched simulation. Load it with",
-        f'`make_policy({str(run)!r})` (or `make_policy("ppo")` for the shipped copy); the',
+        f"`make_policy({str(run)!r})` (or `make_policy({shipped})` for the shipped copy); the",
         "policy applies the saved normalisation and the agent's wrappers itself.",
         "",
         "## How it was trained",

@@ -424,9 +424,10 @@ def load_default() -> PPOPolicy:
     return PPOPolicy(DEFAULT_AGENT, name="ppo")
 
 
-def load_shipped(name: str) -> PPOPolicy:
-    """The shipped agent ``policies/agents/<name>`` (e.g. ``"ppo_mecanum"``), named ``name``."""
-    return PPOPolicy(AGENTS / name, name=name)
+def load_shipped(folder: str, name: str | None = None) -> PPOPolicy:
+    """The shipped agent ``policies/agents/<folder>`` (e.g. ``"ppo_line"``), named ``name``
+    (default: ``folder``)."""
+    return PPOPolicy(AGENTS / folder, name=name or folder)
 
 
 def resolve_path(name: str) -> PPOPolicy | None:

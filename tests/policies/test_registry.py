@@ -165,10 +165,31 @@ def test_policies_are_listed_by_the_task_they_read() -> None:
     from policies import policy_task
 
     line = available_policies("line_trace")
-    assert {"coordinate", "coordinate:literal", "pid"} <= set(line)
-    assert not set(line) & set(available_policies("person_follow"))
+    assert {"coordinate", "coordinate:literal", "pid", "ppo"} <= set(line)
+    # only the shipped agent's name is both tasks' (each task's own agent)
+    assert set(line) & set(available_policies("person_follow")) == {"ppo"}
     assert policy_task("pid") == "line_trace"
     assert policy_task("pn") == "person_follow"
+    assert policy_task("ppo") == "person_follow"  # a name of both: PersonFollow's unless told
+
+
+def test_a_name_of_two_tasks_builds_the_asked_tasks_policy() -> None:
+    registry = PolicyRegistry()
+    registry.register("agent", lambda: PN(PN_THESIS, name="follow"))
+    registry.register("agent", lambda: PN(PN_TUNED, name="line"), task="line_trace")
+    assert registry.make("agent").name == "follow"
+    assert registry.make("agent", "person_follow").name == "follow"
+    assert registry.make("agent", "line_trace").name == "line"
+    assert registry.names("line_trace") == registry.names("person_follow") == ["agent"]
+    with pytest.raises(ValueError, match="already registered for line_trace"):
+        registry.register("agent", PN, task="line_trace")
+
+
+def test_a_name_of_one_task_is_that_tasks_whatever_task_is_asked() -> None:
+    registry = PolicyRegistry()
+    registry.register("line-law", lambda: PN(PN_THESIS, name="line-law"), task="line_trace")
+    assert registry.make("line-law").name == "line-law"
+    assert registry.make("line-law", "person_follow").name == "line-law"
 
 
 def test_a_bare_line_follower_name_means_its_tuned_preset() -> None:

@@ -81,3 +81,16 @@ def test_a_card_comparison_is_refused_for_the_line_task(
     err = capsys.readouterr().err
     assert "--final-episodes 2: the model card's comparison with a law is PersonFollow's" in err
     assert not (tmp_path / "r").exists()
+
+
+def test_the_shipped_line_agent_is_ppo_of_the_line_task_and_takes_corners() -> None:
+    from eval.rollout import rollout
+    from policies import make_policy
+
+    agent = make_policy("ppo", "line_trace")
+    assert agent.name == "ppo"
+    assert make_policy("ppo").name == "ppo"  # PersonFollow's agent: another one
+    assert type(make_policy("ppo")) is type(agent)
+    episodes = rollout(["ppo"], ["corners"], range(3), task="line_trace", workers=1)
+    # the 90-degree corners the earlier agents stopped at (README, LineTrace's PPO)
+    assert [e.termination for e in episodes] == ["track_end"] * 3
