@@ -17,9 +17,10 @@ So ``"gsmpn"`` is ``"gsmpn:tuned"``, and ``"gsmpn-listing:thesis"`` is the thesi
 with the thesis's values. A built policy's ``name`` is always the full ``<law>:<preset>``.
 Each :func:`make_policy` call builds a fresh policy, so laws never share memory.
 
-Learned agents: ``ppo`` is the shipped PPO agent (``policies/agents/ppo``), and a path (a run
-folder of ``follow-train``, its ``model.zip``, or a checkpoint ``.zip``) loads that agent under
-the path as its name (:mod:`policies.learned.ppo`).
+Learned agents: ``ppo`` is each task's shipped PPO agent (PersonFollow's
+``policies/agents/ppo``; with ``task="line_trace"``, ``policies/agents/ppo_line``), and a path
+(a run folder of ``follow-train``, its ``model.zip``, or a checkpoint ``.zip``) loads that
+agent under the path as its name (:mod:`policies.learned.ppo`).
 
 ## Extending
 - A new law: one module with a :class:`~policies.base.GuidanceLaw` subclass and its ``PRESETS``,
