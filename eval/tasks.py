@@ -69,9 +69,10 @@ class EvalTask:
         return f"{self.variant}s"
 
 
-def _with_sensing_of(ideal: Any, sections: Sequence[str]) -> Callable[[Any], Any]:
-    """``config -> config`` with ``ideal``'s fields of ``sections`` wherever ``ideal`` differs
-    from the default preset (its sensing changes), everything else as given."""
+def _with_sensing_of(ideal: Any, sections: Sequence[str]) -> Callable[..., Any]:
+    """``(config, presets) -> config`` with ``ideal``'s fields of ``sections`` wherever
+    ``ideal`` differs from the default preset (its sensing changes), everything else as given;
+    ``config`` is a preset name (looked up in ``presets``) or section overrides."""
     from dataclasses import fields
 
     base = type(ideal)()
@@ -90,7 +91,7 @@ def _with_sensing_of(ideal: Any, sections: Sequence[str]) -> Callable[[Any], Any
                 changes[section] = changed
         return given.replace(**changes)
 
-    return perfect  # type: ignore[return-value]
+    return perfect
 
 
 def _person_follow() -> EvalTask:
