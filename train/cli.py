@@ -121,7 +121,8 @@ def parse_study(argv: Sequence[str] | None = None) -> tuple[Args, tuple[int, ...
         if getattr(ns, option) is not None:
             raise UsageError(
                 f"--{option} takes one run, not a study: run the same --seeds command again to "
-                f"resume it; export a seed's agent with follow-train --resume OUT/seed-K --export"
+                "resume it; a seed's agent is the run folder OUT/seed-K (make_policy and "
+                "follow-eval load it by that path)"
             )
     try:
         seeds = parse_seeds(given["seeds"])
