@@ -71,7 +71,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(
         prog=PROG, description="Compare person-following controllers on identical rollouts."
     )
-    sub = parser.add_subparsers(dest="command", required=True, metavar="{run,metrics,thesis}")
+    sub = parser.add_subparsers(
+        dest="command", required=True, metavar="{run,metrics,thesis,aggregate}"
+    )
     run = sub.add_parser(
         "run",
         help="run policies on a scenario x seed grid and write tables, logs and plots",
@@ -202,7 +204,61 @@ def build_parser() -> argparse.ArgumentParser:
     thesis.add_argument(
         "--out", type=Path, default=None, help="output folder (default: runs/thesis-<timestamp>)"
     )
+    agg = sub.add_parser(
+        "aggregate",
+        help="learners over their training seeds against the laws: IQM, performance profiles, "
+        "probability of improvement (eval.aggregate)",
+        description="Score each learner (a follow-train --seeds study or a run folder) and the "
+        "laws on the same episodes, with stratified bootstrap CIs (eval.aggregate).",
+    )
+    agg.add_argument("runs", nargs="+", type=Path, help="study or run folders, one per learner")
+    agg.add_argument("--laws", default="pn,mpn,gsmpn", help="laws (default: %(default)s)")
+    agg.add_argument(
+        "--scenarios", default="straight,curve,random", help="scenarios (default: %(default)s)"
+    )
+    agg.add_argument(
+        "--episodes", type=_positive, default=10, help="seeds per scenario (default: 10)"
+    )
+    agg.add_argument(
+        "--seed", type=_non_negative, default=9001, help="first seed (default: %(default)s)"
+    )
+    agg.add_argument(
+        "--reps", type=_positive, default=2000, help="bootstrap samples (default: %(default)s)"
+    )
+    agg.add_argument(
+        "--out", type=Path, default=None, help="output folder (default: runs/aggregate-<time>)"
+    )
     return parser
+
+
+def cmd_aggregate(args: argparse.Namespace) -> int:
+    """``follow-eval aggregate``: see :mod:`eval.aggregate`."""
+    from eval import aggregate as agg
+    from eval.atomic import atomic_folder
+    from follow_env.tasks import get_task
+    from policies import available_policies
+
+    learners = [agg.learner_runs(path) for path in args.runs]
+    laws = _names(args.laws, "laws")
+    for law in laws:
+        if law not in available_policies("person_follow"):
+            raise UsageError(f"--laws: unknown law {law!r}")
+    scenarios = _names(args.scenarios, "scenarios")
+    known = get_task("person_follow").variants()
+    for name in scenarios:
+        if name not in known:
+            raise UsageError(f"--scenarios: unknown scenario {name!r}; known: {', '.join(known)}")
+    n_agents = sum(len(learner.agents) for learner in learners)
+    _check_grid(n_agents + len(laws), len(scenarios), args.episodes, args.seed)
+    out = args.out or Path("runs") / f"aggregate-{datetime.now(UTC):%Y%m%d-%H%M%S}"
+    check_new_folder(out)
+    seeds = range(args.seed, args.seed + args.episodes)
+    tables = agg.aggregate(learners, laws, scenarios, seeds, reps=args.reps)
+    with atomic_folder(out) as tmp:
+        report = agg.write(tables, tmp)
+    print(report)
+    print(f"Wrote {out}/: aggregate.csv|md, improvement.csv, profiles.csv, scores.csv, plots/")
+    return 0
 
 
 def cmd_thesis(args: argparse.Namespace) -> int:
@@ -312,7 +368,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``follow-eval`` and ``python -m eval``; returns the exit status."""
     try:
         args = build_parser().parse_args(argv)
-        commands = {"run": cmd_run, "metrics": cmd_metrics, "thesis": cmd_thesis}
+        commands = {
+            "run": cmd_run,
+            "metrics": cmd_metrics,
+            "thesis": cmd_thesis,
+            "aggregate": cmd_aggregate,
+        }
         return commands[args.command](args)
     except (
         UsageError,

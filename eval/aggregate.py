@@ -1,0 +1,301 @@
+"""``follow-eval aggregate``: learners over training seeds against the laws, at rliable's standard.
+
+::
+
+    follow-eval aggregate runs/ppo-study [runs/other-study ...] --laws pn,mpn,gsmpn \\
+        --scenarios straight,curve,random --episodes 10 --out runs/aggregate-x
+
+Each ``RUN`` is a learner: a study of ``follow-train --seeds`` (its ``seed-<k>/`` run folders,
+one per training seed) or a single run folder (one seed). Every seed's agent and every law
+play the same scenarios x evaluation seeds (identical rollouts; seeds ``--seed`` ..), and each
+episode is scored by the env's own summed reward, normalised per scenario to [0, 1] by the
+lowest and highest episode score any controller reached there (a score of 1 is the best
+episode seen on that scenario), so that scenarios with larger rewards do not outweigh the rest.
+
+Following Agarwal et al. (2021) and their library rliable, for every controller:
+
+- the **interquartile mean** (IQM), mean, median and optimality gap of the normalised scores,
+  each with a 95 % **stratified bootstrap** CI: the runs (training seeds x evaluation episodes;
+  a law's runs are its episodes) are resampled with replacement within each scenario;
+- the **performance profile**: the share of runs scoring above tau, for tau in [0, 1], with its
+  bootstrap band;
+- the **probability of improvement** of each learner over each law, P(X > Y) averaged over the
+  scenarios (the Mann-Whitney statistic), with a stratified bootstrap CI over both.
+
+The point estimates are rliable's own functions (``rliable.metrics``). rliable 1.2's bootstrap
+module does not import with pandas 3 (its dependency ``arch`` 7.2 fails on import, and ``arch``
+8 changed the call rliable makes), so the stratified bootstrap here is a few lines of numpy
+that resample exactly as rliable's ``StratifiedBootstrap`` does (per task, with replacement),
+seeded, so the intervals are reproducible.
+
+Writes ``aggregate.csv`` (controller, metric, estimate, ci_low, ci_high), ``improvement.csv``
+(learner, law, probability, ci_low, ci_high), ``profiles.csv``, ``scores.csv`` (every
+episode's raw and normalised score), ``aggregate.md`` and ``plots/`` (interval estimates,
+performance profiles), atomically.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from eval.rollout import Episode, rollout
+
+__all__ = [
+    "AGGREGATES",
+    "LearnerRuns",
+    "aggregate",
+    "learner_runs",
+    "normalised_scores",
+    "stratified_ci",
+]
+
+#: The aggregate metrics, rliable's, over a (runs, tasks) score matrix.
+AGGREGATES: dict[str, Callable[[np.ndarray], float]] = {}
+
+
+def _aggregates() -> dict[str, Callable[[np.ndarray], float]]:
+    if not AGGREGATES:
+        from rliable import metrics
+
+        AGGREGATES.update(
+            {
+                "iqm": metrics.aggregate_iqm,
+                "mean": metrics.aggregate_mean,
+                "median": metrics.aggregate_median,
+                "optimality_gap": metrics.aggregate_optimality_gap,
+            }
+        )
+    return AGGREGATES
+
+
+class LearnerRuns:
+    """A learner's agents: its name and one agent path per training seed."""
+
+    def __init__(self, name: str, agents: Sequence[Path]) -> None:
+        self.name = name
+        self.agents = list(agents)
+
+
+def learner_runs(path: str | Path) -> LearnerRuns:
+    """The learner at ``path``: a ``follow-train --seeds`` study (its ``seed-<k>`` runs that
+    hold a model) or one run folder.
+
+    :raises ValueError: naming the path if it holds no agent.
+    """
+    path = Path(path)
+    if not path.is_dir():
+        raise ValueError(f"{path}: not a folder (a follow-train run or --seeds study)")
+    seeds = sorted(
+        (p for p in path.glob("seed-*") if (p / "model.zip").is_file()),
+        key=lambda p: int(p.name.removeprefix("seed-")) if p.name[5:].isdigit() else 0,
+    )
+    if seeds:
+        return LearnerRuns(path.name, seeds)
+    if (path / "model.zip").is_file():
+        return LearnerRuns(path.name, [path])
+    raise ValueError(f"{path}: holds no trained agent (no model.zip, no seed-<k>/model.zip)")
+
+
+def _return(episode: Episode) -> float:
+    """An episode's summed env reward (reduced where the episode ran)."""
+    return float(episode.log["reward"].sum())
+
+
+def normalised_scores(raw: pd.DataFrame) -> pd.DataFrame:
+    """``raw`` (columns controller, run, scenario, seed, score) with ``normalised``: per
+    scenario, (score - lowest) / (highest - lowest) over every controller's episodes."""
+    out = raw.copy()
+    by = out.groupby("scenario")["score"]
+    low, high = by.transform("min"), by.transform("max")
+    span = (high - low).where(high > low, 1.0)
+    out["normalised"] = (out["score"] - low) / span
+    return out
+
+
+def _matrix(scores: pd.DataFrame, scenarios: Sequence[str]) -> np.ndarray:
+    """A controller's (runs, tasks) matrix: runs = (training seed, episode), tasks = scenarios."""
+    table = scores.pivot_table(
+        index=["run", "seed"], columns="scenario", values="normalised", aggfunc="first"
+    )
+    return table[list(scenarios)].to_numpy(dtype=float)
+
+
+def _resample(matrix: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """Runs resampled with replacement within each task (rliable's StratifiedBootstrap)."""
+    runs, tasks = matrix.shape
+    rows = rng.integers(0, runs, size=(runs, tasks))
+    return matrix[rows, np.arange(tasks)]
+
+
+def stratified_ci(
+    func: Callable[..., float],
+    matrices: Sequence[np.ndarray],
+    reps: int,
+    seed: int = 0,
+    level: float = 0.95,
+) -> tuple[float, float, float]:
+    """``func(*matrices)`` and its percentile CI over ``reps`` stratified bootstrap samples
+    (each matrix resampled on its own, within each task)."""
+    rng = np.random.default_rng(seed)
+    point = float(func(*matrices))
+    draws = np.array([func(*(_resample(m, rng) for m in matrices)) for _ in range(reps)])
+    tail = 100.0 * (1.0 - level) / 2.0
+    low, high = np.percentile(draws, [tail, 100.0 - tail])
+    return point, float(low), float(high)
+
+
+def aggregate(
+    learners: Sequence[LearnerRuns],
+    laws: Sequence[str],
+    scenarios: Sequence[str],
+    seeds: Sequence[int],
+    *,
+    config: Any = None,
+    reps: int = 2000,
+    backend: Any = None,
+) -> dict[str, pd.DataFrame]:
+    """Run every agent and law on the grid and compute the tables (module docstring).
+
+    :returns: ``scores``, ``aggregate``, ``improvement`` and ``profiles`` tables.
+    """
+    from rliable import metrics
+
+    agents = [str(a) for learner in learners for a in learner.agents]
+    returns = rollout(
+        [*agents, *laws], list(scenarios), list(seeds), config=config, reduce=_return,
+        backend=backend,
+    )  # fmt: skip
+    owner = {
+        str(a): (learner.name, k) for learner in learners for k, a in enumerate(learner.agents)
+    }
+    rows = []
+    i = 0
+    for policy in [*agents, *laws]:
+        name, run = owner.get(policy, (policy, 0))
+        for scenario in scenarios:
+            for seed in seeds:
+                rows.append((name, run, scenario, int(seed), returns[i]))
+                i += 1
+    scores = normalised_scores(
+        pd.DataFrame(rows, columns=["controller", "run", "scenario", "seed", "score"])
+    )
+    controllers = [learner.name for learner in learners] + list(laws)
+    matrix = {c: _matrix(scores[scores["controller"] == c], scenarios) for c in controllers}
+    table = []
+    for c in controllers:
+        for j, (metric, fn) in enumerate(_aggregates().items()):
+            point, low, high = stratified_ci(fn, [matrix[c]], reps, seed=j)
+            table.append((c, metric, point, low, high))
+    improvement = []
+    for learner in learners:
+        for law in laws:
+            point, low, high = stratified_ci(
+                metrics.probability_of_improvement, [matrix[learner.name], matrix[law]], reps
+            )
+            improvement.append((learner.name, law, point, low, high))
+    taus = np.linspace(0.0, 1.0, 21)
+    profiles = []
+    for c in controllers:
+        for tau in taus:
+            point, low, high = stratified_ci(
+                lambda m, t=tau: float(np.mean(m > t)), [matrix[c]], reps // 4
+            )
+            profiles.append((c, float(tau), point, low, high))
+    return {
+        "scores": scores,
+        "aggregate": pd.DataFrame(
+            table, columns=["controller", "metric", "estimate", "ci_low", "ci_high"]
+        ),
+        "improvement": pd.DataFrame(
+            improvement, columns=["learner", "law", "probability", "ci_low", "ci_high"]
+        ),
+        "profiles": pd.DataFrame(
+            profiles, columns=["controller", "tau", "fraction", "ci_low", "ci_high"]
+        ),
+    }
+
+
+def write(tables: dict[str, pd.DataFrame], folder: Path) -> str:
+    """Write the tables and plots into ``folder`` (atomically, file by file); returns the
+    Markdown report."""
+    from eval.atomic import atomic_path, atomic_write_text
+
+    for name in ("scores", "aggregate", "improvement", "profiles"):
+        atomic_write_text(folder / f"{name}.csv", tables[name].to_csv(index=False))
+    report = markdown(tables)
+    atomic_write_text(folder / "aggregate.md", report)
+    (folder / "plots").mkdir(exist_ok=True)
+    with atomic_path(folder / "plots" / "aggregates.png") as tmp:
+        _plot_intervals(tables["aggregate"], tmp)
+    with atomic_path(folder / "plots" / "performance_profiles.png") as tmp:
+        _plot_profiles(tables["profiles"], tmp)
+    return report
+
+
+def markdown(tables: dict[str, pd.DataFrame]) -> str:
+    """The aggregate and improvement tables as Markdown."""
+    agg = tables["aggregate"].copy()
+    agg["value"] = [
+        f"{e:.3f} [{lo:.3f}, {hi:.3f}]"
+        for e, lo, hi in zip(agg["estimate"], agg["ci_low"], agg["ci_high"], strict=True)
+    ]
+    wide = agg.pivot(index="controller", columns="metric", values="value")
+    imp = tables["improvement"].copy()
+    imp["P(learner > law)"] = [
+        f"{p:.3f} [{lo:.3f}, {hi:.3f}]"
+        for p, lo, hi in zip(imp["probability"], imp["ci_low"], imp["ci_high"], strict=True)
+    ]
+    return (
+        "## Aggregate normalised scores (95 % stratified bootstrap CIs)\n\n"
+        + wide[list(_aggregates())].to_markdown()
+        + "\n\n## Probability of improvement\n\n"
+        + imp[["learner", "law", "P(learner > law)"]].to_markdown(index=False)
+        + "\n"
+    )
+
+
+def _plot_intervals(table: pd.DataFrame, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    metrics = list(_aggregates())
+    controllers = list(dict.fromkeys(table["controller"]))
+    fig, axes = plt.subplots(
+        1, len(metrics), figsize=(3.2 * len(metrics), 0.5 * len(controllers) + 1.5)
+    )
+    for ax, metric in zip(axes, metrics, strict=True):
+        rows = table[table["metric"] == metric].set_index("controller").loc[controllers]
+        y = np.arange(len(controllers))
+        ax.hlines(y, rows["ci_low"], rows["ci_high"], linewidth=6, alpha=0.5)
+        ax.plot(rows["estimate"], y, "k|", markersize=14)
+        ax.set_yticks(y, controllers if ax is axes[0] else [""] * len(controllers))
+        ax.set_title(metric)
+        ax.set_xlabel("normalised score")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110, format="png")
+    plt.close(fig)
+
+
+def _plot_profiles(table: pd.DataFrame, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6, 4))
+    for controller, rows in table.groupby("controller", sort=False):
+        ax.plot(rows["tau"], rows["fraction"], label=str(controller))
+        ax.fill_between(rows["tau"], rows["ci_low"], rows["ci_high"], alpha=0.2)
+    ax.set_xlabel("normalised score tau")
+    ax.set_ylabel("fraction of runs with score > tau")
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=110, format="png")
+    plt.close(fig)
