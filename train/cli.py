@@ -111,7 +111,10 @@ def parse_study(argv: Sequence[str] | None = None) -> tuple[Args, tuple[int, ...
 
     :raises UsageError: for a study option without --seeds, or one a study cannot take.
     """
-    ns = build_parser().parse_args(argv)
+    return _study(build_parser().parse_args(argv))
+
+
+def _study(ns: argparse.Namespace) -> tuple[Args, tuple[int, ...], Backend] | None:
     given = {k: getattr(ns, k) for k in _STUDY_OPTIONS if getattr(ns, k) is not None}
     if "seeds" not in given:
         if given:
@@ -128,7 +131,7 @@ def parse_study(argv: Sequence[str] | None = None) -> tuple[Args, tuple[int, ...
         seeds = parse_seeds(given["seeds"])
     except ValueError as e:
         raise UsageError(str(e)) from None
-    args = parse_args(_without_study_options(list(argv or [])))
+    args = _args(ns)  # the study options are not the runs' (_args leaves them out)
     kind = given.get("backend", "local")
     workers = given.get("workers", 1 if kind == "local" else None)
     try:
@@ -140,26 +143,15 @@ def parse_study(argv: Sequence[str] | None = None) -> tuple[Args, tuple[int, ...
     return args, seeds, backend
 
 
-def _without_study_options(argv: list[str]) -> list[str]:
-    out, skip = [], False
-    for a in argv:
-        if skip:
-            skip = False
-            continue
-        name = a.split("=", 1)[0]
-        if name in {f"--{k}" for k in _STUDY_OPTIONS}:
-            skip = "=" not in a
-            continue
-        out.append(a)
-    return out
-
-
 def parse_args(argv: Sequence[str] | None = None) -> Args:
     """Parse the command line into :class:`Args`.
 
     :raises UsageError: for unknown or conflicting options.
     """
-    ns = build_parser().parse_args(argv)
+    return _args(build_parser().parse_args(argv))
+
+
+def _args(ns: argparse.Namespace) -> Args:
     given = {k: v for k, v in vars(ns).items() if v is not None and k not in _STUDY_OPTIONS}
     if "resume" in given and set(given) - _RESUME_OPTIONS:
         extra = ", ".join("--" + k.replace("_", "-") for k in sorted(set(given) - _RESUME_OPTIONS))
@@ -196,10 +188,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``follow-train`` and ``python -m train``; returns the exit status."""
     argv = sys.argv[1:] if argv is None else list(argv)
     try:
-        study = parse_study(argv)
+        ns = build_parser().parse_args(argv)
+        study = _study(ns)
         if study is not None:
             return _main_study(*study, command=" ".join([PROG, *argv]))
-        args = parse_args(argv)
+        args = _args(ns)
         run = train(args, command=" ".join([PROG, *argv]))
     except Interrupted as e:
         print(f"{PROG}: {e}", file=sys.stderr)
