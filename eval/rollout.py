@@ -64,9 +64,8 @@ Reducer = Callable[["Episode"], Any]
 DEFAULT_TASK = "person_follow"
 
 # Measured on the 2-core development machine (README "Evaluation"): an episode of `straight` or
-# `curve` costs about 5 ms here (stepping, policy, log), while a pool worker needs about 2 s to
-# start (imports and loading the compiled kernels). A pool pays off only above this many
-# episodes per extra worker.
+# `curve` costs about 5 ms (stepping, policy, log), a pool worker about 2 s to start (imports,
+# loading the compiled kernels): a pool pays off only above this many episodes per worker.
 _EPISODES_PER_WORKER_START = 1000
 
 
@@ -94,6 +93,11 @@ class Episode:
     def termination(self) -> str:
         """Why the episode ended (the info key "termination")."""
         return str(self.log["termination"].iloc[-1])
+
+    @property
+    def total_reward(self) -> float:
+        """The env's reward summed over the episode (the reset row's NaN is skipped)."""
+        return float(self.log["reward"].sum())
 
 
 class _Task(NamedTuple):
@@ -396,12 +400,9 @@ def _step_log(
 
 
 def auto_workers(episodes: int) -> int:
-    """How many processes pay off for ``episodes`` episodes on this machine (1 = no pool).
-
-    A pool worker costs about 2 s to start and an episode about 5 ms (measured, see
-    ``_EPISODES_PER_WORKER_START``), so small grids such as the thesis comparison (120 episodes)
-    run fastest in this process.
-    """
+    """How many processes pay off for ``episodes`` episodes on this machine (1 = no pool):
+    small grids such as the thesis comparison (120 episodes) run fastest in this process
+    (``_EPISODES_PER_WORKER_START``)."""
     cores = os.cpu_count() or 1
     return max(1, min(cores, episodes // _EPISODES_PER_WORKER_START))
 
@@ -445,10 +446,8 @@ def rollout(
         module-level function).
     :param task: the task (``"person_follow"``, ``"line_trace"``); a policy registered for
         another task is refused.
-    :param backend: where the work units run (:class:`execution.Backend`: this process, a
-        pool, Ray); the results are the same whichever.
-    :param chunk: seeds per work unit (default :func:`chunk_size` for the backend's slots); a
-        resumed run passes the chunking it started with, so its unit indices still match.
+    :param backend: where the units run (:class:`execution.Backend`); the same results on each.
+    :param chunk: seeds per unit (default :func:`chunk_size`); a resumed run passes its own.
     :param done: results of units already run, by unit index (:func:`work_units`' order).
     :param on_unit: called with (unit index, its episodes) as each finishes (a journal).
     :returns: the episodes (or their reductions) in grid order: policy, scenario, seed.

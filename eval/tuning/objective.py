@@ -58,7 +58,7 @@ def episode_score(episode: Episode) -> tuple[float, float, float]:
     """(summed reward, turn accel RMS [rad/s²], 1 if it failed else 0) of one episode; runs
     in the worker. Failed: lost the person or the line, collided, left the field, or ran out of
     time on a track."""
-    reward = float(episode.log["reward"].sum())  # the reset row's NaN is skipped
+    reward = episode.total_reward
     turn = float(METRICS["turn_accel_rms_rad_s2"].fn(episode.log))
     return reward, turn, float(episode.termination not in NORMAL_ENDINGS)
 
