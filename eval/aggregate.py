@@ -36,6 +36,8 @@ performance profiles), atomically.
 
 from __future__ import annotations
 
+import itertools
+import operator
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -43,34 +45,31 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from eval.rollout import Episode, rollout
+from eval.rollout import rollout
 
 __all__ = [
-    "AGGREGATES",
     "LearnerRuns",
     "aggregate",
+    "aggregate_metrics",
     "learner_runs",
     "normalised_scores",
     "stratified_ci",
 ]
 
-#: The aggregate metrics, rliable's, over a (runs, tasks) score matrix.
-AGGREGATES: dict[str, Callable[[np.ndarray], float]] = {}
+#: Bootstrap samples of a performance profile's band, as a share of ``reps`` (21 taus each).
+_PROFILE_REPS_SHARE = 4
 
 
-def _aggregates() -> dict[str, Callable[[np.ndarray], float]]:
-    if not AGGREGATES:
-        from rliable import metrics
+def aggregate_metrics() -> dict[str, Callable[[np.ndarray], float]]:
+    """The aggregate metrics over a (runs, tasks) score matrix, by name: rliable's."""
+    from rliable import metrics
 
-        AGGREGATES.update(
-            {
-                "iqm": metrics.aggregate_iqm,
-                "mean": metrics.aggregate_mean,
-                "median": metrics.aggregate_median,
-                "optimality_gap": metrics.aggregate_optimality_gap,
-            }
-        )
-    return AGGREGATES
+    return {
+        "iqm": metrics.aggregate_iqm,
+        "mean": metrics.aggregate_mean,
+        "median": metrics.aggregate_median,
+        "optimality_gap": metrics.aggregate_optimality_gap,
+    }
 
 
 class LearnerRuns:
@@ -99,11 +98,6 @@ def learner_runs(path: str | Path) -> LearnerRuns:
     if (path / "model.zip").is_file():
         return LearnerRuns(path.name, [path])
     raise ValueError(f"{path}: holds no trained agent (no model.zip, no seed-<k>/model.zip)")
-
-
-def _return(episode: Episode) -> float:
-    """An episode's summed env reward (reduced where the episode ran)."""
-    return float(episode.log["reward"].sum())
 
 
 def normalised_scores(raw: pd.DataFrame) -> pd.DataFrame:
@@ -166,21 +160,24 @@ def aggregate(
     from rliable import metrics
 
     agents = [str(a) for learner in learners for a in learner.agents]
+    policies = [*agents, *laws]
+    # rollout checks every name (agents, laws, scenarios) before any episode runs
     returns = rollout(
-        [*agents, *laws], list(scenarios), list(seeds), config=config, reduce=_return,
+        policies,
+        list(scenarios),
+        list(seeds),
+        config=config,
+        reduce=operator.attrgetter("total_reward"),
         backend=backend,
-    )  # fmt: skip
+    )
     owner = {
         str(a): (learner.name, k) for learner in learners for k, a in enumerate(learner.agents)
     }
-    rows = []
-    i = 0
-    for policy in [*agents, *laws]:
-        name, run = owner.get(policy, (policy, 0))
-        for scenario in scenarios:
-            for seed in seeds:
-                rows.append((name, run, scenario, int(seed), returns[i]))
-                i += 1
+    grid = itertools.product(policies, scenarios, seeds)  # rollout's order
+    rows = [
+        (*owner.get(policy, (policy, 0)), scenario, int(seed), score)
+        for (policy, scenario, seed), score in zip(grid, returns, strict=True)
+    ]
     scores = normalised_scores(
         pd.DataFrame(rows, columns=["controller", "run", "scenario", "seed", "score"])
     )
@@ -188,7 +185,7 @@ def aggregate(
     matrix = {c: _matrix(scores[scores["controller"] == c], scenarios) for c in controllers}
     table = []
     for c in controllers:
-        for j, (metric, fn) in enumerate(_aggregates().items()):
+        for j, (metric, fn) in enumerate(aggregate_metrics().items()):
             point, low, high = stratified_ci(fn, [matrix[c]], reps, seed=j)
             table.append((c, metric, point, low, high))
     improvement = []
@@ -223,17 +220,15 @@ def aggregate(
 def write(tables: dict[str, pd.DataFrame], folder: Path) -> str:
     """Write the tables and plots into ``folder`` (atomically, file by file); returns the
     Markdown report."""
-    from eval.atomic import atomic_path, atomic_write_text
+    from eval.atomic import atomic_write_text
 
     for name in ("scores", "aggregate", "improvement", "profiles"):
         atomic_write_text(folder / f"{name}.csv", tables[name].to_csv(index=False))
     report = markdown(tables)
     atomic_write_text(folder / "aggregate.md", report)
     (folder / "plots").mkdir(exist_ok=True)
-    with atomic_path(folder / "plots" / "aggregates.png") as tmp:
-        _plot_intervals(tables["aggregate"], tmp)
-    with atomic_path(folder / "plots" / "performance_profiles.png") as tmp:
-        _plot_profiles(tables["profiles"], tmp)
+    _plot_intervals(tables["aggregate"], folder / "plots" / "aggregates.png")
+    _plot_profiles(tables["profiles"], folder / "plots" / "performance_profiles.png")
     return report
 
 
@@ -252,24 +247,21 @@ def markdown(tables: dict[str, pd.DataFrame]) -> str:
     ]
     return (
         "## Aggregate normalised scores (95 % stratified bootstrap CIs)\n\n"
-        + wide[list(_aggregates())].to_markdown()
+        + wide[list(aggregate_metrics())].to_markdown()
         + "\n\n## Probability of improvement\n\n"
         + imp[["learner", "law", "P(learner > law)"]].to_markdown(index=False)
         + "\n"
     )
 
 
-def _plot_intervals(table: pd.DataFrame, path: Path) -> None:
-    import matplotlib
+def _plot_intervals(table: pd.DataFrame, path: Path) -> Path:
+    from eval.report import _pyplot, _save
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    metrics = list(_aggregates())
+    plt = _pyplot()
+    metrics = list(aggregate_metrics())
     controllers = list(dict.fromkeys(table["controller"]))
-    fig, axes = plt.subplots(
-        1, len(metrics), figsize=(3.2 * len(metrics), 0.5 * len(controllers) + 1.5)
-    )
+    height = 0.5 * len(controllers) + 1.5
+    fig, axes = plt.subplots(1, len(metrics), figsize=(3.2 * len(metrics), height))
     for ax, metric in zip(axes, metrics, strict=True):
         rows = table[table["metric"] == metric].set_index("controller").loc[controllers]
         y = np.arange(len(controllers))
@@ -279,17 +271,13 @@ def _plot_intervals(table: pd.DataFrame, path: Path) -> None:
         ax.set_title(metric)
         ax.set_xlabel("normalised score")
     fig.tight_layout()
-    fig.savefig(path, dpi=110, format="png")
-    plt.close(fig)
+    return _save(fig, path)
 
 
-def _plot_profiles(table: pd.DataFrame, path: Path) -> None:
-    import matplotlib
+def _plot_profiles(table: pd.DataFrame, path: Path) -> Path:
+    from eval.report import _pyplot, _save
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(6, 4))
+    fig, ax = _pyplot().subplots(figsize=(6, 4))
     for controller, rows in table.groupby("controller", sort=False):
         ax.plot(rows["tau"], rows["fraction"], label=str(controller))
         ax.fill_between(rows["tau"], rows["ci_low"], rows["ci_high"], alpha=0.2)
@@ -297,5 +285,4 @@ def _plot_profiles(table: pd.DataFrame, path: Path) -> None:
     ax.set_ylabel("fraction of runs with score > tau")
     ax.legend()
     fig.tight_layout()
-    fig.savefig(path, dpi=110, format="png")
-    plt.close(fig)
+    return _save(fig, path)

@@ -78,6 +78,7 @@ def test_a_study_against_a_law_writes_the_tables_and_plots(
 
 def test_bad_arguments_give_one_line(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     assert main(["aggregate", str(AGENT), "--laws", "pnn", "--out", str(tmp_path / "x")]) == 2
-    assert "unknown law 'pnn'" in capsys.readouterr().err
+    assert "unknown policy 'pnn'" in capsys.readouterr().err
+    assert not (tmp_path / "x").exists()
     assert main(["aggregate", str(tmp_path), "--out", str(tmp_path / "y")]) == 2
     assert "holds no trained agent" in capsys.readouterr().err
