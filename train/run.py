@@ -28,6 +28,7 @@ import json
 import re
 import shutil
 import time
+from collections.abc import Iterator
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
@@ -72,19 +73,28 @@ CHECKPOINT_PREFIX = "ppo"
 _CHECKPOINT = re.compile(rf"^{CHECKPOINT_PREFIX}_(\d+)_steps\.zip$")
 
 
-def new_run_dir(root: str | Path = "runs", prefix: str = "ppo") -> Path:
-    """Create and return a new run folder ``root/<prefix>-<timestamp>[-k]``."""
-    root = Path(root)
-    root.mkdir(parents=True, exist_ok=True)
+def run_dir_names(root: str | Path = "runs", prefix: str = "ppo") -> Iterator[Path]:
+    """The names a new run folder may take, in order: ``root/<prefix>-<timestamp>[-k]``.
+
+    :raises FileExistsError: once the 1000 names of this second are all taken.
+    """
     stamp = f"{prefix}-{datetime.now():%Y%m%d-%H%M%S}"
     for k in range(1000):
-        path = root / (stamp if k == 0 else f"{stamp}-{k}")
+        yield Path(root) / (stamp if k == 0 else f"{stamp}-{k}")
+    raise FileExistsError(f"{root}: no free run folder name for {stamp}")
+
+
+def new_run_dir(root: str | Path = "runs", prefix: str = "ppo") -> Path:
+    """Create and return a new run folder ``root/<prefix>-<timestamp>[-k]``."""
+    Path(root).mkdir(parents=True, exist_ok=True)
+    names = run_dir_names(root, prefix)
+    while True:
+        path = next(names)  # FileExistsError once every name is taken
         try:
             path.mkdir()
         except FileExistsError:
             continue
         return path
-    raise FileExistsError(f"{root}: no free run folder name for {stamp}")
 
 
 def write_config(run: Path, config: dict[str, Any]) -> Path:

@@ -195,14 +195,7 @@ def _claim(study: Path, settings: dict[str, Any]) -> None:
 
 def _new_study_path(root: Path) -> Path:
     """``root/ppo-seeds-<timestamp>[-k]``, not yet made (nothing is written before the checks)."""
-    from datetime import datetime
-
-    stamp = f"ppo-seeds-{datetime.now():%Y%m%d-%H%M%S}"
-    for k in range(1000):
-        path = root / (stamp if k == 0 else f"{stamp}-{k}")
-        if not path.exists():
-            return path
-    raise FileExistsError(f"{root}: no free study folder name for {stamp}")
+    return next(p for p in runs.run_dir_names(root, "ppo-seeds") if not p.exists())
 
 
 def write_summary(study: Path, rows: Sequence[dict[str, Any]]) -> pd.DataFrame:
