@@ -13,7 +13,7 @@ import importlib
 import pkgutil
 from typing import Any
 
-__all__ = ["available_tasks", "get_task", "register_envs", "task_for_env"]
+__all__ = ["available_tasks", "env_ids", "get_task", "register_envs", "task_for_env"]
 
 
 def _packages() -> list[str]:
@@ -25,31 +25,40 @@ def available_tasks() -> list[str]:
     return sorted(_packages())
 
 
+def _envs() -> dict[str, tuple[str, dict[str, Any]]]:
+    """Every task's Gymnasium ids: id -> (task name, its registration keywords)."""
+    out = {}
+    for name in _packages():
+        package = importlib.import_module(f"{__name__}.{name}")
+        for env_id, kwargs in getattr(package, "ENVS", {}).items():
+            out[env_id] = (name, kwargs)
+    return out
+
+
+def env_ids() -> list[str]:
+    """Every task's Gymnasium ids (``"PersonFollow-v0"``, ...), task by task."""
+    return list(_envs())
+
+
 def register_envs() -> None:
     """Register every task's Gymnasium ids (idempotent)."""
     import gymnasium
 
-    for name in _packages():
-        package = importlib.import_module(f"{__name__}.{name}")
-        for env_id, kwargs in getattr(package, "ENVS", {}).items():
-            if env_id not in gymnasium.registry:
-                # No max_episode_steps: the kernel ends episodes itself, so the single env and
-                # the batched core truncate at exactly the same step.
-                gymnasium.register(id=env_id, **kwargs)
+    for env_id, (_, kwargs) in _envs().items():
+        if env_id not in gymnasium.registry:
+            # No max_episode_steps: the kernel ends episodes itself, so the single env and
+            # the batched core truncate at exactly the same step.
+            gymnasium.register(id=env_id, **kwargs)
 
 
 def task_for_env(env_id: str) -> Any:
     """The task model behind a Gymnasium id (``"PersonFollow-v0"``); ``ValueError`` listing
     the known ids otherwise."""
-    known = []
-    for name in _packages():
-        package = importlib.import_module(f"{__name__}.{name}")
-        envs = getattr(package, "ENVS", {})
-        if env_id in envs:
-            return get_task(name)
-        known += list(envs)
+    envs = _envs()
+    if env_id in envs:
+        return get_task(envs[env_id][0])
     raise ValueError(
-        f"env_id={env_id!r} is out of range: must be one of " + ", ".join(map(repr, known))
+        f"env_id={env_id!r} is out of range: must be one of " + ", ".join(map(repr, envs))
     )
 
 

@@ -16,7 +16,6 @@ every node (or let the first episodes there compile).
 from __future__ import annotations
 
 import argparse
-import importlib
 import os
 import sys
 import time
@@ -31,13 +30,9 @@ def pairs() -> list[tuple[str, str]]:
     """Every (Gymnasium id, platform) pair: each task's ids x every registered platform,
     PersonFollow's first (its kernels take longest, so a pool starts them first)."""
     from follow_env.platforms import available_platforms
-    from follow_env.tasks import available_tasks
+    from follow_env.tasks import env_ids
 
-    ids = []
-    for task in available_tasks():
-        package = importlib.import_module(f"follow_env.tasks.{task}")
-        ids += list(getattr(package, "ENVS", {}))
-    ids.sort(key=lambda env_id: not env_id.startswith("PersonFollow"))
+    ids = sorted(env_ids(), key=lambda env_id: not env_id.startswith("PersonFollow"))
     return [(env_id, platform) for env_id in ids for platform in available_platforms()]
 
 
