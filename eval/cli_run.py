@@ -163,18 +163,19 @@ def cmd_run(args: argparse.Namespace) -> int:
     )
     # The run's grid, and with --ideal-baseline the same grid again under perfect sensing
     # (its units kept in a journal of their own, inside the run's).
-    grids = [("", args.config, UnitJournal(folder, run | {"chunk": chunk}))]
+    journal = UnitJournal(folder, run | {"chunk": chunk})
+    grids = [("", args.config, journal)]
     if args.ideal_baseline:
         perfect = task.perfect_sensing(args.config)
         ideal = UnitJournal(folder / "ideal", run | {"chunk": chunk, "baseline": IDEAL_SUFFIX})
         grids.append((IDEAL_SUFFIX, perfect, ideal))
     episodes: list[Any] = []
     try:
-        for suffix, config, journal in grids:
-            done = journal.load()
+        for suffix, config, kept_in in grids:
+            done = kept_in.load()
             if done:
                 print(
-                    f"{PROG}: resuming: {len(done)} work units already done in {journal.folder}",
+                    f"{PROG}: resuming: {len(done)} work units already done in {kept_in.folder}",
                     file=sys.stderr,
                 )
             got = rollout(
@@ -187,13 +188,13 @@ def cmd_run(args: argparse.Namespace) -> int:
                 task=task.name,
                 chunk=chunk,
                 done=done,
-                on_unit=journal.put,
+                on_unit=kept_in.put,
             )
             episodes += [_labelled(ep, suffix) for ep in got] if suffix else got
     except BaseException as e:
         kept = len(list(folder.rglob("unit-*.pkl")))
         if not kept:
-            grids[0][2].remove()  # nothing to resume: leave nothing behind
+            journal.remove()  # nothing to resume (the ideal grid's journal is inside it)
         if not isinstance(e, KeyboardInterrupt):
             raise
         print(
@@ -207,7 +208,6 @@ def cmd_run(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
         return 130
-    journal = grids[0][2]
     with atomic_folder(out) as tmp:
         for ep in episodes:
             folder = tmp / "logs" / safe_name(ep.policy) / safe_name(ep.scenario)
