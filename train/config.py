@@ -305,6 +305,20 @@ def _check_batch(where: str, hp: Hyperparams, name: Callable[[str], str]) -> Non
         )
 
 
+def platform_label(platform: Any) -> str | None:
+    """``env_kwargs.platform`` for people: ``mecanum``, or ``mecanum (drive.mode=pid)`` for a
+    mapping with section overrides; None when the run names no platform."""
+    if not isinstance(platform, Mapping):
+        return platform
+    flat = [
+        f"{section}.{key}={value}"
+        for section, fields in platform.items()
+        if section != "name"
+        for key, value in (fields.items() if isinstance(fields, Mapping) else [("", fields)])
+    ]
+    return f"{platform['name']} ({', '.join(flat)})" if flat else str(platform["name"])
+
+
 def _check_env_kwargs(where: str, value: Any) -> dict[str, Any]:
     """``env_kwargs``: a mapping of ``gym.make`` keyword arguments; ``platform`` a registered
     platform's name (the other values are the env's to check when it is built)."""
@@ -322,15 +336,22 @@ def _check_env_kwargs(where: str, value: Any) -> dict[str, Any]:
             raise ConfigError(f"{where}: env_kwargs.{key} is set by follow-train ({instead})")
     if "platform" in checked:
         from follow_env.platforms import available_platforms
+        from follow_env.tasks.config import named_platform
 
         platform = checked["platform"]
-        if not isinstance(platform, str) or platform not in available_platforms():
+        name = platform.get("name") if isinstance(platform, Mapping) else platform
+        if not isinstance(name, str) or name not in available_platforms():
             raise _fail(
                 where,
                 "env_kwargs.platform",
                 platform,
-                f"a platform's name: {', '.join(available_platforms())}",
+                f"a platform's name ({', '.join(available_platforms())}) or a mapping with its "
+                "'name' and section overrides",
             )
+        try:
+            named_platform("platform", platform)
+        except ValueError as e:
+            raise ConfigError(f"{where}: env_kwargs.platform: {e}") from None
     return checked
 
 
@@ -351,7 +372,7 @@ def check_action_fit(hp: Hyperparams, names: Any, *, where: str = "hyperparamete
     try:
         check_mirror_action(signs, names, "policy_kwargs.mirror_action")
     except ValueError as e:
-        platform = (hp.get("env_kwargs") or {}).get("platform")
+        platform = platform_label((hp.get("env_kwargs") or {}).get("platform"))
         on = f" (env_kwargs.platform: {platform})" if platform else ""
         raise ConfigError(f"{where}: {e}{on}") from None
 

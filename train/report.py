@@ -11,7 +11,7 @@ or loses the person more often than the law does (:func:`outcome_summary`).
 from __future__ import annotations
 
 import platform
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from typing import Any
@@ -22,6 +22,7 @@ import pandas as pd
 from eval.atomic import atomic_path
 from eval.metrics import METRICS, OUTCOME_METRICS
 from follow_env.tasks import task_for_env
+from train.config import platform_label
 
 __all__ = [
     "CARD_METRICS",
@@ -102,19 +103,25 @@ def compare_with_law(
     scenarios: Sequence[str],
     seeds: Sequence[int],
     config: Any,
-    platform: str | None = None,
+    platform: str | Mapping[str, Any] | None = None,
 ) -> pd.DataFrame:
     """Paired comparison ``agent - law`` per scenario on :data:`CARD_METRICS`.
 
     :param agent: a policy name (e.g. a run folder path) or a :class:`~policies.Policy`.
     :param law: a policy name, e.g. ``"gsmpn:tuned"``.
-    :param platform: run both on this platform (``eval``'s ``policy@platform``); None: the
-        configuration's.
+    :param platform: run both on this platform (``eval``'s ``policy@platform``), or on a
+        platform with section overrides (``{"name": "mecanum", "drive": {...}}``, put into
+        ``config``); None: the configuration's.
     :returns: :func:`eval.stats.compare` rows for :data:`CARD_METRICS`, agent as ``policy_a``.
     """
     from eval.rollout import rollout
     from eval.stats import compare, episode_table
 
+    if isinstance(platform, Mapping):
+        from follow_env.tasks import get_task
+
+        config = get_task("person_follow").resolve_config(config=config, platform=platform)
+        platform = None
     policies = [agent, law] if platform is None else [f"{agent}@{platform}", f"{law}@{platform}"]
     episodes = rollout(policies, list(scenarios), list(seeds), config=config, workers=1)
     table = episode_table(episodes)
@@ -207,7 +214,7 @@ def model_card(
     steps = sessions[-1]["last_step"] if sessions else 0
     wall_s = sum(s["wall_s"] for s in sessions)  # killed sessions too, to their checkpoint
     rates = [s["env_steps_per_s"] for s in sessions if s.get("env_steps_per_s")]
-    platform = (hp.get("env_kwargs") or {}).get("platform")
+    platform = platform_label((hp.get("env_kwargs") or {}).get("platform"))
     on = f", platform `{platform}`" if platform else ""
     env_id = getattr(args, "env_id", None) or "PersonFollow-v0"
     task = task_for_env(env_id).name

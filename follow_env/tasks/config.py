@@ -86,7 +86,7 @@ def resolve_config(
     presets: Mapping[str, TaskConfig],
     default: TaskConfig,
     config: Any = None,
-    platform: str | PlatformConfig | None = None,
+    platform: str | PlatformConfig | Mapping[str, Any] | None = None,
     shorthands: Mapping[str, Any] | None = None,
     overrides: Mapping[str, Any] | None = None,
 ) -> Any:
@@ -95,12 +95,16 @@ def resolve_config(
     :param cls: the task's config class. :param presets: its presets by name.
     :param default: the preset a dict of overrides applies to (and ``config=None`` means).
     :param config: a preset name, a config object, or a mapping of section overrides.
-    :param platform: a platform name (its default configuration) or a platform config object;
-        the platform's sections may still be overridden (``motor={...}``).
+    :param platform: a platform name (its default configuration), a platform config object,
+        or a mapping naming one with section overrides (``{"name": "mecanum", "drive": {"mode":
+        "pid"}}``, the form ``to_dict`` writes); it is put in before a ``config`` mapping, whose
+        keys may then use its sections (``{"platform.drive.mode": "pid"}``), and the platform's
+        sections may still be overridden (``motor={...}``).
     :param shorthands: dotted fields set by the task's shorthand arguments, applied last (e.g.
         ``{"scenario.name": "curve"}``); ``None`` values are left out.
     :param overrides: sections (``sensor={...}``) or ``section__field=value`` pairs.
     """
+    chosen = _platform(platform)
     if config is None:
         cfg = default
     elif isinstance(config, cls):
@@ -114,20 +118,40 @@ def resolve_config(
             )
         cfg = presets[config]
     elif isinstance(config, dict):
+        if chosen is not None:
+            named = [k for k, v in config.items() if named_platform(k, v) is not None]
+            if named:
+                raise ValueError(
+                    f"the platform is given twice: platform= and config[{named[0]!r}]; give one"
+                )
+            default, chosen = cls.from_overrides(default, {"platform": chosen}), None
         cfg = cls.from_overrides(default, config)
     else:
         raise out_of_range("config", config, f"a preset name, {_a(cls.__name__)} or a dict")
+    if chosen is not None:  # first, so that the overrides below may use its sections
+        cfg = cls.from_overrides(cfg, {"platform": chosen})
     flat: dict[str, Any] = {}
-    if platform is not None:
-        if isinstance(platform, str):
-            platform = get_platform(platform).config()
-        flat["platform"] = platform
     for key, value in (overrides or {}).items():
         flat[key.replace("__", ".")] = value
     for key, value in (shorthands or {}).items():
         if value is not None:
             flat[key] = value
     return cls.from_overrides(cfg, flat) if flat else cfg
+
+
+def _platform(platform: str | PlatformConfig | Mapping[str, Any] | None) -> PlatformConfig | None:
+    """``gym.make``'s ``platform=``: a name, a config object, or a mapping with a ``name``."""
+    if platform is None or isinstance(platform, PlatformConfig):
+        return platform
+    chosen = named_platform("platform", platform)
+    if chosen is None:
+        raise out_of_range(
+            "platform",
+            platform,
+            "a platform's name, a platform config, or a mapping with its 'name' and section "
+            "overrides",
+        )
+    return chosen
 
 
 def _a(noun: str) -> str:

@@ -12,6 +12,7 @@ from train.config import (
     check_action_fit,
     load_hyperparams,
     parse_hyperparams,
+    platform_label,
     policy_class,
     schedule,
 )
@@ -211,9 +212,23 @@ def test_env_kwargs_platform_must_be_a_registered_platform() -> None:
     with pytest.raises(
         ConfigError,
         match=r"env_kwargs\.platform='mecanum4' is out of range: must be a "
-        r"platform's name: diff_drive, mecanum",
+        r"platform's name \(diff_drive, mecanum, unicycle\) or a mapping with its 'name'",
     ):
         parse_hyperparams(MINIMAL | {"env_kwargs": {"platform": "mecanum4"}})
+
+
+def test_env_kwargs_platform_may_carry_section_overrides() -> None:
+    platform = {"name": "mecanum", "drive": {"mode": "pid"}}
+    hp = parse_hyperparams(MINIMAL | {"env_kwargs": {"platform": platform}})
+    assert hp["env_kwargs"]["platform"] == platform
+    assert platform_label(platform) == "mecanum (drive.mode=pid)"
+    assert platform_label("mecanum") == "mecanum"
+    with pytest.raises(ConfigError, match=r"env_kwargs\.platform: .*drive\.gear"):
+        parse_hyperparams(
+            MINIMAL | {"env_kwargs": {"platform": {"name": "mecanum", "drive": {"gear": 2}}}}
+        )
+    with pytest.raises(ConfigError, match=r"env_kwargs\.platform=\{'drive'"):
+        parse_hyperparams(MINIMAL | {"env_kwargs": {"platform": {"drive": {"mode": "pid"}}}})
 
 
 @pytest.mark.parametrize(

@@ -10,6 +10,7 @@ how observations and the ``info`` dict are read from the state.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -161,7 +162,7 @@ class LineTraceTask(TaskPlatforms):
         self,
         config: LineTraceConfig | str | dict[str, Any] | None = None,
         track: str | None = None,
-        platform: str | PlatformConfig | None = None,
+        platform: str | PlatformConfig | Mapping[str, Any] | None = None,
         **overrides: Any,
     ) -> LineTraceConfig:
         """Build a :class:`LineTraceConfig` from ``gym.make`` keyword arguments.
@@ -169,7 +170,8 @@ class LineTraceTask(TaskPlatforms):
         :param config: a preset name (``"paper"``, ``"ideal"``, ``"noisy"``), a
             ``LineTraceConfig``, or a mapping of section overrides applied to ``paper``.
         :param track: shorthand for ``track={"name": ...}``.
-        :param platform: a platform name (its default configuration) or a platform config.
+        :param platform: a platform name (its default configuration), a platform config,
+            or a mapping ``{"name": ..., <section>: {...}}``.
         :param overrides: sections (``sensor={...}``) or ``section__field=value`` pairs.
         """
         return resolve_config(

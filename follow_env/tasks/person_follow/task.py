@@ -9,6 +9,7 @@ the ``info`` dict are read from the state.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -170,7 +171,7 @@ class PersonFollowTask(TaskPlatforms):
         self,
         config: EnvConfig | str | dict[str, Any] | None = None,
         scenario: str | None = None,
-        platform: str | PlatformConfig | None = None,
+        platform: str | PlatformConfig | Mapping[str, Any] | None = None,
         **overrides: Any,
     ) -> EnvConfig:
         """Build an :class:`EnvConfig` from ``gym.make`` keyword arguments.
@@ -178,8 +179,9 @@ class PersonFollowTask(TaskPlatforms):
         :param config: a preset name (``"thesis"``, ``"ideal"``, ``"noisy"``, ``"randomized"``),
             an ``EnvConfig``, or a mapping of section overrides applied to the ``thesis`` preset.
         :param scenario: shorthand for ``scenario={"name": ...}``.
-        :param platform: a platform name (its default configuration) or a platform config
-            object; sections of the platform may still be overridden (``robot={...}``).
+        :param platform: a platform name (its default configuration), a platform config
+            object, or a mapping ``{"name": ..., <section>: {...}}``; sections of the platform
+            may still be overridden (``robot={...}``), in ``config`` too.
         :param overrides: sections (``perception={...}``) or ``section__field=value`` pairs.
         """
         return resolve_config(

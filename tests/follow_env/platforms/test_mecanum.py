@@ -124,6 +124,40 @@ def test_alternating_translation_and_rotation_slices_with_the_heading_follows_th
     assert np.degrees(path[-1, 2]) > 20.0
 
 
+@pytest.mark.parametrize(
+    "kwargs",
+    [
+        {"platform": {"name": "mecanum", "drive": {"mode": "pid"}}},
+        {"platform": "mecanum", "config": {"platform.drive.mode": "pid"}},
+        {"platform": "mecanum", "config": {"drive": {"mode": "pid"}}},
+        {"platform": "mecanum", "drive": {"mode": "pid"}},
+        {"config": {"platform": {"name": "mecanum", "drive": {"mode": "pid"}}}},
+    ],
+)
+def test_the_platforms_sections_can_be_set_however_it_is_named(kwargs: dict) -> None:
+    env = gym.make("PersonFollow-v0", **kwargs)
+    platform = env.unwrapped.config.platform
+    assert isinstance(platform, MecanumConfig)
+    assert platform.drive.mode == "pid"
+    env.close()
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"platform": {"drive": {"mode": "pid"}}}, r"platform=\{'drive'.* with its 'name'"),
+        ({"platform": 5}, r"platform=5 is out of range"),
+        (
+            {"platform": "mecanum", "config": {"platform": "diff_drive"}},
+            r"the platform is given twice: platform= and config\['platform'\]",
+        ),
+    ],
+)
+def test_a_platform_given_wrongly_is_refused(kwargs: dict, message: str) -> None:
+    with pytest.raises(ValueError, match=message):
+        gym.make("PersonFollow-v0", **kwargs)
+
+
 def test_reset_zeroes_the_wheels_and_randomize_draws_per_motor() -> None:
     cfg = THESIS.replace(platform="mecanum")
     env = gym.make("PersonFollow-v0", config=cfg)
