@@ -209,6 +209,14 @@ class VecShapedReward(VecEnvWrapper):
       The env's own reward charges 0.02 per m/s² of acceleration, a few hundredths of its
       distance and offset terms, which leaves the agent little reason to be
       smooth; the evaluation's StdAccel asks for exactly that.
+    - ``distance_potential``: potential-based shaping (Ng, Harada and Russell 1999) on the
+      observed distance, ``gamma * phi(o') - phi(o)`` with ``phi(o) = -distance_potential *
+      min(|d - target_distance_m|, potential_cap_m)`` (``d <= 0``, no reading: the cap). The
+      env's distance term is capped at 1 m, so beyond 2 m every distance is worth the same and
+      an agent that has fallen behind gets no signal to catch up; this term gives it one, and
+      being potential-based it changes no optimal policy and makes no exit pay: the episode's
+      last step compares with the terminal observation (lost: the cap), so ending an episode
+      far behind keeps its low potential. ``gamma`` must be the learner's discount.
 
     Put a ``VecMonitor`` below this wrapper to log the env's own episode returns.
 
@@ -221,6 +229,10 @@ class VecShapedReward(VecEnvWrapper):
     :param rate_weights: one weight per action entry [reward per agent unit], each >= 0;
         instead of ``v_rate_weight`` / ``w_rate_weight``.
     :param offset_weight: weight on ``min(|observed offset| / (width / 2), 1)``, >= 0.
+    :param distance_potential: weight of the distance potential [reward per m], >= 0; 0: none.
+    :param potential_cap_m: the distance error at which the potential stops falling [m], > 0.
+    :param target_distance_m: the distance the potential is highest at [m] (the env's 1 m).
+    :param gamma: the discount of the shaping term (the learner's ``gamma``), in [0, 1].
     """
 
     #: Changes rewards only: :func:`train.envs.agent_env` leaves it out at inference.
@@ -235,6 +247,10 @@ class VecShapedReward(VecEnvWrapper):
         w_rate_weight: float = 0.0,
         offset_weight: float = 0.0,
         rate_weights: Sequence[float] | None = None,
+        distance_potential: float = 0.0,
+        potential_cap_m: float = 5.0,
+        target_distance_m: float = 1.0,
+        gamma: float = 0.99,
     ) -> None:
         for name, value in (
             ("alive_bonus", alive_bonus),
@@ -242,9 +258,13 @@ class VecShapedReward(VecEnvWrapper):
             ("w_rate_weight", w_rate_weight),
             ("offset_weight", offset_weight),
             ("reward_floor", reward_floor),
+            ("distance_potential", distance_potential),
+            ("target_distance_m", target_distance_m),
         ):
-            lo = 0.0 if name.endswith("weight") else None
+            lo = 0.0 if name.endswith(("weight", "potential", "_m")) else None
             check_number(f"VecShapedReward.{name}", value, lo, optional=name == "reward_floor")
+        check_number("VecShapedReward.potential_cap_m", potential_cap_m, 0.0, lo_open=True)
+        check_number("VecShapedReward.gamma", gamma, 0.0, 1.0)
         act_box = venv.action_space
         if not isinstance(act_box, spaces.Box) or len(act_box.shape) != 1:
             raise ValueError(f"VecShapedReward needs a flat Box action space, got {act_box}")
@@ -254,6 +274,11 @@ class VecShapedReward(VecEnvWrapper):
         self.reward_floor = -np.inf if reward_floor is None else float(reward_floor)
         self.alive_bonus = float(alive_bonus)
         self.offset_weight = float(offset_weight)
+        self.distance_potential = float(distance_potential)
+        self.potential_cap_m = float(potential_cap_m)
+        self.target_distance_m = float(target_distance_m)
+        self.gamma = float(gamma)
+        self._phi = np.zeros(venv.num_envs)
         self._half_width_px = float(venv.observation_space.high[1]) + 1.0
         self._low, self._high = act_box.low, act_box.high
         self._prev = np.zeros((venv.num_envs, len(names)))
@@ -293,7 +318,15 @@ class VecShapedReward(VecEnvWrapper):
 
     def reset(self) -> VecEnvObs:
         self._prev[:] = 0.0
-        return self.venv.reset()
+        obs = self.venv.reset()
+        self._phi = self._potential(np.asarray(obs))
+        return obs
+
+    def _potential(self, obs: np.ndarray) -> np.ndarray:
+        """``phi`` of each lane's observation (rows of ``[distance_m, offset_px, ...]``)."""
+        d = np.asarray(obs, dtype=np.float64)[..., 0]
+        error = np.where(d > 0.0, np.abs(d - self.target_distance_m), np.inf)
+        return -self.distance_potential * np.minimum(error, self.potential_cap_m)
 
     def step_async(self, actions: np.ndarray) -> None:
         a = np.asarray(actions, dtype=np.float64).reshape(self._prev.shape)
@@ -312,6 +345,13 @@ class VecShapedReward(VecEnvWrapper):
         if self.offset_weight:
             offset = np.abs(np.asarray(obs, dtype=np.float64)[:, 1]) / self._half_width_px
             shaped -= self.offset_weight * np.minimum(offset, 1.0)
+        if self.distance_potential:
+            reached = np.array(obs, dtype=np.float64)
+            for i in np.flatnonzero(dones):  # the episode's own last observation, not the reset's
+                reached[i] = infos[i].get("terminal_observation", reached[i])
+            phi = self._potential(reached)
+            shaped += self.gamma * phi - self._phi
+            self._phi = np.where(dones, self._potential(np.asarray(obs)), phi)
         self._prev[dones] = 0.0
         return obs, shaped.astype(np.float32), dones, infos
 
