@@ -28,10 +28,17 @@ module does not import with pandas 3 (its dependency ``arch`` 7.2 fails on impor
 that resample exactly as rliable's ``StratifiedBootstrap`` does (per task, with replacement),
 seeded, so the intervals are reproducible.
 
+The scenarios are also grouped into the splits of the social-navigation benchmarks
+(:data:`~follow_env.tasks.person_follow.scenarios.SPLITS`: ``single_target``, ``distractor``,
+``look_alike``; each scenario declares its own): per split that holds any of the scenarios run,
+the IQM of every controller and each learner's probability of improvement over each law,
+with the same stratified bootstrap over that split's scenarios only.
+
 Writes ``aggregate.csv`` (controller, metric, estimate, ci_low, ci_high), ``improvement.csv``
-(learner, law, probability, ci_low, ci_high), ``profiles.csv``, ``scores.csv`` (every
-episode's raw and normalised score), ``aggregate.md`` and ``plots/`` (interval estimates,
-performance profiles), atomically.
+(learner, law, probability, ci_low, ci_high), ``splits.csv`` (split, scenarios, controller,
+law, metric, estimate, ci_low, ci_high), ``profiles.csv``, ``scores.csv`` (every episode's
+raw and normalised score, with its split), ``aggregate.md`` and ``plots/`` (interval
+estimates, performance profiles), atomically.
 """
 
 from __future__ import annotations
@@ -53,6 +60,7 @@ __all__ = [
     "aggregate_metrics",
     "learner_runs",
     "normalised_scores",
+    "scenario_split",
     "stratified_ci",
 ]
 
@@ -195,6 +203,8 @@ def aggregate(
                 metrics.probability_of_improvement, [matrix[learner.name], matrix[law]], reps
             )
             improvement.append((learner.name, law, point, low, high))
+    scores["split"] = scores["scenario"].map(scenario_split)
+    splits = _by_split(matrix, learners, laws, scenarios, reps)
     taus = np.linspace(0.0, 1.0, 21)
     profiles = []
     for c in controllers:
@@ -214,7 +224,48 @@ def aggregate(
         "profiles": pd.DataFrame(
             profiles, columns=["controller", "tau", "fraction", "ci_low", "ci_high"]
         ),
+        "splits": splits,
     }
+
+
+def scenario_split(scenario: str) -> str:
+    """The split a PersonFollow scenario declares (``single_target``, ``distractor``, ...)."""
+    from follow_env.tasks.person_follow.scenarios import get_scenario
+
+    return str(get_scenario(scenario).split)
+
+
+def _by_split(
+    matrix: dict[str, np.ndarray],
+    learners: Sequence[LearnerRuns],
+    laws: Sequence[str],
+    scenarios: Sequence[str],
+    reps: int,
+) -> pd.DataFrame:
+    """Per split of the scenarios run: every controller's IQM and each learner's probability
+    of improvement over each law, on that split's columns of the score matrices."""
+    from rliable import metrics
+
+    from follow_env.tasks.person_follow.scenarios import SPLITS
+
+    rows = []
+    for split in SPLITS:
+        columns = [k for k, name in enumerate(scenarios) if scenario_split(name) == split]
+        if not columns:
+            continue
+        names = ",".join(scenarios[k] for k in columns)
+        part = {c: m[:, columns] for c, m in matrix.items()}
+        for c in part:
+            point, low, high = stratified_ci(metrics.aggregate_iqm, [part[c]], reps)
+            rows.append((split, names, c, "", "iqm", point, low, high))
+        for learner in learners:
+            for law in laws:
+                point, low, high = stratified_ci(
+                    metrics.probability_of_improvement, [part[learner.name], part[law]], reps
+                )
+                rows.append((split, names, learner.name, law, "p_improvement", point, low, high))
+    columns = ["split", "scenarios", "controller", "law", "metric", "estimate", "ci_low", "ci_high"]
+    return pd.DataFrame(rows, columns=columns)
 
 
 def write(tables: dict[str, pd.DataFrame], folder: Path) -> str:
@@ -222,7 +273,7 @@ def write(tables: dict[str, pd.DataFrame], folder: Path) -> str:
     Markdown report."""
     from eval.atomic import atomic_write_text
 
-    for name in ("scores", "aggregate", "improvement", "profiles"):
+    for name in ("scores", "aggregate", "improvement", "splits", "profiles"):
         atomic_write_text(folder / f"{name}.csv", tables[name].to_csv(index=False))
     report = markdown(tables)
     atomic_write_text(folder / "aggregate.md", report)
@@ -245,11 +296,23 @@ def markdown(tables: dict[str, pd.DataFrame]) -> str:
         f"{p:.3f} [{lo:.3f}, {hi:.3f}]"
         for p, lo, hi in zip(imp["probability"], imp["ci_low"], imp["ci_high"], strict=True)
     ]
+    split = tables["splits"].copy()
+    split["value"] = [
+        f"{e:.3f} [{lo:.3f}, {hi:.3f}]"
+        for e, lo, hi in zip(split["estimate"], split["ci_low"], split["ci_high"], strict=True)
+    ]
+    split["what"] = [
+        "IQM" if metric == "iqm" else f"P(> {law})"
+        for metric, law in zip(split["metric"], split["law"], strict=True)
+    ]
+    by_split = split[["split", "scenarios", "controller", "what", "value"]]
     return (
         "## Aggregate normalised scores (95 % stratified bootstrap CIs)\n\n"
         + wide[list(aggregate_metrics())].to_markdown()
         + "\n\n## Probability of improvement\n\n"
         + imp[["learner", "law", "P(learner > law)"]].to_markdown(index=False)
+        + "\n\n## By scenario split (IQM; P(learner > law))\n\n"
+        + by_split.to_markdown(index=False)
         + "\n"
     )
 

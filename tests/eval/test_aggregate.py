@@ -9,7 +9,15 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from eval.aggregate import _resample, learner_runs, normalised_scores, stratified_ci
+from eval.aggregate import (
+    LearnerRuns,
+    _by_split,
+    _resample,
+    learner_runs,
+    normalised_scores,
+    scenario_split,
+    stratified_ci,
+)
 from eval.cli import main
 
 AGENT = Path(__file__).parents[2] / "policies" / "agents" / "ppo"
@@ -69,6 +77,16 @@ def test_a_study_against_a_law_writes_the_tables_and_plots(
     scores = pd.read_csv(out / "scores.csv")
     assert len(scores) == (2 + 1) * 2 * 2  # (2 seeds + 1 law) x 2 scenarios x 2 episodes
     assert scores["normalised"].between(0.0, 1.0).all()
+    assert set(scores["split"]) == {"single_target"}
+    splits = pd.read_csv(out / "splits.csv")
+    # both scenarios are single-target: one split, an IQM per controller and one P(improvement)
+    assert splits[["split", "scenarios"]].drop_duplicates().to_numpy().tolist() == [
+        ["single_target", "straight,curve"]
+    ]
+    assert sorted(splits["metric"]) == ["iqm", "iqm", "p_improvement"]
+    iqm = agg[agg["metric"] == "iqm"].set_index("controller")["estimate"]
+    split_iqm = splits[splits["metric"] == "iqm"].set_index("controller")["estimate"]
+    assert np.allclose(split_iqm.loc[iqm.index], iqm)  # one split holding every scenario: the same
     assert {p.name for p in (out / "plots").iterdir()} == {
         "aggregates.png",
         "performance_profiles.png",
@@ -82,3 +100,29 @@ def test_bad_arguments_give_one_line(tmp_path: Path, capsys: pytest.CaptureFixtu
     assert not (tmp_path / "x").exists()
     assert main(["aggregate", str(tmp_path), "--out", str(tmp_path / "y")]) == 2
     assert "holds no trained agent" in capsys.readouterr().err
+
+
+def test_scenarios_fall_into_the_splits_they_declare() -> None:
+    assert {s: scenario_split(s) for s in ("straight", "occlusion", "crossing", "crowd")} == {
+        "straight": "single_target",
+        "occlusion": "single_target",  # walls hide the person; nobody else is there
+        "crossing": "distractor",
+        "crowd": "distractor",
+    }
+
+
+def test_each_split_is_scored_on_its_own_scenarios_only() -> None:
+    # scenarios straight (single-target) and crossing (distractor); the learner is best on
+    # straight and worst on crossing, the law the reverse
+    learner = np.array([[1.0, 0.0], [0.9, 0.1], [0.8, 0.2]])
+    law = 1.0 - learner
+    table = _by_split(
+        {"agent": learner, "law": law}, [LearnerRuns("agent", [])], ["law"],
+        ["straight", "crossing"], reps=100,
+    )  # fmt: skip
+    got = table.set_index(["split", "controller", "metric"])["estimate"]
+    assert got["single_target", "agent", "iqm"] == pytest.approx(0.9)
+    assert got["distractor", "agent", "iqm"] == pytest.approx(0.1)
+    assert got["single_target", "agent", "p_improvement"] == pytest.approx(1.0)
+    assert got["distractor", "agent", "p_improvement"] == pytest.approx(0.0)
+    assert set(table["scenarios"]) == {"straight", "crossing"}

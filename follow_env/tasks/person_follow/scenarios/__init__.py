@@ -13,6 +13,13 @@ Built in: ``straight``, ``curve`` and ``random`` (:mod:`.basic`), and the realis
 drawn per episode, uniform within ``cruise_speed_mps +- speed_spread_mps``, and slowed in bends
 to keep ``v^2 / R`` below ``lateral_accel_mps2``.
 
+Each scenario belongs to one of :data:`SPLITS`, the groups the social-navigation benchmarks
+report by (``register_scenario(..., split=...)``; by default ``distractor`` when the scenario
+has room for people besides the target, ``single_target`` otherwise): ``crossing``, ``crowd``
+and ``random_world`` are distractor scenarios, the rest single-target. No built-in scenario is
+``look_alike`` yet (a person whose look the re-identification gate confuses with the target's:
+each person's appearance is an independent uniform draw).
+
 A minimal scenario of your own::
 
     import numpy as np
@@ -37,6 +44,7 @@ from follow_env.tasks.person_follow.scenarios import basic, realistic  # noqa: F
 from follow_env.tasks.person_follow.scenarios.registry import (
     PW,
     SCENARIOS,
+    SPLITS,
     WALL_MARGIN_M,
     ScenarioBatch,
     ScenarioRandom,
@@ -56,6 +64,7 @@ from follow_env.tasks.person_follow.scenarios.registry import (
 __all__ = [
     "PW",
     "SCENARIOS",
+    "SPLITS",
     "WALL_MARGIN_M",
     "ScenarioBatch",
     "ScenarioRandom",

@@ -20,6 +20,7 @@ if TYPE_CHECKING:
 __all__ = [
     "PW",
     "SCENARIOS",
+    "SPLITS",
     "ScenarioBatch",
     "ScenarioRandom",
     "ScenarioSpec",
@@ -81,6 +82,10 @@ class ScenarioSpec:
         ``scenario.room_length_m`` / ``room_width_m`` (these defaults otherwise); ``None`` for a
         scenario with a fixed map, which refuses the room fields.
     :param world: the key of ``rng.world``: the world stream, or a declared domain.
+    :param split: which of :data:`SPLITS` the scenario belongs to, as the social-navigation
+        benchmarks group theirs: ``single_target`` (the person alone), ``distractor`` (other
+        people walk where the detector sees them) or ``look_alike`` (another person looks
+        like the target to the re-identification gate).
     """
 
     name: str
@@ -90,6 +95,7 @@ class ScenarioSpec:
     max_walls: int
     room: tuple[float, float] | None
     world: streams.Stream | streams.Domain
+    split: str = "single_target"
 
     def points_for(self, cfg: EnvConfig) -> int:
         """Waypoints a path may have under ``cfg`` (sizes the core's path arrays)."""
@@ -121,6 +127,9 @@ class ScenarioSpec:
 SCENARIOS: dict[str, ScenarioSpec] = {}
 """Registered scenarios by name."""
 
+SPLITS = ("single_target", "distractor", "look_alike")
+"""The groups evaluations report scenarios by (:attr:`ScenarioSpec.split`)."""
+
 
 def register_scenario(
     name: str,
@@ -130,15 +139,23 @@ def register_scenario(
     max_walls: int = 4,
     room: tuple[float, float] | None = (24.0, 16.0),
     world: streams.Stream | streams.Domain = streams.WORLD,
+    split: str | None = None,
 ) -> Callable[[ScenarioFn], ScenarioFn]:
     """Register ``fn`` as scenario ``name``; the sizes bound what the function returns
-    (``max_points`` may depend on the configuration). See :class:`ScenarioSpec` for ``room``
-    and ``world``."""
+    (``max_points`` may depend on the configuration). See :class:`ScenarioSpec` for ``room``,
+    ``world`` and ``split`` (default: ``distractor`` if the scenario has room for other people,
+    ``single_target`` otherwise)."""
+    if split is None:
+        split = "distractor" if max_people > 1 else "single_target"
+    if split not in SPLITS:
+        raise out_of_range("register_scenario.split", split, "one of " + ", ".join(SPLITS))
 
     def deco(fn: ScenarioFn) -> ScenarioFn:
         if name in SCENARIOS:
             raise ValueError(f"scenario {name!r} is registered already")
-        SCENARIOS[name] = ScenarioSpec(name, fn, max_people, max_points, max_walls, room, world)
+        SCENARIOS[name] = ScenarioSpec(
+            name, fn, max_people, max_points, max_walls, room, world, split
+        )
         return fn
 
     return deco

@@ -100,3 +100,12 @@ def test_a_new_scenario_is_one_registered_function() -> None:
             register_scenario("test-standstill")(standstill)
     finally:
         del SCENARIOS["test-standstill"]
+
+
+def test_a_scenario_declares_its_split_and_one_with_other_people_is_a_distractor_one() -> None:
+    assert SCENARIOS["straight"].split == "single_target"
+    assert SCENARIOS["crowd"].split == "distractor"  # max_people > 1
+    assert SCENARIOS["random_world"].split == "distractor"  # its bystanders
+    with pytest.raises(ValueError, match=r"register_scenario\.split='twins' is out of range"):
+        register_scenario("test-twins", split="twins")
+    assert "test-twins" not in SCENARIOS
