@@ -187,16 +187,17 @@ class VecIncrementalAction(_FeatureWrapper):
 
 
 class VecShapedReward(VecEnvWrapper):
-    """Training-only reward: ``max(r, reward_floor) + alive_bonus - rate terms``.
+    """Training-only reward: ``max(r - far, reward_floor) + alive_bonus - rate terms``.
 
-    The env's reward is meant for scoring a controller; three changes make it learnable:
+    The env's reward is meant for scoring a controller; these changes make it learnable:
 
-    - ``reward_floor``: the env's distance term ``-|d - 1 m|`` is unbounded, so a step far
-      behind the person (-8 at 10 m) costs more than losing the person (about -2 a step, then
-      the episode ends after 3 s). A fresh agent, which cannot follow yet, learns the cheapest
-      exit: lose the person at once. Clipping a step's reward from below makes "far behind" no
-      worse than "lost"; the step that ends an episode by termination is not clipped, so a
-      collision keeps its full -50.
+    - ``reward_floor``: a step of the env's reward goes down to about -2 (alive 1, distance
+      error capped at 1 m, offset up to 1, lost 1), and an episode in which the person is lost
+      ends after 3 s. A fresh agent, which cannot follow yet, learns the cheapest exit: lose
+      the person at once. Clipping a step's reward from below makes "far behind" no worse than
+      "lost"; the step that ends an episode by termination is not clipped, so a collision
+      keeps its full -50. (With the env's distance term capped at 1 m, a step 2 m behind
+      is worth as little as one 10 m behind: ``far_weight`` below gives the gradient back.)
     - ``alive_bonus``: a constant per step. With the floor at -1 and the bonus at 1 every step is
       worth at least 0, so no exit (lost, collision) is ever better than going on; following
       well is worth about 1.8 a step.
@@ -209,14 +210,15 @@ class VecShapedReward(VecEnvWrapper):
       The env's own reward charges 0.02 per m/s² of acceleration, a few hundredths of its
       distance and offset terms, which leaves the agent little reason to be
       smooth; the evaluation's StdAccel asks for exactly that.
-    - ``distance_potential``: potential-based shaping (Ng, Harada and Russell 1999) on the
-      observed distance, ``gamma * phi(o') - phi(o)`` with ``phi(o) = -distance_potential *
-      min(|d - target_distance_m|, potential_cap_m)`` (``d <= 0``, no reading: the cap). The
-      env's distance term is capped at 1 m, so beyond 2 m every distance is worth the same and
-      an agent that has fallen behind gets no signal to catch up; this term gives it one, and
-      being potential-based it changes no optimal policy and makes no exit pay: the episode's
-      last step compares with the terminal observation (lost: the cap), so ending an episode
-      far behind keeps its low potential. ``gamma`` must be the learner's discount.
+    - ``far_weight``: the env's distance term is capped at 1 m of error (so that, scored, a
+      person far away costs no more than a lost one), which leaves a trainee that has fallen
+      more than 2 m behind no reason to catch up: measured, PPO with this project's settings
+      reached held-out returns of +50 after 200 k steps before the cap and stayed below -40
+      to 300 k steps after it. ``far_weight`` charges each metre of the observed distance's
+      error beyond ``far_from_m`` (the cap) before the floor, as the env's term did before it
+      was capped: the step's reward is ``r - far_weight * max(|d - target_distance_m| -
+      far_from_m, 0)`` (``d <= 0``, no reading yet: nothing), on the episode's last step
+      from its terminal observation.
 
     Put a ``VecMonitor`` below this wrapper to log the env's own episode returns.
 
@@ -229,10 +231,10 @@ class VecShapedReward(VecEnvWrapper):
     :param rate_weights: one weight per action entry [reward per agent unit], each >= 0;
         instead of ``v_rate_weight`` / ``w_rate_weight``.
     :param offset_weight: weight on ``min(|observed offset| / (width / 2), 1)``, >= 0.
-    :param distance_potential: weight of the distance potential [reward per m], >= 0; 0: none.
-    :param potential_cap_m: the distance error at which the potential stops falling [m], > 0.
-    :param target_distance_m: the distance the potential is highest at [m] (the env's 1 m).
-    :param gamma: the discount of the shaping term (the learner's ``gamma``), in [0, 1].
+    :param far_weight: weight on the observed distance error beyond ``far_from_m`` [reward
+        per m per step], >= 0; 0: none.
+    :param far_from_m: the distance error the charge starts at [m] (the env's cap, 1 m), >= 0.
+    :param target_distance_m: the following distance [m] (the env's 1 m), >= 0.
     """
 
     #: Changes rewards only: :func:`train.envs.agent_env` leaves it out at inference.
@@ -247,10 +249,9 @@ class VecShapedReward(VecEnvWrapper):
         w_rate_weight: float = 0.0,
         offset_weight: float = 0.0,
         rate_weights: Sequence[float] | None = None,
-        distance_potential: float = 0.0,
-        potential_cap_m: float = 5.0,
+        far_weight: float = 0.0,
+        far_from_m: float = 1.0,
         target_distance_m: float = 1.0,
-        gamma: float = 0.99,
     ) -> None:
         for name, value in (
             ("alive_bonus", alive_bonus),
@@ -258,13 +259,12 @@ class VecShapedReward(VecEnvWrapper):
             ("w_rate_weight", w_rate_weight),
             ("offset_weight", offset_weight),
             ("reward_floor", reward_floor),
-            ("distance_potential", distance_potential),
+            ("far_weight", far_weight),
+            ("far_from_m", far_from_m),
             ("target_distance_m", target_distance_m),
         ):
-            lo = 0.0 if name.endswith(("weight", "potential", "_m")) else None
+            lo = 0.0 if name.endswith(("weight", "_m")) else None
             check_number(f"VecShapedReward.{name}", value, lo, optional=name == "reward_floor")
-        check_number("VecShapedReward.potential_cap_m", potential_cap_m, 0.0, lo_open=True)
-        check_number("VecShapedReward.gamma", gamma, 0.0, 1.0)
         act_box = venv.action_space
         if not isinstance(act_box, spaces.Box) or len(act_box.shape) != 1:
             raise ValueError(f"VecShapedReward needs a flat Box action space, got {act_box}")
@@ -274,11 +274,9 @@ class VecShapedReward(VecEnvWrapper):
         self.reward_floor = -np.inf if reward_floor is None else float(reward_floor)
         self.alive_bonus = float(alive_bonus)
         self.offset_weight = float(offset_weight)
-        self.distance_potential = float(distance_potential)
-        self.potential_cap_m = float(potential_cap_m)
+        self.far_weight = float(far_weight)
+        self.far_from_m = float(far_from_m)
         self.target_distance_m = float(target_distance_m)
-        self.gamma = float(gamma)
-        self._phi = np.zeros(venv.num_envs)
         self._half_width_px = float(venv.observation_space.high[1]) + 1.0
         self._low, self._high = act_box.low, act_box.high
         self._prev = np.zeros((venv.num_envs, len(names)))
@@ -318,15 +316,17 @@ class VecShapedReward(VecEnvWrapper):
 
     def reset(self) -> VecEnvObs:
         self._prev[:] = 0.0
-        obs = self.venv.reset()
-        self._phi = self._potential(np.asarray(obs))
-        return obs
+        return self.venv.reset()
 
-    def _potential(self, obs: np.ndarray) -> np.ndarray:
-        """``phi`` of each lane's observation (rows of ``[distance_m, offset_px, ...]``)."""
-        d = np.asarray(obs, dtype=np.float64)[..., 0]
-        error = np.where(d > 0.0, np.abs(d - self.target_distance_m), np.inf)
-        return -self.distance_potential * np.minimum(error, self.potential_cap_m)
+    def _far(self, obs: np.ndarray, dones: np.ndarray, infos: list[dict[str, Any]]) -> np.ndarray:
+        """The ``far_weight`` charge of each lane's step, from the observation it reached (the
+        terminal one where an episode ended; rows ``[distance_m, offset_px, ...]``)."""
+        d = np.array(obs, dtype=np.float64)[:, 0]
+        for i in np.flatnonzero(dones):  # the episode's own last observation, not the reset's
+            if "terminal_observation" in infos[i]:
+                d[i] = float(np.asarray(infos[i]["terminal_observation"])[0])
+        excess = np.maximum(np.abs(d - self.target_distance_m) - self.far_from_m, 0.0)
+        return self.far_weight * np.where(d > 0.0, excess, 0.0)
 
     def step_async(self, actions: np.ndarray) -> None:
         a = np.asarray(actions, dtype=np.float64).reshape(self._prev.shape)
@@ -340,18 +340,13 @@ class VecShapedReward(VecEnvWrapper):
         truncated = np.array([info.get("TimeLimit.truncated", False) for info in infos])
         terminated = np.asarray(dones, dtype=bool) & ~truncated
         r = np.asarray(rewards, dtype=np.float64)
+        if self.far_weight:
+            r = r - self._far(obs, dones, infos)
         shaped = np.where(terminated, r, np.maximum(r, self.reward_floor))
         shaped += self.alive_bonus - self._change @ self.rate_weights
         if self.offset_weight:
             offset = np.abs(np.asarray(obs, dtype=np.float64)[:, 1]) / self._half_width_px
             shaped -= self.offset_weight * np.minimum(offset, 1.0)
-        if self.distance_potential:
-            reached = np.array(obs, dtype=np.float64)
-            for i in np.flatnonzero(dones):  # the episode's own last observation, not the reset's
-                reached[i] = infos[i].get("terminal_observation", reached[i])
-            phi = self._potential(reached)
-            shaped += self.gamma * phi - self._phi
-            self._phi = np.where(dones, self._potential(np.asarray(obs)), phi)
         self._prev[dones] = 0.0
         return obs, shaped.astype(np.float32), dones, infos
 

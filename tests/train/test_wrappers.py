@@ -192,29 +192,28 @@ def test_shaped_reward_floors_the_last_step_of_a_truncated_episode() -> None:
     assert wrapped.step(np.zeros((1, 2)))[1][0] == -1.0
 
 
-def test_distance_potential_pays_for_closing_the_gap_and_never_for_an_exit() -> None:
-    # lane 0 closes from 4 m to 2 m to 1.5 m; lane 1's episode ends at step 2, where the
-    # scripted env's terminal observation is the next observation + 0.5 (2.5 m).
-    obs = [[[4.0, 0.0], [3.0, 0.0]], [[2.0, 0.0], [3.0, 0.0]], [[1.5, 0.0], [2.0, 0.0]]]
+def test_far_weight_charges_the_distance_error_beyond_the_cap_before_the_floor() -> None:
+    # lane 0 is 4 m away (3 m of error, 2 beyond the cap), then 1.5 m; lane 1's episode ends
+    # by termination at step 2, where the scripted terminal observation is the next + 0.5 m
+    obs = [[[1.0, 0.0], [1.0, 0.0]], [[4.0, 0.0], [2.5, 0.0]], [[1.5, 0.0], [5.0, 0.0]]]
+    rewards = [[0.0, 0.0], [0.0, -50.0]]
     dones = [[False, False], [False, True]]
-    env = ScriptedVecEnv(obs, dones=dones)
-    wrapped = VecShapedReward(env, distance_potential=2.0, potential_cap_m=5.0, gamma=0.9)
+    env = ScriptedVecEnv(obs, rewards=rewards, dones=dones)
+    wrapped = VecShapedReward(env, reward_floor=-1.0, alive_bonus=1.0, far_weight=0.25)
     wrapped.reset()
     _, r, *_ = wrapped.step(np.zeros((2, 2)))
-    # phi = -2 min(|d - 1|, 5): lane 0 from -6 to -2: 0.9 * -2 + 6; lane 1 stays at -4
-    np.testing.assert_allclose(r, [0.9 * -2.0 + 6.0, 0.9 * -4.0 + 4.0])
+    np.testing.assert_allclose(r, [1.0 - 0.25 * 2.0, 1.0 - 0.25 * 0.5])
     _, r, *_ = wrapped.step(np.zeros((2, 2)))
-    # lane 1 ends: its terminal observation is 2.0 + 0.5 m (-3), not the next episode's first
-    np.testing.assert_allclose(r, [0.9 * -1.0 + 2.0, 0.9 * -3.0 + 4.0], rtol=1e-6)
-    assert wrapped._phi[1] == -2.0  # the next episode starts from its own first observation
+    # lane 1: the terminal observation 5.5 m (3.5 m beyond the cap), not floored: a collision
+    np.testing.assert_allclose(r, [1.0, -50.0 - 0.25 * 3.5 + 1.0])
 
 
-def test_distance_potential_treats_a_missing_reading_as_the_cap() -> None:
-    env = ScriptedVecEnv([[[1.0, 0.0]], [[0.0, 0.0]], [[0.0, 0.0]]])
-    wrapped = VecShapedReward(env, distance_potential=1.0, potential_cap_m=3.0, gamma=1.0)
+def test_far_weight_is_floored_and_skips_a_missing_reading() -> None:
+    env = ScriptedVecEnv([[[1.0, 0.0]], [[9.0, 0.0]], [[0.0, 0.0]]])
+    wrapped = VecShapedReward(env, reward_floor=-1.0, alive_bonus=1.0, far_weight=1.0)
     wrapped.reset()
-    assert wrapped.step(np.zeros((1, 2)))[1][0] == -3.0  # losing the reading costs the cap
-    assert wrapped.step(np.zeros((1, 2)))[1][0] == 0.0  # and staying lost costs no more
+    assert wrapped.step(np.zeros((1, 2)))[1][0] == 0.0  # -7 floored to -1: no worse than lost
+    assert wrapped.step(np.zeros((1, 2)))[1][0] == 1.0  # no reading yet: nothing charged
 
 
 def test_concat_vec_env_lane_j_replays_its_scenario_seeded_s_plus_j() -> None:
@@ -257,14 +256,13 @@ def test_concat_vec_env_lane_j_replays_its_scenario_seeded_s_plus_j() -> None:
         (lambda e: VecObservationAge(e, max_age_steps=2.5), r"max_age_steps=2\.5 is out of range"),
         (lambda e: VecShapedReward(e, v_rate_weight=-1), r"v_rate_weight=-1 is out of range"),
         (
-            lambda e: VecShapedReward(e, distance_potential=-1.0),
-            r"VecShapedReward\.distance_potential=-1\.0 is out of range",
+            lambda e: VecShapedReward(e, far_weight=-1.0),
+            r"VecShapedReward\.far_weight=-1\.0 is out of range",
         ),
         (
-            lambda e: VecShapedReward(e, potential_cap_m=0.0),
-            r"VecShapedReward\.potential_cap_m=0\.0 is out of range",
+            lambda e: VecShapedReward(e, far_from_m=-0.5),
+            r"VecShapedReward\.far_from_m=-0\.5 is out of range",
         ),
-        (lambda e: VecShapedReward(e, gamma=1.5), r"VecShapedReward\.gamma=1\.5 is out of range"),
     ],
 )
 def test_constructors_refuse_bad_arguments_naming_them(build: Any, message: str) -> None:
