@@ -4,7 +4,7 @@ The keys rl-zoo3 reads are read here with the same meaning, so the file serves b
 
     PersonFollow-v0:
       policy: MlpPolicy
-      n_envs: 44                # all lanes; follow-train splits them evenly over the scenarios
+      n_envs: 48                # all lanes; follow-train splits them evenly over the scenarios
       n_timesteps: !!float 4e6
       normalize: {norm_obs: true, norm_reward: true}   # VecNormalize kwargs, or true / false
       frame_stack: 4            # VecFrameStack over the normalised observation

@@ -229,6 +229,14 @@ PARAMS = Block(
             "std of the appearance a detection carries",
             source="perception.appearance_noise",
         ),
+        f8(
+            "look_of",
+            "",
+            "whose appearance person p's detections carry (p, unless the scenario makes p "
+            "a look-alike; set at every reset)",
+            shape=(PEOPLE_MAX,),
+            source=lambda c: np.arange(PEOPLE_MAX, dtype=np.float64),
+        ),
     ],
 )
 
@@ -359,7 +367,8 @@ def detection(
             app = 0.0
             if prm.assoc > 0.0:
                 z_app = normal_pair_at(kdet, slot + 4)[0]
-                app = uniform_at(kdet ^ _APP_CONST, p) + prm.app_noise * z_app
+                look = int(prm.look_of[p])  # a look-alike carries the target's look
+                app = uniform_at(kdet ^ _APP_CONST, look) + prm.app_noise * z_app
             return True, j1, j2, j3, j4, area, app
     return False, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
 

@@ -34,7 +34,7 @@ def test_bad_arguments_give_one_line_and_exit_2(
 @pytest.mark.slow
 def test_a_tiny_search_trains_and_scores_each_trial(tmp_path: Path) -> None:
     out = tmp_path / "out"
-    argv = ["--trials", "2", "--n-timesteps", "256", "--n-envs", "11", "--seeds", "1"]
+    argv = ["--trials", "2", "--n-timesteps", "256", "--n-envs", "12", "--seeds", "1"]
     assert main([*argv, "--scenarios", "straight", "--out", str(out)]) == 0
     result = json.loads((out / "result.json").read_text())
     assert result["trials"] == 2

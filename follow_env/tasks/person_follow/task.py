@@ -272,6 +272,11 @@ class PersonFollowTask(TaskPlatforms):
         camera.randomize(prm["camera"], lanes, sim.cfg, keys)
         detector.randomize(prm["detector"], base["detector"], lanes, sim.cfg, keys)
         depth.randomize(prm["depth"], base["depth"], lanes, sim.cfg, keys)
+        # Whose look each person's detections carry: their own, or the scenario's look-alikes.
+        look_of = np.tile(np.arange(PEOPLE_MAX, dtype=np.float64), (lanes.size, 1))
+        if batch.look_of is not None:
+            look_of[:, : batch.look_of.shape[1]] = batch.look_of
+        prm["detector"]["look_of"][lanes] = look_of
         return batch.robot_pose
 
     # -- what the env faces read ---------------------------------------------------------------

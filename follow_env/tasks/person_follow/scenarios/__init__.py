@@ -8,17 +8,17 @@ float arrays whose columns are the fields of :data:`~follow_env.tasks.person_fol
 (:data:`PW`) and :data:`~follow_env.world.geometry.WALL`.
 
 Built in: ``straight``, ``curve`` and ``random`` (:mod:`.basic`), and the realistic world's
-``corridor_turn``, ``doorway``, ``occlusion``, ``crossing``, ``crowd``, ``stop_and_go``,
-``zigzag`` and ``random_world`` (:mod:`.realistic`). In all of them the person's cruise pace is
-drawn per episode, uniform within ``cruise_speed_mps +- speed_spread_mps``, and slowed in bends
-to keep ``v^2 / R`` below ``lateral_accel_mps2``.
+``corridor_turn``, ``doorway``, ``occlusion``, ``crossing``, ``lookalike``, ``crowd``,
+``stop_and_go``, ``zigzag`` and ``random_world`` (:mod:`.realistic`). In all of them the
+person's cruise pace is drawn per episode, uniform within ``cruise_speed_mps +-
+speed_spread_mps``, and slowed in bends to keep ``v^2 / R`` below ``lateral_accel_mps2``.
 
 Each scenario belongs to one of :data:`SPLITS`, the groups the social-navigation benchmarks
 report by (``register_scenario(..., split=...)``; by default ``distractor`` when the scenario
 has room for people besides the target, ``single_target`` otherwise): ``crossing``, ``crowd``
-and ``random_world`` are distractor scenarios, the rest single-target. No built-in scenario is
-``look_alike`` yet (a person whose look the re-identification gate confuses with the target's:
-each person's appearance is an independent uniform draw).
+and ``random_world`` are distractor scenarios, ``lookalike`` (crossing's bystander with the
+target's look, :attr:`ScenarioBatch.look_of`) the look-alike one, the rest single-target.
+Everybody else's appearance is an independent uniform draw per episode.
 
 A minimal scenario of your own::
 

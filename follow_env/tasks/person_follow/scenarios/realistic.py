@@ -246,6 +246,27 @@ def crossing(rng: ScenarioRandom, cfg: EnvConfig) -> ScenarioBatch:
     return pack_lanes(np.array(poses), people, [walls] * rng.n)
 
 
+@register_scenario(
+    "lookalike",
+    max_people=2,
+    max_points=64,
+    max_walls=4,
+    room=(24.0, 12.0),
+    world=CROSSING_KEY,
+    split="look_alike",
+)
+def lookalike(rng: ScenarioRandom, cfg: EnvConfig) -> ScenarioBatch:
+    """``crossing`` (the same walk, the same bystander on the same seed) with a bystander who
+    looks like the person: their detections carry the target's appearance (each detection
+    still its own appearance noise), so the tracker's re-identification gate
+    (``perception.association = "tracker"``) cannot tell them apart and only its box gate
+    holds the track. Without the tracker the detector knows nobody's look, and this is
+    ``crossing`` exactly."""
+    batch = crossing(rng, cfg)
+    batch.look_of = np.zeros((rng.n, 2), dtype=np.int64)  # both look like person 0
+    return batch
+
+
 def _bystander_paths(world: LaneRandom, n_by: int, hx: float, hy: float) -> np.ndarray:
     """Bystanders criss-crossing a hall, for all lanes at once: (n, n_by, 5, N_PW). Each
     walks four legs between random points on alternate sides of the hall, at their own pace,

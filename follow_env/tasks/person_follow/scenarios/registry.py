@@ -69,6 +69,9 @@ class ScenarioBatch:
     n_people: np.ndarray  # (n,) int: people present (>= 1; person 0 is the target)
     walls: np.ndarray  # (n, walls, 5): x1, y1, x2, y2, height m (follow_env.world.geometry.WALL)
     n_walls: np.ndarray  # (n,) int
+    # (n, people) int: whose look each person has for the tracker's re-identification gate
+    # (a look-alike of the target: 0); None: everybody their own
+    look_of: np.ndarray | None = None
 
 
 ScenarioFn = Callable[[ScenarioRandom, "EnvConfig"], ScenarioBatch]
