@@ -3,12 +3,16 @@
 from __future__ import annotations
 
 import inspect
+from pathlib import Path
 
 import pytest
+import yaml
 
 from follow_env.tasks.person_follow import ENV_ID
 from train.algos import ALGOS, RECURRENT_PPO_RULES, SAC_RULES
+from train.cli import main
 from train.config import ConfigError, load_hyperparams, parse_hyperparams
+from train.ppo import Args, check_new_run
 
 MINIMAL = {"n_envs": 4, "n_timesteps": 1000}
 # rl-zoo3's keys, which the trainer consumes (the rest go to the algorithm's constructor).
@@ -23,6 +27,9 @@ def test_the_shipped_files_load_and_check(name: str) -> None:
     hp = load_hyperparams(algo.hyperparams, ENV_ID, algo=name)
     assert hp["n_envs"] % 11 == 0  # every scenario gets the same lanes
     assert set(hp) - {"policy_kwargs"} <= {*algo.rules, *ZOO}
+    args, checked = check_new_run(Args(algo=name, runs=Path("/nonexistent/runs")))
+    assert args.hyperparams == algo.hyperparams  # --algo X without --hyperparams: X's file
+    assert checked == hp
 
 
 def test_policies_default_to_the_algorithms_mlp() -> None:
@@ -113,3 +120,34 @@ def test_the_tables_cover_the_constructors() -> None:
     for name, rules in (("recurrent_ppo", RECURRENT_PPO_RULES), ("sac", SAC_RULES)):
         parameters = set(inspect.signature(ALGOS[name].cls().__init__).parameters)
         assert parameters - own == set(rules), name
+
+
+def test_a_bad_algo_gives_one_line_status_2_and_writes_nothing(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "run"
+    status = main(["--algo", "dqn", "--out", str(out), "--runs", str(tmp_path / "runs")])
+    err = capsys.readouterr().err
+    assert status == 2
+    assert err.count("\n") == 1
+    assert "--algo: invalid choice: 'dqn'" in err
+    assert "'recurrent_ppo'" in err
+    assert list(tmp_path.iterdir()) == []
+    with pytest.raises(ValueError, match=r"--algo 'dqn' is not a learner: one of ppo, "):
+        check_new_run(Args(algo="dqn", out=out))
+
+
+def test_a_file_for_another_algorithm_is_refused_in_one_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    sac = yaml.safe_load(ALGOS["sac"].hyperparams.read_text())
+    path = tmp_path / "sac.yaml"
+    path.write_text(yaml.safe_dump(sac))
+    status = main(["--algo", "ppo", "--hyperparams", str(path), "--out", str(tmp_path / "r")])
+    err = capsys.readouterr().err
+    assert status == 2
+    assert err.count("\n") == 1
+    # SAC's own keys are named (batch_size, gamma, ent_coef ... are PPO's too).
+    assert "unknown key(s) buffer_size, gradient_steps, learning_starts" in err
+    assert "(not PPO arguments)" in err
+    assert not (tmp_path / "r").exists()
