@@ -1,12 +1,12 @@
 """The learners ``follow-train --algo`` trains: each one's class, rules and shipped file.
 
-======================  ==================================  ==================================
-``--algo``              class                               shipped hyperparameters
-======================  ==================================  ==================================
-``ppo`` (the default)   stable-baselines3 ``PPO``           ``train/configs/ppo.yaml``
+======================  ===================================  ====================================
+``--algo``              class                                shipped hyperparameters
+======================  ===================================  ====================================
+``ppo`` (the default)   stable-baselines3 ``PPO``            ``train/configs/ppo.yaml``
 ``recurrent_ppo``       sb3-contrib ``RecurrentPPO`` (LSTM)  ``train/configs/recurrent_ppo.yaml``
-``sac``                 stable-baselines3 ``SAC``           ``train/configs/sac.yaml``
-======================  ==================================  ==================================
+``sac``                 stable-baselines3 ``SAC``            ``train/configs/sac.yaml``
+======================  ===================================  ====================================
 
 An :class:`Algo` says which arguments a hyperparameter file may give the algorithm's
 constructor (:attr:`Algo.rules`, each checked with SB3's meaning and range; any other key is

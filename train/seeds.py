@@ -203,10 +203,10 @@ def _claim(study: Path, settings: dict[str, Any]) -> None:
     atomic_write_text(path, json.dumps(settings, indent=1) + "\n")
 
 
-def _new_study_path(root: Path, algo: str | None) -> Path:
+def _new_study_path(root: Path, learner: str | None) -> Path:
     """``root/<algo>-seeds-<timestamp>[-k]`` (``ppo-seeds-...`` by default), not yet made
     (nothing is written before the checks)."""
-    prefix = f"{algo or DEFAULT_ALGO}-seeds"
+    prefix = f"{learner or DEFAULT_ALGO}-seeds"
     return next(p for p in runs.run_dir_names(root, prefix) if not p.exists())
 
 
