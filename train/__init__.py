@@ -1,7 +1,10 @@
-"""Training learned controllers: PPO (stable-baselines3) on the batched PersonFollow env.
+"""Training learned controllers: PPO, RecurrentPPO or SAC (stable-baselines3, sb3-contrib) on
+the batched PersonFollow env.
 
 - :mod:`train.ppo`: ``follow-train`` / ``python -m train``, the training script (top-down).
-- :mod:`train.config`: hyperparameters in rl-zoo3's YAML format (``train/configs/ppo.yaml``).
+- :mod:`train.algos`: the learners ``--algo`` chooses from: class, rules, shipped file.
+- :mod:`train.config`: hyperparameters in rl-zoo3's YAML format (``train/configs/<algo>.yaml``).
+- :mod:`train.rules`: the checks of one hyperparameter value, and schedules.
 - :mod:`train.wrappers`: the VecEnv wrappers between the env and the agent, and a VecEnv of
   several scenarios.
 - :mod:`train.envs`: builds the agent's env for training, evaluation and inference.

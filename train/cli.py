@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import NoReturn
 
 from execution import BACKENDS, Backend, BackendUnavailableError, backend_from_args
+from train.algos import ALGOS, CONFIGS, DEFAULT_ALGO
 from train.config import ConfigError
 from train.ppo import MAX_THREADS, PROG, USAGE_ERROR, Args, Interrupted, TrainingError, train
 from train.seeds import parse_seeds, train_seeds
@@ -35,8 +36,21 @@ class _Parser(argparse.ArgumentParser):
 def build_parser() -> argparse.ArgumentParser:
     """The ``follow-train`` argument parser; defaults are :class:`Args`'s."""
     d = Args()
-    p = _Parser(prog=PROG, description="Train PPO on PersonFollow-v0 (stable-baselines3).")
-    p.add_argument("--hyperparams", type=Path, help=f"YAML file (default: {d.hyperparams})")
+    p = _Parser(
+        prog=PROG,
+        description="Train PPO, RecurrentPPO or SAC on PersonFollow-v0 (stable-baselines3, "
+        "sb3-contrib).",
+    )
+    p.add_argument(
+        "--algo",
+        choices=tuple(ALGOS),
+        help=f"the learner (default: {DEFAULT_ALGO}; with --resume: the run's own)",
+    )
+    p.add_argument(
+        "--hyperparams",
+        type=Path,
+        help=f"YAML file (default: the algorithm's, {CONFIGS}/<algo>.yaml)",
+    )
     p.add_argument(
         "--env-id", help="section of the YAML file, naming the task (default: its only one)"
     )
@@ -58,7 +72,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--n-envs", type=int, help="lanes (default: the YAML's)")
     p.add_argument("--threads", type=int, help=f"torch threads, 1..{MAX_THREADS} ({d.threads})")
     p.add_argument("--runs", type=Path, help=f"where run folders go ({d.runs})")
-    p.add_argument("--out", type=Path, help="run folder (default: runs/ppo-<timestamp>)")
+    p.add_argument("--out", type=Path, help="run folder (default: runs/<algo>-<timestamp>)")
     p.add_argument("--resume", type=Path, metavar="RUN_DIR", help="continue this run")
     p.add_argument(
         "--export",
@@ -99,7 +113,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 # Options that may accompany --resume (the rest come from the run's config.yaml).
-_RESUME_OPTIONS = {"resume", "n_timesteps", "threads", "progress", "export", "force"}
+_RESUME_OPTIONS = {"resume", "algo", "n_timesteps", "threads", "progress", "export", "force"}
 
 
 # Options of a study (--seeds), not of one run.
@@ -157,7 +171,8 @@ def _args(ns: argparse.Namespace) -> Args:
         extra = ", ".join("--" + k.replace("_", "-") for k in sorted(set(given) - _RESUME_OPTIONS))
         raise UsageError(
             f"{extra}: a resumed run keeps its own settings; with --resume only "
-            "--n-timesteps, --threads, --no-progress, --export and --force may be given"
+            "--algo (the run's own), --n-timesteps, --threads, --no-progress, --export and --force "
+            "may be given"
         )
     if "scenarios" in given:
         given["scenarios"] = tuple(s.strip() for s in given["scenarios"].split(",") if s.strip())
@@ -176,7 +191,8 @@ def _written(run: Path) -> str:
     names = [runs.MODEL, runs.NORMALIZATION, runs.CONFIG, runs.CARD, runs.CURVE]
     names += [runs.EVALUATIONS, runs.SESSIONS]
     found = [name for name in names if (run / name).is_file()]
-    checkpoints = len(list((run / runs.CHECKPOINTS).glob(f"{runs.CHECKPOINT_PREFIX}_*_steps.zip")))
+    prefix = runs.read_config(run).get("algo", runs.CHECKPOINT_PREFIX)
+    checkpoints = len(list((run / runs.CHECKPOINTS).glob(f"{prefix}_*_steps.zip")))
     if checkpoints:
         found.append(f"{runs.CHECKPOINTS}/ ({checkpoints} checkpoint{'s' * (checkpoints > 1)})")
     if (run / runs.LOGS).is_dir():

@@ -1,4 +1,4 @@
-"""Hyperparameters in rl-zoo3's YAML format, keyed by env id (``train/configs/ppo.yaml``).
+"""Hyperparameters in rl-zoo3's YAML format, keyed by env id (``train/configs/<algo>.yaml``).
 
 The keys rl-zoo3 reads are read here with the same meaning, so the file serves both::
 
@@ -12,8 +12,15 @@ The keys rl-zoo3 reads are read here with the same meaning, so the file serves b
         - train.wrappers.VecRescaleAction: {w_max_radps: 2.0}
       policy_kwargs: {net_arch: [64, 64]}
       learning_rate: lin_3e-4   # a float, or lin_<x>: linear decay from x to 0
-      n_steps: 64               # ... and any other PPO argument
+      n_steps: 64               # ... and any other argument of the algorithm
       env_kwargs: {platform: mecanum}   # gym.make keyword arguments (default: none)
+
+A file is read for one algorithm (``follow-train --algo``, :mod:`train.algos`): PPO
+(``ppo.yaml``), sb3-contrib's RecurrentPPO (``recurrent_ppo.yaml``, policy ``MlpLstmPolicy``) or
+SAC (``sac.yaml``). The rl-zoo3 keys above are the same for all three; the rest of the section
+are arguments of the algorithm's constructor, and each algorithm has its own table of those it
+takes (:data:`train.algos.PPO_RULES`, ``RECURRENT_PPO_RULES``, ``SAC_RULES``): a SAC file may
+set ``buffer_size`` or ``tau`` and not ``n_epochs``, a PPO file the reverse.
 
 rl-zoo3 ``eval``-uates strings for ``normalize`` and ``policy_kwargs``; here they are YAML
 mappings (rl-zoo3 accepts those too), and nothing is evaluated. ``env_kwargs`` are the env's
@@ -26,13 +33,17 @@ decides the action's width and names, which the per-action settings must fit
 hyperparameters (scenarios, seeds, evaluation and checkpoint intervals) are ``follow-train``
 options (:class:`train.ppo.Args`).
 
-Every key is checked here, before anything is built or written: its type, its range, and the
-constraints stable-baselines3 asserts later (``batch_size`` > 1 and at most ``n_steps *
-n_envs``), so a bad file fails in one line naming the key, the value and what it may be, not
-with a traceback (or a NaN) in the middle of training. The rules are :data:`PPO_RULES`;
-``policy_kwargs`` must be arguments of the policy class, and each ``vec_env_wrapper`` entry a
-``VecEnvWrapper`` whose keyword arguments its constructor takes (the constructors check the
-values when the agent's env is built, still before anything is written).
+Every key is checked here, before anything is built or written: its type, its range (SB3's
+meaning of it for the algorithm), and the constraints stable-baselines3 asserts later, each
+algorithm's own (PPO: ``batch_size`` > 1 and at most ``n_steps * n_envs``; RecurrentPPO: the
+same, and no last mini-batch of one step; SAC: ``batch_size`` at most ``buffer_size``, at least
+one transition per lane, episodic ``train_freq`` with one lane only), so a bad file fails in one
+line naming the key, the value and what it may be, not with a traceback (or a NaN) in the middle
+of training. ``policy`` must be one of the algorithm's (PPO's custom
+``train.mirror.MirrorMlpPolicy`` is PPO's only); ``policy_kwargs`` must be arguments of the
+policy class, and each ``vec_env_wrapper`` entry a ``VecEnvWrapper`` whose keyword arguments
+its constructor takes (the constructors check the values when the agent's env is built, still
+before anything is written).
 """
 
 from __future__ import annotations
@@ -45,6 +56,18 @@ from pathlib import Path
 from typing import Any
 
 import yaml
+
+from train.algos import DEFAULT_ALGO, PPO_RULES, Algo, algo
+from train.rules import (
+    ConfigError,
+    _Linear,  # noqa: F401  (models saved with a lin_ schedule name it here)
+    fail,
+    flag,
+    integer,
+    number,
+    schedule,
+    unsupported,
+)
 
 __all__ = [
     "PPO_RULES",
@@ -59,7 +82,7 @@ __all__ = [
     "wrapper_specs",
 ]
 
-# Keys rl-zoo3 consumes itself; the rest go to the PPO constructor.
+# Keys rl-zoo3 consumes itself; the rest go to the algorithm's constructor.
 ZOO_KEYS = (
     "policy",
     "n_envs",
@@ -71,112 +94,22 @@ ZOO_KEYS = (
 )
 # gym.make keyword arguments follow-train sets itself (--scenarios, --env-config; no rendering).
 _ENV_KWARGS_OWN = ("scenario", "config", "render_mode")
-POLICIES = ("MlpPolicy",)  # or a dotted name of an ActorCriticPolicy subclass
 
 Hyperparams = dict[str, Any]
 
 
-class ConfigError(ValueError):
-    """A hyperparameter file that cannot be used; the message names the file and the key."""
-
-
-# -- Checks of one value: each returns the value as stored, or raises naming key and range ---
-
-
-def _fail(where: str, key: str, value: Any, rule: str) -> ConfigError:
-    return ConfigError(f"{where}: {key}={value!r} is out of range: must be {rule}")
-
-
-def _integer(where: str, key: str, value: Any, low: int) -> int:
-    """An integer >= ``low``; an integral float (YAML's ``!!float 4e6``) counts as one."""
-    if isinstance(value, float) and value.is_integer():
-        value = int(value)
-    if isinstance(value, bool) or not isinstance(value, int) or value < low:
-        raise _fail(where, key, value, f"an integer >= {low}")
-    return value
-
-
-def _number(
-    where: str, key: str, value: Any, low: float, high: float = math.inf, *, open_low: bool = False
-) -> float:
-    """A finite number in ``[low, high]`` (``(low, high]`` with ``open_low``)."""
-    above = (value > low if open_low else value >= low) if _is_number(value) else False
-    if not (above and value <= high and math.isfinite(value)):
-        left = "(" if open_low else "["
-        rule = f"a number {'>' if open_low else '>='} {low:g}"
-        if low == -math.inf:
-            rule = "a finite number"
-        elif high < math.inf:
-            rule = f"a number in {left}{low:g}, {high:g}]"
-        raise _fail(where, key, value, rule)
-    return value
-
-
-def _is_number(value: Any) -> bool:
-    return isinstance(value, int | float) and not isinstance(value, bool)
-
-
-def _flag(where: str, key: str, value: Any) -> bool:
-    if not isinstance(value, bool):
-        raise _fail(where, key, value, "true or false")
-    return value
-
-
-def _positive_schedule(where: str, key: str, value: Any) -> Any:
-    schedule(value, where=f"{where}: {key}")
-    return value
-
-
-def _optional(check: Callable[[str, str, Any], Any]) -> Callable[[str, str, Any], Any]:
-    def check_or_none(where: str, key: str, value: Any) -> Any:
-        return None if value is None else check(where, key, value)
-
-    return check_or_none
-
-
-def _unsupported(where: str, key: str, value: Any) -> Any:
-    if value not in (None, {}):
-        raise ConfigError(
-            f"{where}: {key}={value!r} is not supported by follow-train (SB3 wants a class, "
-            "which a YAML file cannot give); leave it out"
-        )
-    return value
-
-
-#: Every PPO argument a hyperparameter file may set, with its check (SB3's meaning and default).
-PPO_RULES: dict[str, Callable[[str, str, Any], Any]] = {
-    "learning_rate": _positive_schedule,  # > 0, or lin_<x> with x > 0
-    "n_steps": lambda w, k, v: _integer(w, k, v, 1),  # steps per lane per update
-    "batch_size": lambda w, k, v: _integer(w, k, v, 1),  # also 2 .. n_steps * n_envs, below
-    "n_epochs": lambda w, k, v: _integer(w, k, v, 1),
-    "gamma": lambda w, k, v: _number(w, k, v, 0.0, 1.0),  # discount per 0.1 s step
-    "gae_lambda": lambda w, k, v: _number(w, k, v, 0.0, 1.0),
-    "clip_range": _positive_schedule,
-    "clip_range_vf": _optional(_positive_schedule),
-    "normalize_advantage": _flag,
-    "ent_coef": lambda w, k, v: _number(w, k, v, 0.0),
-    "vf_coef": lambda w, k, v: _number(w, k, v, 0.0),
-    "max_grad_norm": lambda w, k, v: _number(w, k, v, 0.0, open_low=True),
-    "use_sde": _flag,
-    "sde_sample_freq": lambda w, k, v: _integer(w, k, v, -1),  # -1: only at rollout start
-    "rollout_buffer_class": _unsupported,
-    "rollout_buffer_kwargs": _unsupported,
-    "target_kl": _optional(lambda w, k, v: _number(w, k, v, 0.0, open_low=True)),
-    "stats_window_size": lambda w, k, v: _integer(w, k, v, 1),
-}
-
 # VecNormalize's arguments (``normalize: {...}``), as SB3 documents them.
 _NORMALIZE_RULES: dict[str, Callable[[str, str, Any], Any]] = {
-    "norm_obs": _flag,
-    "norm_reward": _flag,
-    "clip_obs": lambda w, k, v: _number(w, k, v, 0.0, open_low=True),
-    "clip_reward": lambda w, k, v: _number(w, k, v, 0.0, open_low=True),
-    "gamma": lambda w, k, v: _number(w, k, v, 0.0, 1.0),
-    "epsilon": lambda w, k, v: _number(w, k, v, 0.0, open_low=True),
+    "norm_obs": flag,
+    "norm_reward": flag,
+    "clip_obs": lambda w, k, v: number(w, k, v, 0.0, open_low=True),
+    "clip_reward": lambda w, k, v: number(w, k, v, 0.0, open_low=True),
+    "gamma": lambda w, k, v: number(w, k, v, 0.0, 1.0),
+    "epsilon": lambda w, k, v: number(w, k, v, 0.0, open_low=True),
 }
 
-# ActorCriticPolicy arguments PPO sets itself: a policy_kwargs entry would clash.
-_SET_BY_PPO = ("observation_space", "action_space", "lr_schedule", "use_sde")
+# Policy arguments the algorithm sets itself: a policy_kwargs entry would clash.
+_SET_BY_ALGO = ("observation_space", "action_space", "lr_schedule", "use_sde")
 # Policy arguments that are classes: not expressible in YAML (strings are not evaluated).
 _CLASS_ARGUMENTS = ("activation_fn", "features_extractor_class", "optimizer_class")
 _POLICY_FLAGS = (
@@ -187,13 +120,6 @@ _POLICY_FLAGS = (
     "share_features_extractor",
     "normalize_images",
 )
-
-
-def _sb3_defaults() -> dict[str, Any]:
-    from stable_baselines3 import PPO
-
-    parameters = inspect.signature(PPO.__init__).parameters
-    return {name: p.default for name, p in parameters.items() if name in PPO_RULES}
 
 
 def _document(path: Path) -> Any:
@@ -220,9 +146,14 @@ def sole_section(path: str | Path) -> str:
 
 
 def load_hyperparams(
-    path: str | Path, env_id: str, overrides: Mapping[str, Any] | None = None
+    path: str | Path,
+    env_id: str,
+    overrides: Mapping[str, Any] | None = None,
+    *,
+    algo: str = DEFAULT_ALGO,
 ) -> Hyperparams:
-    """Read the hyperparameters for ``env_id`` from an rl-zoo3-style YAML file and check them.
+    """Read the hyperparameters for ``env_id`` from an rl-zoo3-style YAML file and check them
+    as arguments of the algorithm ``algo`` (:data:`train.algos.ALGOS`).
 
     :param overrides: values given on the command line (``n_envs``, ``n_timesteps``); they
         replace the file's and are named as options in messages.
@@ -234,7 +165,8 @@ def load_hyperparams(
     if not isinstance(document, dict) or env_id not in document:
         found = ", ".join(map(str, document)) if isinstance(document, dict) else "nothing"
         raise ConfigError(f"{path}: no section {env_id!r} (found: {found})")
-    return parse_hyperparams(document[env_id], where=f"{path} [{env_id}]", overrides=overrides)
+    where = f"{path} [{env_id}]"
+    return parse_hyperparams(document[env_id], where=where, overrides=overrides, algo=algo)
 
 
 def parse_hyperparams(
@@ -242,18 +174,22 @@ def parse_hyperparams(
     *,
     where: str = "hyperparameters",
     overrides: Mapping[str, Any] | None = None,
+    algo: str = DEFAULT_ALGO,
 ) -> Hyperparams:
     """Check one env's hyperparameters (a mapping as in the YAML file) and return a copy.
 
-    Defaults are filled in for rl-zoo3's keys (``policy`` MlpPolicy, ``normalize`` false,
-    ``frame_stack`` 1, no wrappers, no ``policy_kwargs``; no ``env_kwargs`` is none); PPO's
-    own defaults stay SB3's.
+    Defaults are filled in for rl-zoo3's keys (``policy`` the algorithm's MLP policy,
+    ``normalize`` false, ``frame_stack`` 1, no wrappers, no ``policy_kwargs``; no
+    ``env_kwargs`` is none); the algorithm's own defaults stay SB3's.
 
     :param section: the mapping under the env id.
     :param where: names the source in error messages.
     :param overrides: command-line values replacing the section's (named ``--n-envs`` etc.).
+    :param algo: the learner, ``ppo``, ``recurrent_ppo`` or ``sac``: its rule table says which
+        keys the section may set (:mod:`train.algos`).
     :raises ConfigError: on a missing, unknown, ill-typed or out-of-range key.
     """
+    learner = _algo(algo, where)
     if not isinstance(section, Mapping):
         raise ConfigError(f"{where}: must be a mapping of hyperparameters")
     overrides = dict(overrides or {})
@@ -265,44 +201,32 @@ def parse_hyperparams(
     for key in ("n_envs", "n_timesteps"):
         if key not in hp:
             raise ConfigError(f"{where}: {key} is missing")
-        hp[key] = _integer(where, name(key), hp[key], 1)
-    hp.setdefault("policy", "MlpPolicy")
-    policy = policy_class(hp["policy"], where=where)
+        hp[key] = integer(where, name(key), hp[key], 1)
+    hp.setdefault("policy", learner.policies[0])
+    policy = policy_class(hp["policy"], where=where, algo=learner.name)
     hp["normalize"] = _check_normalize(where, hp.setdefault("normalize", False))
-    hp["frame_stack"] = _integer(where, "frame_stack", hp.setdefault("frame_stack", 1), 1)
-    _check_policy_kwargs(where, policy, hp.setdefault("policy_kwargs", {}))
+    hp["frame_stack"] = integer(where, "frame_stack", hp.setdefault("frame_stack", 1), 1)
+    _check_policy_kwargs(where, learner, policy, hp.setdefault("policy_kwargs", {}))
     wrapper_specs(hp.setdefault("vec_env_wrapper", []), where=where)
     if "env_kwargs" in hp:
         hp["env_kwargs"] = _check_env_kwargs(where, hp["env_kwargs"])
-    unknown = sorted(set(hp) - set(ZOO_KEYS) - {"policy_kwargs"} - set(PPO_RULES))
+    unknown = sorted(set(hp) - set(ZOO_KEYS) - {"policy_kwargs"} - set(learner.rules))
     if unknown:
-        raise ConfigError(f"{where}: unknown key(s) {', '.join(unknown)}")
-    for key, check in PPO_RULES.items():
+        raise ConfigError(
+            f"{where}: unknown key(s) {', '.join(unknown)} (not {learner.label} arguments)"
+        )
+    for key, check in learner.rules.items():
         if key in hp:
             hp[key] = check(where, key, hp[key])
-    _check_batch(where, hp, name)
+    learner.check_batch(where, hp, name, learner.defaults())
     return hp
 
 
-def _check_batch(where: str, hp: Hyperparams, name: Callable[[str], str]) -> None:
-    """SB3's own constraints on the rollout buffer, checked before SB3 asserts them."""
-    defaults = _sb3_defaults()
-    n_steps = hp.get("n_steps", defaults["n_steps"])
-    batch_size = hp.get("batch_size", defaults["batch_size"])
-    buffer = n_steps * hp["n_envs"]
-    # SB3 normalises advantages per mini-batch (a standard deviation needs 2 samples).
-    smallest = 2 if hp.get("normalize_advantage", defaults["normalize_advantage"]) else 1
-    lanes = f" (n_envs from {name('n_envs')})" if name("n_envs") != "n_envs" else ""
-    if buffer < smallest:
-        raise ConfigError(
-            f"{where}: n_steps * n_envs = {n_steps} * {hp['n_envs']} is out of range: must be "
-            f">= 2 while normalize_advantage is true{lanes}"
-        )
-    if not smallest <= batch_size <= buffer:
-        raise ConfigError(
-            f"{where}: batch_size={batch_size} is out of range: must be in [{smallest}, "
-            f"n_steps * n_envs = {n_steps} * {hp['n_envs']} = {buffer}]{lanes}"
-        )
+def _algo(name: str, where: str) -> Algo:
+    try:
+        return algo(name)
+    except ConfigError as e:
+        raise ConfigError(f"{where}: {e}") from None
 
 
 def platform_label(platform: Any) -> str | None:
@@ -341,7 +265,7 @@ def _check_env_kwargs(where: str, value: Any) -> dict[str, Any]:
         platform = checked["platform"]
         name = platform.get("name") if isinstance(platform, Mapping) else platform
         if not isinstance(name, str) or name not in available_platforms():
-            raise _fail(
+            raise fail(
                 where,
                 "env_kwargs.platform",
                 platform,
@@ -389,7 +313,7 @@ def _check_normalize(where: str, value: Any) -> bool | dict[str, Any]:
     for key, item in checked.items():
         rule = _NORMALIZE_RULES.get(key)
         if key == "norm_obs_keys":  # dict observation spaces only; ours is a Box
-            _unsupported(where, f"normalize.{key}", item)
+            unsupported(where, f"normalize.{key}", item)
         elif rule is None:
             known = ", ".join([*_NORMALIZE_RULES, "norm_obs_keys"])
             raise ConfigError(f"{where}: normalize.{key} is not a VecNormalize argument ({known})")
@@ -412,13 +336,11 @@ def _accepted_arguments(cls: type) -> set[str]:
     return names - {"self"}
 
 
-def _check_policy_kwargs(where: str, policy: Any, kwargs: Any) -> None:
+def _check_policy_kwargs(where: str, learner: Algo, policy: Any, kwargs: Any) -> None:
     if not isinstance(kwargs, Mapping):
         raise ConfigError(f"{where}: policy_kwargs must be a mapping (strings are not evaluated)")
-    from stable_baselines3.common.policies import ActorCriticPolicy
-
-    cls = ActorCriticPolicy if isinstance(policy, str) else policy
-    accepted = _accepted_arguments(cls) - set(_SET_BY_PPO)
+    cls = learner.base_policy() if isinstance(policy, str) else policy
+    accepted = _accepted_arguments(cls) - set(_SET_BY_ALGO)
     for key, value in kwargs.items():
         field = f"policy_kwargs.{key}"
         if key not in accepted:
@@ -427,87 +349,65 @@ def _check_policy_kwargs(where: str, policy: Any, kwargs: Any) -> None:
                 f"(accepted: {', '.join(sorted(accepted))})"
             )
         if key == "net_arch":
-            _check_net_arch(where, value)
+            _check_net_arch(where, value, learner.net_arch_keys)
+        elif key in learner.policy_rules:
+            learner.policy_rules[key](where, field, value)
         elif key in _CLASS_ARGUMENTS:
-            _unsupported(where, field, value)
+            unsupported(where, field, value)
         elif key in _POLICY_FLAGS:
-            _flag(where, field, value)
+            flag(where, field, value)
         elif key == "log_std_init":
-            _number(where, field, value, -math.inf)
+            number(where, field, value, -math.inf)
         elif key.endswith("_kwargs") and not isinstance(value, Mapping | None):
-            raise _fail(where, field, value, "a mapping")
+            raise fail(where, field, value, "a mapping")
 
 
-def _check_net_arch(where: str, value: Any) -> None:
+def _check_net_arch(where: str, value: Any, keys: tuple[str, str] = ("pi", "vf")) -> None:
+    """A list of layer sizes, or a mapping of them with the actor's and critic's ``keys``."""
+
     def layers(item: Any) -> bool:
         return isinstance(item, list) and all(
             isinstance(n, int) and not isinstance(n, bool) and n >= 1 for n in item
         )
 
     if isinstance(value, Mapping):
-        ok = set(value) <= {"pi", "vf"} and all(layers(v) for v in value.values())
+        ok = set(value) <= set(keys) and all(layers(v) for v in value.values())
     else:
         ok = layers(value)
     if not ok:
-        raise _fail(
+        raise fail(
             where,
             "policy_kwargs.net_arch",
             value,
-            "a list of layer sizes (integers >= 1), or {pi: [...], vf: [...]}",
+            "a list of layer sizes (integers >= 1), or "
+            + "{"
+            + ", ".join(f"{key}: [...]" for key in keys)
+            + "}",
         )
 
 
-def policy_class(name: str, *, where: str = "policy") -> Any:
-    """``"MlpPolicy"``, or the class a dotted name imports (an SB3 ``ActorCriticPolicy``).
+def policy_class(name: str, *, where: str = "policy", algo: str = DEFAULT_ALGO) -> Any:
+    """One of the algorithm's policy names (``"MlpPolicy"``; RecurrentPPO's
+    ``"MlpLstmPolicy"``), or the class a dotted name imports, a subclass of the algorithm's
+    policy (PPO's: an SB3 ``ActorCriticPolicy``, such as ``train.mirror.MirrorMlpPolicy``).
 
-    :raises ConfigError: if the name does not import or is no actor-critic policy.
+    :raises ConfigError: if the name does not import or is not a policy of the algorithm.
     """
-    if name in POLICIES:
+    learner = _algo(algo, where)
+    if name in learner.policies:
         return name
-    from stable_baselines3.common.policies import ActorCriticPolicy
-
+    base = learner.base_policy()
+    known = f"{learner.name} takes {', '.join(learner.policies)} or a {base.__name__} subclass"
+    if isinstance(name, str) and name.endswith("MirrorMlpPolicy") and learner.name != "ppo":
+        raise ConfigError(f"{where}: policy {name!r} is PPO's only ({known})")
     try:
         cls = import_object(str(name))
     except (ImportError, AttributeError, ValueError) as e:
         raise ConfigError(f"{where}: policy {name!r} does not import: {e}") from None
-    if not (isinstance(cls, type) and issubclass(cls, ActorCriticPolicy)):
-        raise ConfigError(f"{where}: policy {name!r} is not an SB3 ActorCriticPolicy")
+    if not (isinstance(cls, type) and issubclass(cls, base)):
+        library = "sb3-contrib" if base.__module__.startswith("sb3_contrib") else "SB3"
+        raise ConfigError(f"{where}: policy {name!r} is not an {library} {base.__name__} ({known})")
     return cls
-
-
-def schedule(value: Any, *, where: str = "schedule") -> float | Callable[[float], float]:
-    """A number > 0, or rl-zoo3's ``"lin_<x>"`` (x > 0): ``x`` times SB3's progress_remaining
-    (1 at the start of training, 0 at the end).
-
-    :raises ConfigError: for anything else, e.g. 0, a negative number, NaN or ``"cos_3e-4"``.
-    """
-    start: float | None = None
-    if _is_number(value):
-        start = float(value)
-    elif isinstance(value, str) and value.startswith("lin_"):
-        try:
-            start = float(value[4:])
-        except ValueError:
-            start = None
-    if start is None or not (math.isfinite(start) and start > 0):
-        raise ConfigError(
-            f"{where}={value!r} is out of range: must be a number > 0, or 'lin_<number>' with "
-            "the number > 0 (linear decay to 0)"
-        )
-    return start if _is_number(value) else _Linear(start)
-
-
-class _Linear:
-    """``start * progress_remaining``: a picklable linear schedule (SB3 saves schedules)."""
-
-    def __init__(self, start: float) -> None:
-        self.start = start
-
-    def __call__(self, progress_remaining: float) -> float:
-        return self.start * progress_remaining
-
-    def __repr__(self) -> str:
-        return f"lin_{self.start:g}"
 
 
 def wrapper_specs(value: Any, *, where: str = "vec_env_wrapper") -> list[tuple[str, dict]]:

@@ -1,14 +1,19 @@
-"""``follow-train``: PPO (stable-baselines3) on PersonFollow-v0, one run folder per run.
+"""``follow-train``: PPO, RecurrentPPO or SAC on PersonFollow-v0, one run folder per run.
 
 ::
 
-    follow-train                                  # train/configs/ppo.yaml, all scenarios
+    follow-train                                  # PPO, train/configs/ppo.yaml, all scenarios
+    follow-train --algo sac                       # SAC, train/configs/sac.yaml
+    follow-train --algo recurrent_ppo             # sb3-contrib's RecurrentPPO (LSTM policy)
     follow-train --n-timesteps 20000 --out runs/ppo-smoke
     follow-train --resume runs/ppo-<timestamp>    # continue from the newest checkpoint
     follow-train --export agents/mine             # also copy the agent there (train.export)
 
 (also ``python -m train``). Read top-down: :class:`Args` holds every option; :func:`train`
-sets up the envs and the model, learns, and saves. SB3 does the algorithm; the agent's view of
+sets up the envs and the model, learns, and saves, the same way for every algorithm
+(:mod:`train.algos` has what differs: the class, the rules of its hyperparameters, the shipped
+file). The run's ``config.yaml`` records the algorithm, and a resume continues with it. SB3
+(and sb3-contrib) do the algorithm; the agent's view of
 the env (action scaling, the observation's extra features, the training reward) is the
 ``vec_env_wrapper`` list of the hyperparameter file (:mod:`train.wrappers`), assembled by
 :func:`train.envs.agent_env`. The run folder's layout is in :mod:`train.run`.
@@ -35,6 +40,7 @@ from typing import Any
 
 from eval.atomic import atomic_write_text, file_on_path
 from follow_env.tasks import task_for_env
+from train.algos import ALGOS, DEFAULT_ALGO, algo, load_model, new_model
 from train.config import (
     ConfigError,
     Hyperparams,
@@ -42,7 +48,6 @@ from train.config import (
     load_hyperparams,
     parse_hyperparams,
     policy_class,
-    schedule,
     sole_section,
 )
 from train.export import AGENT_FILES, EXPORT_EXTRAS, check_export, export_agent
@@ -51,7 +56,7 @@ __all__ = ["AGENT_FILES", "EXPORT_EXTRAS", "Args", "Interrupted", "check_new_run
 
 PROG = "follow-train"
 USAGE_ERROR = 2
-DEFAULT_HYPERPARAMS = Path(__file__).parent / "configs" / "ppo.yaml"
+DEFAULT_HYPERPARAMS = ALGOS[DEFAULT_ALGO].hyperparams  # train/configs/ppo.yaml
 #: The largest seed any lane may get: SB3 passes the seed to ``numpy.random.seed``.
 MAX_SEED = 2**32 - 1
 #: The most torch threads a run may ask for (more only slow a 0.1-ms policy step down).
@@ -62,7 +67,8 @@ MAX_THREADS = 256
 class Args:
     """Every option of a run (``follow-train --help`` has the same list)."""
 
-    hyperparams: Path = DEFAULT_HYPERPARAMS  # rl-zoo3-style YAML, keyed by env id
+    algo: str | None = None  # ppo, recurrent_ppo or sac; None: ppo (a resume: the run's)
+    hyperparams: Path | None = None  # rl-zoo3-style YAML, keyed by env id; None: the algo's
     env_id: str | None = None  # the YAML section, and the task; default: the file's only section
     scenarios: tuple[str, ...] | None = None  # the task's variants to train on; None = all
     env_config: str = "thesis"  # the env preset the agent trains and is evaluated on
@@ -77,7 +83,7 @@ class Args:
     n_envs: int | None = None  # overrides the hyperparameter file's
     threads: int = 1  # torch threads (the env steps in this thread too)
     runs: Path = Path("runs")
-    out: Path | None = None  # the run folder (default: runs/ppo-<timestamp>)
+    out: Path | None = None  # the run folder (default: runs/<algo>-<timestamp>)
     resume: Path | None = None  # continue this run from its newest checkpoint
     export: Path | None = None  # also copy the finished agent into this folder
     force: bool = False  # --export may write into a folder it did not make (train.export)
@@ -123,7 +129,7 @@ def train(args: Args, command: str = PROG) -> Path:
     # -- The run folder, now that everything checked out -------------------------------------
     made = run is None and (args.out is None or not args.out.exists())
     if run is None:
-        run = args.out if args.out is not None else runs.new_run_dir(args.runs)
+        run = args.out if args.out is not None else runs.new_run_dir(args.runs, args.algo)
         run.mkdir(parents=True, exist_ok=True)
     try:
         if saved is None:
@@ -143,7 +149,9 @@ def train(args: Args, command: str = PROG) -> Path:
             _remove_new_run(run, made)
         raise
     callbacks = [
-        runs.AtomicCheckpointCallback(args.checkpoint_freq, run, venv.num_envs, session),
+        runs.AtomicCheckpointCallback(
+            args.checkpoint_freq, run, venv.num_envs, session, prefix=args.algo
+        ),
         runs.HeldOutEvalCallback(eval_env, run, args.eval_seed, args.eval_freq, venv.num_envs),
     ]
 
@@ -156,7 +164,7 @@ def train(args: Args, command: str = PROG) -> Path:
             reset_num_timesteps=False,
         )
     except KeyboardInterrupt:
-        kept = runs.newest_checkpoint(run)
+        kept = runs.newest_checkpoint(run, args.algo)
         trained = model.num_timesteps - start_step
         session.close("interrupted", kept[0] if kept else start_step, trained)
         if kept is None and saved is None:
@@ -170,7 +178,7 @@ def train(args: Args, command: str = PROG) -> Path:
             f"{kept[0] if kept else start_step:,} env steps)"
         ) from None
     except ValueError as e:
-        kept = runs.newest_checkpoint(run)
+        kept = runs.newest_checkpoint(run, args.algo)
         trained = model.num_timesteps - start_step
         session.close("failed", kept[0] if kept else start_step, trained)
         if "invalid values" not in str(e):
@@ -188,7 +196,8 @@ def train(args: Args, command: str = PROG) -> Path:
         session.close("finished", model.num_timesteps, steps)
         venv.close()
         eval_env.close()
-        report.plot_learning_curve(run, run / runs.CURVE)
+        title = f"{ALGOS[args.algo].label} on {args.env_id}"
+        report.plot_learning_curve(run, run / runs.CURVE, title)
         seeds = range(args.eval_seed, args.eval_seed + args.final_episodes)
         comparison = None
         if args.final_episodes > 0:
@@ -234,23 +243,12 @@ def check_new_run(args: Args) -> tuple[Args, Hyperparams]:
     if args.n_envs is not None:  # before the file: its batch size may not fit either
         _check_lanes(args.n_envs, args.scenarios)
     given = {k: v for k in ("n_timesteps", "n_envs") if (v := getattr(args, k)) is not None}
-    hp = load_hyperparams(args.hyperparams, args.env_id, overrides=given)
+    hp = load_hyperparams(args.hyperparams, args.env_id, overrides=given, algo=args.algo)
     _check_against_hyperparams(args, hp)
     return args, hp
 
 
 # -- Helpers ---------------------------------------------------------------------------------
-
-# Keys the trainer consumes itself; the rest of a hyperparameter section goes to PPO().
-_ZOO_ONLY = (
-    "n_envs",
-    "n_timesteps",
-    "normalize",
-    "frame_stack",
-    "vec_env_wrapper",
-    "policy",
-    "env_kwargs",
-)
 
 
 def _resume_settings(args: Args) -> tuple[Args, Hyperparams, dict[str, Any], str, tuple]:
@@ -267,12 +265,20 @@ def _resume_settings(args: Args) -> tuple[Args, Hyperparams, dict[str, Any], str
         raise ValueError(f"--resume {run}: {what}")
     saved = runs.read_config(run)
     where = f"{run / runs.CONFIG} [hyperparams]"
-    given = {"n_timesteps": args.n_timesteps} if args.n_timesteps is not None else {}
-    hp = parse_hyperparams(saved["hyperparams"], where=where, overrides=given)
     if not isinstance(saved.get("args"), dict):
         raise ValueError(f"{run / runs.CONFIG}: no 'args' mapping; not a follow-train run")
+    # Runs saved before there was a choice of algorithm are PPO's.
+    learner = algo(saved.get("algo", DEFAULT_ALGO), option=f"{run / runs.CONFIG}: algo")
+    if args.algo is not None and args.algo != learner.name:
+        raise ValueError(
+            f"--algo {args.algo}: {run} is a {learner.name} run (its config.yaml says so); a "
+            "resume continues with its own algorithm: leave --algo out"
+        )
+    given = {"n_timesteps": args.n_timesteps} if args.n_timesteps is not None else {}
+    hp = parse_hyperparams(saved["hyperparams"], where=where, overrides=given, algo=learner.name)
     resumed = dataclasses.replace(
         _args_from_dict(saved["args"], where=str(run / runs.CONFIG)),
+        algo=learner.name,
         n_timesteps=args.n_timesteps,
         threads=args.threads,
         progress=args.progress,
@@ -280,7 +286,7 @@ def _resume_settings(args: Args) -> tuple[Args, Hyperparams, dict[str, Any], str
         force=args.force,
         resume=run,
     )
-    checkpoint = runs.newest_checkpoint(run)
+    checkpoint = runs.newest_checkpoint(run, learner.name)
     if checkpoint is None:
         raise ValueError(f"{run / runs.CHECKPOINTS}: no checkpoint to resume from")
     steps = checkpoint[0]
@@ -306,12 +312,15 @@ def _check_int(name: str, value: Any, low: int, high: int | None = None) -> None
 
 
 def _with_defaults(args: Args) -> Args:
-    """``args`` with the env id (the hyperparameter file's only section) and the scenarios (all
-    of the task's) filled in where they were left to their defaults."""
+    """``args`` with the algorithm (PPO), its hyperparameter file, the env id (the file's only
+    section) and the scenarios (all of the task's) filled in where they were left to their
+    defaults."""
+    learner = algo(DEFAULT_ALGO if args.algo is None else args.algo)
+    hyperparams = learner.hyperparams if args.hyperparams is None else args.hyperparams
     env_id = args.env_id
     if env_id is None:
         try:
-            env_id = sole_section(args.hyperparams)
+            env_id = sole_section(hyperparams)
         except ConfigError as e:
             raise ValueError(str(e)) from None
     scenarios = args.scenarios
@@ -320,7 +329,9 @@ def _with_defaults(args: Args) -> Args:
             scenarios = tuple(task_for_env(env_id).variants())
         except ValueError as e:
             raise ValueError(f"--env-id: {e}") from None
-    return dataclasses.replace(args, env_id=env_id, scenarios=scenarios)
+    return dataclasses.replace(
+        args, algo=learner.name, hyperparams=hyperparams, env_id=env_id, scenarios=scenarios
+    )
 
 
 def _check_options(args: Args, *, run: Path | None) -> None:
@@ -369,7 +380,7 @@ def _check_options(args: Args, *, run: Path | None) -> None:
     if run is None:
         _check_run_folder(args)
     if args.export is not None:
-        location = run or args.out or args.runs / "ppo-<timestamp>"
+        location = run or args.out or args.runs / f"{args.algo}-<timestamp>"
         check_export(args.export, force=args.force, run=location)
     elif args.force:
         raise ValueError("--force applies to --export only (it lets --export write into a folder)")
@@ -416,13 +427,13 @@ def _build(
     stats_path: Path | None,
     start_step: int,
 ) -> tuple[Any, Any, Any]:
-    """The training env, the held-out env and the model, in memory (nothing is written).
+    """The training env, the held-out env and the model (``args.algo``'s), in memory (nothing
+    is written).
 
     The wrappers and SB3 check their own arguments here, so a value they refuse is reported
     as a bad hyperparameter before the run folder exists.
     """
-    from stable_baselines3 import PPO
-
+    from train import run as runs
     from train.envs import agent_env, base_env
     from train.wrappers import env_action_names
 
@@ -447,24 +458,19 @@ def _build(
             raise
         problem = f"{type(e).__name__}: {e}"
         raise ValueError(f"{normalization}: cannot resume from it ({problem})") from None
+    learner = ALGOS[args.algo]
     if model_path is not None:
-        try:
-            model = PPO.load(model_path, env=venv, device="cpu")
-        except Exception as e:  # zipfile, pickle, torch and SB3 each raise their own
-            problem = f"{type(e).__name__}: {e}"
-            raise ValueError(f"{model_path}: cannot resume from it ({problem})") from None
+        model = load_model(learner, model_path, venv)
+        replay = runs.replay_buffer_file(model_path)
+        try:  # an off-policy run goes on learning from its transitions
+            if replay.is_file():
+                model.load_replay_buffer(replay)
+        except Exception as e:  # pickle and SB3 raise their own
+            raise ValueError(f"{replay}: cannot resume from it ({type(e).__name__}: {e})") from None
         model.set_random_seed(args.seed + start_step)  # new episodes, still >= args.seed
         return venv, eval_env, model
-    ppo_kwargs = {k: v for k, v in hp.items() if k not in _ZOO_ONLY}
-    for key in ("learning_rate", "clip_range", "clip_range_vf"):
-        if ppo_kwargs.get(key) is not None:
-            ppo_kwargs[key] = schedule(ppo_kwargs[key])
-    try:
-        model = PPO(policy_class(hp["policy"]), venv, seed=args.seed, device="cpu", verbose=0,
-                    **ppo_kwargs)  # fmt: skip
-    except (ValueError, TypeError, AssertionError) as e:
-        raise ConfigError(f"{where}: stable-baselines3 rejects the hyperparameters: {e}") from None
-    return venv, eval_env, model
+    policy = policy_class(hp["policy"], algo=learner.name)
+    return venv, eval_env, new_model(learner, policy, hp, venv, args.seed, where=where)
 
 
 def _remove_new_run(run: Path, made: bool) -> None:
@@ -489,6 +495,8 @@ def _resolved_config(args: Args, hp: Hyperparams, venv: Any, command: str) -> di
     names = env_action_names(base)
     return {
         "command": command,
+        # The learner; policies.learned reads it to rebuild the network (and its memory).
+        "algo": args.algo,
         "env_id": args.env_id,
         "args": _args_to_dict(args),
         "hyperparams": hp,

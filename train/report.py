@@ -22,6 +22,7 @@ import pandas as pd
 from eval.atomic import atomic_path
 from eval.metrics import METRICS, OUTCOME_METRICS
 from follow_env.tasks import task_for_env
+from train.algos import ALGOS, DEFAULT_ALGO
 from train.config import platform_label
 
 __all__ = [
@@ -45,7 +46,8 @@ _FAILURES = (("collision_rate_pct", "collides"), ("lost_rate_pct", "loses the pe
 def package_versions() -> dict[str, str]:
     """Versions of Python and the packages training depends on."""
     out = {"python": platform.python_version()}
-    for package in ("personfollow", "stable-baselines3", "torch", "gymnasium", "numpy", "numba"):
+    packages = ("personfollow", "stable-baselines3", "sb3-contrib", "torch", "gymnasium", "numpy")
+    for package in (*packages, "numba"):
         try:
             out[package] = version(package)
         except PackageNotFoundError:
@@ -53,7 +55,7 @@ def package_versions() -> dict[str, str]:
     return out
 
 
-def plot_learning_curve(run: Path, path: Path) -> Path:
+def plot_learning_curve(run: Path, path: Path, title: str = "PPO on PersonFollow-v0") -> Path:
     """Plot the held-out evaluation return (mean and range) and the training return over steps.
 
     Reads ``evaluations.npz`` and ``logs/progress-*.csv`` of ``run``; writes a PNG atomically.
@@ -87,7 +89,7 @@ def plot_learning_curve(run: Path, path: Path) -> Path:
             ax.plot(steps, results.mean(axis=1), "o-", color="C0", ms=3, label="held-out seeds")
     ax.set_xlabel("env steps")
     ax.set_ylabel("episode return (env reward)")
-    ax.set_title("PPO on PersonFollow-v0")
+    ax.set_title(title)
     ax.grid(alpha=0.3)
     ax.legend(loc="lower right", fontsize=8)
     fig.tight_layout()
@@ -219,12 +221,16 @@ def model_card(
     env_id = getattr(args, "env_id", None) or "PersonFollow-v0"
     task = task_for_env(env_id).name
     shipped = '"ppo"' if task == "person_follow" else f'"ppo", task="{task}"'
+    learner = ALGOS[getattr(args, "algo", None) or DEFAULT_ALGO]
     lines = [
-        f"# PPO agent for {env_id}",
+        f"# {learner.label} agent for {env_id}",
         "",
-        f"A learned controller for {env_id}: stable-baselines3 PPO (MlpPolicy), trained by",
+        f"A learned controller for {env_id}: {learner.library} {learner.label} "
+        f"({hp.get('policy', learner.policies[0])}), trained by",
         "the project's own command on the batched simulation. Load it with",
-        f"`make_policy({str(run)!r})` (or `make_policy({shipped})` for the shipped copy); the",
+        f"`make_policy({str(run)!r})`"
+        + (f" (or `make_policy({shipped})` for the shipped copy)" if learner.name == "ppo" else "")
+        + "; the",
         "policy applies the saved normalisation and the agent's wrappers itself.",
         "",
         "## How it was trained",

@@ -2,21 +2,25 @@
 
 ::
 
-    runs/ppo-<timestamp>/
-      config.yaml           the resolved configuration: options, hyperparameters, env spaces
-      model.zip             the final agent (SB3 PPO)
+    runs/ppo-<timestamp>/   (recurrent_ppo-<timestamp>, sac-<timestamp>: --algo)
+      config.yaml           the resolved configuration: algorithm, options, hyperparameters,
+                            env spaces
+      model.zip             the final agent (SB3 PPO or SAC, sb3-contrib RecurrentPPO)
       vecnormalize.pkl      its observation normalisation statistics (VecNormalize)
       MODEL_CARD.md         command, seed, versions, training time, scores
       learning_curve.png    held-out evaluation return and training return over steps
       evaluations.npz       the EvalCallback log (timesteps, results, ep_lengths)
       sessions.json         one entry per training session (a resume starts a new one), kept
                             up to date at every checkpoint, so a killed session still counts
-      checkpoints/          ppo_<steps>_steps.zip + ppo_vecnormalize_<steps>_steps.pkl
+      checkpoints/          ppo_<steps>_steps.zip + ppo_vecnormalize_<steps>_steps.pkl (the
+                            prefix is the algorithm's); SAC's newest checkpoint also has its
+                            replay buffer, sac_replay_buffer_<steps>_steps.pkl
       logs/                 progress-<first step>.csv per session, tb/ (TensorBoard events)
 
 Every file is written to a temporary name beside it and renamed into place, so a run killed at
 any moment leaves complete files only; a checkpoint's statistics are written before its model,
-so a model file in ``checkpoints/`` always has its statistics. Nothing else is written: the
+so a model file in ``checkpoints/`` always has its statistics (and an off-policy model its replay
+buffer, which only the newest checkpoint keeps: it can be large). Nothing else is written: the
 held-out evaluation keeps SB3's own log in memory (earlier versions kept it in a
 ``.eval-scratch-*`` folder, which a kill left behind; :func:`remove_stale_scratch` clears those).
 """
@@ -54,6 +58,7 @@ __all__ = [
     "read_config",
     "read_sessions",
     "remove_stale_scratch",
+    "replay_buffer_file",
     "save_model",
     "save_normalization",
     "write_config",
@@ -69,8 +74,7 @@ EVALUATIONS = "evaluations.npz"
 SESSIONS = "sessions.json"
 CHECKPOINTS = "checkpoints"
 LOGS = "logs"
-CHECKPOINT_PREFIX = "ppo"
-_CHECKPOINT = re.compile(rf"^{CHECKPOINT_PREFIX}_(\d+)_steps\.zip$")
+CHECKPOINT_PREFIX = "ppo"  # PPO's; each algorithm's checkpoints start with its name
 
 
 def run_dir_names(root: str | Path = "runs", prefix: str = "ppo") -> Iterator[Path]:
@@ -244,40 +248,62 @@ def save_normalization(venv: VecNormalize | None, path: Path) -> Path | None:
     return path
 
 
-def newest_checkpoint(run: Path) -> tuple[int, Path, Path] | None:
+def newest_checkpoint(run: Path, prefix: str = CHECKPOINT_PREFIX) -> tuple[int, Path, Path] | None:
     """``(steps, model zip, statistics pkl)`` of the newest complete checkpoint, or None.
 
-    A checkpoint is complete when its model file exists (statistics are written first); the
-    statistics path is returned even if the config does not normalise (it then does not exist).
+    A checkpoint is complete when its model file exists (statistics and a replay buffer are
+    written first); the statistics path is returned even if the config does not normalise (it
+    then does not exist).
+
+    :param prefix: the checkpoints' prefix, the run's algorithm (``ppo``, ``sac`` ...).
     """
     folder = run / CHECKPOINTS
+    pattern = re.compile(rf"^{re.escape(prefix)}_(\d+)_steps\.zip$")
     found = []
-    for path in folder.glob(f"{CHECKPOINT_PREFIX}_*_steps.zip") if folder.is_dir() else []:
-        match = _CHECKPOINT.match(path.name)
+    for path in folder.glob(f"{prefix}_*_steps.zip") if folder.is_dir() else []:
+        match = pattern.match(path.name)
         if match:
             found.append((int(match.group(1)), path))
     if not found:
         return None
     steps, model = max(found)
-    return steps, model, folder / f"{CHECKPOINT_PREFIX}_vecnormalize_{steps}_steps.pkl"
+    return steps, model, folder / f"{prefix}_vecnormalize_{steps}_steps.pkl"
+
+
+def replay_buffer_file(checkpoint: Path) -> Path:
+    """The replay buffer saved with the checkpoint model ``<prefix>_<steps>_steps.zip``
+    (``<prefix>_replay_buffer_<steps>_steps.pkl``; on-policy runs have none)."""
+    prefix, steps, _ = checkpoint.name.rsplit("_", 2)
+    return checkpoint.with_name(f"{prefix}_replay_buffer_{steps}_steps.pkl")
 
 
 class AtomicCheckpointCallback(CheckpointCallback):
-    """SB3's ``CheckpointCallback`` (model + VecNormalize), each file written atomically.
+    """SB3's ``CheckpointCallback`` (model + VecNormalize, and an off-policy model's replay
+    buffer), each file written atomically.
+
+    The replay buffer of the newest checkpoint only is kept (older ones are removed once the
+    new checkpoint is complete), so a resumed SAC run learns on from the transitions it had.
 
     :param save_freq_steps: env steps between checkpoints (all lanes counted).
     :param run: the run folder; checkpoints go to ``run/checkpoints``.
     :param n_envs: lanes, to turn env steps into callback calls.
     :param session: told of every checkpoint written (``sessions.json``), if given.
+    :param prefix: the checkpoint files' prefix (the algorithm's name).
     """
 
     def __init__(
-        self, save_freq_steps: int, run: Path, n_envs: int, session: SessionLog | None = None
+        self,
+        save_freq_steps: int,
+        run: Path,
+        n_envs: int,
+        session: SessionLog | None = None,
+        *,
+        prefix: str = CHECKPOINT_PREFIX,
     ) -> None:
         super().__init__(
             save_freq=max(save_freq_steps // n_envs, 1),
             save_path=str(run / CHECKPOINTS),
-            name_prefix=CHECKPOINT_PREFIX,
+            name_prefix=prefix,
             save_vecnormalize=True,
         )
         self.session = session
@@ -288,7 +314,16 @@ class AtomicCheckpointCallback(CheckpointCallback):
                 self.model.get_vec_normalize_env(),
                 Path(self._checkpoint_path("vecnormalize_", extension="pkl")),
             )
-            save_model(self.model, Path(self._checkpoint_path(extension="zip")))
+            model = Path(self._checkpoint_path(extension="zip"))
+            buffer = getattr(self.model, "replay_buffer", None)
+            if buffer is not None:
+                with atomic_path(replay_buffer_file(model)) as tmp:
+                    self.model.save_replay_buffer(tmp)
+            save_model(self.model, model)
+            if buffer is not None:
+                for old in model.parent.glob(f"{self.name_prefix}_replay_buffer_*_steps.pkl"):
+                    if old != replay_buffer_file(model):
+                        old.unlink(missing_ok=True)
             if self.session is not None:
                 self.session.checkpoint(self.num_timesteps)
         return True

@@ -5,6 +5,7 @@
     follow-train --seeds 0-4 --out runs/ppo-study            # one seed after another
     follow-train --seeds 0-4 --out runs/ppo-study --workers 2 --threads 1
     follow-train --seeds 0-4 --out runs/ppo-study --backend ray [--address HOST:PORT]
+    follow-train --seeds 0-4 --algo sac --out runs/sac-study  # any algorithm (train.algos)
 
 Training seed ``k`` is an ordinary run (:func:`train.ppo.train`) in ``<out>/seed-<k>/`` whose
 training lanes and network start from ``seed + k * SEED_STRIDE`` (so no two seeds share an
@@ -40,6 +41,7 @@ import pandas as pd
 from eval.atomic import atomic_write_text
 from execution import Backend, execute
 from train import run as runs
+from train.algos import DEFAULT_ALGO, algo
 from train.ppo import MAX_SEED, Args, check_new_run, train
 
 __all__ = ["MAX_SEEDS", "SEED_STRIDE", "parse_seeds", "seed_args", "train_seeds"]
@@ -94,6 +96,14 @@ def _settings(args: Args, seeds: Sequence[int]) -> dict[str, Any]:
             continue  # where it goes and how fast, not what is trained (a resume may lengthen)
         value = getattr(args, f.name)
         out[f.name] = str(value) if isinstance(value, Path) else value
+    # The defaults as the run fills them in, so that leaving an option out or giving its
+    # default is the same study; PPO studies keep no "algo" (as before there was a choice).
+    learner = algo(args.algo or DEFAULT_ALGO)
+    out["hyperparams"] = str(args.hyperparams or learner.hyperparams)
+    if learner.name == DEFAULT_ALGO:
+        del out["algo"]
+    else:
+        out["algo"] = learner.name
     return json.loads(json.dumps(out))
 
 
@@ -142,7 +152,7 @@ def train_seeds(
         study folder that holds another study.
     """
     backend = backend or Backend("local", workers=1, cpus_per_task=args.threads)
-    study = args.out if args.out is not None else _new_study_path(args.runs)
+    study = args.out if args.out is not None else _new_study_path(args.runs, args.algo)
     settings = _settings(args, seeds)
     units: list[tuple[int, Args, str]] = []
     done: dict[int, dict[str, Any]] = {}
@@ -193,9 +203,11 @@ def _claim(study: Path, settings: dict[str, Any]) -> None:
     atomic_write_text(path, json.dumps(settings, indent=1) + "\n")
 
 
-def _new_study_path(root: Path) -> Path:
-    """``root/ppo-seeds-<timestamp>[-k]``, not yet made (nothing is written before the checks)."""
-    return next(p for p in runs.run_dir_names(root, "ppo-seeds") if not p.exists())
+def _new_study_path(root: Path, learner: str | None) -> Path:
+    """``root/<algo>-seeds-<timestamp>[-k]`` (``ppo-seeds-...`` by default), not yet made
+    (nothing is written before the checks)."""
+    prefix = f"{learner or DEFAULT_ALGO}-seeds"
+    return next(p for p in runs.run_dir_names(root, prefix) if not p.exists())
 
 
 def write_summary(study: Path, rows: Sequence[dict[str, Any]]) -> pd.DataFrame:

@@ -4,5 +4,7 @@
 stacking, action scaling and increments), batched over lanes. Training wraps the very same code
 as stable-baselines3 ``VecEnvWrapper`` s (:mod:`train.wrappers`), so a trained agent sees at
 inference exactly what it saw in training. :mod:`.ppo` loads an agent (torch and
-stable-baselines3, imported only when an agent is built) and acts through that pipeline.
+stable-baselines3, imported only when an agent is built) and acts through that pipeline;
+:mod:`.networks` rebuilds its network per algorithm (PPO, SAC, RecurrentPPO with its LSTM
+state).
 """

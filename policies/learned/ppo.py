@@ -1,35 +1,39 @@
-"""A trained PPO agent (``follow-train``) behind the :class:`~policies.base.Policy` protocol.
+"""A trained agent (``follow-train``) behind the :class:`~policies.base.Policy` protocol.
 
 ``make_policy("ppo")`` is the shipped agent (``policies/agents/ppo``); ``make_policy(path)``
-loads any other: a run folder (``runs/ppo-<timestamp>``), its ``model.zip``, or a checkpoint
-(``runs/ppo-<timestamp>/checkpoints/ppo_<steps>_steps.zip``). An agent is three files:
+loads any other: a run folder (``runs/ppo-<timestamp>``, ``runs/sac-<timestamp>`` ...), its
+``model.zip``, or a checkpoint (``runs/ppo-<timestamp>/checkpoints/ppo_<steps>_steps.zip``). An
+agent is three files:
 
-- ``model.zip``: the SB3 PPO model;
+- ``model.zip``: the SB3 model (PPO or SAC, or sb3-contrib's RecurrentPPO);
 - ``vecnormalize.pkl``: the observation normalisation statistics (a checkpoint has its own,
-  ``ppo_vecnormalize_<steps>_steps.pkl``);
-- ``config.yaml``: the run's resolved configuration, whose ``vec_env_wrapper`` list, ``frame_stack``
-  and env spaces say how the agent sees the env.
+  ``ppo_vecnormalize_<steps>_steps.pkl``; a run that does not normalise has none);
+- ``config.yaml``: the run's resolved configuration, whose ``algo``, ``vec_env_wrapper`` list,
+  ``frame_stack`` and env spaces say how the agent sees the env (no ``algo``: PPO).
 
 The policy rebuilds the agent's view from the configuration with the feature pipeline that
 training wraps (:mod:`policies.learned.features`): extra observation features, normalisation
 with the saved statistics (frozen), stacked frames. So the agent gets exactly the input it was
-trained on, acts deterministically (the mean of its Gaussian), and its action is mapped back to
+trained on, acts deterministically (:mod:`policies.learned.networks`: PPO's Gaussian mean,
+SAC's squashed mean rescaled onto the action box, RecurrentPPO's mean after its LSTM, whose
+state the policy keeps per lane), and its action is mapped back to
 SI by the same code: the action of the platform it was trained on (``config.yaml``'s
 ``platform`` and ``env_spaces.action.names``; an agent saved without them was trained on the
 differential drive, ``[v_mps, w_radps]``). An agent of another task (LineTrace-v0's 25
 readings) works the same way: its observation's size comes from the saved ``env_spaces``. The
 policy names its platform and action (``platform``, ``action_names``), and
 :func:`policies.adapt.for_platform` refuses it on a platform whose action differs.
-:meth:`PPOPolicy.reset` clears the pipeline's memory (frame stack, command, observation age).
-No training code is imported.
+:meth:`PPOPolicy.reset` clears the pipeline's memory (frame stack, command, observation age) and
+a recurrent agent's LSTM state. No training code is imported.
 
 Batched acting (:meth:`PPOPolicy.act_batch`) runs the feature pipeline over all lanes at once
 but the network one lane at a time: torch's batched matrix products round differently from a
 single row (measured: up to 3e-7 on the shipped agent), and batched evaluation promises actions
 bitwise equal to an episode run alone.
 
-torch and stable-baselines3 load only when an agent is built; a loaded model is shared by the
-policies built from the same files (each keeps its own memory).
+torch and stable-baselines3 (sb3-contrib for a recurrent agent) load only when an agent is
+built; a loaded model is shared by the policies built from the same files (each keeps its own
+memory).
 """
 
 from __future__ import annotations
@@ -45,6 +49,7 @@ import yaml
 
 from policies.base import OBS_SIZE, validate_obs, validate_obs_batch
 from policies.learned.features import Box, Feature, FrameStack, NormalizeObservation, Pipeline
+from policies.learned.networks import ALGOS, Memory, load_network
 
 __all__ = [
     "AGENTS",
@@ -107,40 +112,6 @@ def agent_files(path: str | Path) -> AgentFiles:
         config = path.parent / CONFIG
         return AgentFiles(path, stats, config if config.exists() else path.parent.parent / CONFIG)
     return AgentFiles(path, path.with_name(NORMALIZATION), path.with_name(CONFIG))
-
-
-class _NoOptimizer:
-    """Stands in for the training optimizer when a policy network is built for inference."""
-
-    def __init__(self, params: Any, lr: float = 0.0, **kwargs: Any) -> None:
-        pass
-
-
-class _Network:
-    """A loaded policy network, acting deterministically on agent observations: the same
-    operations as stable-baselines3's ``predict`` (a float tensor, the mean action, clipped to
-    the action box), one row at a time (module docstring)."""
-
-    def __init__(self, policy: Any) -> None:
-        self.policy = policy
-        policy.set_training_mode(False)
-        self.observation_space = policy.observation_space
-        self.action_space = policy.action_space
-        self._low, self._high = self.action_space.low, self.action_space.high
-        self._shape = self.action_space.shape
-
-    def act(self, obs: np.ndarray) -> np.ndarray:
-        """Actions ``(n, m)`` float32 for agent observations ``(n, k)`` float32."""
-        import torch
-
-        out = np.empty((len(obs), *self._shape), dtype=np.float32)
-        with torch.no_grad():
-            for i in range(len(obs)):
-                tensor = torch.as_tensor(obs[i : i + 1]).float()
-                action = self.policy._predict(tensor, deterministic=True)
-                action = action.cpu().numpy().reshape((-1, *self._shape))
-                out[i] = np.clip(action, self._low, self._high)[0]
-        return out
 
 
 class _Statistics(NamedTuple):
@@ -221,7 +192,11 @@ class _Loaded:
         if hp.get("normalize"):
             self.normalization = self._load_normalization(files.normalization)
         self.files = files
-        self.model = self._load_model(files.model, hp.get("policy"))
+        #: The learner (``config.yaml``'s ``algo``; runs saved before there was one are PPO's).
+        self.algo = config.get("algo", "ppo")
+        if self.algo not in ALGOS:
+            raise AgentLoadError(f"{where}: algo={self.algo!r} is not one of {', '.join(ALGOS)}")
+        self.model = load_network(files.model, self.algo, hp.get("policy"), AgentLoadError)
 
     @staticmethod
     def _load_normalization(path: Path) -> Any:
@@ -248,37 +223,6 @@ class _Loaded:
             raise AgentLoadError(
                 f"{path}: not VecNormalize statistics ({type(e).__name__}: {e})"
             ) from None
-
-    @staticmethod
-    def _load_model(path: Path, policy: Any) -> _Network:
-        from stable_baselines3.common.save_util import load_from_zip_file
-
-        custom: dict[str, Any] = {}
-        if isinstance(policy, str) and policy.endswith("MirrorMlpPolicy"):
-            from policies.learned.mirror import MirrorMlpPolicy
-
-            # The saved model names the class where training imported it; loading it from here
-            # keeps training code out of inference.
-            custom["policy_class"] = MirrorMlpPolicy
-        try:
-            data, params, _ = load_from_zip_file(path, device="cpu", custom_objects=custom)
-            kwargs = dict(data.get("policy_kwargs") or {})
-            # Inference needs no optimizer (and building torch's Adam imports its compiler,
-            # about a second).
-            kwargs["optimizer_class"] = _NoOptimizer
-            net = data["policy_class"](
-                data["observation_space"],
-                data["action_space"],
-                lambda _: 0.0,
-                use_sde=data.get("use_sde", False),
-                **kwargs,
-            )
-            net.load_state_dict(params["policy"])
-        except Exception as e:  # zipfile, pickle, torch and SB3 each raise their own
-            raise AgentLoadError(
-                f"{path}: not a readable stable-baselines3 PPO model ({type(e).__name__}: {e})"
-            ) from None
-        return _Network(net)
 
     def pipeline(self, n: int) -> Pipeline:
         """A fresh feature pipeline for ``n`` lanes."""
@@ -344,6 +288,8 @@ class PPOPolicy:
             )
         self._view: Pipeline | None = None
         self._batch: Pipeline | None = None
+        self._memory: Memory | None = None  # a recurrent agent's LSTM state, per lane
+        self._batch_memory: Memory | None = None
         self._started = False
         self.action_names = self._agent.action_names
         self._obs_size = self._agent.observation_box.shape[0]
@@ -365,7 +311,8 @@ class PPOPolicy:
         return arr.reshape(-1, self._obs_size).astype(np.float32)
 
     def reset(self) -> None:
-        """Start a new episode: the next :meth:`act` starts the pipeline afresh."""
+        """Start a new episode: the next :meth:`act` starts the pipeline (and a recurrent
+        agent's LSTM state) afresh."""
         self._started = False
 
     def act(self, obs: np.ndarray) -> np.ndarray:
@@ -378,11 +325,12 @@ class PPOPolicy:
         row = self._rows(obs, batch=False)
         if not self._started or self._view is None:
             self._view = self._agent.pipeline(1)
+            self._memory = self._agent.model.memory(1)
             agent_obs = self._view.start(row)
             self._started = True
         else:
             agent_obs = self._view.observe(row)
-        action = self._agent.model.act(agent_obs)
+        action = self._agent.model.act(agent_obs, self._memory)
         return self._view.act(action).astype(np.float32)[0]
 
     def reset_batch(self, n: int) -> None:
@@ -400,10 +348,11 @@ class PPOPolicy:
             )
         if self._batch is None:
             self._batch = self._agent.pipeline(len(rows))
+            self._batch_memory = self._agent.model.memory(len(rows))
             agent_obs = self._batch.start(rows)
         else:
             agent_obs = self._batch.observe(rows)
-        actions = self._agent.model.act(agent_obs)
+        actions = self._agent.model.act(agent_obs, self._batch_memory)
         return self._batch.act(actions).astype(np.float32)
 
     def __reduce__(self) -> tuple[Any, ...]:

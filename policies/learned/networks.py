@@ -1,0 +1,157 @@
+"""A trained agent's network for inference, per algorithm: PPO's, SAC's, RecurrentPPO's.
+
+:func:`load_network` rebuilds the policy network saved in a stable-baselines3 (or sb3-contrib)
+``.zip`` without the algorithm (no optimizer, no rollout or replay buffer) and acts with it
+deterministically, as the library's ``predict`` does:
+
+- PPO: the mean of the Gaussian, clipped to the action box;
+- SAC: the squashed mean, ``tanh(mean)``, rescaled from ``[-1, 1]`` onto the action box
+  (``unscale_action``), not clipped;
+- RecurrentPPO: the mean of the Gaussian after the actor's LSTM, clipped; the LSTM's hidden
+  and cell state are kept per lane in a :class:`Memory`, which a new episode starts at zero
+  (the episode-start flag of the first step, as sb3-contrib's ``predict`` is given it).
+
+Every network runs one lane (one row) at a time, so a batch gives each lane exactly the action
+it gets alone (:mod:`policies.learned.ppo` says why). torch and SB3 are imported only here,
+when a network is loaded.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+__all__ = ["ALGOS", "Memory", "Network", "RecurrentNetwork", "load_network"]
+
+#: The algorithms ``follow-train --algo`` trains (``config.yaml``'s ``algo``; none: PPO).
+ALGOS = ("ppo", "recurrent_ppo", "sac")
+_LIBRARY = {"ppo": "stable-baselines3 PPO", "recurrent_ppo": "sb3-contrib RecurrentPPO",
+            "sac": "stable-baselines3 SAC"}  # fmt: skip
+
+
+class _NoOptimizer:
+    """Stands in for the training optimizer when a policy network is built for inference."""
+
+    def __init__(self, params: Any, lr: float = 0.0, **kwargs: Any) -> None:
+        pass
+
+
+class Memory:
+    """What a recurrent network remembers of ``n`` lanes' episodes: each lane's LSTM state
+    ``(hidden, cell)`` (torch tensors, ``(layers, 1, units)``), and whether its next step
+    starts an episode."""
+
+    def __init__(self, n: int, shape: tuple[int, ...]) -> None:
+        import torch
+
+        zeros = torch.zeros(shape, dtype=torch.float32)
+        self.states: list[tuple[Any, Any]] = [(zeros, zeros) for _ in range(n)]
+        self.starts = np.ones(n, dtype=bool)
+
+
+class Network:
+    """A loaded feed-forward policy network (PPO's or SAC's), acting deterministically on agent
+    observations one row at a time (module docstring)."""
+
+    def __init__(self, policy: Any) -> None:
+        self.policy = policy
+        policy.set_training_mode(False)
+        self.observation_space = policy.observation_space
+        self.action_space = policy.action_space
+        self._low, self._high = self.action_space.low, self.action_space.high
+        self._shape = self.action_space.shape
+        self._squashed = bool(getattr(policy, "squash_output", False))
+
+    def memory(self, n: int) -> Memory | None:
+        """A fresh memory for ``n`` lanes (a feed-forward network has none)."""
+        return None
+
+    def _output(self, action: Any) -> np.ndarray:
+        """One row's network output as the library's ``predict`` returns it."""
+        action = action.cpu().numpy().reshape((-1, *self._shape))
+        if self._squashed:  # SAC: tanh output in [-1, 1], rescaled onto the box
+            return self.policy.unscale_action(action)[0]
+        return np.clip(action, self._low, self._high)[0]
+
+    def act(self, obs: np.ndarray, memory: Memory | None = None) -> np.ndarray:
+        """Actions ``(n, m)`` float32 for agent observations ``(n, k)`` float32."""
+        import torch
+
+        out = np.empty((len(obs), *self._shape), dtype=np.float32)
+        with torch.no_grad():
+            for i in range(len(obs)):
+                tensor = torch.as_tensor(obs[i : i + 1]).float()
+                out[i] = self._output(self.policy._predict(tensor, deterministic=True))
+        return out
+
+
+class RecurrentNetwork(Network):
+    """A loaded RecurrentPPO policy: the actor's LSTM state is carried per lane in a
+    :class:`Memory` from one step to the next."""
+
+    def memory(self, n: int) -> Memory:
+        """Zero LSTM states for ``n`` lanes, each about to start an episode."""
+        return Memory(n, tuple(self.policy.lstm_hidden_state_shape))
+
+    def act(self, obs: np.ndarray, memory: Memory | None = None) -> np.ndarray:
+        """Actions ``(n, m)`` for agent observations ``(n, k)``, advancing ``memory``.
+
+        :raises ValueError: without a memory of ``n`` lanes.
+        """
+        import torch
+
+        if memory is None or len(memory.states) != len(obs):
+            raise ValueError(f"a recurrent network needs a memory of {len(obs)} lanes")
+        out = np.empty((len(obs), *self._shape), dtype=np.float32)
+        with torch.no_grad():
+            for i in range(len(obs)):
+                tensor = torch.as_tensor(obs[i : i + 1]).float()
+                start = torch.tensor([float(memory.starts[i])], dtype=torch.float32)
+                action, state = self.policy._predict(
+                    tensor, lstm_states=memory.states[i], episode_starts=start, deterministic=True
+                )
+                memory.states[i] = (state[0], state[1])
+                out[i] = self._output(action)
+        memory.starts[:] = False
+        return out
+
+
+def load_network(path: Path, algo: str, policy: Any, error: type[Exception]) -> Network:
+    """The policy network saved in the model ``path`` of algorithm ``algo``.
+
+    :param policy: the configuration's ``policy`` (a dotted ``MirrorMlpPolicy`` is loaded from
+        :mod:`policies.learned.mirror`, not from where training imported it).
+    :param error: the exception to raise, naming ``path``, if the file is not such a model.
+    """
+    from stable_baselines3.common.save_util import load_from_zip_file
+
+    custom: dict[str, Any] = {}
+    if isinstance(policy, str) and policy.endswith("MirrorMlpPolicy"):
+        from policies.learned.mirror import MirrorMlpPolicy
+
+        # The saved model names the class where training imported it; loading it from here
+        # keeps training code out of inference.
+        custom["policy_class"] = MirrorMlpPolicy
+    try:
+        data, params, _ = load_from_zip_file(path, device="cpu", custom_objects=custom)
+        kwargs = dict(data.get("policy_kwargs") or {})
+        # Inference needs no optimizer (and building torch's Adam imports its compiler,
+        # about a second).
+        kwargs["optimizer_class"] = _NoOptimizer
+        # SAC keeps use_sde in its policy_kwargs, PPO beside them.
+        kwargs.setdefault("use_sde", data.get("use_sde", False))
+        net = data["policy_class"](
+            data["observation_space"], data["action_space"], lambda _: 0.0, **kwargs
+        )
+        net.load_state_dict(params["policy"])
+    except Exception as e:  # zipfile, pickle, torch and SB3 each raise their own
+        raise error(
+            f"{path}: not a readable {_LIBRARY[algo]} model ({type(e).__name__}: {e})"
+        ) from None
+    recurrent = hasattr(net, "lstm_hidden_state_shape")
+    if recurrent != (algo == "recurrent_ppo"):
+        kind = "a recurrent" if recurrent else "a feed-forward"
+        raise error(f"{path}: holds {kind} policy ({type(net).__name__}), not {_LIBRARY[algo]}'s")
+    return RecurrentNetwork(net) if recurrent else Network(net)
