@@ -8,6 +8,7 @@ from pathlib import Path
 import pytest
 import yaml
 
+from follow_env.tasks import task_for_env
 from follow_env.tasks.person_follow import ENV_ID
 from train.algos import ALGOS, RECURRENT_PPO_RULES, SAC_RULES
 from train.cli import main
@@ -25,7 +26,8 @@ def test_the_shipped_files_load_and_check(name: str) -> None:
     algo = ALGOS[name]
     assert algo.hyperparams.name == f"{name}.yaml"
     hp = load_hyperparams(algo.hyperparams, ENV_ID, algo=name)
-    assert hp["n_envs"] % 11 == 0  # every scenario gets the same lanes
+    scenarios = len(task_for_env(ENV_ID).variants())
+    assert hp["n_envs"] % scenarios == 0  # every scenario gets the same lanes
     assert set(hp) - {"policy_kwargs"} <= {*algo.rules, *ZOO}
     args, checked = check_new_run(Args(algo=name, runs=Path("/nonexistent/runs")))
     assert args.hyperparams == algo.hyperparams  # --algo X without --hyperparams: X's file
