@@ -18,7 +18,8 @@ with the thesis's values. A built policy's ``name`` is always the full ``<law>:<
 Each :func:`make_policy` call builds a fresh policy, so laws never share memory.
 
 Learned agents: ``ppo`` is each task's shipped PPO agent (PersonFollow's
-``policies/agents/ppo``; with ``task="line_trace"``, ``policies/agents/ppo_line``), and a path
+``policies/agents/ppo``; with ``task="line_trace"``, ``policies/agents/ppo_line``),
+``ppo_mecanum`` PersonFollow's on the mecanum base (``policies/agents/ppo_mecanum``), and a path
 (a run folder of ``follow-train``, its ``model.zip``, or a checkpoint ``.zip``) loads that
 agent under the path as its name (:mod:`policies.learned.ppo`).
 
@@ -281,5 +282,7 @@ register_law(
 # Learned agents: the shipped PPO agent by name, any other by its path (a run folder or a .zip).
 # policies.learned.ppo loads torch and stable-baselines3 only when an agent is built.
 register_policy("ppo", ppo.load_default)
+# The mecanum base's agent (its action is [v_mps, vy_mps, w_radps]: ppo_mecanum@mecanum).
+register_policy("ppo_mecanum", partial(ppo.load_shipped, "ppo_mecanum"))
 register_policy("ppo", partial(ppo.load_shipped, "ppo_line", name="ppo"), task="line_trace")
 register_resolver(ppo.resolve_path)

@@ -221,6 +221,8 @@ def model_card(
     env_id = getattr(args, "env_id", None) or "PersonFollow-v0"
     task = task_for_env(env_id).name
     shipped = '"ppo"' if task == "person_follow" else f'"ppo", task="{task}"'
+    if task == "person_follow" and (platform or "").split(" ")[0] == "mecanum":
+        shipped = '"ppo_mecanum"'  # the registry's name of the mecanum base's agent
     learner = ALGOS[getattr(args, "algo", None) or DEFAULT_ALGO]
     lines = [
         f"# {learner.label} agent for {env_id}",
