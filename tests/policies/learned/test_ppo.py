@@ -219,3 +219,16 @@ def test_the_differential_drive_agent_is_refused_on_the_mecanum_base() -> None:
         r"\[v_mps, w_radps\]; it cannot drive a platform acting \[v_mps, vy_mps, w_radps\]",
     ):
         for_platform(make_policy("ppo"), MECANUM)
+
+
+def test_the_mecanum_agent_is_ppo_mecanum_and_follows_on_its_base_only() -> None:
+    from eval.rollout import rollout
+
+    policy = make_policy("ppo_mecanum")
+    assert policy.platform == "mecanum"
+    assert policy.action_names == ("v_mps", "vy_mps", "w_radps")
+    (episode,) = rollout(["ppo_mecanum@mecanum"], ["curve"], [0])
+    assert episode.termination == "walk_over"
+    assert episode.log["in_frame"].all()
+    with pytest.raises(ValueError, match="mecanum"):
+        rollout(["ppo_mecanum"], ["curve"], [0])  # the differential drive's [v, w]
