@@ -170,6 +170,13 @@ def bench_scale_out(quick: bool) -> list[tuple[str, float, str]]:
     return bench_scale(quick)
 
 
+def bench_ppo_training(quick: bool) -> list[tuple[str, float, str]]:
+    """follow-train's PPO per choice of lanes, minibatch, epochs, threads (bench.training)."""
+    from bench.training import bench_training
+
+    return bench_training(quick)
+
+
 BENCHMARKS: dict[str, Callable[[bool], list[tuple[str, float, str]]]] = {
     "single env (steps/s)": bench_single_env,
     "vector env (env-steps/s)": bench_vector_env,
@@ -178,6 +185,7 @@ BENCHMARKS: dict[str, Callable[[bool], list[tuple[str, float, str]]]] = {
     "serial link": bench_serial_link,
     "robot: runner and monitor (ms)": bench_robot,
     "scale-out: evaluation (episodes/s)": bench_scale_out,
+    "PPO training (env-steps/s)": bench_ppo_training,
 }
 
 
