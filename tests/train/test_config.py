@@ -263,3 +263,11 @@ def test_mirror_action_must_fit_the_platforms_action() -> None:
     hp["policy_kwargs"]["mirror_action"] = [1, 1, -1]
     with pytest.raises(ConfigError, match="vy_mps changes its sign in a left-right mirror"):
         check_action_fit(hp, ("v_mps", "vy_mps", "w_radps"))
+
+
+def test_the_fast_file_is_ppo_yaml_with_more_lanes_larger_minibatches_fewer_epochs() -> None:
+    fast = load_hyperparams(DEFAULT_HYPERPARAMS.with_name("ppo_fast.yaml"), ENV_ID)
+    shipped = load_hyperparams(DEFAULT_HYPERPARAMS, ENV_ID)
+    changed = {k for k in fast if fast[k] != shipped[k]}
+    assert changed == {"n_envs", "n_timesteps", "batch_size", "n_epochs"}
+    assert fast["n_steps"] * fast["n_envs"] % fast["batch_size"] == 0  # whole minibatches
