@@ -249,7 +249,8 @@ def cmd_aggregate(args: argparse.Namespace) -> int:
     with atomic_folder(out) as tmp:
         report = agg.write(tables, tmp)
     print(report)
-    print(f"Wrote {out}/: aggregate.csv|md, improvement.csv, profiles.csv, scores.csv, plots/")
+    files = "aggregate.csv|md, improvement.csv, splits.csv, profiles.csv, scores.csv, plots/"
+    print(f"Wrote {out}/: {files}")
     return 0
 
 
