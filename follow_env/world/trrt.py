@@ -64,6 +64,7 @@ from numpy.typing import ArrayLike
 from follow_env.sim.config import Validated, param
 from follow_env.sim.jit import njit
 from follow_env.sim.rng import uniform_at
+from follow_env.world.buckets import bucket_of, nearest_in_buckets
 from follow_env.world.costmap import (
     CostMap,
     cell_of,
@@ -160,58 +161,6 @@ def update_temperature(
 # --- the planner loop --------------------------------------------------------------------------
 
 
-@njit(inline="always")
-def _bucket(x: float, y: float, x0: float, y0: float, g: float, gnx: int, gny: int) -> int:
-    """The grid bucket (cells of ``g`` m) holding point (x, y), clamped to the grid."""
-    bx = min(max(int((x - x0) / g), 0), gnx - 1)
-    by = min(max(int((y - y0) / g), 0), gny - 1)
-    return by * gnx + bx
-
-
-@njit
-def _nearest(
-    nodes: np.ndarray,
-    head: np.ndarray,
-    nxt: np.ndarray,
-    qx: float,
-    qy: float,
-    x0: float,
-    y0: float,
-    g: float,
-    gnx: int,
-    gny: int,
-) -> tuple:
-    """The tree node nearest (qx, qy) and its squared distance: the lowest index among equally
-    near ones, exactly as a scan over all nodes in order finds it, but visiting only the
-    buckets in rings around the query's until no farther ring can hold a nearer node (after
-    rings 0..r every unvisited node is at least r * g away)."""
-    cx = min(max(int((qx - x0) / g), 0), gnx - 1)
-    cy = min(max(int((qy - y0) / g), 0), gny - 1)
-    best, best_d2 = -1, np.inf
-    r = 0
-    while r <= max(gnx, gny):
-        for by in range(cy - r, cy + r + 1):
-            if by < 0 or by >= gny:
-                continue
-            on_edge = by == cy - r or by == cy + r
-            bx = cx - r
-            while bx <= cx + r:
-                if 0 <= bx < gnx:
-                    j = head[by * gnx + bx]
-                    while j >= 0:
-                        ddx, ddy = nodes[j, 0] - qx, nodes[j, 1] - qy
-                        d2 = ddx * ddx + ddy * ddy
-                        if d2 < best_d2 or (d2 == best_d2 and j < best):
-                            best, best_d2 = j, d2
-                        j = nxt[j]
-                bx += 1 if on_edge else 2 * r if r > 0 else 1
-        reach = r * g
-        if best >= 0 and best_d2 < reach * reach:
-            break
-        r += 1
-    return best, best_d2
-
-
 @njit
 def _grow_tree(
     cost: np.ndarray,
@@ -254,7 +203,7 @@ def _grow_tree(
     n_log = 0
     nodes[0, 0], nodes[0, 1] = sx, sy
     parent[0] = -1
-    b = _bucket(sx, sy, x0, y0, g, gnx, gny)
+    b = bucket_of(sx, sy, x0, y0, g, gnx, gny)
     nxt[0], head[b] = head[b], 0
     ix, iy = cell_of(sx, sy, x0, y0, res, ny, nx)
     node_cost[0] = cost[iy, ix]
@@ -283,7 +232,7 @@ def _grow_tree(
             qx = x0 + width * uniform_at(key, c + _SLOT_X)
             qy = y0 + height * uniform_at(key, c + _SLOT_Y)
         # 2. Nearest node (the first of equals in index order, found through the buckets).
-        best, best_d2 = _nearest(nodes, head, nxt, qx, qy, x0, y0, g, gnx, gny)
+        best, best_d2 = nearest_in_buckets(nodes, head, nxt, qx, qy, x0, y0, g, gnx, gny)
         d = np.sqrt(best_d2)
         if d < 1e-9:
             continue  # the sample is a node already: nothing to extend
@@ -321,7 +270,7 @@ def _grow_tree(
         nodes[n, 0], nodes[n, 1] = qx, qy
         parent[n] = best
         node_cost[n] = child_cost
-        b = _bucket(qx, qy, x0, y0, g, gnx, gny)
+        b = bucket_of(qx, qy, x0, y0, g, gnx, gny)
         nxt[n], head[b] = head[b], n
         n += 1
         # 7. Goal reached: within tolerance and a free last segment.

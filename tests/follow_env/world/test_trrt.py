@@ -394,7 +394,7 @@ def test_bad_cost_map_raises() -> None:
 
 
 def test_the_bucketed_nearest_node_is_the_first_of_the_nearest_in_index_order() -> None:
-    from follow_env.world.trrt import _bucket, _nearest
+    from follow_env.world.buckets import bucket_of, nearest_in_buckets
 
     rng = np.random.default_rng(0)
     x0, y0, g, gnx, gny = -3.0, 2.0, 1.0, 9, 7
@@ -403,12 +403,12 @@ def test_the_bucketed_nearest_node_is_the_first_of_the_nearest_in_index_order() 
     nodes[300:] = np.round(nodes[300:])  # points on bucket borders
     head, nxt = np.full(gnx * gny, -1, dtype=np.int64), np.empty(len(nodes), dtype=np.int64)
     for j, (x, y) in enumerate(nodes):
-        b = _bucket(x, y, x0, y0, g, gnx, gny)
+        b = bucket_of(x, y, x0, y0, g, gnx, gny)
         nxt[j], head[b] = head[b], j
     queries = np.vstack([rng.uniform([x0, y0], [x0 + 8.5, y0 + 6.5], size=(500, 2)), nodes[::7]])
     for qx, qy in queries:
         d2 = ((nodes - [qx, qy]) ** 2).sum(axis=1)
-        assert _nearest(nodes, head, nxt, qx, qy, x0, y0, g, gnx, gny) == (
+        assert nearest_in_buckets(nodes, head, nxt, qx, qy, x0, y0, g, gnx, gny) == (
             int(np.argmin(d2)),  # argmin: the first index of the minimum, as the scan kept
             d2.min(),
         )
