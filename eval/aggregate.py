@@ -165,7 +165,6 @@ def aggregate(
 
     :returns: ``scores``, ``aggregate``, ``improvement`` and ``profiles`` tables.
     """
-    from rliable import metrics
 
     agents = [str(a) for learner in learners for a in learner.agents]
     policies = [*agents, *laws]
@@ -196,13 +195,7 @@ def aggregate(
         for j, (metric, fn) in enumerate(aggregate_metrics().items()):
             point, low, high = stratified_ci(fn, [matrix[c]], reps, seed=j)
             table.append((c, metric, point, low, high))
-    improvement = []
-    for learner in learners:
-        for law in laws:
-            point, low, high = stratified_ci(
-                metrics.probability_of_improvement, [matrix[learner.name], matrix[law]], reps
-            )
-            improvement.append((learner.name, law, point, low, high))
+    improvement = _improvements(matrix, learners, laws, reps)
     scores["split"] = scores["scenario"].map(scenario_split)
     splits = _by_split(matrix, learners, laws, scenarios, reps)
     taus = np.linspace(0.0, 1.0, 21)
@@ -235,6 +228,23 @@ def scenario_split(scenario: str) -> str:
     return str(get_scenario(scenario).split)
 
 
+def _improvements(
+    matrix: dict[str, np.ndarray], learners: Sequence[LearnerRuns], laws: Sequence[str], reps: int
+) -> list[tuple[str, str, float, float, float]]:
+    """``(learner, law, P(learner > law), ci_low, ci_high)`` for every learner and law, on
+    the given score matrices (all scenarios, or one split's columns)."""
+    from rliable import metrics
+
+    rows = []
+    for learner in learners:
+        for law in laws:
+            point, low, high = stratified_ci(
+                metrics.probability_of_improvement, [matrix[learner.name], matrix[law]], reps
+            )
+            rows.append((learner.name, law, point, low, high))
+    return rows
+
+
 def _by_split(
     matrix: dict[str, np.ndarray],
     learners: Sequence[LearnerRuns],
@@ -258,12 +268,8 @@ def _by_split(
         for c in part:
             point, low, high = stratified_ci(metrics.aggregate_iqm, [part[c]], reps)
             rows.append((split, names, c, "", "iqm", point, low, high))
-        for learner in learners:
-            for law in laws:
-                point, low, high = stratified_ci(
-                    metrics.probability_of_improvement, [part[learner.name], part[law]], reps
-                )
-                rows.append((split, names, learner.name, law, "p_improvement", point, low, high))
+        for learner, law, point, low, high in _improvements(part, learners, laws, reps):
+            rows.append((split, names, learner, law, "p_improvement", point, low, high))
     columns = ["split", "scenarios", "controller", "law", "metric", "estimate", "ci_low", "ci_high"]
     return pd.DataFrame(rows, columns=columns)
 
