@@ -7,6 +7,8 @@
         [--platforms diff_drive,mecanum] [--backend local|ray [--address HOST:PORT]]
     follow-eval run --task line_trace --policies coordinate,pid --tracks course,random ...
     follow-eval metrics LOG.csv [LOG.csv | FOLDER ...] [--out DIR]
+    follow-eval aggregate RUN... [--laws pn,mpn,gsmpn] [--scenarios ...] [--out DIR]
+    follow-eval dominance RUN --learner ppo [--laws ...]
 
 (also ``python -m eval ...``). ``run`` writes into its output folder::
 
@@ -72,7 +74,7 @@ def build_parser() -> argparse.ArgumentParser:
         prog=PROG, description="Compare person-following controllers on identical rollouts."
     )
     sub = parser.add_subparsers(
-        dest="command", required=True, metavar="{run,metrics,thesis,aggregate}"
+        dest="command", required=True, metavar="{run,metrics,thesis,aggregate,dominance}"
     )
     run = sub.add_parser(
         "run",
@@ -228,6 +230,18 @@ def build_parser() -> argparse.ArgumentParser:
     agg.add_argument(
         "--out", type=Path, default=None, help="output folder (default: runs/aggregate-<time>)"
     )
+    dom = sub.add_parser(
+        "dominance",
+        help="a learner against the best law per scenario and criterion (eval.dominance)",
+        description="Read a follow-eval run folder's episodes.csv and compare the learner with "
+        "the best of the laws on each scenario and criterion, paired over seeds; writes "
+        "dominance-<learner>.md|csv into the folder.",
+    )
+    dom.add_argument("run", type=Path, help="a follow-eval run output folder")
+    dom.add_argument("--learner", required=True, help="the learner's policy label, e.g. ppo")
+    dom.add_argument(
+        "--laws", default=None, help="the laws' labels (default: every other policy in the run)"
+    )
     return parser
 
 
@@ -251,6 +265,34 @@ def cmd_aggregate(args: argparse.Namespace) -> int:
     print(report)
     files = "aggregate.csv|md, improvement.csv, splits.csv, profiles.csv, scores.csv, plots/"
     print(f"Wrote {out}/: {files}")
+    return 0
+
+
+def cmd_dominance(args: argparse.Namespace) -> int:
+    """``follow-eval dominance``: see :mod:`eval.dominance`."""
+    import pandas as pd
+
+    from eval.atomic import atomic_write_text
+    from eval.dominance import dominance, dominance_markdown
+    from eval.report import safe_name
+
+    path = args.run / "episodes.csv"
+    if not path.is_file():
+        raise UsageError(f"{path}: no such file (give a follow-eval run output folder)")
+    try:
+        table = pd.read_csv(path)
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as e:
+        raise UsageError(f"{path}: not an episode table ({e})") from None
+    if not {"policy", "seed"} <= set(table.columns):
+        raise UsageError(f"{path}: not an episode table (no policy and seed columns)")
+    laws = _names(args.laws, "laws") if args.laws else None
+    frame = dominance(table, args.learner, laws)
+    report = dominance_markdown(frame, args.learner)
+    stem = args.run / f"dominance-{safe_name(args.learner)}"
+    atomic_write_text(f"{stem}.csv", frame.to_csv(index=False))
+    atomic_write_text(f"{stem}.md", report)
+    print(report, end="")
+    print(f"Wrote {stem}.md|csv")
     return 0
 
 
@@ -366,6 +408,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             "metrics": cmd_metrics,
             "thesis": cmd_thesis,
             "aggregate": cmd_aggregate,
+            "dominance": cmd_dominance,
         }
         return commands[args.command](args)
     except (

@@ -153,7 +153,7 @@ def test_metrics_on_malformed_row_names_file_and_line(
         (["run", "--plot-seed", "99", "--episodes", "2"], "--plot-seed 99 is out of range"),
         (["metrics", "nowhere.csv"], "nowhere.csv: no such file"),
         (["fly"], "invalid choice: 'fly'"),
-        ([], "the following arguments are required: {run,metrics,thesis,aggregate}"),
+        ([], "the following arguments are required: {run,metrics,thesis,aggregate,dominance}"),
     ],
 )
 def test_bad_arguments_give_one_line_and_exit_2(

@@ -1,0 +1,235 @@
+"""Does a learner dominate the laws? Each scenario and criterion against the best law there.
+
+A learned controller *dominates* when, on every scenario, it is at least as good as the best
+law on the outcome criteria (keeps the person in frame as often, loses them and collides no
+more often, holds the distance as well) and better on the quality criteria (centres the
+person and moves more smoothly), with paired CIs that exclude zero. "The best law" is taken
+per scenario and per criterion: the law whose mean is best on that criterion there, from
+whichever laws the run compared (the thesis and tuned presets of pn / mpn / gsmpn, say), so
+the learner meets the strongest opponent on each line of the table.
+
+Every comparison is paired over the seeds both ran (identical rollouts), and its 95 % CI is
+:func:`eval.stats.mean_ci` of the per-seed differences, keyed by the cell's names, so a table
+is reproducible. Each line carries two judgements:
+
+- ``verdict``: ``better`` / ``worse`` when the CI of ``learner - best law`` excludes zero in
+  that direction, else ``tie`` (no significant difference);
+- ``meets``: the criterion's requirement. ``at_least`` criteria ask that the learner's mean be
+  no worse than the best law's (a strict reading: a lost person in 1 of 20 episodes against
+  none does not meet it, significant or not); ``better`` criteria ask for ``verdict ==
+  "better"``.
+
+::
+
+    follow-eval run --policies ppo,pn,mpn,gsmpn,pn:tuned,mpn:tuned,gsmpn:tuned \\
+        --scenarios <all> --episodes 20 --seed 0 --out runs/dom
+    follow-eval dominance runs/dom --learner ppo
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+from eval.metrics import METRICS
+from eval.stats import mean_ci, variant_column
+
+__all__ = ["CRITERIA", "Criterion", "dominance", "dominance_markdown"]
+
+
+@dataclass(frozen=True)
+class Criterion:
+    """One line of the dominance table.
+
+    :param metric: the episode-table column (an :data:`eval.metrics.METRICS` name).
+    :param higher_is_better: the metric's direction.
+    :param need: ``"at_least"`` (mean no worse than the best law's) or ``"better"``
+        (significantly better: the CI of the difference excludes zero).
+    """
+
+    metric: str
+    higher_is_better: bool
+    need: str
+
+    def __post_init__(self) -> None:
+        if self.need not in ("at_least", "better"):
+            raise ValueError(f"Criterion.need: {self.need!r} is not one of 'at_least', 'better'")
+
+
+#: The requirement of a dominating agent, in table order.
+CRITERIA = (
+    Criterion("in_frame_rate_pct", True, "at_least"),
+    Criterion("lost_rate_pct", False, "at_least"),
+    Criterion("collision_rate_pct", False, "at_least"),
+    Criterion("rms_distance_error_m", False, "at_least"),
+    Criterion("mean_offset_px", False, "better"),
+    Criterion("std_accel_mm_s2", False, "better"),
+)
+
+COLUMNS = [
+    "criterion",
+    "need",
+    "learner_mean",
+    "best_law",
+    "law_mean",
+    "diff",
+    "diff_ci_low",
+    "diff_ci_high",
+    "n",
+    "verdict",
+    "meets",
+]
+
+
+def dominance(
+    table: pd.DataFrame,
+    learner: str,
+    laws: Sequence[str] | None = None,
+    *,
+    criteria: Sequence[Criterion] = CRITERIA,
+    seed: int = 0,
+) -> pd.DataFrame:
+    """The learner against the best law, per scenario and criterion.
+
+    :param table: an :func:`eval.stats.episode_table` (``episodes.csv`` of a ``follow-eval run``).
+    :param learner: the learner's policy label in ``table``.
+    :param laws: the laws' labels (default: every other policy in ``table``).
+    :param criteria: the lines of the table (default: :data:`CRITERIA`).
+    :param seed: seeds the bootstrap resampling.
+    :returns: one row per (scenario, criterion) with the columns ``scenario`` and
+        :data:`COLUMNS`; ``diff`` is ``learner - best law`` over the ``n`` paired seeds.
+    :raises ValueError: if the learner or a law is not in the table, no law is left, or a
+        criterion's metric is not a column.
+    """
+    policies = list(dict.fromkeys(table["policy"]))
+    if learner not in policies:
+        raise ValueError(f"learner {learner!r} is not in the table (policies: {policies})")
+    laws = [p for p in policies if p != learner] if laws is None else list(laws)
+    missing = [law for law in laws if law not in policies]
+    if missing:
+        raise ValueError(f"laws {missing} are not in the table (policies: {policies})")
+    if not laws or learner in laws:
+        raise ValueError(f"dominance needs at least one law other than the learner, got {laws}")
+    for c in criteria:
+        if c.metric not in table:
+            raise ValueError(f"criterion {c.metric!r} is not a column of the episode table")
+    variant = variant_column(table)
+    rows = []
+    for scenario in dict.fromkeys(table[variant]):
+        cell = table[table[variant] == scenario]
+        mine = cell[cell["policy"] == learner].set_index("seed")
+        for c in criteria:
+            sign = 1.0 if c.higher_is_better else -1.0
+            best, best_score, theirs = None, -np.inf, None
+            for law in laws:
+                other = cell[cell["policy"] == law].set_index("seed")
+                values = other[c.metric].to_numpy(dtype=np.float64)
+                values = values[np.isfinite(values)]
+                if values.size and sign * values.mean() > best_score:
+                    best, best_score, theirs = law, sign * values.mean(), other
+            rows.append(_line(scenario, c, mine, best, theirs, seed, variant, learner))
+    return pd.DataFrame(rows, columns=[variant, *COLUMNS])
+
+
+def _line(
+    scenario: str,
+    c: Criterion,
+    mine: pd.DataFrame,
+    best: str | None,
+    theirs: pd.DataFrame | None,
+    seed: int,
+    variant: str,
+    learner: str,
+) -> dict[str, object]:
+    """One (scenario, criterion) row: the paired difference against the best law."""
+    row: dict[str, object] = {variant: scenario, "criterion": c.metric, "need": c.need}
+    if best is None or theirs is None:  # no law has a finite value here (e.g. never lost)
+        row.update(best_law="", n=0, verdict="n/a", meets=False)
+        return row
+    seeds = mine.index.intersection(theirs.index).sort_values()
+    a = mine.loc[seeds, c.metric].to_numpy(dtype=np.float64)
+    b = theirs.loc[seeds, c.metric].to_numpy(dtype=np.float64)
+    ok = np.isfinite(a) & np.isfinite(b)
+    diff = a[ok] - b[ok]
+    low, high = mean_ci(diff, seed, "dominance", str(scenario), learner, best, c.metric)
+    sign = 1.0 if c.higher_is_better else -1.0
+    gain = sign * float(diff.mean()) if diff.size else np.nan  # > 0: the learner is better
+    if diff.size and np.all(diff == 0.0):
+        low = high = 0.0  # identical on every seed: the interval is the point
+    good_low, good_high = (low, high) if c.higher_is_better else (-high, -low)
+    verdict = "better" if good_low > 0.0 else "worse" if good_high < 0.0 else "tie"
+    meets = bool(diff.size) and (gain >= 0.0 if c.need == "at_least" else verdict == "better")
+    row.update(
+        learner_mean=float(a[ok].mean()) if ok.any() else np.nan,
+        best_law=best,
+        law_mean=float(b[ok].mean()) if ok.any() else np.nan,
+        diff=float(diff.mean()) if diff.size else np.nan,
+        diff_ci_low=low,
+        diff_ci_high=high,
+        n=int(ok.sum()),
+        verdict=verdict,
+        meets=meets,
+    )
+    return row
+
+
+def dominance_markdown(frame: pd.DataFrame, learner: str) -> str:
+    """The table in markdown, after one line per criterion saying where it is met.
+
+    :param frame: :func:`dominance` output.
+    :param learner: the learner's label, for the text.
+    """
+    variant = frame.columns[0]
+    scenarios = list(dict.fromkeys(frame[variant]))
+    lines = []
+    met_all = bool(frame["meets"].all())
+    lines.append(
+        f"`{learner}` {'dominates' if met_all else 'does not dominate'} the laws: "
+        f"{int(frame['meets'].sum())} of {len(frame)} (scenario, criterion) requirements met."
+    )
+    lines.append("")
+    for criterion in dict.fromkeys(frame["criterion"]):
+        rows = frame[frame["criterion"] == criterion]
+        need = rows["need"].iloc[0]
+        missed = rows[~rows["meets"].astype(bool)][variant].tolist()
+        what = "at least as good as" if need == "at_least" else "significantly better than"
+        where = f"; not in {', '.join(map(str, missed))}" if missed else ""
+        lines.append(
+            f"- {_label(criterion)}: {what} the best law in "
+            f"{len(scenarios) - len(missed)} of {len(scenarios)} scenarios{where}"
+        )
+    lines.append("")
+    lines.append(
+        f"| {variant} | criterion | need | {learner} | best law | law | "
+        f"{learner} - law [95 % CI] | verdict | meets |"
+    )
+    lines.append("|---|---|---|---:|---|---:|---|---|---|")
+    for row in frame.itertuples(index=False):
+        r = row._asdict()
+        if r["verdict"] == "n/a":
+            lines.append(
+                f"| {r[variant]} | {_label(r['criterion'])} | {r['need']} | | | | | n/a | no |"
+            )
+            continue
+        d = _digits(r["criterion"])
+        lines.append(
+            f"| {r[variant]} | {_label(r['criterion'])} | {r['need']} | "
+            f"{r['learner_mean']:.{d}f} | {r['best_law']} | {r['law_mean']:.{d}f} | "
+            f"{r['diff']:+.{d}f} [{r['diff_ci_low']:+.{d}f}, {r['diff_ci_high']:+.{d}f}] | "
+            f"{r['verdict']} | {'yes' if r['meets'] else '**no**'} |"
+        )
+    return "\n".join(lines) + "\n"
+
+
+def _label(metric: str) -> str:
+    """The metric's table label (with its unit)."""
+    m = METRICS.get(metric)
+    return m.label if m is not None else metric
+
+
+def _digits(metric: str) -> int:
+    """Decimals for a metric: 3 for metres, 1 otherwise."""
+    return 3 if metric.endswith("_m") else 1

@@ -1,0 +1,153 @@
+"""eval/dominance.py: a learner against the best law per scenario and criterion."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from eval.cli import main
+from eval.dominance import CRITERIA, Criterion, dominance, dominance_markdown
+
+METRICS = [c.metric for c in CRITERIA]
+
+
+def _table(values: dict[str, dict[str, list[float]]], scenario: str = "straight") -> pd.DataFrame:
+    """An episode table: per policy, per metric, one value per seed 0..n-1."""
+    rows = []
+    for policy, by_metric in values.items():
+        n = len(next(iter(by_metric.values())))
+        for seed in range(n):
+            row = {"policy": policy, "scenario": scenario, "seed": seed}
+            row.update({m: by_metric.get(m, [0.0] * n)[seed] for m in METRICS})
+            rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def _line(frame: pd.DataFrame, metric: str) -> pd.Series:
+    return frame[frame["criterion"] == metric].iloc[0]
+
+
+def test_the_best_law_is_chosen_per_criterion_by_its_direction() -> None:
+    rng = np.random.default_rng(0)
+    base = list(rng.normal(30.0, 1.0, 12))
+    table = _table(
+        {
+            "agent": {"mean_offset_px": [v - 5.0 for v in base], "in_frame_rate_pct": [99.0] * 12},
+            "pn": {"mean_offset_px": [v + 3.0 for v in base], "in_frame_rate_pct": [100.0] * 12},
+            "gsmpn": {"mean_offset_px": base, "in_frame_rate_pct": [95.0] * 12},
+        }
+    )
+    frame = dominance(table, "agent")
+    offset = _line(frame, "mean_offset_px")
+    assert offset["best_law"] == "gsmpn"  # lower offset is better: gsmpn's 30 beats pn's 33
+    assert offset["diff"] == pytest.approx(-5.0)
+    assert offset["verdict"] == "better"
+    assert offset["meets"]
+    in_frame = _line(frame, "in_frame_rate_pct")
+    assert in_frame["best_law"] == "pn"  # higher is better: pn's 100 %
+    assert in_frame["verdict"] == "worse"
+    assert not in_frame["meets"]
+
+
+def test_at_least_is_read_strictly_and_better_needs_a_significant_difference() -> None:
+    lost_law = [0.0] * 20
+    lost_agent = [100.0] + [0.0] * 19  # lost once in 20: not significant, but not "at least"
+    noisy = list(np.random.default_rng(1).normal(0.0, 5.0, 20))
+    table = _table(
+        {
+            "agent": {"lost_rate_pct": lost_agent, "std_accel_mm_s2": [500 + v for v in noisy]},
+            "pn": {"lost_rate_pct": lost_law, "std_accel_mm_s2": [500.0] * 20},
+        }
+    )
+    frame = dominance(table, "agent")
+    lost = _line(frame, "lost_rate_pct")
+    assert lost["verdict"] == "tie"
+    assert not lost["meets"]
+    smooth = _line(frame, "std_accel_mm_s2")
+    assert smooth["verdict"] == "tie"
+    assert not smooth["meets"]
+    equal = _line(frame, "collision_rate_pct")  # all zero on both sides
+    assert equal["verdict"] == "tie"
+    assert equal["meets"]
+    assert (equal["diff_ci_low"], equal["diff_ci_high"]) == (0.0, 0.0)
+
+
+def test_only_the_seeds_both_ran_are_paired() -> None:
+    table = _table(
+        {"agent": {"mean_offset_px": [1.0, 2.0, 3.0]}, "pn": {"mean_offset_px": [5.0] * 5}}
+    )
+    assert _line(dominance(table, "agent"), "mean_offset_px")["n"] == 3
+
+
+def test_the_report_names_where_each_requirement_is_missed() -> None:
+    table = pd.concat(
+        [
+            _table({"agent": {"mean_offset_px": [1.0] * 8}, "pn": {"mean_offset_px": [9.0] * 8}}),
+            _table(
+                {"agent": {"mean_offset_px": [9.0] * 8}, "pn": {"mean_offset_px": [1.0] * 8}},
+                scenario="curve",
+            ),
+        ]
+    )
+    frame = dominance(table, "agent")
+    text = dominance_markdown(frame, "agent")
+    assert text.startswith("`agent` does not dominate the laws")
+    assert (
+        "- MeanOffset (px): significantly better than the best law in 1 of 2 scenarios; "
+        "not in curve" in text
+    )
+    assert (
+        "| curve | MeanOffset (px) | better | 9.0 | pn | 1.0 | +8.0 [+8.0, +8.0] | worse | **no** |"
+        in text
+    )
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"learner": "sac"}, "learner 'sac' is not in the table"),
+        ({"learner": "agent", "laws": ["mpn"]}, "laws ['mpn'] are not in the table"),
+        ({"learner": "agent", "laws": []}, "needs at least one law"),
+        (
+            {"learner": "agent", "criteria": [Criterion("jerk", False, "better")]},
+            "'jerk' is not a column",
+        ),
+    ],
+)
+def test_bad_arguments_name_what_is_wrong(kwargs: dict, message: str) -> None:
+    table = _table({"agent": {"mean_offset_px": [1.0] * 3}, "pn": {"mean_offset_px": [2.0] * 3}})
+    with pytest.raises(ValueError, match=re.escape(message)):
+        dominance(table, **kwargs)
+
+
+def test_a_criterion_needs_a_known_requirement() -> None:
+    with pytest.raises(ValueError, match=r"Criterion\.need: 'most'"):
+        Criterion("mean_offset_px", False, "most")
+
+
+def test_the_command_reads_a_run_folder_and_writes_its_tables(tmp_path: Path, capsys) -> None:
+    table = _table(
+        {"ppo": {"mean_offset_px": [1.0] * 6}, "pn:tuned": {"mean_offset_px": [4.0] * 6}}
+    )
+    table.to_csv(tmp_path / "episodes.csv", index=False)
+    assert main(["dominance", str(tmp_path), "--learner", "ppo"]) == 0
+    out = capsys.readouterr().out
+    assert "`ppo` does not dominate the laws" in out  # the other criteria are all ties at 0
+    written = pd.read_csv(tmp_path / "dominance-ppo.csv")
+    assert list(written["criterion"]) == METRICS
+    assert (tmp_path / "dominance-ppo.md").read_text().startswith("`ppo`")
+
+
+def test_the_command_refuses_a_folder_without_an_episode_table(tmp_path: Path, capsys) -> None:
+    assert main(["dominance", str(tmp_path), "--learner", "ppo"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1
+    assert "episodes.csv: no such file" in err[0]
+    (tmp_path / "episodes.csv").write_text("a,b\n1,2\n")
+    assert main(["dominance", str(tmp_path), "--learner", "ppo"]) == 2
+    assert "not an episode table" in capsys.readouterr().err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["episodes.csv"]
