@@ -96,7 +96,9 @@ def dominance(
 
     :param table: an :func:`eval.stats.episode_table` (``episodes.csv`` of a ``follow-eval run``).
     :param learner: the learner's policy label in ``table``.
-    :param laws: the laws' labels (default: every other policy in ``table``).
+    :param laws: the laws' labels (default: every other policy in ``table`` with the learner's
+        label suffix: a run with ``--ideal-baseline`` sets ``ppo`` against ``pn``, ``gsmpn``,
+        ... and ``ppo+ideal`` against ``pn+ideal``, ...).
     :param criteria: the lines of the table (default: :data:`CRITERIA`).
     :param seed: seeds the bootstrap resampling.
     :returns: one row per (scenario, criterion) with the columns ``scenario`` and
@@ -107,7 +109,9 @@ def dominance(
     policies = list(dict.fromkeys(table["policy"]))
     if learner not in policies:
         raise ValueError(f"learner {learner!r} is not in the table (policies: {policies})")
-    laws = [p for p in policies if p != learner] if laws is None else list(laws)
+    if laws is None:  # the other policies under the learner's own sensing (see _sensing)
+        laws = [p for p in policies if p != learner and _sensing(p) == _sensing(learner)]
+    laws = list(laws)
     missing = [law for law in laws if law not in policies]
     if missing:
         raise ValueError(f"laws {missing} are not in the table (policies: {policies})")
@@ -132,6 +136,12 @@ def dominance(
                     best, best_score, theirs = law, sign * values.mean(), other
             rows.append(_line(scenario, c, mine, best, theirs, seed, variant, learner))
     return pd.DataFrame(rows, columns=[variant, *COLUMNS])
+
+
+def _sensing(label: str) -> str:
+    """A label's ``+suffix`` (``"+ideal"`` for ``pn+ideal``), or ``""``."""
+    _, plus, tail = label.rpartition("+")
+    return plus + tail if plus and tail.isidentifier() else ""
 
 
 def _line(

@@ -83,6 +83,13 @@ def test_only_the_seeds_both_ran_are_paired() -> None:
     assert _line(dominance(table, "agent"), "mean_offset_px")["n"] == 3
 
 
+def test_by_default_the_learner_meets_the_laws_under_its_own_sensing() -> None:
+    offsets = {"mean_offset_px": [1.0] * 4}
+    table = _table({p: offsets for p in ("ppo", "pn", "ppo+ideal", "pn+ideal", "gsmpn+ideal")})
+    assert set(dominance(table, "ppo")["best_law"]) == {"pn"}
+    assert set(dominance(table, "ppo+ideal")["best_law"]) <= {"pn+ideal", "gsmpn+ideal"}
+
+
 def test_the_report_names_where_each_requirement_is_missed() -> None:
     table = pd.concat(
         [
