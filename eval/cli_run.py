@@ -83,6 +83,7 @@ def _check_run_args(args: argparse.Namespace) -> tuple[list[str], list[str]]:
     runs = 2 if getattr(args, "ideal_baseline", False) else 1  # the grid again, perfect sensing
     _check_grid(len(policies) * runs, len(scenarios), args.episodes, args.seed)
     registered, for_task = set(available_policies()), set(available_policies(task.name))
+    labels: dict[str, str] = {}
     for name in policies:
         try:
             spec, platform = policy_spec(name)
@@ -96,6 +97,15 @@ def _check_run_args(args: argparse.Namespace) -> tuple[list[str], list[str]]:
                 for_platform(law, tuple(a.name for a in get_platform(platform).actions))
         except (ValueError, TypeError) as e:
             raise UsageError(f"--policies: {e}") from None
+        # Episodes are told apart by label: two names of one controller (pn is pn:tuned)
+        # would pool their episodes into one cell.
+        label = law.name if platform is None else f"{law.name}@{platform}"
+        if label in labels:
+            raise UsageError(
+                f"--policies: {labels[label]!r} and {name!r} are the same controller "
+                f"({label}); give it once"
+            )
+        labels[label] = name
     from follow_env.tasks import get_task
 
     known_variants = get_task(task.name).variants()

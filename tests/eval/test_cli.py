@@ -146,6 +146,10 @@ def test_metrics_on_malformed_row_names_file_and_line(
         (["run", "--episodes", "many"], "--episodes: 'many' is not an integer"),
         (["run", "--workers", "0"], "--workers: 0 is out of range"),
         (["run", "--policies", ","], "--policies is empty"),
+        (
+            ["run", "--policies", "pn,gsmpn,pn:tuned"],
+            "--policies: 'pn' and 'pn:tuned' are the same controller (pn:tuned); give it once",
+        ),
         (["run", "--config", "harsh"], "--config: 'harsh' is not a preset"),
         (["run", "--config", '{"perception": {"miss": 1}}'], "unknown field perception.miss"),
         (["run", "--config", "[1, 2]"], "must be a mapping of config sections"),
