@@ -21,11 +21,15 @@ import yaml
 
 #: (label, hyperparameter changes, torch threads).
 CHOICES: list[tuple[str, dict[str, Any], int]] = [
-    ("shipped: 48 lanes, mb 256, 10 ep", {}, 1),
+    ("ppo.yaml: 48 lanes, mb 256, 10 ep", {}, 1),
     ("48 lanes, mb 1536, 4 epochs", {"batch_size": 1536, "n_epochs": 4}, 1),
     ("192 lanes, mb 4096, 4 epochs", {"n_envs": 192, "batch_size": 4096, "n_epochs": 4}, 1),
     ("192 lanes, mb 6144, 3 ep, 2 thr", {"n_envs": 192, "batch_size": 6144, "n_epochs": 3}, 2),
-    ("384 lanes, mb 4096, 4 ep, 2 thr", {"n_envs": 384, "batch_size": 4096, "n_epochs": 4}, 2),
+    (
+        "384 lanes, mb 4096, 4 ep, 2 thr (shipped)",
+        {"n_envs": 384, "batch_size": 4096, "n_epochs": 4},
+        2,
+    ),
 ]
 
 

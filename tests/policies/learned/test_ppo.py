@@ -205,9 +205,13 @@ def test_act_batch_needs_reset_batch_for_its_lane_count() -> None:
 MECANUM = ("v_mps", "vy_mps", "w_radps")
 
 
-def test_an_agent_saved_without_a_platform_is_a_differential_drive_agent() -> None:
-    assert "platform" not in read_config(DEFAULT_AGENT)  # saved before platforms were named
-    policy = make_policy("ppo")
+def test_an_agent_saved_without_a_platform_is_a_differential_drive_agent(agent_copy: Path) -> None:
+    # agents saved before platforms were named have no platform key
+    config = yaml.safe_load((agent_copy / "config.yaml").read_text(encoding="utf-8"))
+    assert config.pop("platform") == "diff_drive"
+    (agent_copy / "config.yaml").write_text(yaml.safe_dump(config), encoding="utf-8")
+    assert "platform" not in read_config(agent_copy)
+    policy = make_policy(str(agent_copy))
     assert policy.platform == "diff_drive"  # type: ignore[attr-defined]
     assert policy.action_names == ("v_mps", "w_radps")  # type: ignore[attr-defined]
 
