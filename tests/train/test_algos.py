@@ -12,7 +12,7 @@ from follow_env.tasks import task_for_env
 from follow_env.tasks.person_follow import ENV_ID
 from train.algos import ALGOS, RECURRENT_PPO_RULES, SAC_RULES
 from train.cli import main
-from train.config import ConfigError, load_hyperparams, parse_hyperparams
+from train.config import ConfigError, load_hyperparams, parse_hyperparams, wrapper_specs
 from train.ppo import Args, check_new_run
 
 MINIMAL = {"n_envs": 4, "n_timesteps": 1000}
@@ -32,6 +32,23 @@ def test_the_shipped_files_load_and_check(name: str) -> None:
     args, checked = check_new_run(Args(algo=name, runs=Path("/nonexistent/runs")))
     assert args.hyperparams == algo.hyperparams  # --algo X without --hyperparams: X's file
     assert checked == hp
+
+
+@pytest.mark.parametrize(
+    ("file", "algo"),
+    [("ppo_fast", "ppo"), ("recurrent_ppo_fast", "recurrent_ppo"), ("sac_fast", "sac")],
+)
+def test_the_budget_files_load_with_the_shipped_agents_reward_and_action(
+    file: str, algo: str
+) -> None:
+    path = ALGOS[algo].hyperparams.with_name(f"{file}.yaml")
+    hp = load_hyperparams(path, ENV_ID, algo=algo)
+    assert hp["n_envs"] % len(task_for_env(ENV_ID).variants()) == 0
+    shaped = dict(wrapper_specs(hp["vec_env_wrapper"]))["train.wrappers.VecShapedReward"]
+    # the shipped agent's reward and action, for every learner
+    assert (shaped["v_rate_weight"], shaped["far_weight"], shaped["far_from_m"]) == (2.0, 1.0, 0.0)
+    incremental = dict(wrapper_specs(hp["vec_env_wrapper"]))["train.wrappers.VecIncrementalAction"]
+    assert incremental["max_change"] == [0.2, 0.15]
 
 
 def test_policies_default_to_the_algorithms_mlp() -> None:
