@@ -240,7 +240,10 @@ def build_parser() -> argparse.ArgumentParser:
     dom.add_argument("run", type=Path, help="a follow-eval run output folder")
     dom.add_argument("--learner", required=True, help="the learner's policy label, e.g. ppo")
     dom.add_argument(
-        "--laws", default=None, help="the laws' labels (default: every other policy in the run)"
+        "--laws",
+        default=None,
+        help="the laws' labels (default: every other policy in the run under the learner's "
+        "sensing: with --ideal-baseline, ppo+ideal meets the +ideal laws)",
     )
     return parser
 

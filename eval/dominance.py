@@ -21,7 +21,7 @@ is reproducible. Each line carries two judgements:
 
 ::
 
-    follow-eval run --policies ppo,pn,mpn,gsmpn,pn:tuned,mpn:tuned,gsmpn:tuned \\
+    follow-eval run --policies ppo,pn:thesis,mpn:thesis,gsmpn:thesis,pn,mpn,gsmpn \\
         --scenarios <all> --episodes 20 --seed 0 --out runs/dom
     follow-eval dominance runs/dom --learner ppo
 """
