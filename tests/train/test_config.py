@@ -15,6 +15,7 @@ from train.config import (
     platform_label,
     policy_class,
     schedule,
+    wrapper_specs,
 )
 from train.ppo import DEFAULT_HYPERPARAMS
 
@@ -267,7 +268,20 @@ def test_mirror_action_must_fit_the_platforms_action() -> None:
 
 def test_the_fast_file_is_ppo_yaml_with_more_lanes_larger_minibatches_fewer_epochs() -> None:
     fast = load_hyperparams(DEFAULT_HYPERPARAMS.with_name("ppo_fast.yaml"), ENV_ID)
-    shipped = load_hyperparams(DEFAULT_HYPERPARAMS, ENV_ID)
-    changed = {k for k in fast if fast[k] != shipped[k]}
-    assert changed == {"n_envs", "n_timesteps", "batch_size", "n_epochs"}
+    default = load_hyperparams(DEFAULT_HYPERPARAMS, ENV_ID)
+    changed = {k for k in fast if fast[k] != default[k]}
+    assert changed == {"n_envs", "n_timesteps", "batch_size", "n_epochs", "vec_env_wrapper"}
+    # the agent's view is the same; the reward and the speed command's steps are its own
+    fast_wrappers, default_wrappers = (
+        dict(wrapper_specs(h["vec_env_wrapper"])) for h in (fast, default)
+    )
+    assert list(fast_wrappers) == list(default_wrappers)
+    differ = {
+        (name, key)
+        for name, kwargs in fast_wrappers.items()
+        for key in {*kwargs, *default_wrappers[name]}
+        if kwargs.get(key) != default_wrappers[name].get(key)
+    }
+    reward, action = "train.wrappers.VecShapedReward", "train.wrappers.VecIncrementalAction"
+    assert differ == {(reward, "v_rate_weight"), (reward, "far_from_m"), (action, "max_change")}
     assert fast["n_steps"] * fast["n_envs"] % fast["batch_size"] == 0  # whole minibatches
