@@ -43,7 +43,7 @@ function here::
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from types import MappingProxyType
 
@@ -59,6 +59,8 @@ __all__ = [
     "episode_metrics",
     "extra_metrics",
     "metric",
+    "metric_digits",
+    "metric_label",
 ]
 
 #: Desired following distance (reference §1.5: "the 1.0 m in V").
@@ -367,6 +369,19 @@ OUTCOME_METRICS: tuple[str, ...] = (
 )
 #: The headline table's metrics, in column order.
 HEADLINE_METRICS: tuple[str, ...] = (*THESIS_METRICS, *OUTCOME_METRICS)
+
+
+def metric_label(name: str, metrics: Mapping[str, Metric] | None = None) -> str:
+    """The table label of metric ``name`` (unit included), from ``metrics`` (default:
+    :data:`METRICS`); the name itself for a column that is no registered metric."""
+    known = METRICS if metrics is None else metrics
+    return known[name].label if name in known else name
+
+
+def metric_digits(name: str) -> int:
+    """Decimals a table shows for metric ``name``: 1 for %, px, mm/s² and mm; 3 for the rest
+    (metres to the mm, seconds to the ms, ratios)."""
+    return 1 if name.endswith(("_pct", "_px", "_mm_s2", "_mm")) else 3
 
 
 def extra_metrics() -> tuple[str, ...]:

@@ -22,7 +22,14 @@ import numpy as np
 import pandas as pd
 
 from eval.atomic import atomic_path, atomic_write_text
-from eval.metrics import HEADLINE_METRICS, METRICS, THESIS_METRICS, Metric
+from eval.metrics import (
+    HEADLINE_METRICS,
+    METRICS,
+    THESIS_METRICS,
+    Metric,
+    metric_digits,
+    metric_label,
+)
 from eval.rollout import Episode
 from eval.stats import variant_column
 
@@ -77,14 +84,8 @@ def _fmt(value: float, digits: int) -> str:
     return "n/a" if not np.isfinite(value) else f"{value:.{digits}f}"
 
 
-def _digits(name: str) -> int:
-    if name.endswith(("_pct", "_px", "_mm_s2", "_mm")):
-        return 1
-    return 3
-
-
 def _with_ci(summary: pd.DataFrame, name: str) -> pd.Series:
-    d = _digits(name)
+    d = metric_digits(name)
     return pd.Series(
         [
             f"{_fmt(m, d)} [{_fmt(lo, d)}, {_fmt(hi, d)}]" if np.isfinite(lo) else _fmt(m, d)
@@ -94,10 +95,6 @@ def _with_ci(summary: pd.DataFrame, name: str) -> pd.Series:
         ],
         index=summary.index,
     )
-
-
-def _label(name: str, metrics: Mapping[str, Metric] = METRICS) -> str:
-    return metrics[name].label if name in metrics else name
 
 
 def summary_markdown(
@@ -114,7 +111,7 @@ def summary_markdown(
     names = [m for m in wanted if m in summary]
     table = summary[["policy", variant_column(summary), "episodes"]].copy()
     for name in names:
-        table[_label(name, tables.metrics)] = _with_ci(summary, name)
+        table[metric_label(name, tables.metrics)] = _with_ci(summary, name)
     return table.to_markdown(index=False, disable_numparse=True)
 
 
@@ -138,14 +135,14 @@ def comparison_markdown(
             if name not in by_metric.index:
                 continue
             r = by_metric.loc[name]
-            d = _digits(name)
+            d = metric_digits(name)
             p = "n/a" if not np.isfinite(r["wilcoxon_p"]) else f"{r['wilcoxon_p']:.2g}"
             ci = (
                 f" [{_fmt(r['diff_ci_low'], d)}, {_fmt(r['diff_ci_high'], d)}]"
                 if np.isfinite(r["diff_ci_low"])
                 else ""
             )
-            row[_label(name, tables.metrics)] = f"{_fmt(r['mean_diff'], d)}{ci} p={p}"
+            row[metric_label(name, tables.metrics)] = f"{_fmt(r['mean_diff'], d)}{ci} p={p}"
         rows.append(row)
     return pd.DataFrame(rows).to_markdown(index=False, disable_numparse=True) if rows else ""
 
@@ -176,7 +173,7 @@ def summary_latex(summary: pd.DataFrame, *, tables: Tables = PERSON_FOLLOW_TABLE
     table = summary[["policy", variant_column(summary), "episodes"]].copy()
     for name in tables.headline:
         if name in summary:
-            table[_label(name, tables.metrics)] = _with_ci(summary, name)
+            table[metric_label(name, tables.metrics)] = _with_ci(summary, name)
     return table.to_latex(index=False, escape=True, column_format="ll" + "r" * (table.shape[1] - 2))
 
 
@@ -297,7 +294,7 @@ def plot_metric_bars(
                 label=policy,
             )
         ax.set_xticks(x, scenarios, rotation=30 if len(scenarios) > 3 else 0)
-        ax.set_title(_label(name, labels))
+        ax.set_title(metric_label(name, labels))
         ax.grid(axis="y", alpha=0.3)
     np.atleast_1d(axes)[0].legend(fontsize="small")
     fig.suptitle(title)

@@ -20,7 +20,7 @@ import numpy as np
 import pandas as pd
 
 from eval.atomic import atomic_path
-from eval.metrics import METRICS, OUTCOME_METRICS
+from eval.metrics import OUTCOME_METRICS, metric_digits, metric_label
 from follow_env.tasks import task_for_env
 from train.algos import ALGOS, DEFAULT_ALGO
 from train.config import platform_label
@@ -130,17 +130,12 @@ def compare_with_law(
     return compare(table, metrics=list(CARD_METRICS))
 
 
-def _digits(metric: str) -> int:
-    return 3 if metric.endswith("_m") else 1  # distances to the mm; px, mm/s² and % to 0.1
-
-
 def comparison_markdown(comparison: pd.DataFrame) -> str:
     """A Markdown table: per scenario and metric, agent, law, difference [95 % CI]."""
     header = "| scenario | metric | agent | law | agent - law [95 % CI] |\n|---|---|---:|---:|---|"
     lines = [header]
     for row in comparison.itertuples():
-        d = _digits(row.metric)
-        label = METRICS[row.metric].label if row.metric in METRICS else row.metric
+        d, label = metric_digits(row.metric), metric_label(row.metric)
         lines.append(
             f"| {row.scenario} | {label} | {row.mean_a:.{d}f} | {row.mean_b:.{d}f} | "
             f"{row.mean_diff:+.{d}f} [{row.diff_ci_low:+.{d}f}, {row.diff_ci_high:+.{d}f}] |"
