@@ -34,7 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from eval.metrics import METRICS
+from eval.metrics import metric_digits, metric_label
 from eval.stats import mean_ci, variant_column
 
 __all__ = ["CRITERIA", "Criterion", "dominance", "dominance_markdown"]
@@ -124,17 +124,19 @@ def dominance(
     rows = []
     for scenario in dict.fromkeys(table[variant]):
         cell = table[table[variant] == scenario]
-        mine = cell[cell["policy"] == learner].set_index("seed")
+        by_policy = {p: cell[cell["policy"] == p].set_index("seed") for p in (learner, *laws)}
         for c in criteria:
             sign = 1.0 if c.higher_is_better else -1.0
-            best, best_score, theirs = None, -np.inf, None
+            best, best_score = None, -np.inf
             for law in laws:
-                other = cell[cell["policy"] == law].set_index("seed")
-                values = other[c.metric].to_numpy(dtype=np.float64)
+                values = by_policy[law][c.metric].to_numpy(dtype=np.float64)
                 values = values[np.isfinite(values)]
                 if values.size and sign * values.mean() > best_score:
-                    best, best_score, theirs = law, sign * values.mean(), other
-            rows.append(_line(scenario, c, mine, best, theirs, seed, variant, learner))
+                    best, best_score = law, sign * values.mean()
+            theirs = None if best is None else by_policy[best]
+            rows.append(
+                _line(scenario, c, by_policy[learner], best, theirs, seed, variant, learner)
+            )
     return pd.DataFrame(rows, columns=[variant, *COLUMNS])
 
 
@@ -208,7 +210,7 @@ def dominance_markdown(frame: pd.DataFrame, learner: str) -> str:
         what = "at least as good as" if need == "at_least" else "significantly better than"
         where = f"; not in {', '.join(map(str, missed))}" if missed else ""
         lines.append(
-            f"- {_label(criterion)}: {what} the best law in "
+            f"- {metric_label(criterion)}: {what} the best law in "
             f"{len(scenarios) - len(missed)} of {len(scenarios)} scenarios{where}"
         )
     lines.append("")
@@ -219,27 +221,15 @@ def dominance_markdown(frame: pd.DataFrame, learner: str) -> str:
     lines.append("|---|---|---|---:|---|---:|---|---|---|")
     for row in frame.itertuples(index=False):
         r = row._asdict()
+        label = metric_label(r["criterion"])
         if r["verdict"] == "n/a":
-            lines.append(
-                f"| {r[variant]} | {_label(r['criterion'])} | {r['need']} | | | | | n/a | no |"
-            )
+            lines.append(f"| {r[variant]} | {label} | {r['need']} | | | | | n/a | no |")
             continue
-        d = _digits(r["criterion"])
+        d = metric_digits(r["criterion"])
         lines.append(
-            f"| {r[variant]} | {_label(r['criterion'])} | {r['need']} | "
+            f"| {r[variant]} | {label} | {r['need']} | "
             f"{r['learner_mean']:.{d}f} | {r['best_law']} | {r['law_mean']:.{d}f} | "
             f"{r['diff']:+.{d}f} [{r['diff_ci_low']:+.{d}f}, {r['diff_ci_high']:+.{d}f}] | "
             f"{r['verdict']} | {'yes' if r['meets'] else '**no**'} |"
         )
     return "\n".join(lines) + "\n"
-
-
-def _label(metric: str) -> str:
-    """The metric's table label (with its unit)."""
-    m = METRICS.get(metric)
-    return m.label if m is not None else metric
-
-
-def _digits(metric: str) -> int:
-    """Decimals for a metric: 3 for metres, 1 otherwise."""
-    return 3 if metric.endswith("_m") else 1
