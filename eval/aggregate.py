@@ -165,7 +165,6 @@ def aggregate(
 
     :returns: ``scores``, ``aggregate``, ``improvement`` and ``profiles`` tables.
     """
-
     agents = [str(a) for learner in learners for a in learner.agents]
     policies = [*agents, *laws]
     # rollout checks every name (agents, laws, scenarios) before any episode runs

@@ -99,7 +99,7 @@ def _check_run_args(args: argparse.Namespace) -> tuple[list[str], list[str]]:
             raise UsageError(f"--policies: {e}") from None
         # Episodes are told apart by label: two names of one controller (pn is pn:tuned)
         # would pool their episodes into one cell.
-        label = law.name if platform is None else f"{law.name}@{platform}"
+        label = _episode_label(law, platform)
         if label in labels:
             raise UsageError(
                 f"--policies: {labels[label]!r} and {name!r} are the same controller "
@@ -310,5 +310,10 @@ def _built(policies: list[str], task: str) -> list[tuple[str, Any]]:
     for name in policies:
         spec, platform = policy_spec(name)
         law = make_policy(spec, task)  # type: ignore[arg-type]
-        out.append((law.name if platform is None else f"{law.name}@{platform}", law))
+        out.append((_episode_label(law, platform), law))
     return out
+
+
+def _episode_label(policy: Any, platform: str | None) -> str:
+    """The label a policy's episodes carry: its name, ``@platform`` when one is named."""
+    return policy.name if platform is None else f"{policy.name}@{platform}"

@@ -44,10 +44,11 @@ def test_the_budget_files_load_with_the_shipped_agents_reward_and_action(
     path = ALGOS[algo].hyperparams.with_name(f"{file}.yaml")
     hp = load_hyperparams(path, ENV_ID, algo=algo)
     assert hp["n_envs"] % len(task_for_env(ENV_ID).variants()) == 0
-    shaped = dict(wrapper_specs(hp["vec_env_wrapper"]))["train.wrappers.VecShapedReward"]
+    wrappers = dict(wrapper_specs(hp["vec_env_wrapper"]))
+    shaped = wrappers["train.wrappers.VecShapedReward"]
     # the shipped agent's reward and action, for every learner
     assert (shaped["v_rate_weight"], shaped["far_weight"], shaped["far_from_m"]) == (2.0, 1.0, 0.0)
-    incremental = dict(wrapper_specs(hp["vec_env_wrapper"]))["train.wrappers.VecIncrementalAction"]
+    incremental = wrappers["train.wrappers.VecIncrementalAction"]
     assert incremental["max_change"] == [0.2, 0.15]
 
 
