@@ -17,10 +17,15 @@ __all__ = ["bucket_of", "nearest_in_buckets"]
 
 
 @njit(inline="always")
+def _bucket_xy(x: float, y: float, x0: float, y0: float, g: float, gnx: int, gny: int) -> tuple:
+    """The bucket's column and row (cells of ``g`` m) holding point (x, y), clamped to the grid."""
+    return min(max(int((x - x0) / g), 0), gnx - 1), min(max(int((y - y0) / g), 0), gny - 1)
+
+
+@njit(inline="always")
 def bucket_of(x: float, y: float, x0: float, y0: float, g: float, gnx: int, gny: int) -> int:
     """The grid bucket (cells of ``g`` m) holding point (x, y), clamped to the grid."""
-    bx = min(max(int((x - x0) / g), 0), gnx - 1)
-    by = min(max(int((y - y0) / g), 0), gny - 1)
+    bx, by = _bucket_xy(x, y, x0, y0, g, gnx, gny)
     return by * gnx + bx
 
 
@@ -41,8 +46,7 @@ def nearest_in_buckets(
     near ones, exactly as a scan over all nodes in order finds it, but visiting only the
     buckets in rings around the query's until no farther ring can hold a nearer node (after
     rings 0..r every unvisited node is at least r * g away)."""
-    cx = min(max(int((qx - x0) / g), 0), gnx - 1)
-    cy = min(max(int((qy - y0) / g), 0), gny - 1)
+    cx, cy = _bucket_xy(qx, qy, x0, y0, g, gnx, gny)
     best, best_d2 = -1, np.inf
     r = 0
     while r <= max(gnx, gny):
