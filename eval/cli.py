@@ -61,7 +61,7 @@ from eval.cli_base import (  # noqa: F401  (MAX_EPISODES, MAX_SEED: the limits, 
     _positive,
     _workers,
 )
-from eval.cli_run import _check_grid, cmd_run
+from eval.cli_run import _check_grid, cmd_run, policy_label, refuse_aliases
 from eval.steplog import StepLogError, read_step_log, step_log_files
 from execution import BACKENDS, BackendUnavailableError
 
@@ -255,8 +255,9 @@ def cmd_aggregate(args: argparse.Namespace) -> int:
 
     learners = [agg.learner_runs(path) for path in args.runs]
     laws = _names(args.laws, "laws")
+    refuse_aliases([(law, policy_label(law, "laws")) for law in laws], "laws")
     scenarios = _names(args.scenarios, "scenarios")
-    # the names themselves are checked by the rollout, before any episode runs
+    # the scenarios are checked by the rollout, before any episode runs
     n_agents = sum(len(learner.agents) for learner in learners)
     _check_grid(n_agents + len(laws), len(scenarios), args.episodes, args.seed)
     out = args.out or Path("runs") / f"aggregate-{datetime.now(UTC):%Y%m%d-%H%M%S}"

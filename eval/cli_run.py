@@ -18,7 +18,7 @@ from eval.cli_base import MAX_EPISODES, MAX_SEED, PROG, UsageError, _config, _na
 from eval.steplog import write_step_log
 from execution import Backend, backend_from_args
 
-__all__ = ["cmd_run"]
+__all__ = ["cmd_run", "policy_label", "refuse_aliases"]
 
 
 def _plural(n: int, one: str, many: str) -> str:
@@ -83,7 +83,7 @@ def _check_run_args(args: argparse.Namespace) -> tuple[list[str], list[str]]:
     runs = 2 if getattr(args, "ideal_baseline", False) else 1  # the grid again, perfect sensing
     _check_grid(len(policies) * runs, len(scenarios), args.episodes, args.seed)
     registered, for_task = set(available_policies()), set(available_policies(task.name))
-    labels: dict[str, str] = {}
+    labels: list[tuple[str, str]] = []
     for name in policies:
         try:
             spec, platform = policy_spec(name)
@@ -97,15 +97,8 @@ def _check_run_args(args: argparse.Namespace) -> tuple[list[str], list[str]]:
                 for_platform(law, tuple(a.name for a in get_platform(platform).actions))
         except (ValueError, TypeError) as e:
             raise UsageError(f"--policies: {e}") from None
-        # Episodes are told apart by label: two names of one controller (pn is pn:tuned)
-        # would pool their episodes into one cell.
-        label = _episode_label(law, platform)
-        if label in labels:
-            raise UsageError(
-                f"--policies: {labels[label]!r} and {name!r} are the same controller "
-                f"({label}); give it once"
-            )
-        labels[label] = name
+        labels.append((name, _episode_label(law, platform)))
+    refuse_aliases(labels, "policies")
     from follow_env.tasks import get_task
 
     known_variants = get_task(task.name).variants()
@@ -317,3 +310,36 @@ def _built(policies: list[str], task: str) -> list[tuple[str, Any]]:
 def _episode_label(policy: Any, platform: str | None) -> str:
     """The label a policy's episodes carry: its name, ``@platform`` when one is named."""
     return policy.name if platform is None else f"{policy.name}@{platform}"
+
+
+def policy_label(name: str, option: str) -> str:
+    """The label the episodes of policy spec ``name`` (``pn:tuned``, ``pn@mecanum``) carry.
+
+    :raises UsageError: naming ``--option``, if no policy has that name.
+    """
+    from eval.rollout import policy_spec
+    from policies import make_policy
+
+    try:
+        spec, platform = policy_spec(name)
+        return _episode_label(make_policy(spec), platform)
+    except (ValueError, TypeError) as e:
+        raise UsageError(f"--{option}: {e}") from None
+
+
+def refuse_aliases(named: list[tuple[str, str]], option: str) -> None:
+    """Refuse two names of one controller (``pn`` is ``pn:tuned``) in ``[(name, label), ...]``.
+
+    Episodes are told apart by label: in a run the two would pool their episodes into one
+    cell; in an aggregate they would be one controller's lines twice.
+
+    :raises UsageError: naming ``--option`` and both names.
+    """
+    seen: dict[str, str] = {}
+    for name, label in named:
+        if label in seen:
+            raise UsageError(
+                f"--{option}: {seen[label]!r} and {name!r} are the same controller "
+                f"({label}); give it once"
+            )
+        seen[label] = name

@@ -100,6 +100,13 @@ def test_bad_arguments_give_one_line(tmp_path: Path, capsys: pytest.CaptureFixtu
     assert not (tmp_path / "x").exists()
     assert main(["aggregate", str(tmp_path), "--out", str(tmp_path / "y")]) == 2
     assert "holds no trained agent" in capsys.readouterr().err
+    # two names of one law (pn is pn:tuned) would be the same controller's lines twice
+    laws = ["--laws", "pn,gsmpn,pn:tuned", "--out", str(tmp_path / "z")]
+    assert main(["aggregate", str(AGENT), *laws]) == 2
+    err = capsys.readouterr().err
+    assert "--laws: 'pn' and 'pn:tuned' are the same controller (pn:tuned); give it once" in err
+    assert err.count("\n") == 1
+    assert not (tmp_path / "z").exists()
 
 
 def test_scenarios_fall_into_the_splits_they_declare() -> None:
