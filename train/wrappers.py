@@ -217,8 +217,11 @@ class VecShapedReward(VecEnvWrapper):
       to 300 k steps after it. ``far_weight`` charges each metre of the observed distance's
       error beyond ``far_from_m`` (the cap) before the floor, as the env's term did before it
       was capped: the step's reward is ``r - far_weight * max(|d - target_distance_m| -
-      far_from_m, 0)`` (``d <= 0``, no reading yet: nothing), on the episode's last step
-      from its terminal observation.
+      far_from_m, 0) ** far_power`` (``d <= 0``, no reading yet: nothing), on the episode's
+      last step from its terminal observation. ``far_power`` 2 charges the squared error, as
+      the evaluation's RMS distance error does: a large lag (a person walking on while the
+      robot slows in a detection gap) then costs more than a small steady offset (resting
+      0.25 m too close after the person stops).
 
     Put a ``VecMonitor`` below this wrapper to log the env's own episode returns.
 
@@ -234,6 +237,8 @@ class VecShapedReward(VecEnvWrapper):
     :param far_weight: weight on the observed distance error beyond ``far_from_m`` [reward
         per m per step], >= 0; 0: none.
     :param far_from_m: the distance error the charge starts at [m] (the env's cap, 1 m), >= 0.
+    :param far_power: the power of the error beyond ``far_from_m`` that is charged, in [1, 3]
+        (1: the error in m; 2: its square in m²).
     :param target_distance_m: the following distance [m] (the env's 1 m), >= 0.
     """
 
@@ -251,6 +256,7 @@ class VecShapedReward(VecEnvWrapper):
         rate_weights: Sequence[float] | None = None,
         far_weight: float = 0.0,
         far_from_m: float = 1.0,
+        far_power: float = 1.0,
         target_distance_m: float = 1.0,
     ) -> None:
         for name, value in (
@@ -265,6 +271,7 @@ class VecShapedReward(VecEnvWrapper):
         ):
             lo = 0.0 if name.endswith(("weight", "_m")) else None
             check_number(f"VecShapedReward.{name}", value, lo, optional=name == "reward_floor")
+        check_number("VecShapedReward.far_power", far_power, 1.0, 3.0)
         act_box = venv.action_space
         if not isinstance(act_box, spaces.Box) or len(act_box.shape) != 1:
             raise ValueError(f"VecShapedReward needs a flat Box action space, got {act_box}")
@@ -276,6 +283,7 @@ class VecShapedReward(VecEnvWrapper):
         self.offset_weight = float(offset_weight)
         self.far_weight = float(far_weight)
         self.far_from_m = float(far_from_m)
+        self.far_power = float(far_power)
         self.target_distance_m = float(target_distance_m)
         self._half_width_px = float(venv.observation_space.high[1]) + 1.0
         self._low, self._high = act_box.low, act_box.high
@@ -326,7 +334,7 @@ class VecShapedReward(VecEnvWrapper):
             if "terminal_observation" in infos[i]:
                 d[i] = float(np.asarray(infos[i]["terminal_observation"])[0])
         excess = np.maximum(np.abs(d - self.target_distance_m) - self.far_from_m, 0.0)
-        return self.far_weight * np.where(d > 0.0, excess, 0.0)
+        return self.far_weight * np.where(d > 0.0, excess**self.far_power, 0.0)
 
     def step_async(self, actions: np.ndarray) -> None:
         a = np.asarray(actions, dtype=np.float64).reshape(self._prev.shape)

@@ -216,6 +216,20 @@ def test_far_weight_is_floored_and_skips_a_missing_reading() -> None:
     assert wrapped.step(np.zeros((1, 2)))[1][0] == 1.0  # no reading yet: nothing charged
 
 
+def test_far_power_charges_the_squared_error_from_the_start() -> None:
+    # 3 m away (2 m of error, 1.5 beyond far_from_m), then 1.25 m (0.25 m, none beyond it)
+    env = ScriptedVecEnv([[[1.0, 0.0]], [[3.0, 0.0]], [[1.25, 0.0]]])
+    wrapped = VecShapedReward(env, alive_bonus=1.0, far_weight=0.5, far_from_m=0.5, far_power=2)
+    wrapped.reset()
+    assert wrapped.step(np.zeros((1, 2)))[1][0] == pytest.approx(1.0 - 0.5 * 1.5**2)
+    assert wrapped.step(np.zeros((1, 2)))[1][0] == 1.0
+    squared = VecShapedReward(
+        ScriptedVecEnv([[[1.0, 0.0]], [[1.5, 0.0]]]), far_weight=2.0, far_from_m=0.0, far_power=2
+    )
+    squared.reset()
+    assert squared.step(np.zeros((1, 2)))[1][0] == pytest.approx(-2.0 * 0.25)  # below 1 m: less
+
+
 def test_concat_vec_env_lane_j_replays_its_scenario_seeded_s_plus_j() -> None:
     parts = [follow_env.make_sb3_vec_env(2, scenario=s) for s in ("straight", "curve")]
     joined = ConcatVecEnv(parts)
@@ -262,6 +276,10 @@ def test_concat_vec_env_lane_j_replays_its_scenario_seeded_s_plus_j() -> None:
         (
             lambda e: VecShapedReward(e, far_from_m=-0.5),
             r"VecShapedReward\.far_from_m=-0\.5 is out of range",
+        ),
+        (
+            lambda e: VecShapedReward(e, far_power=0.5),
+            r"VecShapedReward\.far_power=0\.5 is out of range: must be \[1, 3\]",
         ),
     ],
 )
