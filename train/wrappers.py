@@ -25,6 +25,8 @@ Innermost first:
   command) becomes part of the observation. The observation ``[distance_m, offset_px]`` alone is
   not Markov (a frame of detector latency, held values, unobserved robot speed); the config's
   ``frame_stack`` adds the recent history on top.
+- :class:`VecStackFrames`: that history as a wrapper of its own, listed last, which can start
+  an episode's stack with its first observation repeated instead of ``VecFrameStack``'s zeros.
 
 :class:`ConcatVecEnv` joins several VecEnvs, here one batched core per scenario (a core runs one
 scenario for all its lanes), into one VecEnv whose lanes are the sub-envs' lanes in order.
@@ -51,6 +53,7 @@ from follow_env.sim.checks import check_number
 from policies.learned.features import (
     Box,
     Feature,
+    FrameStack,
     IncrementalAction,
     ObservationAge,
     RescaleAction,
@@ -65,6 +68,7 @@ __all__ = [
     "VecRescaleAction",
     "VecScaleObservation",
     "VecShapedReward",
+    "VecStackFrames",
     "agent_to_si",
     "env_action_names",
     "env_platform",
@@ -184,6 +188,16 @@ class VecIncrementalAction(_FeatureWrapper):
     most ``max_change`` a step and sees the command in force."""
 
     feature_class = IncrementalAction
+
+
+class VecStackFrames(_FeatureWrapper):
+    """:class:`policies.learned.features.FrameStack`: the last ``n_stack`` observations side
+    by side, with ``pad: first`` the episode's first observation repeated before it (not
+    ``VecFrameStack``'s zeros, which read as a person moving away fast). List it last (the
+    outermost wrapper) in place of ``frame_stack``; with ``normalize: {norm_obs: true}`` the
+    statistics are then those of the stacked frames."""
+
+    feature_class = FrameStack
 
 
 class VecShapedReward(VecEnvWrapper):

@@ -20,7 +20,9 @@ agent), actions inwards (agent to env), innermost step first, in the order of th
   statistics (when the agent was trained with it).
 - :class:`FrameStack`: the last ``n`` observations side by side, as ``VecFrameStack`` does: the
   raw observation is not Markov (a frame of detector latency, held values, the robot's own speed
-  unobserved).
+  unobserved). The agent's ``frame_stack`` pads an episode's start with zeros, as
+  ``VecFrameStack`` does; listed as the wrapper ``VecStackFrames`` (outermost) it can repeat
+  the first observation instead.
 
 The arithmetic is exactly that of the training wrappers (they call these classes), so an agent's
 actions are bitwise the same in training, in an env, and on a robot. :class:`Pipeline` chains
@@ -423,31 +425,55 @@ class NormalizeObservation(Feature):
 
 class FrameStack(Feature):
     """The last ``n_stack`` observations side by side (oldest first), as ``VecFrameStack`` with
-    the stack on the last axis: zeros before an episode's first observation.
+    the stack on the last axis.
 
-    :param n_stack: frames kept.
+    ``pad`` says what stands before an episode's first observation: ``"zeros"``, as in
+    ``VecFrameStack`` (the agent's ``frame_stack``), or ``"first"``, that observation repeated
+    (the training wrapper ``VecStackFrames``). With zeros, the first frames of every episode
+    read as a distance that jumped from 0 m (no reading) to the person's, a person moving
+    away fast, and an agent learns to set off before the person does; repeated, they read as a
+    person standing still, which is what the robot has seen.
+
+    :param n_stack: frames kept (an integer >= 1).
+    :param pad: ``"zeros"`` or ``"first"``.
     """
 
-    def __init__(self, n_stack: int) -> None:
-        if not is_integer(n_stack) or n_stack < 1:
-            raise out_of_range("FrameStack.n_stack", n_stack, "an integer >= 1")
-        self.n_stack = int(n_stack)
+    PADS = ("zeros", "first")
+
+    def __init__(self, n_stack: int, pad: str = "zeros") -> None:
+        self.n_stack = n_stack
+        self.pad = pad
+
+    def _check(self) -> None:
+        if not is_integer(self.n_stack) or self.n_stack < 1:
+            raise out_of_range(f"{self.owner}.n_stack", self.n_stack, "an integer >= 1")
+        self.n_stack = int(self.n_stack)
+        if self.pad not in self.PADS:
+            raise out_of_range(f"{self.owner}.pad", self.pad, "'zeros' or 'first'")
 
     def bind(self, obs: Box, act: Box, n: int) -> tuple[Box, Box]:
+        self._check()  # here, not in __init__: a training wrapper gives its name first
         self._k = obs.shape[0]
         self._stack = np.zeros((n, self._k * self.n_stack), dtype=np.float32)
         return Box(np.tile(obs.low, self.n_stack), np.tile(obs.high, self.n_stack)), act
 
     def start(self, obs: np.ndarray) -> np.ndarray:
-        self._stack[...] = 0
-        self._stack[:, -self._k :] = obs
-        return self._stack.copy()
+        return self.observe(obs, np.ones(len(obs), dtype=bool))
 
     def observe(self, obs: np.ndarray, done: np.ndarray) -> np.ndarray:
         self._stack = np.roll(self._stack, shift=-self._k, axis=-1)
-        self._stack[done] = 0
+        if self.pad == "first":
+            self._stack[done] = np.tile(np.asarray(obs, dtype=np.float32)[done], self.n_stack)
+        else:
+            self._stack[done] = 0
         self._stack[:, -self._k :] = obs
         return self._stack.copy()
+
+    def terminal(self, obs: np.ndarray, lane: int) -> np.ndarray:
+        # VecFrameStack's: the lane's stack with its final observation pushed on
+        stack = np.roll(self._stack[lane], shift=-self._k)
+        stack[-self._k :] = obs
+        return stack
 
 
 FEATURES: dict[str, type[Feature]] = {
@@ -455,6 +481,7 @@ FEATURES: dict[str, type[Feature]] = {
     "ObservationAge": ObservationAge,
     "ScaleObservation": ScaleObservation,
     "IncrementalAction": IncrementalAction,
+    "StackFrames": FrameStack,
 }
 """Feature steps by name (an agent's ``vec_env_wrapper`` entry ``train.wrappers.VecX`` names
 step ``X``)."""

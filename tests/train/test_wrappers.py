@@ -7,7 +7,7 @@ from typing import Any
 import numpy as np
 import pytest
 from gymnasium import spaces
-from stable_baselines3.common.vec_env import VecEnv
+from stable_baselines3.common.vec_env import VecEnv, VecFrameStack
 
 import follow_env
 from train.wrappers import (
@@ -17,6 +17,7 @@ from train.wrappers import (
     VecRescaleAction,
     VecScaleObservation,
     VecShapedReward,
+    VecStackFrames,
     agent_to_si,
     env_action_names,
 )
@@ -228,6 +229,49 @@ def test_far_power_charges_the_squared_error_from_the_start() -> None:
     )
     squared.reset()
     assert squared.step(np.zeros((1, 2)))[1][0] == pytest.approx(-2.0 * 0.25)  # below 1 m: less
+
+
+def _stack_script() -> tuple[list, list]:
+    """Two lanes, four steps; lane 1's episode ends at step 2 (the next obs is a new one's)."""
+    obs = [[[1.0, 5.0], [2.0, -5.0]], [[1.1, 6.0], [2.1, -6.0]], [[1.2, 7.0], [3.0, 9.0]],
+           [[1.3, 8.0], [3.1, 8.0]], [[1.4, 9.0], [3.2, 7.0]]]  # fmt: skip
+    dones = [[False, False], [False, True], [False, False], [False, False]]
+    return obs, dones
+
+
+def _run(venv: VecEnv, steps: int) -> tuple[list[np.ndarray], list[Any]]:
+    seen, terminals = [venv.reset()], []
+    for _ in range(steps):
+        o, _, _, infos = venv.step(np.zeros((2, 2)))
+        seen.append(o)
+        terminals += [
+            info["terminal_observation"] for info in infos if "terminal_observation" in info
+        ]
+    return seen, terminals
+
+
+def test_stack_frames_with_zeros_is_sb3s_frame_stack_terminal_observations_included() -> None:
+    obs, dones = _stack_script()
+    ours = _run(VecStackFrames(ScriptedVecEnv(obs, dones=dones), n_stack=3), 4)
+    sb3 = _run(VecFrameStack(ScriptedVecEnv(obs, dones=dones), n_stack=3), 4)
+    for a, b in zip(ours[0] + ours[1], sb3[0] + sb3[1], strict=True):
+        np.testing.assert_array_equal(a, b)
+
+
+def test_stack_frames_padded_with_the_first_observation_at_every_episode_start() -> None:
+    obs, dones = _stack_script()
+    seen, terminals = _run(VecStackFrames(ScriptedVecEnv(obs, dones=dones), 3, pad="first"), 4)
+    np.testing.assert_array_equal(seen[0], [[1, 5, 1, 5, 1, 5], [2, -5, 2, -5, 2, -5]])
+    np.testing.assert_allclose(seen[1][0], [1, 5, 1, 5, 1.1, 6])
+    # lane 1 starts again from 3 m: its stack is that observation three times
+    np.testing.assert_array_equal(seen[2][1], [3, 9, 3, 9, 3, 9])
+    np.testing.assert_allclose(seen[3][1], [3, 9, 3, 9, 3.1, 8])
+    # its episode's last view: the old stack with the terminal observation (obs + 0.5) pushed on
+    np.testing.assert_allclose(terminals[0], [2, -5, 2.1, -6, 3.5, 9.5])
+    with pytest.raises(ValueError, match=r"VecStackFrames\.pad='last' is out of range"):
+        VecStackFrames(ScriptedVecEnv(obs), 3, pad="last")
+    with pytest.raises(ValueError, match=r"VecStackFrames\.n_stack=0 is out of range"):
+        VecStackFrames(ScriptedVecEnv(obs), 0)
 
 
 def test_concat_vec_env_lane_j_replays_its_scenario_seeded_s_plus_j() -> None:

@@ -143,6 +143,43 @@ def test_policy_acts_as_the_agent_did_in_its_training_env() -> None:
     np.testing.assert_array_equal(np.array(recorder.actions), expected)
 
 
+def test_a_stack_of_frames_among_the_wrappers_is_seen_alike_in_training_and_at_inference() -> None:
+    # ppo_fast.yaml's view with its history as the wrapper VecStackFrames (first frame
+    # repeated): the training stack and the policy's pipeline, driven by the same agent actions
+    # on the same seed, see the same observations step by step.
+    from follow_env.tasks.person_follow import ENV_ID
+    from policies.learned.features import Box, Pipeline
+    from train.config import load_hyperparams, wrapper_specs
+    from train.ppo import DEFAULT_HYPERPARAMS
+
+    hp = load_hyperparams(DEFAULT_HYPERPARAMS.with_name("ppo_fast.yaml"), ENV_ID)
+    hp["frame_stack"] = 1
+    hp["vec_env_wrapper"] = [
+        *hp["vec_env_wrapper"],
+        {"train.wrappers.VecStackFrames": {"n_stack": 4, "pad": "first"}},
+    ]
+    base = base_env(["curve"], 1)
+    venv = agent_env(base, hp, "eval")
+    pipeline = Pipeline(
+        Pipeline.from_wrappers(wrapper_specs(hp["vec_env_wrapper"])),
+        Box(base.observation_space.low, base.observation_space.high),
+        Box(base.action_space.low, base.action_space.high, ("v_mps", "w_radps")),
+        1,
+    )
+    single = base_env(["curve"], 1)
+    venv.seed(7)
+    single.seed(7)
+    seen, expected = venv.reset(), pipeline.start(single.reset())
+    np.testing.assert_array_equal(seen[0, :5], seen[0, -5:])  # the first frame, four times
+    actions = np.random.default_rng(0).uniform(-1, 1, size=(40, 1, 2)).astype(np.float32)
+    for action in actions:
+        np.testing.assert_array_equal(seen, expected)
+        seen, *_ = venv.step(action)
+        obs, _, dones, _ = single.step(pipeline.act(action))
+        expected = pipeline.observe(obs, dones)
+    assert seen.shape == (1, 20)
+
+
 def test_shipped_agent_keeps_the_person_in_frame_on_straight() -> None:
     episode = run_episode("ppo", "straight", 0)
     assert episode.termination == "walk_over"
