@@ -270,12 +270,18 @@ def test_the_fast_file_is_ppo_yaml_with_more_lanes_larger_minibatches_fewer_epoc
     fast = load_hyperparams(DEFAULT_HYPERPARAMS.with_name("ppo_fast.yaml"), ENV_ID)
     default = load_hyperparams(DEFAULT_HYPERPARAMS, ENV_ID)
     changed = {k for k in fast if fast[k] != default[k]}
-    assert changed == {"n_envs", "n_timesteps", "batch_size", "n_epochs", "vec_env_wrapper"}
-    # the agent's view is the same; the reward and the speed command's steps are its own
+    changed_keys = {"n_envs", "n_timesteps", "batch_size", "n_epochs", "frame_stack"}
+    assert changed == {*changed_keys, "vec_env_wrapper"}
+    # the agent's view is the same, its 4 frames stacked by VecStackFrames from the episode's
+    # first observation (not frame_stack's zeros); the reward and the speed command's steps
+    # are its own
     fast_wrappers, default_wrappers = (
         dict(wrapper_specs(h["vec_env_wrapper"])) for h in (fast, default)
     )
-    assert list(fast_wrappers) == list(default_wrappers)
+    stack = "train.wrappers.VecStackFrames"
+    assert (default["frame_stack"], fast["frame_stack"]) == (4, 1)
+    assert list(fast_wrappers) == [*default_wrappers, stack]
+    assert fast_wrappers.pop(stack) == {"n_stack": 4, "pad": "first"}
     differ = {
         (name, key)
         for name, kwargs in fast_wrappers.items()
@@ -283,5 +289,10 @@ def test_the_fast_file_is_ppo_yaml_with_more_lanes_larger_minibatches_fewer_epoc
         if kwargs.get(key) != default_wrappers[name].get(key)
     }
     reward, action = "train.wrappers.VecShapedReward", "train.wrappers.VecIncrementalAction"
-    assert differ == {(reward, "v_rate_weight"), (reward, "far_from_m"), (action, "max_change")}
+    assert differ == {
+        (reward, "v_rate_weight"),
+        (reward, "far_weight"),
+        (reward, "far_from_m"),
+        (action, "max_change"),
+    }
     assert fast["n_steps"] * fast["n_envs"] % fast["batch_size"] == 0  # whole minibatches

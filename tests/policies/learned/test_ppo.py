@@ -144,20 +144,20 @@ def test_policy_acts_as_the_agent_did_in_its_training_env() -> None:
 
 
 def test_a_stack_of_frames_among_the_wrappers_is_seen_alike_in_training_and_at_inference() -> None:
-    # ppo_fast.yaml's view with its history as the wrapper VecStackFrames (first frame
-    # repeated): the training stack and the policy's pipeline, driven by the same agent actions
-    # on the same seed, see the same observations step by step.
+    # ppo_fast.yaml's view, its history the wrapper VecStackFrames (first frame repeated):
+    # the training stack and the policy's pipeline, driven by the same agent actions on the
+    # same seed, see the same observations step by step.
     from follow_env.tasks.person_follow import ENV_ID
     from policies.learned.features import Box, Pipeline
     from train.config import load_hyperparams, wrapper_specs
     from train.ppo import DEFAULT_HYPERPARAMS
 
     hp = load_hyperparams(DEFAULT_HYPERPARAMS.with_name("ppo_fast.yaml"), ENV_ID)
-    hp["frame_stack"] = 1
-    hp["vec_env_wrapper"] = [
-        *hp["vec_env_wrapper"],
-        {"train.wrappers.VecStackFrames": {"n_stack": 4, "pad": "first"}},
-    ]
+    assert hp["frame_stack"] == 1
+    assert wrapper_specs(hp["vec_env_wrapper"])[-1] == (
+        "train.wrappers.VecStackFrames",
+        {"n_stack": 4, "pad": "first"},
+    )
     base = base_env(["curve"], 1)
     venv = agent_env(base, hp, "eval")
     pipeline = Pipeline(
