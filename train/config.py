@@ -207,7 +207,8 @@ def parse_hyperparams(
     hp["normalize"] = _check_normalize(where, hp.setdefault("normalize", False))
     hp["frame_stack"] = integer(where, "frame_stack", hp.setdefault("frame_stack", 1), 1)
     _check_policy_kwargs(where, learner, policy, hp.setdefault("policy_kwargs", {}))
-    wrapper_specs(hp.setdefault("vec_env_wrapper", []), where=where)
+    specs = wrapper_specs(hp.setdefault("vec_env_wrapper", []), where=where)
+    _refuse_double_stack(where, hp["frame_stack"], specs)
     if "env_kwargs" in hp:
         hp["env_kwargs"] = _check_env_kwargs(where, hp["env_kwargs"])
     unknown = sorted(set(hp) - set(ZOO_KEYS) - {"policy_kwargs"} - set(learner.rules))
@@ -449,6 +450,23 @@ def wrapper_specs(value: Any, *, where: str = "vec_env_wrapper") -> list[tuple[s
                 )
         specs.append((name, dict(kwargs)))
     return specs
+
+
+def _refuse_double_stack(where: str, frame_stack: int, specs: list[tuple[str, dict]]) -> None:
+    """``frame_stack`` > 1 beside a frame-stacking wrapper would stack the stacks (4 x 4 = 16
+    frames, the first history twice): one history only."""
+    from stable_baselines3.common.vec_env import VecFrameStack
+
+    from train.wrappers import VecStackFrames
+
+    if frame_stack == 1:
+        return
+    for name, _ in specs:
+        if issubclass(import_object(name), VecStackFrames | VecFrameStack):
+            raise ConfigError(
+                f"{where}: frame_stack={frame_stack} is out of range beside the wrapper {name}, "
+                "which stacks frames itself: must be 1 (one history, not a stack of stacks)"
+            )
 
 
 def import_object(dotted: str) -> Any:

@@ -68,11 +68,32 @@ def test_missing_file_is_named(tmp_path: Path) -> None:
         ({"policy": "CnnPolicy"}, "does not import"),
         ({"policy": "train.wrappers.VecRescaleAction"}, "not an SB3 ActorCriticPolicy"),
         ({"learning_rate": "cos_3e-4"}, "learning_rate='cos_3e-4' is out of range: must be a"),
+        (
+            {"frame_stack": 4, "vec_env_wrapper": [{"train.wrappers.VecStackFrames": {}}]},
+            "frame_stack=4 is out of range beside the wrapper train.wrappers.VecStackFrames, "
+            "which stacks frames itself: must be 1",
+        ),
+        (
+            {
+                "frame_stack": 2,
+                "vec_env_wrapper": [
+                    {"stable_baselines3.common.vec_env.VecFrameStack": {"n_stack": 4}}
+                ],
+            },
+            "frame_stack=2 is out of range beside the wrapper stable_baselines3",
+        ),
     ],
 )
 def test_bad_values_are_rejected_naming_the_key(override: dict, message: str) -> None:
     with pytest.raises(ConfigError, match=message):
         parse_hyperparams(MINIMAL | override)
+
+
+def test_one_frame_history_is_accepted() -> None:
+    """The stacking wrapper with frame_stack 1 (ppo_fast.yaml's way), or frame_stack alone."""
+    wrapper = [{"train.wrappers.VecStackFrames": {"n_stack": 4}}]
+    assert parse_hyperparams(MINIMAL | {"vec_env_wrapper": wrapper})["frame_stack"] == 1
+    assert parse_hyperparams(MINIMAL | {"frame_stack": 4})["frame_stack"] == 4
 
 
 W = "train.wrappers.VecRescaleAction"
