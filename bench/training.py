@@ -2,11 +2,13 @@
 and threads, beside SB3's PPO on CartPole-v1 with the same choices (the baseline: the same
 learner on an env that costs almost nothing, measured in this process).
 
-Each row trains ``train/configs/ppo.yaml`` (the agent's wrappers, the mirror policy, the
-training reward) through ``follow-train``'s own ``train()`` for a fixed number of steps, no
-held-out evaluation, no checkpoint, no comparison, with one setting changed; the rate is the
-run's own ``sessions.json`` figure (env steps over the learning loop's wall time). The run
-folders go to a temporary folder and are removed.
+Each row but the last trains ``train/configs/ppo.yaml`` (the agent's wrappers, the mirror
+policy, the training reward) through ``follow-train``'s own ``train()`` for a fixed number of
+steps, no held-out evaluation, no checkpoint, no comparison, with one setting changed; the last
+trains the shipped agent's file, ``ppo_fast.yaml``, as it is (its reward, and its history
+stacked by ``VecStackFrames`` rather than ``frame_stack``). The rate is the run's own
+``sessions.json`` figure (env steps over the learning loop's wall time). The run folders go to
+a temporary folder and are removed.
 """
 
 from __future__ import annotations
@@ -19,31 +21,51 @@ from typing import Any
 
 import yaml
 
-#: (label, hyperparameter changes, torch threads).
-CHOICES: list[tuple[str, dict[str, Any], int]] = [
-    ("ppo.yaml: 48 lanes, mb 256, 10 ep", {}, 1),
-    ("48 lanes, mb 1536, 4 epochs", {"batch_size": 1536, "n_epochs": 4}, 1),
-    ("192 lanes, mb 4096, 4 epochs", {"n_envs": 192, "batch_size": 4096, "n_epochs": 4}, 1),
-    ("192 lanes, mb 6144, 3 ep, 2 thr", {"n_envs": 192, "batch_size": 6144, "n_epochs": 3}, 2),
+from train.ppo import DEFAULT_HYPERPARAMS
+
+#: The shipped agent's hyperparameters.
+SHIPPED_HYPERPARAMS = DEFAULT_HYPERPARAMS.with_name("ppo_fast.yaml")
+
+#: (label, hyperparameter file, changes to it, torch threads).
+CHOICES: list[tuple[str, Path, dict[str, Any], int]] = [
+    ("ppo.yaml: 48 lanes, mb 256, 10 ep", DEFAULT_HYPERPARAMS, {}, 1),
+    ("48 lanes, mb 1536, 4 epochs", DEFAULT_HYPERPARAMS, {"batch_size": 1536, "n_epochs": 4}, 1),
     (
-        "384 lanes, mb 4096, 4 ep, 2 thr (shipped)",
+        "192 lanes, mb 4096, 4 epochs",
+        DEFAULT_HYPERPARAMS,
+        {"n_envs": 192, "batch_size": 4096, "n_epochs": 4},
+        1,
+    ),
+    (
+        "192 lanes, mb 6144, 3 ep, 2 thr",
+        DEFAULT_HYPERPARAMS,
+        {"n_envs": 192, "batch_size": 6144, "n_epochs": 3},
+        2,
+    ),
+    (
+        "384 lanes, mb 4096, 4 ep, 2 thr",
+        DEFAULT_HYPERPARAMS,
         {"n_envs": 384, "batch_size": 4096, "n_epochs": 4},
         2,
     ),
+    ("ppo_fast.yaml as shipped, 2 thr", SHIPPED_HYPERPARAMS, {}, 2),
 ]
 
 
-def _follow_train_rate(changes: dict[str, Any], threads: int, steps: int, folder: Path) -> float:
-    from train.ppo import DEFAULT_HYPERPARAMS, Args, train
+def _follow_train_rate(
+    hyperparams: Path, changes: dict[str, Any], threads: int, steps: int, folder: Path
+) -> float:
+    """follow-train's env-steps/s on ``hyperparams`` with ``changes`` for ``steps`` steps."""
+    from train.ppo import Args, train
 
-    document = yaml.safe_load(DEFAULT_HYPERPARAMS.read_text(encoding="utf-8"))
+    document = yaml.safe_load(hyperparams.read_text(encoding="utf-8"))
     document["PersonFollow-v0"].update(changes)
     name = f"{len(list(folder.iterdir()))}"
-    hyperparams = folder / f"{name}.yaml"
-    hyperparams.write_text(yaml.safe_dump(document), encoding="utf-8")
+    copy = folder / f"{name}.yaml"
+    copy.write_text(yaml.safe_dump(document), encoding="utf-8")
     never = 10**9
     args = Args(
-        hyperparams=hyperparams,
+        hyperparams=copy,
         n_timesteps=steps,
         eval_freq=never,
         checkpoint_freq=never,
@@ -86,8 +108,8 @@ def bench_training(quick: bool) -> list[tuple[str, float, str]]:
     rows = []
     with tempfile.TemporaryDirectory(prefix="bench-training-") as tmp:
         folder = Path(tmp)
-        for label, changes, threads in CHOICES:
-            rate = _follow_train_rate(changes, threads, steps, folder)
+        for label, hyperparams, changes, threads in CHOICES:
+            rate = _follow_train_rate(hyperparams, changes, threads, steps, folder)
             cartpole = _cartpole_rate(changes, steps) if threads == 1 else float("nan")
             ratio = f"{cartpole / rate:.2f}x CartPole's time" if threads == 1 else "(2 threads)"
             rows.append((label, rate, ratio))
