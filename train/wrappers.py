@@ -41,7 +41,7 @@ from __future__ import annotations
 
 import inspect
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, ClassVar
 
 import gymnasium as gym
 import numpy as np
@@ -236,6 +236,14 @@ class VecShapedReward(VecEnvWrapper):
       the evaluation's RMS distance error does: a large lag (a person walking on while the
       robot slows in a detection gap) then costs more than a small steady offset (resting
       0.25 m too close after the person stops).
+    - ``far_source`` and ``offset_source``: what the distance and offset terms measure, the
+      ``observation`` (default) or the ``truth`` of the target (the env's info
+      ``true_distance_m`` and ``true_offset_px``, which the wrapper asks the env to include:
+      follow_env's SB3 adapter's :meth:`~follow_env.sim.sb3.TaskSB3VecEnv.include_info`). The
+      observation is whoever the detector picked: when it picks a bystander 4 m away, a
+      charge on the observed distance pays the agent to chase them (in ``crowd`` it did, and
+      drove into the person it followed, who stood 1 m in front of it). The truth is known in
+      simulation only, and only the reward reads it: the agent still sees the observation.
 
     Put a ``VecMonitor`` below this wrapper to log the env's own episode returns.
 
@@ -254,10 +262,19 @@ class VecShapedReward(VecEnvWrapper):
     :param far_power: the power of the error beyond ``far_from_m`` that is charged, in [1, 3]
         (1: the error in m; 2: its square in m²).
     :param target_distance_m: the following distance [m] (the env's 1 m), >= 0.
+    :param far_source: ``observation`` or ``truth``: the distance ``far_weight`` charges.
+    :param offset_source: ``observation`` or ``truth``: the offset ``offset_weight`` charges.
     """
 
     #: Changes rewards only: :func:`train.envs.agent_env` leaves it out at inference.
     training_only = True
+
+    #: What a term may measure, and the info key of the truth for each term.
+    SOURCES = ("observation", "truth")
+    TRUTH_KEYS: ClassVar[dict[str, str]] = {
+        "far_source": "true_distance_m",
+        "offset_source": "true_offset_px",
+    }
 
     def __init__(
         self,
@@ -272,6 +289,8 @@ class VecShapedReward(VecEnvWrapper):
         far_from_m: float = 1.0,
         far_power: float = 1.0,
         target_distance_m: float = 1.0,
+        far_source: str = "observation",
+        offset_source: str = "observation",
     ) -> None:
         for name, value in (
             ("alive_bonus", alive_bonus),
@@ -286,6 +305,27 @@ class VecShapedReward(VecEnvWrapper):
             lo = 0.0 if name.endswith(("weight", "_m")) else None
             check_number(f"VecShapedReward.{name}", value, lo, optional=name == "reward_floor")
         check_number("VecShapedReward.far_power", far_power, 1.0, 3.0)
+        sources = {"far_source": far_source, "offset_source": offset_source}
+        for name, value in sources.items():
+            if value not in self.SOURCES:
+                raise ValueError(
+                    f"VecShapedReward.{name}={value!r} is out of range: must be one of "
+                    f"{', '.join(self.SOURCES)}"
+                )
+        truthful = [name for name, value in sources.items() if value == "truth"]
+        truths = [self.TRUTH_KEYS[name] for name in truthful]
+        if truths:
+            try:  # every lane's env (the adapter keeps one set of keys for all its lanes)
+                venv.env_method("include_info", truths)
+                kept = all(set(truths) <= set(keys) for keys in venv.get_attr("info_keys"))
+            except AttributeError:
+                kept = False
+            if not kept:
+                raise ValueError(
+                    f"VecShapedReward: {' and '.join(f'{n}=truth' for n in truthful)} needs an "
+                    f"env whose infos can carry {', '.join(truths)} (follow_env's SB3 adapter: "
+                    "include_info)"
+                )
         act_box = venv.action_space
         if not isinstance(act_box, spaces.Box) or len(act_box.shape) != 1:
             raise ValueError(f"VecShapedReward needs a flat Box action space, got {act_box}")
@@ -299,6 +339,8 @@ class VecShapedReward(VecEnvWrapper):
         self.far_from_m = float(far_from_m)
         self.far_power = float(far_power)
         self.target_distance_m = float(target_distance_m)
+        self.far_source = far_source
+        self.offset_source = offset_source
         self._half_width_px = float(venv.observation_space.high[1]) + 1.0
         self._low, self._high = act_box.low, act_box.high
         self._prev = np.zeros((venv.num_envs, len(names)))
@@ -340,13 +382,30 @@ class VecShapedReward(VecEnvWrapper):
         self._prev[:] = 0.0
         return self.venv.reset()
 
-    def _far(self, obs: np.ndarray, dones: np.ndarray, infos: list[dict[str, Any]]) -> np.ndarray:
-        """The ``far_weight`` charge of each lane's step, from the observation it reached (the
-        terminal one where an episode ended; rows ``[distance_m, offset_px, ...]``)."""
-        d = np.array(obs, dtype=np.float64)[:, 0]
+    def _measured(
+        self, column: int, source: str, obs: np.ndarray, dones: np.ndarray, infos: list[dict]
+    ) -> np.ndarray:
+        """Each lane's distance (``column`` 0) or offset (1) at the state its step reached: the
+        observation's (the terminal one where an episode ended; rows ``[distance_m,
+        offset_px, ...]``), or the truth's from the infos (the final state's there already)."""
+        if source == "truth":
+            key = self.TRUTH_KEYS["far_source" if column == 0 else "offset_source"]
+            try:
+                return np.array([info[key] for info in infos], dtype=np.float64)
+            except KeyError:
+                raise ValueError(
+                    f"VecShapedReward: the env's infos carry no {key!r} (include_info was not "
+                    "kept by the env below)"
+                ) from None
+        values = np.array(obs, dtype=np.float64)[:, column]
         for i in np.flatnonzero(dones):  # the episode's own last observation, not the reset's
             if "terminal_observation" in infos[i]:
-                d[i] = float(np.asarray(infos[i]["terminal_observation"])[0])
+                values[i] = float(np.asarray(infos[i]["terminal_observation"])[column])
+        return values
+
+    def _far(self, obs: np.ndarray, dones: np.ndarray, infos: list[dict[str, Any]]) -> np.ndarray:
+        """The ``far_weight`` charge of each lane's step (no reading yet, ``d <= 0``: none)."""
+        d = self._measured(0, self.far_source, obs, dones, infos)
         excess = np.maximum(np.abs(d - self.target_distance_m) - self.far_from_m, 0.0)
         return self.far_weight * np.where(d > 0.0, excess**self.far_power, 0.0)
 
@@ -367,8 +426,11 @@ class VecShapedReward(VecEnvWrapper):
         shaped = np.where(terminated, r, np.maximum(r, self.reward_floor))
         shaped += self.alive_bonus - self._change @ self.rate_weights
         if self.offset_weight:
-            offset = np.abs(np.asarray(obs, dtype=np.float64)[:, 1]) / self._half_width_px
-            shaped -= self.offset_weight * np.minimum(offset, 1.0)
+            if self.offset_source == "truth":
+                offset = self._measured(1, "truth", obs, dones, infos)
+            else:  # the observation the agent sees next (the reset's after an episode's end)
+                offset = np.asarray(obs, dtype=np.float64)[:, 1]
+            shaped -= self.offset_weight * np.minimum(np.abs(offset) / self._half_width_px, 1.0)
         self._prev[dones] = 0.0
         return obs, shaped.astype(np.float32), dones, infos
 

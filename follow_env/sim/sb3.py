@@ -35,7 +35,7 @@ class TaskSB3VecEnv(VecEnv):
     :param num_envs: number of lanes.
     :param full_info: put every info key in every lane's info dict each step (costs about a
         microsecond per key and lane); by default the dicts hold only what SB3 needs at episode
-        ends, plus ``termination``.
+        ends, plus ``termination``, and the keys :meth:`include_info` asked for.
     :param env_kwargs: the single env's keyword arguments (``config``, shorthands, sections).
     """
 
@@ -56,6 +56,8 @@ class TaskSB3VecEnv(VecEnv):
         self.config = task.resolve_config(**env_kwargs)
         self.render_mode = None
         self.full_info = full_info
+        #: Info keys put in every lane's dict each step besides SB3's (:meth:`include_info`).
+        self.info_keys: tuple[str, ...] = ()
         self.sim = BatchedSim(task, self.config, int(num_envs))
         obs_space, act_space = task.spaces(self.config, self.sim.platform)
         self._actions = np.zeros((int(num_envs), act_space.shape[0]))
@@ -131,13 +133,34 @@ class TaskSB3VecEnv(VecEnv):
         """No images: the adapter does not render."""
         return [None for _ in range(self.num_envs)]
 
+    def include_info(self, keys: Sequence[str]) -> None:
+        """Put the info ``keys`` in every lane's info dict from the next step on (a wrapper's
+        way to read, say, the ground truth a training reward charges): the values of the state
+        each step reached, on a lane whose episode ended its final state, before the reset.
+
+        :raises ValueError: for a key the task's info does not have (naming the known ones).
+        """
+        known = self.task.info_keys(self.sim.platform)
+        for key in keys:
+            if key not in known:
+                raise ValueError(f"info key {key!r} is not one of {', '.join(known)}")
+        self.info_keys = tuple(dict.fromkeys((*self.info_keys, *keys)))
+
     # -- helpers ------------------------------------------------------------------------------
 
     def _infos(self) -> list[dict[str, Any]]:
         if not self.full_info:
             names = self.task.spec.terminations
             reasons = self.sim.episode["reason"]
-            return [{"termination": names[r]} if r else {} for r in reasons.tolist()]
+            infos: list[dict[str, Any]] = [
+                {"termination": names[r]} if r else {} for r in reasons.tolist()
+            ]
+            if self.info_keys:
+                batch = self.task.batch_info(self.sim)
+                for key in self.info_keys:
+                    for info, value in zip(infos, batch[key].tolist(), strict=True):
+                        info[key] = value
+            return infos
         batch = self.task.batch_info(self.sim)
         columns = {k: v.tolist() for k, v in batch.items()}
         keys = list(columns)

@@ -231,6 +231,43 @@ def test_far_power_charges_the_squared_error_from_the_start() -> None:
     assert squared.step(np.zeros((1, 2)))[1][0] == pytest.approx(-2.0 * 0.25)  # below 1 m: less
 
 
+def test_the_distance_and_offset_terms_can_charge_the_truth() -> None:
+    """far_source / offset_source truth: the target's true distance and offset of the state each
+    step reached (an ended episode's final one), from the adapter's infos; the agent's
+    observation is unchanged. A twin env with every info key gives the expected values."""
+    kwargs: dict[str, Any] = {"scenario": "crowd", "episode": {"max_steps": 20}}
+    venv = follow_env.make_sb3_vec_env(2, **kwargs)
+    twin = follow_env.make_sb3_vec_env(2, full_info=True, **kwargs)
+    weights = {"reward_floor": -1.0, "far_weight": 2.0, "far_from_m": 0.0, "offset_weight": 3.0}
+    wrapped = VecShapedReward(venv, far_source="truth", offset_source="truth", **weights)
+    for env in (wrapped, twin):
+        env.seed(3)
+    np.testing.assert_array_equal(wrapped.reset(), twin.reset())
+    action = np.array([[0.6, 0.2], [0.3, -0.4]], dtype=np.float32)
+    ends = 0
+    for _ in range(30):
+        obs, shaped, dones, _ = wrapped.step(action)
+        twin_obs, r, twin_dones, infos = twin.step(action)
+        np.testing.assert_array_equal(obs, twin_obs)
+        np.testing.assert_array_equal(dones, twin_dones)
+        d = np.array([info["true_distance_m"] for info in infos])
+        o = np.array([info["true_offset_px"] for info in infos])
+        charged = r - 2.0 * np.abs(d - 1.0)
+        terminated = dones & ~np.array([i.get("TimeLimit.truncated", False) for i in infos])
+        expected = np.where(terminated, charged, np.maximum(charged, -1.0))
+        expected -= 3.0 * np.minimum(np.abs(o) / 320.0, 1.0)
+        np.testing.assert_allclose(shaped, expected, rtol=1e-5, atol=1e-5)
+        ends += int(dones.sum())
+    assert ends >= 2  # final states were charged too
+
+
+def test_a_truth_source_needs_an_env_that_can_report_it() -> None:
+    with pytest.raises(ValueError, match=r"far_source='true' is out of range: must be one of "):
+        VecShapedReward(ScriptedVecEnv(constant_obs(1)), far_source="true")
+    with pytest.raises(ValueError, match=r"offset_source=truth needs an env whose infos can carry"):
+        VecShapedReward(ScriptedVecEnv(constant_obs(1)), offset_source="truth")
+
+
 def _stack_script() -> tuple[list, list]:
     """Two lanes, four steps; lane 1's episode ends at step 2 (the next obs is a new one's)."""
     obs = [[[1.0, 5.0], [2.0, -5.0]], [[1.1, 6.0], [2.1, -6.0]], [[1.2, 7.0], [3.0, 9.0]],

@@ -164,6 +164,36 @@ def test_sb3_adapter_lanes_equal_single_envs() -> None:
     assert ends >= N
 
 
+def test_sb3_adapter_includes_the_info_keys_asked_for_final_states_included() -> None:
+    venv = make_sb3_vec_env(N, **KWARGS)
+    venv.include_info(["true_distance_m", "true_offset_px"])
+    venv.include_info(["true_distance_m"])  # asking twice adds nothing
+    assert venv.info_keys == ("true_distance_m", "true_offset_px")
+    singles = [gym.make("PersonFollow-v0", **KWARGS) for _ in range(N)]
+    venv.seed(SEED)
+    venv.reset()
+    for i, env in enumerate(singles):
+        env.reset(seed=SEED + i)
+    ends = 0
+    for a in _actions():
+        venv.step_async(a)
+        _, _, dones, infos = venv.step_wait()
+        for i, env in enumerate(singles):
+            _, _, te, tr, inf = env.step(a[i])
+            # the step's own state, on a lane that ended its final one (before the reset)
+            assert infos[i]["true_distance_m"] == inf["true_distance_m"]
+            assert infos[i]["true_offset_px"] == inf["true_offset_px"]
+            assert "robot_x_m" not in infos[i]
+            if te or tr:
+                env.reset()
+                ends += 1
+        assert all(dones[i] == ("terminal_observation" in infos[i]) for i in range(N))
+    assert ends >= N
+    with pytest.raises(ValueError, match="info key 'true_distance' is not one of time_s, "):
+        venv.include_info(["true_distance"])
+    assert venv.info_keys == ("true_distance_m", "true_offset_px")
+
+
 def test_sb3_adapter_works_with_monitor_normalize_and_evaluate_policy() -> None:
     from stable_baselines3.common.evaluation import evaluate_policy
     from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
