@@ -35,17 +35,18 @@ def test_the_shipped_files_load_and_check(name: str) -> None:
 
 
 @pytest.mark.parametrize(
-    ("file", "algo", "v_rate_weight", "far_weight"),
+    ("file", "algo", "v_rate_weight", "far_weight", "stack"),
     [
-        ("ppo_fast", "ppo", 4.0, 2.0),
-        # their five-seed studies (README) ran with the reward the agent shipped before
-        # this one was trained with; the speed command's steps are the shipped agent's
-        ("recurrent_ppo_fast", "recurrent_ppo", 2.0, 1.0),
-        ("sac_fast", "sac", 2.0, 1.0),
+        ("ppo_fast", "ppo", 4.0, 2.0, "first"),
+        ("sac_fast", "sac", 4.0, 2.0, "first"),
+        # its five-seed study (README) ran with the reward the agent shipped before this one
+        # was trained with; the speed command's steps are the shipped agent's; the LSTM
+        # carries the history
+        ("recurrent_ppo_fast", "recurrent_ppo", 2.0, 1.0, None),
     ],
 )
 def test_the_budget_files_load_with_the_reward_and_action_of_their_studies(
-    file: str, algo: str, v_rate_weight: float, far_weight: float
+    file: str, algo: str, v_rate_weight: float, far_weight: float, stack: str | None
 ) -> None:
     path = ALGOS[algo].hyperparams.with_name(f"{file}.yaml")
     hp = load_hyperparams(path, ENV_ID, algo=algo)
@@ -59,6 +60,11 @@ def test_the_budget_files_load_with_the_reward_and_action_of_their_studies(
     )
     incremental = wrappers["train.wrappers.VecIncrementalAction"]
     assert incremental["max_change"] == [0.2, 0.15]
+    assert hp["frame_stack"] == 1  # any history is the stacking wrapper's, from its first frame
+    frames = wrappers.get("train.wrappers.VecStackFrames")
+    assert (frames or {}).get("pad") == stack
+    if stack is not None:  # the outermost wrapper, as the policy runs it
+        assert wrapper_specs(hp["vec_env_wrapper"])[-1][0] == "train.wrappers.VecStackFrames"
 
 
 def test_policies_default_to_the_algorithms_mlp() -> None:
