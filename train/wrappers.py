@@ -244,6 +244,7 @@ class VecShapedReward(VecEnvWrapper):
       charge on the observed distance pays the agent to chase them (in ``crowd`` it did, and
       drove into the person it followed, who stood 1 m in front of it). The truth is known in
       simulation only, and only the reward reads it: the agent still sees the observation.
+      (Measured, it did not stop those collisions: README, "Tried on top of ppo_fast.yaml".)
 
     Put a ``VecMonitor`` below this wrapper to log the env's own episode returns.
 

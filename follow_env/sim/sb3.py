@@ -136,7 +136,8 @@ class TaskSB3VecEnv(VecEnv):
     def include_info(self, keys: Sequence[str]) -> None:
         """Put the info ``keys`` in every lane's info dict from the next step on (a wrapper's
         way to read, say, the ground truth a training reward charges): the values of the state
-        each step reached, on a lane whose episode ended its final state, before the reset.
+        each step reached; on a lane whose episode ended, those of its final state (before the
+        reset), as ``terminal_observation`` is.
 
         :raises ValueError: for a key the task's info does not have (naming the known ones).
         """
