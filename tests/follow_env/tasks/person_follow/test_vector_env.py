@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from typing import Any
 
 import gymnasium as gym
@@ -137,28 +138,40 @@ def test_vector_env_renders_one_frame_per_lane() -> None:
     assert frames[0].dtype == np.uint8
 
 
-def test_sb3_adapter_lanes_equal_single_envs() -> None:
-    venv = make_sb3_vec_env(N, full_info=True, **KWARGS)
+def _lockstep(venv: Any) -> Iterator[tuple[Any, ...]]:
+    """Step the SB3 adapter ``venv`` and N single envs seeded alike with the same actions;
+    yield per step ``(obs, rewards, dones, infos, singles)``, ``singles[i]`` the single env's
+    ``(final_obs, obs, reward, terminated, truncated, info)``: ``obs`` is the next episode's
+    first after an end (the adapter resets that lane in the same step), ``final_obs`` the
+    step's own."""
     singles = [gym.make("PersonFollow-v0", **KWARGS) for _ in range(N)]
     venv.seed(SEED)
     obs = venv.reset()
     for i, env in enumerate(singles):
         o, _ = env.reset(seed=SEED + i)
         assert np.array_equal(obs[i], o)
-    ends = 0
     for a in _actions():
         venv.step_async(a)
-        obs, rew, dones, infos = venv.step_wait()
+        obs, rewards, dones, infos = venv.step_wait()
+        steps = []
         for i, env in enumerate(singles):
-            o, r, te, tr, inf = env.step(a[i])
+            final, r, te, tr, inf = env.step(a[i])
+            o = env.reset()[0] if te or tr else final
+            steps.append((final, o, r, te, tr, inf))
+        yield obs, rewards, dones, infos, steps
+
+
+def test_sb3_adapter_lanes_equal_single_envs() -> None:
+    ends = 0
+    for obs, rew, dones, infos, singles in _lockstep(make_sb3_vec_env(N, full_info=True, **KWARGS)):
+        for i, (final, o, r, te, tr, inf) in enumerate(singles):
             assert rew[i] == np.float32(r)
             assert dones[i] == (te or tr)
             for key in INFO_KEYS:
                 assert infos[i][key] == inf[key], key
             if te or tr:
-                assert np.array_equal(infos[i]["terminal_observation"], o)
+                assert np.array_equal(infos[i]["terminal_observation"], final)
                 assert infos[i]["TimeLimit.truncated"] == (tr and not te)
-                o, _ = env.reset()
                 ends += 1
             assert np.array_equal(obs[i], o)
     assert ends >= N
@@ -169,25 +182,15 @@ def test_sb3_adapter_includes_the_info_keys_asked_for_final_states_included() ->
     venv.include_info(["true_distance_m", "true_offset_px"])
     venv.include_info(["true_distance_m"])  # asking twice adds nothing
     assert venv.info_keys == ("true_distance_m", "true_offset_px")
-    singles = [gym.make("PersonFollow-v0", **KWARGS) for _ in range(N)]
-    venv.seed(SEED)
-    venv.reset()
-    for i, env in enumerate(singles):
-        env.reset(seed=SEED + i)
     ends = 0
-    for a in _actions():
-        venv.step_async(a)
-        _, _, dones, infos = venv.step_wait()
-        for i, env in enumerate(singles):
-            _, _, te, tr, inf = env.step(a[i])
+    for _, _, dones, infos, singles in _lockstep(venv):
+        for i, (_, _, _, te, tr, inf) in enumerate(singles):
             # the step's own state, on a lane that ended its final one (before the reset)
             assert infos[i]["true_distance_m"] == inf["true_distance_m"]
             assert infos[i]["true_offset_px"] == inf["true_offset_px"]
             assert "robot_x_m" not in infos[i]
-            if te or tr:
-                env.reset()
-                ends += 1
-        assert all(dones[i] == ("terminal_observation" in infos[i]) for i in range(N))
+            assert dones[i] == ("terminal_observation" in infos[i])
+            ends += int(te or tr)
     assert ends >= N
     with pytest.raises(ValueError, match="info key 'true_distance' is not one of time_s, "):
         venv.include_info(["true_distance"])
