@@ -383,30 +383,29 @@ class VecShapedReward(VecEnvWrapper):
         self._prev[:] = 0.0
         return self.venv.reset()
 
-    def _measured(
-        self, column: int, source: str, obs: np.ndarray, dones: np.ndarray, infos: list[dict]
-    ) -> np.ndarray:
-        """Each lane's distance (``column`` 0) or offset (1) at the state its step reached: the
-        observation's (the terminal one where an episode ended; rows ``[distance_m,
-        offset_px, ...]``), or the truth's from the infos (the final state's there already)."""
-        if source == "truth":
-            key = self.TRUTH_KEYS["far_source" if column == 0 else "offset_source"]
-            try:
-                return np.array([info[key] for info in infos], dtype=np.float64)
-            except KeyError:
-                raise ValueError(
-                    f"VecShapedReward: the env's infos carry no {key!r} (include_info was not "
-                    "kept by the env below)"
-                ) from None
-        values = np.array(obs, dtype=np.float64)[:, column]
-        for i in np.flatnonzero(dones):  # the episode's own last observation, not the reset's
-            if "terminal_observation" in infos[i]:
-                values[i] = float(np.asarray(infos[i]["terminal_observation"])[column])
-        return values
+    def _truth(self, source: str, infos: list[dict[str, Any]]) -> np.ndarray:
+        """Each lane's true value for ``source`` (``far_source`` or ``offset_source``) from the
+        infos, the final state's where an episode ended (the adapter's ``include_info``)."""
+        key = self.TRUTH_KEYS[source]
+        try:
+            return np.array([info[key] for info in infos], dtype=np.float64)
+        except KeyError:
+            raise ValueError(
+                f"VecShapedReward: the env's infos carry no {key!r} (include_info was not kept "
+                "by the env below)"
+            ) from None
 
     def _far(self, obs: np.ndarray, dones: np.ndarray, infos: list[dict[str, Any]]) -> np.ndarray:
-        """The ``far_weight`` charge of each lane's step (no reading yet, ``d <= 0``: none)."""
-        d = self._measured(0, self.far_source, obs, dones, infos)
+        """The ``far_weight`` charge of each lane's step, from the distance it reached: the
+        truth's, or the observation's (the terminal one where an episode ended; rows
+        ``[distance_m, offset_px, ...]``; no reading yet, ``d <= 0``: nothing)."""
+        if self.far_source == "truth":
+            d = self._truth("far_source", infos)
+        else:
+            d = np.array(obs, dtype=np.float64)[:, 0]
+            for i in np.flatnonzero(dones):  # the episode's own last observation, not the reset's
+                if "terminal_observation" in infos[i]:
+                    d[i] = float(np.asarray(infos[i]["terminal_observation"])[0])
         excess = np.maximum(np.abs(d - self.target_distance_m) - self.far_from_m, 0.0)
         return self.far_weight * np.where(d > 0.0, excess**self.far_power, 0.0)
 
@@ -428,7 +427,7 @@ class VecShapedReward(VecEnvWrapper):
         shaped += self.alive_bonus - self._change @ self.rate_weights
         if self.offset_weight:
             if self.offset_source == "truth":
-                offset = self._measured(1, "truth", obs, dones, infos)
+                offset = self._truth("offset_source", infos)
             else:  # the observation the agent sees next (the reset's after an episode's end)
                 offset = np.asarray(obs, dtype=np.float64)[:, 1]
             shaped -= self.offset_weight * np.minimum(np.abs(offset) / self._half_width_px, 1.0)
