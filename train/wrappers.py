@@ -245,6 +245,25 @@ class VecShapedReward(VecEnvWrapper):
       drove into the person it followed, who stood 1 m in front of it). The truth is known in
       simulation only, and only the reward reads it: the agent still sees the observation.
       (Measured, it did not stop those collisions: README, "Tried on top of ppo_fast.yaml".)
+    - ``blind_speed_weight``: charges the forward speed command (``max(v, 0)`` in the units of
+      the wrapped action: above :class:`VecRescaleAction`, 1 at full speed) on each step whose
+      frame has no detection (the env's info ``detected``, which the wrapper asks the env to
+      include, as for the truth). The laws stop when the person disappears (and lose them); an
+      agent that drives on towards where they were runs into the wall they walked behind
+      (``occlusion``). The charge teaches it to slow down while it sees nothing.
+    - ``clearance_weight``: charges coming near a wall, ``clearance_weight * max(clearance_m -
+      c, 0) / clearance_m`` a step, where ``c`` is the robot footprint's true clearance to the
+      nearest wall (the env's info ``wall_clearance_m``, included as for the truth; a
+      collision at ``c <= 0`` ends the episode with the env's own penalty). The collision
+      penalty alone is one sparse charge at the end; a wall approached is charged on every step
+      before it, which tells the agent which of its paths cut a corner the person walked
+      around. The agent still sees only the person: it can learn where walls tend to be from
+      how the person moves, not see them.
+    - ``near_weight``: charges being nearer than the following distance once more, on top of
+      ``far_weight`` (the same distance, the same source, before the floor): ``near_weight *
+      max(target_distance_m - d, 0)``. An agent charged alike on both sides overshoots when the
+      person stops (it came to 0.76 m and backed off); a charge that is steeper on the near
+      side makes closing in dearer than lagging.
 
     Put a ``VecMonitor`` below this wrapper to log the env's own episode returns.
 
@@ -265,6 +284,13 @@ class VecShapedReward(VecEnvWrapper):
     :param target_distance_m: the following distance [m] (the env's 1 m), >= 0.
     :param far_source: ``observation`` or ``truth``: the distance ``far_weight`` charges.
     :param offset_source: ``observation`` or ``truth``: the offset ``offset_weight`` charges.
+    :param blind_speed_weight: weight on the forward speed command on steps without a detection
+        [reward per agent unit per step], >= 0; 0: none.
+    :param clearance_weight: weight on the wall clearance's shortfall below ``clearance_m``, as
+        a share of it [reward per step at contact], >= 0; 0: none.
+    :param clearance_m: the wall clearance below which the charge starts [m], > 0.
+    :param near_weight: weight on the distance's shortfall below ``target_distance_m``, on top
+        of ``far_weight``'s charge [reward per m per step], >= 0; 0: none.
     """
 
     #: Changes rewards only: :func:`train.envs.agent_env` leaves it out at inference.
@@ -292,6 +318,10 @@ class VecShapedReward(VecEnvWrapper):
         target_distance_m: float = 1.0,
         far_source: str = "observation",
         offset_source: str = "observation",
+        blind_speed_weight: float = 0.0,
+        clearance_weight: float = 0.0,
+        clearance_m: float = 0.3,
+        near_weight: float = 0.0,
     ) -> None:
         for name, value in (
             ("alive_bonus", alive_bonus),
@@ -302,9 +332,13 @@ class VecShapedReward(VecEnvWrapper):
             ("far_weight", far_weight),
             ("far_from_m", far_from_m),
             ("target_distance_m", target_distance_m),
+            ("blind_speed_weight", blind_speed_weight),
+            ("clearance_weight", clearance_weight),
+            ("near_weight", near_weight),
         ):
             lo = 0.0 if name.endswith(("weight", "_m")) else None
             check_number(f"VecShapedReward.{name}", value, lo, optional=name == "reward_floor")
+        check_number("VecShapedReward.clearance_m", clearance_m, 0.0, lo_open=True)
         check_number("VecShapedReward.far_power", far_power, 1.0, 3.0)
         sources = {"far_source": far_source, "offset_source": offset_source}
         for name, value in sources.items():
@@ -314,18 +348,24 @@ class VecShapedReward(VecEnvWrapper):
                     f"{', '.join(self.SOURCES)}"
                 )
         truthful = [name for name, value in sources.items() if value == "truth"]
-        truths = [self.TRUTH_KEYS[name] for name in truthful]
-        if truths:
+        needs = [f"{name}=truth" for name in truthful]
+        keys = [self.TRUTH_KEYS[name] for name in truthful]
+        if blind_speed_weight:
+            needs.append("blind_speed_weight")
+            keys.append("detected")
+        if clearance_weight:
+            needs.append("clearance_weight")
+            keys.append("wall_clearance_m")
+        if keys:
             try:  # every lane's env (the adapter keeps one set of keys for all its lanes)
-                venv.env_method("include_info", truths)
-                kept = all(set(truths) <= set(keys) for keys in venv.get_attr("info_keys"))
+                venv.env_method("include_info", keys)
+                kept = all(set(keys) <= set(have) for have in venv.get_attr("info_keys"))
             except AttributeError:
                 kept = False
             if not kept:
                 raise ValueError(
-                    f"VecShapedReward: {' and '.join(f'{n}=truth' for n in truthful)} needs an "
-                    f"env whose infos can carry {', '.join(truths)} (follow_env's SB3 adapter: "
-                    "include_info)"
+                    f"VecShapedReward: {' and '.join(needs)} needs an env whose infos can carry "
+                    f"{', '.join(keys)} (follow_env's SB3 adapter: include_info)"
                 )
         act_box = venv.action_space
         if not isinstance(act_box, spaces.Box) or len(act_box.shape) != 1:
@@ -342,6 +382,16 @@ class VecShapedReward(VecEnvWrapper):
         self.target_distance_m = float(target_distance_m)
         self.far_source = far_source
         self.offset_source = offset_source
+        self.blind_speed_weight = float(blind_speed_weight)
+        self.clearance_weight = float(clearance_weight)
+        self.clearance_m = float(clearance_m)
+        self.near_weight = float(near_weight)
+        self._v_entry = names.index("v_mps") if "v_mps" in names else None
+        if self.blind_speed_weight and self._v_entry is None:
+            raise ValueError(
+                f"VecShapedReward.blind_speed_weight: the env's action [{', '.join(names)}] has "
+                "no v_mps"
+            )
         self._half_width_px = float(venv.observation_space.high[1]) + 1.0
         self._low, self._high = act_box.low, act_box.high
         self._prev = np.zeros((venv.num_envs, len(names)))
@@ -396,8 +446,8 @@ class VecShapedReward(VecEnvWrapper):
             ) from None
 
     def _far(self, obs: np.ndarray, dones: np.ndarray, infos: list[dict[str, Any]]) -> np.ndarray:
-        """The ``far_weight`` charge of each lane's step, from the distance it reached: the
-        truth's, or the observation's (the terminal one where an episode ended; rows
+        """The ``far_weight`` and ``near_weight`` charge of each lane's step, from the distance
+        it reached: the truth's, or the observation's (the terminal one where an episode ended; rows
         ``[distance_m, offset_px, ...]``; no reading yet, ``d <= 0``: nothing)."""
         if self.far_source == "truth":
             d = self._truth("far_source", infos)
@@ -407,7 +457,9 @@ class VecShapedReward(VecEnvWrapper):
                 if "terminal_observation" in infos[i]:
                     d[i] = float(np.asarray(infos[i]["terminal_observation"])[0])
         excess = np.maximum(np.abs(d - self.target_distance_m) - self.far_from_m, 0.0)
-        return self.far_weight * np.where(d > 0.0, excess**self.far_power, 0.0)
+        near = np.maximum(self.target_distance_m - d, 0.0)
+        charge = self.far_weight * excess**self.far_power + self.near_weight * near
+        return np.where(d > 0.0, charge, 0.0)
 
     def step_async(self, actions: np.ndarray) -> None:
         a = np.asarray(actions, dtype=np.float64).reshape(self._prev.shape)
@@ -421,7 +473,7 @@ class VecShapedReward(VecEnvWrapper):
         truncated = np.array([info.get("TimeLimit.truncated", False) for info in infos])
         terminated = np.asarray(dones, dtype=bool) & ~truncated
         r = np.asarray(rewards, dtype=np.float64)
-        if self.far_weight:
+        if self.far_weight or self.near_weight:
             r = r - self._far(obs, dones, infos)
         shaped = np.where(terminated, r, np.maximum(r, self.reward_floor))
         shaped += self.alive_bonus - self._change @ self.rate_weights
@@ -431,6 +483,14 @@ class VecShapedReward(VecEnvWrapper):
             else:  # the observation the agent sees next (the reset's after an episode's end)
                 offset = np.asarray(obs, dtype=np.float64)[:, 1]
             shaped -= self.offset_weight * np.minimum(np.abs(offset) / self._half_width_px, 1.0)
+        if self.blind_speed_weight:
+            blind = ~np.array([bool(info["detected"]) for info in infos])
+            forward = np.maximum(self._prev[:, self._v_entry], 0.0)
+            shaped -= self.blind_speed_weight * np.where(blind, forward, 0.0)
+        if self.clearance_weight:
+            c = np.array([info["wall_clearance_m"] for info in infos], dtype=np.float64)
+            short = np.clip(self.clearance_m - c, 0.0, self.clearance_m) / self.clearance_m
+            shaped -= self.clearance_weight * short
         self._prev[dones] = 0.0
         return obs, shaped.astype(np.float32), dones, infos
 

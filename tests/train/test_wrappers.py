@@ -231,6 +231,22 @@ def test_far_power_charges_the_squared_error_from_the_start() -> None:
     assert squared.step(np.zeros((1, 2)))[1][0] == pytest.approx(-2.0 * 0.25)  # below 1 m: less
 
 
+def test_near_weight_charges_the_near_side_once_more() -> None:
+    # lane 0 at 0.6 m (0.4 m too near), then 1.5 m (0.5 m too far); lane 1 has no reading yet
+    obs = [[[1.0, 0.0], [1.0, 0.0]], [[0.6, 0.0], [0.0, 0.0]], [[1.5, 0.0], [0.0, 0.0]]]
+    wrapped = VecShapedReward(
+        ScriptedVecEnv(obs), alive_bonus=1.0, far_weight=2.0, far_from_m=0.0, near_weight=3.0
+    )
+    wrapped.reset()
+    np.testing.assert_allclose(
+        wrapped.step(np.zeros((2, 2)))[1], [1.0 - (2.0 + 3.0) * 0.4, 1.0], rtol=1e-6
+    )
+    np.testing.assert_allclose(wrapped.step(np.zeros((2, 2)))[1], [1.0 - 2.0 * 0.5, 1.0], atol=1e-6)
+    alone = VecShapedReward(ScriptedVecEnv(obs), near_weight=3.0)  # without far_weight too
+    alone.reset()
+    np.testing.assert_allclose(alone.step(np.zeros((2, 2)))[1], [-3.0 * 0.4, 0.0], rtol=1e-6)
+
+
 def test_the_distance_and_offset_terms_can_charge_the_truth() -> None:
     """far_source / offset_source truth: the target's true distance and offset of the state each
     step reached (an ended episode's final one), from the adapter's infos; the agent's
@@ -266,6 +282,74 @@ def test_a_truth_source_needs_an_env_that_can_report_it() -> None:
         VecShapedReward(ScriptedVecEnv(constant_obs(1)), far_source="true")
     with pytest.raises(ValueError, match=r"offset_source=truth needs an env whose infos can carry"):
         VecShapedReward(ScriptedVecEnv(constant_obs(1)), offset_source="truth")
+
+
+def test_blind_speed_weight_charges_the_forward_command_while_nothing_is_detected() -> None:
+    """The charge is ``w * max(v, 0)`` on the steps whose frame has no detection (the env's
+    ``detected``), nothing otherwise: the same shaping without it, on the same rollout, differs
+    by exactly that."""
+    kwargs: dict[str, Any] = {"scenario": "occlusion", "episode": {"max_steps": 40}}
+    weights = {"reward_floor": -1.0, "alive_bonus": 1.0, "v_rate_weight": 4.0}
+    blind = VecShapedReward(
+        follow_env.make_sb3_vec_env(2, **kwargs), blind_speed_weight=2.0, **weights
+    )
+    plain = VecShapedReward(follow_env.make_sb3_vec_env(2, full_info=True, **kwargs), **weights)
+    for env in (blind, plain):
+        env.seed(5)
+        env.reset()
+    rng = np.random.default_rng(0)
+    charged = 0
+    for _ in range(60):  # lane 0 drives on at 1 m/s (into the walls), lane 1 backs away
+        action = np.array([[1.0, rng.uniform(-1, 1)], [-0.5, 0.0]], dtype=np.float32)
+        obs, shaped, dones, _ = blind.step(action)
+        plain_obs, base, plain_dones, infos = plain.step(action)
+        np.testing.assert_array_equal(obs, plain_obs)
+        np.testing.assert_array_equal(dones, plain_dones)
+        unseen = ~np.array([info["detected"] for info in infos])
+        expected = base - 2.0 * np.where(unseen, np.maximum(action[:, 0], 0.0), 0.0)
+        np.testing.assert_allclose(shaped, expected, rtol=1e-6, atol=1e-6)
+        charged += int((unseen & (action[:, 0] > 0)).sum())
+    assert charged >= 5  # frames without a detection were met, and charged
+
+
+def test_clearance_weight_charges_the_wall_clearance_shortfall_up_to_the_collision() -> None:
+    """The charge is ``w * clip(clearance_m - c, 0, clearance_m) / clearance_m`` with ``c`` the
+    true wall clearance of the state each step reached (an ended episode's final one): the same
+    shaping without it, on the same rollout, differs by exactly that, and a lane driven into
+    the wall pays it on the steps before the collision."""
+    kwargs: dict[str, Any] = {"scenario": "occlusion", "episode": {"max_steps": 80}}
+    weights = {"reward_floor": -1.0, "alive_bonus": 1.0}
+    near = VecShapedReward(
+        follow_env.make_sb3_vec_env(2, **kwargs), clearance_weight=4.0, clearance_m=0.5, **weights
+    )
+    plain = VecShapedReward(follow_env.make_sb3_vec_env(2, full_info=True, **kwargs), **weights)
+    for env in (near, plain):
+        env.seed(5)
+        env.reset()
+    charged, collided = 0, 0
+    for _ in range(80):  # both lanes turn and drive on: into a wall
+        action = np.array([[1.0, 0.8], [0.6, -1.0]], dtype=np.float32)
+        _, shaped, dones, _ = near.step(action)
+        _, base, plain_dones, infos = plain.step(action)
+        np.testing.assert_array_equal(dones, plain_dones)
+        c = np.array([info["wall_clearance_m"] for info in infos])
+        expected = base - 4.0 * np.clip(0.5 - c, 0.0, 0.5) / 0.5
+        np.testing.assert_allclose(shaped, expected, rtol=1e-6, atol=1e-6)
+        charged += int(((c < 0.5) & (c > 0.0)).sum())
+        collided += sum(info.get("termination") == "collision_wall" for info in infos)
+    assert charged >= 3  # walls were approached and charged,
+    assert collided >= 1  # and hit
+
+
+def test_blind_speed_and_clearance_weights_need_their_info_keys() -> None:
+    with pytest.raises(ValueError, match=r"blind_speed_weight needs an env whose infos can carry"):
+        VecShapedReward(ScriptedVecEnv(constant_obs(1)), blind_speed_weight=1.0)
+    with pytest.raises(ValueError, match=r"blind_speed_weight=-1\.0 is out of range"):
+        VecShapedReward(ScriptedVecEnv(constant_obs(1)), blind_speed_weight=-1.0)
+    with pytest.raises(ValueError, match=r"clearance_weight needs an env whose infos can carry"):
+        VecShapedReward(ScriptedVecEnv(constant_obs(1)), clearance_weight=1.0)
+    with pytest.raises(ValueError, match=r"clearance_m=0\.0 is out of range"):
+        VecShapedReward(ScriptedVecEnv(constant_obs(1)), clearance_m=0.0)
 
 
 def _stack_script() -> tuple[list, list]:
