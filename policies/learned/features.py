@@ -337,13 +337,24 @@ class IncrementalAction(Feature):
     :param reading_index: the observation entry holding the distance, or None. While it is <= 0
         (no distance reading yet) the command does not change, so the robot stays at rest until
         it first measures the person, as the reference robot and every guidance law do.
+    :param brake_change: the largest change per step towards rest, one per entry (inner
+        units), or None: ``max_change`` both ways (and through zero in one step). Given, a step
+        whose action points against the command's sign takes ``|u|`` down by up to
+        ``brake_change * |a|`` and stops at rest (the next step may go on past zero at
+        ``max_change``). The drive brakes much harder than a
+        smooth follower needs to speed up: with one limit for both, an agent that follows at
+        1 m/s cannot stop within the distance it keeps when the person stops.
     """
 
     def __init__(
-        self, max_change: Sequence[float] = (0.1, 0.1), reading_index: int | None = None
+        self,
+        max_change: Sequence[float] = (0.1, 0.1),
+        reading_index: int | None = None,
+        brake_change: Sequence[float] | None = None,
     ) -> None:
         self.given = max_change
         self.reading_index = reading_index
+        self.given_brake = brake_change
 
     def bind(self, obs: Box, act: Box, n: int) -> tuple[Box, Box]:
         change = _numbers(self.given)
@@ -357,6 +368,17 @@ class IncrementalAction(Feature):
                 f"{act.shape[0]} positive numbers, one per action entry "
                 f"[{', '.join(act.entry_names())}]"
             )
+        brake = change if self.given_brake is None else _numbers(self.given_brake)
+        if (
+            brake is None
+            or brake.shape != act.shape
+            or not np.all(np.isfinite(brake) & (brake > 0))
+        ):
+            raise ValueError(
+                f"{self.owner}.brake_change={self.given_brake!r} is out of range: must be None "
+                f"or {act.shape[0]} positive numbers, one per action entry "
+                f"[{', '.join(act.entry_names())}]"
+            )
         n_obs = obs.shape[0]
         index = self.reading_index
         if index is not None and not (is_integer(index) and 0 <= index < n_obs):
@@ -365,6 +387,7 @@ class IncrementalAction(Feature):
                 f"observation index in [0, {n_obs - 1}]"
             )
         self.max_change = change
+        self.brake_change = brake
         self._low = act.low.astype(np.float64)
         self._high = act.high.astype(np.float64)
         self._command = np.zeros((n, act.shape[0]))
@@ -380,7 +403,12 @@ class IncrementalAction(Feature):
     def act(self, action: np.ndarray) -> np.ndarray:
         a = np.clip(np.asarray(action, dtype=np.float64).reshape(self._command.shape), -1, 1)
         a[~self._reading] = 0.0
-        self._command = np.clip(self._command + self.max_change * a, self._low, self._high)
+        u = self._command
+        moved = u + self.max_change * a
+        if self.given_brake is not None:  # towards rest: down by up to brake_change, to zero
+            slowed = np.sign(u) * np.maximum(np.abs(u) - self.brake_change * np.abs(a), 0.0)
+            moved = np.where(a * u < 0.0, slowed, moved)
+        self._command = np.clip(moved, self._low, self._high)
         return self._command.astype(np.float32)
 
     def observe(self, obs: np.ndarray, done: np.ndarray) -> np.ndarray:

@@ -133,6 +133,26 @@ def test_incremental_action_clips_to_the_wrapped_box_and_restarts_at_rest() -> N
     np.testing.assert_allclose(obs, [[1.0, 0.0, 0.0, 0.0]])  # the next episode starts at rest
 
 
+def test_incremental_action_brakes_by_brake_change_and_stops_at_rest() -> None:
+    env = ScriptedVecEnv(constant_obs(6))
+    wrapped = VecIncrementalAction(env, max_change=[0.5, 1.0], brake_change=[1.5, 1.0])
+    wrapped.reset()
+    for a in ([1.0, 1.0], [1.0, 1.0], [1.0, 1.0]):  # speeding up: max_change a step
+        wrapped.step(np.array([a]))
+    np.testing.assert_allclose(env.actions[-1], [[1.5, 3.0]])
+    wrapped.step(np.array([[-0.5, -0.5]]))  # towards rest: brake_change * |a|
+    np.testing.assert_allclose(env.actions[-1], [[0.75, 2.5]])
+    wrapped.step(np.array([[-1.0, 0.0]]))  # 1.5 of braking asked, 0.75 left: stops at rest
+    np.testing.assert_allclose(env.actions[-1], [[0.0, 2.5]])
+    wrapped.step(np.array([[-1.0, 0.0]]))  # from rest, backwards at max_change
+    np.testing.assert_allclose(env.actions[-1], [[-0.5, 2.5]])
+    plain = VecIncrementalAction(ScriptedVecEnv(constant_obs(2)), max_change=[0.5, 1.0])
+    plain.reset()
+    plain.step(np.array([[0.4, 0.0]]))
+    plain.step(np.array([[-1.0, 0.0]]))  # without brake_change: through zero in one step
+    np.testing.assert_allclose(plain.venv.actions[-1], [[-0.3, 0.0]])
+
+
 def test_incremental_action_keeps_the_robot_at_rest_until_a_distance_reading() -> None:
     script = [[[0.0, 5.0]], [[0.0, 5.0]], [[1.2, 5.0]], [[1.2, 5.0]]]
     env = ScriptedVecEnv(script)
@@ -432,6 +452,11 @@ def test_concat_vec_env_lane_j_replays_its_scenario_seeded_s_plus_j() -> None:
             r"observation index in \[0, 1\]",
         ),
         (lambda e: VecIncrementalAction(e, reading_index="0"), r"reading_index='0' is out of"),
+        (
+            lambda e: VecIncrementalAction(e, max_change=[0.5, 0.5], brake_change=[0.5, 0.0]),
+            r"VecIncrementalAction\.brake_change=\[0\.5, 0\.0\] is out of range: must be None or 2 "
+            r"positive numbers",
+        ),
         (lambda e: VecObservationAge(e, max_age_steps=2.5), r"max_age_steps=2\.5 is out of range"),
         (lambda e: VecShapedReward(e, v_rate_weight=-1), r"v_rate_weight=-1 is out of range"),
         (
