@@ -357,28 +357,12 @@ class IncrementalAction(Feature):
         self.given_brake = brake_change
 
     def bind(self, obs: Box, act: Box, n: int) -> tuple[Box, Box]:
-        change = _numbers(self.given)
-        if (
-            change is None
-            or change.shape != act.shape
-            or not np.all(np.isfinite(change) & (change > 0))
-        ):
-            raise ValueError(
-                f"{self.owner}.max_change={self.given!r} is out of range: must be "
-                f"{act.shape[0]} positive numbers, one per action entry "
-                f"[{', '.join(act.entry_names())}]"
-            )
-        brake = change if self.given_brake is None else _numbers(self.given_brake)
-        if (
-            brake is None
-            or brake.shape != act.shape
-            or not np.all(np.isfinite(brake) & (brake > 0))
-        ):
-            raise ValueError(
-                f"{self.owner}.brake_change={self.given_brake!r} is out of range: must be None "
-                f"or {act.shape[0]} positive numbers, one per action entry "
-                f"[{', '.join(act.entry_names())}]"
-            )
+        change = self._steps("max_change", self.given, act)
+        brake = (
+            change
+            if self.given_brake is None
+            else self._steps("brake_change", self.given_brake, act)
+        )
         n_obs = obs.shape[0]
         index = self.reading_index
         if index is not None and not (is_integer(index) and 0 <= index < n_obs):
@@ -394,6 +378,21 @@ class IncrementalAction(Feature):
         self._reading = np.ones(n, dtype=bool)
         outer_obs = Box(np.concatenate([obs.low, act.low]), np.concatenate([obs.high, act.high]))
         return outer_obs, Box(-np.ones(act.shape), np.ones(act.shape), act.names)
+
+    def _steps(self, field: str, given: Any, act: Box) -> np.ndarray:
+        """``given`` as one positive step per action entry, or a ValueError naming ``field``."""
+        steps = _numbers(given)
+        if (
+            steps is None
+            or steps.shape != act.shape
+            or not np.all(np.isfinite(steps) & (steps > 0))
+        ):
+            may = "None or " if field == "brake_change" else ""
+            raise ValueError(
+                f"{self.owner}.{field}={given!r} is out of range: must be {may}{act.shape[0]} "
+                f"positive numbers, one per action entry [{', '.join(act.entry_names())}]"
+            )
+        return steps
 
     def start(self, obs: np.ndarray) -> np.ndarray:
         self._command[:] = 0.0
