@@ -250,7 +250,10 @@ class VecShapedReward(VecEnvWrapper):
       frame has no detection (the env's info ``detected``, which the wrapper asks the env to
       include, as for the truth). The laws stop when the person disappears (and lose them); an
       agent that drives on towards where they were runs into the wall they walked behind
-      (``occlusion``). The charge teaches it to slow down while it sees nothing.
+      (``occlusion``). The charge is meant to teach it to slow down while it sees nothing; it
+      comes after the floor, so a large weight makes standing still the cheapest course.
+      (Measured, README "Tried on top of ppo_fast.yaml": at 1 the agent backed away while
+      blind and cut the corner when the person reappeared; at 3 it never set off.)
     - ``clearance_weight``: charges coming near a wall, ``clearance_weight * max(clearance_m -
       c, 0) / clearance_m`` a step, where ``c`` is the robot footprint's true clearance to the
       nearest wall (the env's info ``wall_clearance_m``, included as for the truth; a
@@ -258,12 +261,13 @@ class VecShapedReward(VecEnvWrapper):
       penalty alone is one sparse charge at the end; a wall approached is charged on every step
       before it, which tells the agent which of its paths cut a corner the person walked
       around. The agent still sees only the person: it can learn where walls tend to be from
-      how the person moves, not see them.
+      how the person moves, not see them. (Measured: at 2, wall collisions fell from 4 to 3 in
+      240 episodes; at 5 the agent kept off walls by falling back and lost the person more.)
     - ``near_weight``: charges being nearer than the following distance once more, on top of
       ``far_weight`` (the same distance, the same source, before the floor): ``near_weight *
       max(target_distance_m - d, 0)``. An agent charged alike on both sides overshoots when the
       person stops (it came to 0.76 m and backed off); a charge that is steeper on the near
-      side makes closing in dearer than lagging.
+      side makes closing in dearer than lagging. (Measured: at 2 and 4 the overshoot stayed.)
 
     Put a ``VecMonitor`` below this wrapper to log the env's own episode returns.
 
@@ -447,8 +451,8 @@ class VecShapedReward(VecEnvWrapper):
 
     def _far(self, obs: np.ndarray, dones: np.ndarray, infos: list[dict[str, Any]]) -> np.ndarray:
         """The ``far_weight`` and ``near_weight`` charge of each lane's step, from the distance
-        it reached: the truth's, or the observation's (the terminal one where an episode ended; rows
-        ``[distance_m, offset_px, ...]``; no reading yet, ``d <= 0``: nothing)."""
+        it reached: the truth's, or the observation's (the terminal one where an episode ended;
+        rows ``[distance_m, offset_px, ...]``; no reading yet, ``d <= 0``: nothing)."""
         if self.far_source == "truth":
             d = self._truth("far_source", infos)
         else:

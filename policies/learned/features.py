@@ -341,9 +341,10 @@ class IncrementalAction(Feature):
         units), or None: ``max_change`` both ways (and through zero in one step). Given, a step
         whose action points against the command's sign takes ``|u|`` down by up to
         ``brake_change * |a|`` and stops at rest (the next step may go on past zero at
-        ``max_change``). The drive brakes much harder than a
-        smooth follower needs to speed up: with one limit for both, an agent that follows at
-        1 m/s cannot stop within the distance it keeps when the person stops.
+        ``max_change``). The drive can brake much harder than a smooth follower needs to
+        speed up. (Measured, README "Tried on top of ppo_fast.yaml": agents trained with two
+        and three times the step towards rest came as close to a person who stops as with one
+        limit: the overshoot at stops is not the limit's.)
     """
 
     def __init__(
