@@ -338,13 +338,9 @@ class IncrementalAction(Feature):
         (no distance reading yet) the command does not change, so the robot stays at rest until
         it first measures the person, as the reference robot and every guidance law do.
     :param brake_change: the largest change per step towards rest, one per entry (inner
-        units), or None: ``max_change`` both ways (and through zero in one step). Given, a step
-        whose action points against the command's sign takes ``|u|`` down by up to
-        ``brake_change * |a|`` and stops at rest (the next step may go on past zero at
-        ``max_change``). The drive can brake much harder than a smooth follower needs to
-        speed up. (Measured, README "Tried on top of ppo_fast.yaml": agents trained with two
-        and three times the step towards rest came as close to a person who stops as with one
-        limit: the overshoot at stops is not the limit's.)
+        units), or None: ``max_change`` both ways. Given, an action against the command's sign
+        takes ``|u|`` down by up to ``brake_change * |a|``, stopping at rest (README, "Tried
+        on top of ppo_fast.yaml": it did not stop the overshoot at stops).
     """
 
     def __init__(
@@ -383,11 +379,8 @@ class IncrementalAction(Feature):
     def _steps(self, field: str, given: Any, act: Box) -> np.ndarray:
         """``given`` as one positive step per action entry, or a ValueError naming ``field``."""
         steps = _numbers(given)
-        if (
-            steps is None
-            or steps.shape != act.shape
-            or not np.all(np.isfinite(steps) & (steps > 0))
-        ):
+        good = steps is not None and steps.shape == act.shape
+        if not (good and np.all(np.isfinite(steps) & (steps > 0))):
             may = "None or " if field == "brake_change" else ""
             raise ValueError(
                 f"{self.owner}.{field}={given!r} is out of range: must be {may}{act.shape[0]} "
