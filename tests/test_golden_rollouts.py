@@ -14,7 +14,10 @@ _spec = importlib.util.spec_from_file_location(
 golden = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(golden)  # type: ignore[union-attr]
 
-RECORDED = json.loads(golden.GOLDEN.read_text())["episodes"]
+_DOC = json.loads(golden.GOLDEN.read_text())
+RECORDED = _DOC["episodes"]
+# Hashes of the same episodes on other CPUs (tests/golden/rollouts.py says when and why).
+ALTERNATES = _DOC.get("alternates", {})
 
 
 @pytest.mark.slow
@@ -24,12 +27,16 @@ def test_single_and_vector_env_replay_the_recorded_episodes(
 ) -> None:
     lanes = golden.vector_env_hashes(scenario, golden.SEEDS, policy, config)
     for seed, lane_hash in zip(golden.SEEDS, lanes, strict=True):
-        want = RECORDED[f"{prefix}/{seed}"]
+        name = f"{prefix}/{seed}"
+        want = RECORDED[name]
+        accepted = {want["sha256"], *(a["sha256"] for a in ALTERNATES.get(name, []))}
         digest, steps = golden.single_env_hash(scenario, seed, policy, config)
-        assert (digest, steps) == (want["sha256"], want["steps"]), f"{prefix}/{seed} single env"
-        assert lane_hash == want["sha256"], f"{prefix}/{seed} vector lane"
+        assert steps == want["steps"], f"{name} single env"
+        assert digest in accepted, f"{name} single env"
+        assert lane_hash == digest, f"{name} vector lane"
 
 
 def test_every_case_was_recorded() -> None:
     names = {f"{prefix}/{seed}" for prefix, *_ in golden.cases() for seed in golden.SEEDS}
     assert names == set(RECORDED)
+    assert set(ALTERNATES) <= names
