@@ -414,9 +414,13 @@ class VecShapedReward(VecEnvWrapper):
         return self.venv.reset()
 
     def _truth(self, source: str, infos: list[dict[str, Any]]) -> np.ndarray:
-        """Each lane's true value for ``source`` (``far_source`` or ``offset_source``) from the
-        infos, the final state's where an episode ended (the adapter's ``include_info``)."""
-        key = self.TRUTH_KEYS[source]
+        """Each lane's true value for ``source`` (``far_source`` or ``offset_source``)."""
+        return self._info(self.TRUTH_KEYS[source], infos)
+
+    @staticmethod
+    def _info(key: str, infos: list[dict[str, Any]]) -> np.ndarray:
+        """Each lane's info ``key`` as floats, the final state's where an episode ended (the
+        adapter's ``include_info``, which the constructor asked for)."""
         try:
             return np.array([info[key] for info in infos], dtype=np.float64)
         except KeyError:
@@ -464,11 +468,11 @@ class VecShapedReward(VecEnvWrapper):
                 offset = np.asarray(obs, dtype=np.float64)[:, 1]
             shaped -= self.offset_weight * np.minimum(np.abs(offset) / self._half_width_px, 1.0)
         if self.blind_speed_weight:
-            blind = ~np.array([bool(info["detected"]) for info in infos])
+            blind = self._info("detected", infos) == 0.0
             forward = np.maximum(self._prev[:, self._v_entry], 0.0)
             shaped -= self.blind_speed_weight * np.where(blind, forward, 0.0)
         if self.clearance_weight:
-            c = np.array([info["wall_clearance_m"] for info in infos], dtype=np.float64)
+            c = self._info("wall_clearance_m", infos)
             short = np.clip(self.clearance_m - c, 0.0, self.clearance_m) / self.clearance_m
             shaped -= self.clearance_weight * short
         self._prev[dones] = 0.0

@@ -356,9 +356,7 @@ class IncrementalAction(Feature):
     def bind(self, obs: Box, act: Box, n: int) -> tuple[Box, Box]:
         change = self._steps("max_change", self.given, act)
         brake = (
-            change
-            if self.given_brake is None
-            else self._steps("brake_change", self.given_brake, act)
+            None if self.given_brake is None else self._steps("brake_change", self.given_brake, act)
         )
         n_obs = obs.shape[0]
         index = self.reading_index
@@ -398,7 +396,7 @@ class IncrementalAction(Feature):
         a[~self._reading] = 0.0
         u = self._command
         moved = u + self.max_change * a
-        if self.given_brake is not None:  # towards rest: down by up to brake_change, to zero
+        if self.brake_change is not None:  # towards rest: down by up to brake_change, to zero
             slowed = np.sign(u) * np.maximum(np.abs(u) - self.brake_change * np.abs(a), 0.0)
             moved = np.where(a * u < 0.0, slowed, moved)
         self._command = np.clip(moved, self._low, self._high)
