@@ -30,7 +30,9 @@ agent under the path as its name (:mod:`policies.learned.ppo`).
 - A learned agent: ``register_policy("ppo", factory)``, where the factory imports
   torch/stable-baselines3 and loads the model only when called (:mod:`policies.learned.ppo`).
 - A filesystem path (``runs/x/model.zip`` or a run folder): ``register_resolver(resolver)``;
-  :func:`policies.learned.ppo.resolve_path` is registered and loads PPO agents.
+  :func:`policies.learned.ppo.resolve_path` is registered and loads PPO agents;
+  :func:`policies.learned.ensemble.resolve_path`, before it, loads a folder with an
+  ``ensemble.yaml`` as the mean of its members.
   Names not registered exactly are offered to each resolver in turn; a resolver returns a policy
   for names it understands and None for the rest.
 """
@@ -44,7 +46,7 @@ from typing import Any, Generic, TypeVar
 
 from policies import coordinate, gsmpn, holonomic, mpn, pid_line, pn
 from policies.base import Policy
-from policies.learned import ppo
+from policies.learned import ensemble, ppo
 from policies.space import SearchSpace, check_space
 
 PolicyFactory = Callable[[], Policy]
@@ -285,4 +287,6 @@ register_policy("ppo", ppo.load_default)
 # The mecanum base's agent (its action is [v_mps, vy_mps, w_radps]: ppo_mecanum@mecanum).
 register_policy("ppo_mecanum", partial(ppo.load_shipped, "ppo_mecanum"))
 register_policy("ppo", partial(ppo.load_shipped, "ppo_line", name="ppo"), task="line_trace")
+# A folder with an ensemble.yaml (a seed study's) is the mean of its members' actions.
+register_resolver(ensemble.resolve_path)
 register_resolver(ppo.resolve_path)

@@ -16,7 +16,10 @@ process, ``--workers`` at once in a process pool, or Ray tasks, each given ``--t
 When every seed has finished, ``<out>/seeds.csv`` (one row per seed: its folder, env steps,
 wall time, env-steps/s, final held-out return) and ``<out>/summary.md`` / ``summary.json``
 (mean, standard deviation, median and interquartile mean of the final held-out return over the
-seeds, with a bootstrap 95 % CI of the mean) are written, atomically. ``<out>/study.json``
+seeds, with a bootstrap 95 % CI of the mean) are written, atomically, and ``<out>/ensemble.yaml``,
+which makes the study one agent: ``make_policy("runs/ppo-study")`` (or ``follow-eval run
+--policies runs/ppo-study``) acts with the mean of every seed's action
+(:mod:`policies.learned.ensemble`), an agent no one picked from the seeds. ``<out>/study.json``
 records the command's settings: the same command run again skips the finished seeds, resumes
 an interrupted one from its newest checkpoint (:mod:`train.run`) and starts the missing ones
 (so ``--seeds 0-9`` after ``--seeds 0-4`` trains five more); other settings pointed at the same
@@ -37,14 +40,16 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
+import yaml
 
 from eval.atomic import atomic_write_text
 from execution import Backend, execute
+from policies.learned.ensemble import ENSEMBLE
 from train import run as runs
 from train.algos import DEFAULT_ALGO, algo
 from train.ppo import MAX_SEED, Args, check_new_run, train
 
-__all__ = ["MAX_SEEDS", "SEED_STRIDE", "parse_seeds", "seed_args", "train_seeds"]
+__all__ = ["MAX_SEEDS", "SEED_STRIDE", "parse_seeds", "seed_args", "train_seeds", "write_ensemble"]
 
 #: Training seed k's lanes start this many seeds after seed k - 1's: more than any run's
 #: env steps plus lanes (a run of n_timesteps steps uses seed .. seed + n_timesteps + n_envs).
@@ -173,7 +178,22 @@ def train_seeds(
     _claim(study, settings)
     rows = execute(_train_unit, units, backend, done=done)
     write_summary(study, rows)
+    if len(rows) > 1:
+        write_ensemble(study, [f"seed-{row['seed']}" for row in rows])
     return study
+
+
+def write_ensemble(study: Path, members: Sequence[str]) -> Path:
+    """``study/ensemble.yaml``, listing ``members`` (run folders relative to ``study``),
+    atomically: ``make_policy(str(study))`` is then the mean of their actions
+    (:mod:`policies.learned.ensemble`). Returns its path."""
+    path = study / ENSEMBLE
+    text = (
+        "# The mean of these agents' actions acts as one agent (policies.learned.ensemble).\n"
+        + yaml.safe_dump({"members": list(members)}, default_flow_style=True, sort_keys=False)
+    )
+    atomic_write_text(path, text)
+    return path
 
 
 def _claim(study: Path, settings: dict[str, Any]) -> None:

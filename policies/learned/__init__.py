@@ -6,5 +6,6 @@ as stable-baselines3 ``VecEnvWrapper`` s (:mod:`train.wrappers`), so a trained a
 inference exactly what it saw in training. :mod:`.ppo` loads an agent (torch and
 stable-baselines3, imported only when an agent is built) and acts through that pipeline;
 :mod:`.networks` rebuilds its network per algorithm (PPO, SAC, RecurrentPPO with its LSTM
-state).
+state). :mod:`.ensemble` acts with the mean of several agents' actions (a training study's
+seeds, through its ``ensemble.yaml``).
 """

@@ -226,14 +226,20 @@ class _Loaded:
 
     def pipeline(self, n: int) -> Pipeline:
         """A fresh feature pipeline for ``n`` lanes."""
-        steps: list[Feature] = Pipeline.from_wrappers(self.wrappers)
+        steps = Pipeline.from_wrappers(self.wrappers) + self.own_steps()
+        return Pipeline(steps, self.observation_box, self.action_box, n)
+
+    def own_steps(self) -> list[Feature]:
+        """The outermost steps, this agent's own: its frozen observation normalisation and its
+        ``frame_stack`` (an ensemble's members share the steps inside them)."""
+        steps: list[Feature] = []
         stats = self.normalization
         if stats is not None and stats.norm_obs:
             rms = stats.obs_rms
             steps.append(NormalizeObservation(rms.mean, rms.var, stats.epsilon, stats.clip_obs))
         if self.frame_stack > 1:
             steps.append(FrameStack(self.frame_stack))
-        return Pipeline(steps, self.observation_box, self.action_box, n)
+        return steps
 
 
 _CACHE: dict[tuple, _Loaded] = {}

@@ -6,10 +6,14 @@ import json
 import shutil
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import pytest
 import yaml
 
+from policies import make_policy
+from policies.learned.ensemble import EnsemblePolicy
+from policies.learned.ppo import PPOPolicy
 from train.cli import main
 from train.seeds import SEED_STRIDE, parse_seeds
 
@@ -84,12 +88,28 @@ def test_the_summary_has_a_row_per_seed_and_the_statistics_across(study: Path) -
     assert "IQM" in (study / "summary.md").read_text()
 
 
+def test_the_study_is_one_agent_the_mean_of_its_seeds(study: Path) -> None:
+    assert yaml.safe_load((study / "ensemble.yaml").read_text()) == {
+        "members": ["seed-0", "seed-1"]
+    }
+    policy = make_policy(str(study))
+    assert isinstance(policy, EnsemblePolicy)
+    obs = np.array([1.3, 40.0], np.float32)
+    alone = [PPOPolicy(study / f"seed-{k}").act(obs) for k in (0, 1)]
+    np.testing.assert_allclose(policy.act(obs), (alone[0] + alone[1]) / 2, rtol=0, atol=1e-6)
+
+
 def test_the_same_command_skips_finished_seeds_and_more_seeds_extend_the_study(study: Path) -> None:
     before = (study / "seed-0" / "sessions.json").read_text()
     assert main([*TINY, "--seeds", "0-2", "--out", str(study)]) == 0
     assert (study / "seed-0" / "sessions.json").read_text() == before  # not trained again
     assert pd.read_csv(study / "seeds.csv")["seed"].tolist() == [0, 1, 2]
     assert json.loads((study / "study.json").read_text())["seeds"] == [0, 1, 2]
+    assert yaml.safe_load((study / "ensemble.yaml").read_text())["members"] == [
+        "seed-0",
+        "seed-1",
+        "seed-2",
+    ]
 
 
 def test_an_interrupted_seed_resumes_from_its_checkpoint(study: Path) -> None:

@@ -1,0 +1,186 @@
+"""Several trained agents acting as one: the mean of their actions (a seed ensemble).
+
+A study (``follow-train --seeds 0-4 --out runs/ppo-study``) trains one agent per seed; their
+spread is wide (``README``: 47 to 58 of 72 dominance requirements for the same file). Acting
+with the mean of every seed's action is one agent that no one picked: ``make_policy(
+"runs/ppo-study")`` builds it from the study's ``ensemble.yaml``, which lists the members' run
+folders relative to itself (the study writes it; any folder with such a file is an ensemble)::
+
+    # runs/ppo-study/ensemble.yaml
+    members: [seed-0, seed-1, seed-2, seed-3, seed-4]
+
+The members must see the env alike: the same observation and action boxes, platform and
+feature steps (``vec_env_wrapper`` without the training-only reward shaping, which may differ,
+and ``frame_stack``), so one feature pipeline serves all of them and the command in force (the
+incremental action's memory) is the ensemble's, not any member's. Each member then applies its
+own observation normalisation (its saved statistics) and frame stack, its network gives its
+deterministic action in agent units (within the action box, as a lone agent's), and the
+ensemble's action is their mean, mapped back to SI by the shared pipeline. The mean of
+mirror-symmetric members is mirror-symmetric.
+
+Batched acting gives each lane the action it gets alone, as :class:`~.ppo.PPOPolicy` does (each
+member's network runs one lane at a time).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from policies.learned.features import Pipeline
+from policies.learned.networks import Memory
+from policies.learned.ppo import AgentLoadError, PPOPolicy, _Loaded, _loaded, agent_files
+
+__all__ = ["ENSEMBLE", "EnsemblePolicy", "resolve_path"]
+
+#: The file that makes a folder an ensemble.
+ENSEMBLE = "ensemble.yaml"
+#: An ensemble's memory for some lanes: the shared pipeline, each member's own steps (its
+#: normalisation and frame stack) and each member's network memory (a recurrent one's state).
+_Views = tuple[Pipeline, list[Pipeline], list[Memory | None]]
+
+
+def _members(path: Path) -> list[Path]:
+    """The member folders listed in ``path`` (an ``ensemble.yaml``), checked."""
+    try:
+        data = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except (OSError, yaml.YAMLError) as e:
+        raise AgentLoadError(f"{path}: not a readable ensemble file: {e}") from None
+    members = data.get("members") if isinstance(data, dict) else None
+    if not isinstance(members, list) or len(members) < 2:
+        raise AgentLoadError(
+            f"{path}: 'members' must list at least two run folders, got {members!r}"
+        )
+    if not all(isinstance(m, str) and m for m in members):
+        raise AgentLoadError(f"{path}: every member must be a run folder's path, got {members!r}")
+    if len(set(members)) != len(members):
+        raise AgentLoadError(f"{path}: a member is listed twice: {members!r}")
+    return [path.parent / m for m in members]
+
+
+def _view_steps(agent: _Loaded) -> list[tuple[str, dict[str, Any]]]:
+    """An agent's inference feature steps as configured (the reward shaping left out)."""
+    return [(n, kw) for n, kw in agent.wrappers if not n.endswith("ShapedReward")]
+
+
+class EnsemblePolicy:
+    """The mean action of several agents as one :class:`~policies.base.Policy`.
+
+    :param path: a folder holding ``ensemble.yaml``, or that file.
+    :param name: the name in tables and logs (default: ``path`` as given).
+    :raises AgentLoadError: for a missing or malformed ensemble file, a member that cannot be
+        loaded (naming its file), or members that do not see the env alike.
+    """
+
+    def __init__(self, path: str | Path, name: str | None = None) -> None:
+        self.path = str(path)
+        self.name = name if name is not None else self.path.rstrip("/")
+        where = Path(path)
+        where = where / ENSEMBLE if where.is_dir() else where
+        if not where.exists():
+            raise AgentLoadError(f"{where}: ensemble file not found")
+        self._folders = _members(where)
+        # Each member is checked as a lone agent is (its files, shapes and statistics).
+        self._policies = [PPOPolicy(folder) for folder in self._folders]
+        self._agents: list[_Loaded] = [_loaded(agent_files(f)) for f in self._folders]
+        first = self._agents[0]
+        for folder, agent in zip(self._folders[1:], self._agents[1:], strict=True):
+            for what, mine, theirs in (
+                ("platform", agent.platform, first.platform),
+                ("action", repr(agent.action_box), repr(first.action_box)),
+                ("observation", repr(agent.observation_box), repr(first.observation_box)),
+                ("feature steps", _view_steps(agent), _view_steps(first)),
+                ("frame_stack", agent.frame_stack, first.frame_stack),
+            ):
+                if mine != theirs:
+                    raise AgentLoadError(
+                        f"{where}: member {folder} does not see the env as {self._folders[0]} "
+                        f"does ({what}: {mine!r} against {theirs!r})"
+                    )
+        self.platform: str = first.platform
+        self.action_names: tuple[str, ...] = first.action_names
+        self._rows = self._policies[0]._rows
+        self._single: _Views | None = None
+        self._batch: _Views | None = None
+        self._batch_n: int | None = None
+
+    @property
+    def members(self) -> tuple[str, ...]:
+        """The members' run folders."""
+        return tuple(str(f) for f in self._folders)
+
+    def _views(self, n: int) -> _Views:
+        """A fresh memory (:data:`_Views`) for ``n`` lanes."""
+        first = self._agents[0]
+        shared = Pipeline(
+            Pipeline.from_wrappers(first.wrappers), first.observation_box, first.action_box, n
+        )
+        tails = [
+            Pipeline(agent.own_steps(), shared.observation_box, shared.action_box, n)
+            for agent in self._agents
+        ]
+        return shared, tails, [agent.model.memory(n) for agent in self._agents]
+
+    def _act(self, views: _Views, obs: np.ndarray, start: bool) -> np.ndarray:
+        """The ensemble's SI actions for ``obs`` (``start``: the lanes' first step)."""
+        shared, tails, memories = views
+        seen = shared.start(obs) if start else shared.observe(obs)
+        total = None
+        for agent, tail, memory in zip(self._agents, tails, memories, strict=True):
+            member_obs = tail.start(seen) if start else tail.observe(seen)
+            action = agent.model.act(member_obs, memory)
+            total = action if total is None else total + action
+        assert total is not None
+        return shared.act(total / len(self._agents)).astype(np.float32)
+
+    def reset(self) -> None:
+        """Start a new episode (every member's memory and the shared pipeline afresh)."""
+        self._single = None
+
+    def act(self, obs: np.ndarray) -> np.ndarray:
+        """The mean of the members' actions for one observation, in SI (the platform's
+        :attr:`action_names`).
+
+        :raises ValueError: if ``obs`` is not a finite array of the agents' observation shape.
+        """
+        row = self._rows(obs, batch=False)
+        start = self._single is None
+        if start:
+            self._single = self._views(1)
+        return self._act(self._single, row, start)[0]
+
+    def reset_batch(self, n: int) -> None:
+        """Start ``n`` lanes' episodes."""
+        self._batch = None
+        self._batch_n = n
+
+    def act_batch(self, obs: np.ndarray) -> np.ndarray:
+        """Actions ``(n, m)`` for observations ``(n, k)``, each lane as :meth:`act` gives it."""
+        rows = self._rows(obs, batch=True)
+        if self._batch_n != len(rows):
+            raise ValueError(
+                f"act_batch got {len(rows)} observations: call reset_batch({len(rows)}) first"
+            )
+        start = self._batch is None
+        if start:
+            self._batch = self._views(len(rows))
+        return self._act(self._batch, rows, start)
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        # Rebuilt from its files in a worker process, as a lone agent is.
+        return (EnsemblePolicy, (self.path, self.name))
+
+    def __repr__(self) -> str:
+        return f"EnsemblePolicy(name={self.name!r}, members={len(self._folders)})"
+
+
+def resolve_path(name: str) -> EnsemblePolicy | None:
+    """Registry resolver: a folder holding ``ensemble.yaml`` (or the file itself) -> ensemble;
+    anything else is left to the other resolvers (None)."""
+    path = Path(name)
+    if path.name == ENSEMBLE or (path.is_dir() and (path / ENSEMBLE).exists()):
+        return EnsemblePolicy(path, name)
+    return None
