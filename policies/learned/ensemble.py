@@ -32,7 +32,7 @@ import yaml
 
 from policies.learned.features import Pipeline
 from policies.learned.networks import Memory
-from policies.learned.ppo import AgentLoadError, PPOPolicy, _Loaded, _loaded, agent_files
+from policies.learned.ppo import AgentLoadError, PPOPolicy, _Loaded
 
 __all__ = ["ENSEMBLE", "EnsemblePolicy", "resolve_path"]
 
@@ -61,11 +61,6 @@ def _members(path: Path) -> list[Path]:
     return [path.parent / m for m in members]
 
 
-def _view_steps(agent: _Loaded) -> list[tuple[str, dict[str, Any]]]:
-    """An agent's inference feature steps as configured (the reward shaping left out)."""
-    return [(n, kw) for n, kw in agent.wrappers if not n.endswith("ShapedReward")]
-
-
 class EnsemblePolicy:
     """The mean action of several agents as one :class:`~policies.base.Policy`.
 
@@ -85,14 +80,14 @@ class EnsemblePolicy:
         self._folders = _members(where)
         # Each member is checked as a lone agent is (its files, shapes and statistics).
         self._policies = [PPOPolicy(folder) for folder in self._folders]
-        self._agents: list[_Loaded] = [_loaded(agent_files(f)) for f in self._folders]
-        first = self._agents[0]
+        self._agents: list[_Loaded] = [policy._agent for policy in self._policies]
+        first, view = self._agents[0], Pipeline.view_entries
         for folder, agent in zip(self._folders[1:], self._agents[1:], strict=True):
             for what, mine, theirs in (
                 ("platform", agent.platform, first.platform),
                 ("action", repr(agent.action_box), repr(first.action_box)),
                 ("observation", repr(agent.observation_box), repr(first.observation_box)),
-                ("feature steps", _view_steps(agent), _view_steps(first)),
+                ("feature steps", view(agent.wrappers), view(first.wrappers)),
                 ("frame_stack", agent.frame_stack, first.frame_stack),
             ):
                 if mine != theirs:
@@ -128,12 +123,10 @@ class EnsemblePolicy:
         """The ensemble's SI actions for ``obs`` (``start``: the lanes' first step)."""
         shared, tails, memories = views
         seen = shared.start(obs) if start else shared.observe(obs)
-        total = None
-        for agent, tail, memory in zip(self._agents, tails, memories, strict=True):
-            member_obs = tail.start(seen) if start else tail.observe(seen)
-            action = agent.model.act(member_obs, memory)
-            total = action if total is None else total + action
-        assert total is not None
+        total = sum(
+            agent.model.act(tail.start(seen) if start else tail.observe(seen), memory)
+            for agent, tail, memory in zip(self._agents, tails, memories, strict=True)
+        )
         return shared.act(total / len(self._agents)).astype(np.float32)
 
     def reset(self) -> None:

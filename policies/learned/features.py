@@ -540,18 +540,20 @@ class Pipeline:
             action = step.act(action)
         return np.asarray(action)
 
+    @staticmethod
+    def view_entries(entries: Sequence[tuple[str, dict]]) -> list[tuple[str, str, dict]]:
+        """``(name, step, kwargs)`` of the ``vec_env_wrapper`` entries that make up an agent's
+        view (``train.wrappers.VecX`` is step ``X``; the reward shaping, which changes rewards
+        only, is left out)."""
+        steps = [(name, name.rsplit(".", 1)[-1].removeprefix("Vec"), kw) for name, kw in entries]
+        return [entry for entry in steps if entry[1] != "ShapedReward"]
+
     @classmethod
-    def from_wrappers(
-        cls, entries: Sequence[tuple[str, dict[str, Any]]], **kw: Any
-    ) -> list[Feature]:
+    def from_wrappers(cls, entries: Sequence[tuple[str, dict[str, Any]]]) -> list[Feature]:
         """The inference steps of an agent's ``vec_env_wrapper`` list (training-only ones, such
-        as the reward shaping, left out): ``[(name, kwargs), ...]``."""
+        as the reward shaping, left out: :meth:`view_entries`): ``[(name, kwargs), ...]``."""
         steps: list[Feature] = []
-        for name, kwargs in entries:
-            short = name.rsplit(".", 1)[-1]
-            short = short[3:] if short.startswith("Vec") else short
-            if short == "ShapedReward":
-                continue  # changes rewards only: not part of the agent's view
+        for name, short, kwargs in cls.view_entries(entries):
             if short not in FEATURES:
                 raise ValueError(f"unknown feature {name!r}; known: {', '.join(FEATURES)}")
             steps.append(FEATURES[short](**kwargs))
