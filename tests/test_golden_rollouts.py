@@ -28,11 +28,8 @@ def test_single_and_vector_env_replay_the_recorded_episodes(
     lanes = golden.vector_env_hashes(scenario, golden.SEEDS, policy, config)
     for seed, lane_hash in zip(golden.SEEDS, lanes, strict=True):
         name = f"{prefix}/{seed}"
-        want = RECORDED[name]
-        accepted = {want["sha256"], *(a["sha256"] for a in ALTERNATES.get(name, []))}
         digest, steps = golden.single_env_hash(scenario, seed, policy, config)
-        assert steps == want["steps"], f"{name} single env"
-        assert digest in accepted, f"{name} single env"
+        assert (digest, steps) in golden.accepted(name, _DOC), f"{name} single env"
         assert lane_hash == digest, f"{name} vector lane"
 
 
@@ -40,3 +37,6 @@ def test_every_case_was_recorded() -> None:
     names = {f"{prefix}/{seed}" for prefix, *_ in golden.cases() for seed in golden.SEEDS}
     assert names == set(RECORDED)
     assert set(ALTERNATES) <= names
+    # Only a learned agent's episode may end elsewhere on another CPU (golden/rollouts.py).
+    moved = {name for name, alts in ALTERNATES.items() for a in alts if "steps" in a}
+    assert {golden.policy_of(name) for name in moved} <= set(golden.LEARNED)

@@ -11,9 +11,15 @@ Record anew (only when behaviour changes on purpose, and say why in the commit):
 
 Some episodes hash differently on another CPU with the same packages (the same steps, values
 apart in the last bits: every ``occlusion`` episode on an AMD EPYC with AVX-512, first seen
-2026-12-02, while every other scenario matched). On such a machine, ``--alternates`` adds its
-hashes of the episodes that differ as alternates, with the CPU's name, beside the recorded
-ones; the test accepts either, and the step count must be the recorded one::
+2026-12-02, while every other scenario matched). A learned agent's episodes may differ by
+more: torch picks its matrix kernels by CPU, and 30 s of closed loop carry a last-bit
+difference in an action into another episode (on an Intel Xeon with AVX-512, first seen
+2026-12-02, 11 of the 12 scenarios' ``ppo`` episodes differed, ``crowd/ppo/0`` ending at step
+116 instead of 96, from the very tree that recorded them, while every law's matched). On such
+a machine, ``--alternates`` adds its hashes of the episodes that differ as alternates, with
+the CPU's name, beside the recorded ones; the test accepts either. A law's episode must keep
+the recorded step count (a different episode is a change of behaviour, not of the CPU); a
+learned agent's alternate records its own (:data:`LEARNED`)::
 
     .venv/bin/python tests/golden/rollouts.py --alternates
 """
@@ -50,6 +56,8 @@ SCENARIOS = (
 )
 SEEDS = (0, 1, 2)
 POLICIES = ("pn", "gsmpn", "ppo")
+#: The learned agents among them: their episodes may change with the CPU (module docstring).
+LEARNED = ("ppo",)
 # Beyond the default preset: every randomisation and push, and the tracker association, so the
 # streams and branches the thesis preset leaves off are covered too.
 EXTRA_CONFIGS: dict[str, Any] = {
@@ -207,6 +215,21 @@ def record() -> dict[str, Any]:
     }
 
 
+def policy_of(name: str) -> str:
+    """The policy of an episode's name (``[<config>:]<scenario>/<policy>/<seed>``)."""
+    return name.split("/")[-2]
+
+
+def accepted(name: str, doc: dict[str, Any]) -> set[tuple[str, int]]:
+    """The ``(sha256, steps)`` pairs episode ``name`` may hash to: the recorded one and its
+    alternates (each with the recorded steps unless it carries its own, :func:`add_alternates`)."""
+    want = doc["episodes"][name]
+    alternates = doc.get("alternates", {}).get(name, [])
+    return {(want["sha256"], want["steps"])} | {
+        (a["sha256"], a.get("steps", want["steps"])) for a in alternates
+    }
+
+
 def cpu_name() -> str:
     """The CPU's model name (Linux's ``/proc/cpuinfo``), else the machine type."""
     cpuinfo = Path("/proc/cpuinfo")
@@ -219,7 +242,8 @@ def cpu_name() -> str:
 
 def add_alternates(doc: dict[str, Any]) -> int:
     """Add this machine's hash of each episode that differs from ``doc``'s as an alternate
-    (same steps required: a different episode is a change of behaviour, not of the CPU)."""
+    (a law's with the same steps: a different episode is a change of behaviour, not of the
+    CPU; a learned agent's with its own, module docstring)."""
     fresh = record()["episodes"]
     alternates = doc.setdefault("alternates", {})
     added = 0
@@ -227,11 +251,14 @@ def add_alternates(doc: dict[str, Any]) -> int:
         got = fresh[name]
         if got["sha256"] == want["sha256"]:
             continue
+        entry = {"sha256": got["sha256"], "cpu": cpu_name(), "numpy": np.__version__}
         if got["steps"] != want["steps"]:
-            raise AssertionError(f"{name}: {got['steps']} steps, recorded {want['steps']}")
+            if policy_of(name) not in LEARNED:
+                raise AssertionError(f"{name}: {got['steps']} steps, recorded {want['steps']}")
+            entry["steps"] = got["steps"]
         known = alternates.setdefault(name, [])
         if all(a["sha256"] != got["sha256"] for a in known):
-            known.append({"sha256": got["sha256"], "cpu": cpu_name(), "numpy": np.__version__})
+            known.append(entry)
             added += 1
     return added
 
