@@ -239,6 +239,15 @@ class VecShapedReward(VecEnvWrapper):
       around. The agent still sees only the person: it can learn where walls tend to be from
       how the person moves, not see them. (Measured: at 2, wall collisions fell from 4 to 3 in
       240 episodes; at 5 the agent kept off walls by falling back and lost the person more.)
+    - ``bystander_weight``: the same charge as ``clearance_weight`` for the nearest bystander,
+      ``bystander_weight * max(bystander_m - c, 0) / bystander_m`` a step, ``c`` the footprint's
+      true clearance to that person's body (the env's info ``bystander_clearance_m``, inf
+      without bystanders). In ``crossing`` a stranger passes between the robot and the
+      person it follows: a robot close behind the person touches them (the shipped agent in 2
+      of 20 episodes), the law that falls furthest back none. The agent sees only the person
+      it follows: it can learn that a stranger is near from how that observation jumps, not
+      see where. (Measured: at 2 within 0.5 m and at 4 within 1 m, bystander collisions did
+      not fall: README, "Tried on top of ppo_fast.yaml".)
     - ``near_weight``: charges being nearer than the following distance once more, on top of
       ``far_weight`` (the same distance, the same source, before the floor): ``near_weight *
       max(target_distance_m - d, 0)``. An agent charged alike on both sides overshoots when the
@@ -269,6 +278,9 @@ class VecShapedReward(VecEnvWrapper):
     :param clearance_weight: weight on the wall clearance's shortfall below ``clearance_m``, as
         a share of it [reward per step at contact], >= 0; 0: none.
     :param clearance_m: the wall clearance below which the charge starts [m], > 0.
+    :param bystander_weight: weight on the bystander clearance's shortfall below
+        ``bystander_m``, as a share of it [reward per step at contact], >= 0; 0: none.
+    :param bystander_m: the bystander clearance below which that charge starts [m], > 0.
     :param near_weight: weight on the distance's shortfall below ``target_distance_m``, on top
         of ``far_weight``'s charge [reward per m per step], >= 0; 0: none.
     """
@@ -302,6 +314,8 @@ class VecShapedReward(VecEnvWrapper):
         clearance_weight: float = 0.0,
         clearance_m: float = 0.3,
         near_weight: float = 0.0,
+        bystander_weight: float = 0.0,
+        bystander_m: float = 0.5,
     ) -> None:
         for name, value in (
             ("alive_bonus", alive_bonus),
@@ -315,10 +329,12 @@ class VecShapedReward(VecEnvWrapper):
             ("blind_speed_weight", blind_speed_weight),
             ("clearance_weight", clearance_weight),
             ("near_weight", near_weight),
+            ("bystander_weight", bystander_weight),
         ):
             lo = 0.0 if name.endswith(("weight", "_m")) else None
             check_number(f"VecShapedReward.{name}", value, lo, optional=name == "reward_floor")
-        check_number("VecShapedReward.clearance_m", clearance_m, 0.0, lo_open=True)
+        for name, value in (("clearance_m", clearance_m), ("bystander_m", bystander_m)):
+            check_number(f"VecShapedReward.{name}", value, 0.0, lo_open=True)
         check_number("VecShapedReward.far_power", far_power, 1.0, 3.0)
         sources = {"far_source": far_source, "offset_source": offset_source}
         for name, value in sources.items():
@@ -336,6 +352,9 @@ class VecShapedReward(VecEnvWrapper):
         if clearance_weight:
             needs.append("clearance_weight")
             keys.append("wall_clearance_m")
+        if bystander_weight:
+            needs.append("bystander_weight")
+            keys.append("bystander_clearance_m")
         if keys:
             try:  # every lane's env (the adapter keeps one set of keys for all its lanes)
                 venv.env_method("include_info", keys)
@@ -366,6 +385,8 @@ class VecShapedReward(VecEnvWrapper):
         self.clearance_weight = float(clearance_weight)
         self.clearance_m = float(clearance_m)
         self.near_weight = float(near_weight)
+        self.bystander_weight = float(bystander_weight)
+        self.bystander_m = float(bystander_m)
         self._v_entry = names.index("v_mps") if "v_mps" in names else None
         if self.blind_speed_weight and self._v_entry is None:
             raise ValueError(
@@ -471,9 +492,12 @@ class VecShapedReward(VecEnvWrapper):
             blind = self._info("detected", infos) == 0.0
             forward = np.maximum(self._prev[:, self._v_entry], 0.0)
             shaped -= self.blind_speed_weight * np.where(blind, forward, 0.0)
-        if self.clearance_weight:
-            c = self._info("wall_clearance_m", infos)
-            short = np.clip(self.clearance_m - c, 0.0, self.clearance_m) / self.clearance_m
-            shaped -= self.clearance_weight * short
+        for weight, key, within in (
+            (self.clearance_weight, "wall_clearance_m", self.clearance_m),
+            (self.bystander_weight, "bystander_clearance_m", self.bystander_m),
+        ):
+            if weight:
+                short = np.clip(within - self._info(key, infos), 0.0, within) / within
+                shaped -= weight * short
         self._prev[dones] = 0.0
         return obs, shaped.astype(np.float32), dones, infos

@@ -332,32 +332,45 @@ def test_blind_speed_weight_charges_the_forward_command_while_nothing_is_detecte
     assert charged >= 5  # frames without a detection were met, and charged
 
 
-def test_clearance_weight_charges_the_wall_clearance_shortfall_up_to_the_collision() -> None:
-    """The charge is ``w * clip(clearance_m - c, 0, clearance_m) / clearance_m`` with ``c`` the
-    true wall clearance of the state each step reached (an ended episode's final one): the same
-    shaping without it, on the same rollout, differs by exactly that, and a lane driven into
-    the wall pays it on the steps before the collision."""
-    kwargs: dict[str, Any] = {"scenario": "occlusion", "episode": {"max_steps": 80}}
+@pytest.mark.parametrize(
+    ("scenario", "weight", "within", "key", "ending", "action"),
+    [
+        # both lanes turn and drive on: into a wall
+        ("occlusion", "clearance_weight", "clearance_m", "wall_clearance_m", "collision_wall",
+         [[1.0, 0.8], [0.6, -1.0]]),
+        # both lanes drive on into the crowd the person walks through
+        ("crowd", "bystander_weight", "bystander_m", "bystander_clearance_m",
+         "collision_bystander", [[1.0, 0.3], [0.8, -0.2]]),
+    ],
+)  # fmt: skip
+def test_a_clearance_weight_charges_the_shortfall_up_to_the_collision(
+    scenario: str, weight: str, within: str, key: str, ending: str, action: list
+) -> None:
+    """The charge is ``w * clip(m - c, 0, m) / m`` with ``c`` the true clearance (to the
+    nearest wall, or bystander) of the state each step reached (an ended episode's final one):
+    the same shaping without it, on the same rollout, differs by exactly that, and a lane
+    driven into a wall or a bystander pays it on the steps before the collision."""
+    kwargs: dict[str, Any] = {"scenario": scenario, "episode": {"max_steps": 80}}
     weights = {"reward_floor": -1.0, "alive_bonus": 1.0}
     near = VecShapedReward(
-        follow_env.make_sb3_vec_env(2, **kwargs), clearance_weight=4.0, clearance_m=0.5, **weights
+        follow_env.make_sb3_vec_env(2, **kwargs), **{weight: 4.0, within: 0.5}, **weights
     )
     plain = VecShapedReward(follow_env.make_sb3_vec_env(2, full_info=True, **kwargs), **weights)
     for env in (near, plain):
         env.seed(5)
         env.reset()
     charged, collided = 0, 0
-    for _ in range(80):  # both lanes turn and drive on: into a wall
-        action = np.array([[1.0, 0.8], [0.6, -1.0]], dtype=np.float32)
-        _, shaped, dones, _ = near.step(action)
-        _, base, plain_dones, infos = plain.step(action)
+    for _ in range(120):
+        act = np.array(action, dtype=np.float32)
+        _, shaped, dones, _ = near.step(act)
+        _, base, plain_dones, infos = plain.step(act)
         np.testing.assert_array_equal(dones, plain_dones)
-        c = np.array([info["wall_clearance_m"] for info in infos])
+        c = np.array([info[key] for info in infos])
         expected = base - 4.0 * np.clip(0.5 - c, 0.0, 0.5) / 0.5
         np.testing.assert_allclose(shaped, expected, rtol=1e-6, atol=1e-6)
         charged += int(((c < 0.5) & (c > 0.0)).sum())
-        collided += sum(info.get("termination") == "collision_wall" for info in infos)
-    assert charged >= 3  # walls were approached and charged,
+        collided += sum(info.get("termination") == ending for info in infos)
+    assert charged >= 3  # they were approached and charged,
     assert collided >= 1  # and hit
 
 
@@ -370,6 +383,10 @@ def test_blind_speed_and_clearance_weights_need_their_info_keys() -> None:
         VecShapedReward(ScriptedVecEnv(constant_obs(1)), clearance_weight=1.0)
     with pytest.raises(ValueError, match=r"clearance_m=0\.0 is out of range"):
         VecShapedReward(ScriptedVecEnv(constant_obs(1)), clearance_m=0.0)
+    with pytest.raises(ValueError, match=r"bystander_weight needs an env whose infos can carry"):
+        VecShapedReward(ScriptedVecEnv(constant_obs(1)), bystander_weight=1.0)
+    with pytest.raises(ValueError, match=r"bystander_m=-0\.5 is out of range"):
+        VecShapedReward(ScriptedVecEnv(constant_obs(1)), bystander_m=-0.5)
 
 
 def _stack_script() -> tuple[list, list]:

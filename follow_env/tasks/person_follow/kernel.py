@@ -51,6 +51,7 @@ def contacts(prm: np.void, st: np.void, people: np.ndarray, walls: np.ndarray) -
             other = min(other, d)
     ts.clear_wall = wall - tp.wall_radius
     ts.clear_person = target
+    ts.clear_other = other
     if ts.clear_wall <= 0.0:
         return REASON_COLLISION_WALL
     if target < tp.clearance:

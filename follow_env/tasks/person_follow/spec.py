@@ -63,6 +63,7 @@ SPEC = TaskSpec(
         _Q("accel_mps2", "m/s^2", "finite difference of encoder_speed_mps over the step"),
         _Q("wall_clearance_m", "m", "footprint to the nearest wall or obstacle"),
         _Q("person_clearance_m", "m", "footprint to the target's body"),
+        _Q("bystander_clearance_m", "m", "footprint to the nearest bystander's body (inf: none)"),
         _Q("person_x_m", "m", "target position x"),
         _Q("person_y_m", "m", "target position y"),
         _Q("person_theta_rad", "rad", "target heading"),

@@ -92,6 +92,7 @@ STATE = Block(
         f8("walk_end_t", "s", "when the target's walk ended (-1: not yet)"),
         f8("clear_wall", "m", "footprint to the nearest wall"),
         f8("clear_person", "m", "footprint to the target"),
+        f8("clear_other", "m", "footprint to the nearest bystander (inf: none)"),
         f8(
             "reward_terms",
             "",
@@ -122,6 +123,7 @@ _STATE_INFO: dict[str, tuple[str, ...]] = {
     "accel_mps2": ("body", "accel"),
     "wall_clearance_m": ("task", "clear_wall"),
     "person_clearance_m": ("task", "clear_person"),
+    "bystander_clearance_m": ("task", "clear_other"),
 }
 # ... from the target person's record.
 _PERSON_INFO = {"person_x_m": "x", "person_y_m": "y", "person_theta_rad": "th", "person_v_mps": "v"}

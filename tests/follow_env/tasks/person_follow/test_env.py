@@ -161,6 +161,27 @@ def test_driving_into_the_person_is_a_collision() -> None:
     assert info["person_clearance_m"] < 0.3
 
 
+def test_the_bystander_clearance_is_inf_alone_and_zero_at_a_bystander_collision() -> None:
+    """``bystander_clearance_m``: the footprint to the nearest bystander's body (inf with no
+    bystander). Bystanders do not react to the robot, so one walks into a robot standing still
+    in ``crowd`` (seed 1, step 71), which ends touching them (clearance <= 0)."""
+    env = gym.make("PersonFollow-v0", scenario="straight")
+    _, info = env.reset(seed=0)
+    assert info["bystander_clearance_m"] == np.inf
+    env = gym.make("PersonFollow-v0", scenario="crowd", episode__lost_timeout_s=100.0)
+    _, info = env.reset(seed=1)
+    seen = [info["bystander_clearance_m"]]
+    for _ in range(100):
+        *_, te, tr, info = env.step(np.zeros(2, dtype=np.float32))
+        seen.append(info["bystander_clearance_m"])
+        if te or tr:
+            break
+    assert np.all(np.isfinite(seen))
+    assert len(set(seen)) > 30  # people move: it changes
+    assert info["termination"] == "collision_bystander"
+    assert info["bystander_clearance_m"] <= 0.0 < min(seen[:-1])
+
+
 def test_driving_into_a_wall_is_a_collision() -> None:
     env = gym.make("PersonFollow-v0", config="ideal", episode__lost_timeout_s=100.0)
     env.reset(seed=0)
