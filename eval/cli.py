@@ -277,7 +277,7 @@ def cmd_dominance(args: argparse.Namespace) -> int:
     import pandas as pd
 
     from eval.atomic import atomic_write_text
-    from eval.dominance import dominance, dominance_markdown
+    from eval.dominance import calibration, default_laws, dominance, dominance_markdown
     from eval.report import safe_name
 
     path = args.run / "episodes.csv"
@@ -291,7 +291,9 @@ def cmd_dominance(args: argparse.Namespace) -> int:
         raise UsageError(f"{path}: not an episode table (no policy and seed columns)")
     laws = _names(args.laws, "laws") if args.laws else None
     frame = dominance(table, args.learner, laws)
-    report = dominance_markdown(frame, args.learner)
+    chosen = laws if laws is not None else default_laws(table, args.learner)
+    calibrated = calibration(table, chosen) if len(chosen) > 1 else None
+    report = dominance_markdown(frame, args.learner, calibrated)
     stem = args.run / f"dominance-{safe_name(args.learner)}"
     atomic_write_text(f"{stem}.csv", frame.to_csv(index=False))
     atomic_write_text(f"{stem}.md", report)

@@ -19,6 +19,10 @@ is reproducible. Each line carries two judgements:
   none does not meet it, significant or not); ``better`` criteria ask for ``verdict ==
   "better"``.
 
+How high that bar is shows in :func:`calibration`: each law put through the same test against
+the other laws (the best of the rest on each line). The report gives those counts beside the
+learner's, so a reader can tell a near miss from a bar no controller clears.
+
 ::
 
     follow-eval run --policies ppo,pn:thesis,mpn:thesis,gsmpn:thesis,pn,mpn,gsmpn \\
@@ -37,7 +41,14 @@ import pandas as pd
 from eval.metrics import metric_digits, metric_label
 from eval.stats import mean_ci, variant_column
 
-__all__ = ["CRITERIA", "Criterion", "dominance", "dominance_markdown"]
+__all__ = [
+    "CRITERIA",
+    "Criterion",
+    "calibration",
+    "default_laws",
+    "dominance",
+    "dominance_markdown",
+]
 
 
 @dataclass(frozen=True)
@@ -109,9 +120,7 @@ def dominance(
     policies = list(dict.fromkeys(table["policy"]))
     if learner not in policies:
         raise ValueError(f"learner {learner!r} is not in the table (policies: {policies})")
-    if laws is None:  # the other policies under the learner's own sensing (see _sensing)
-        laws = [p for p in policies if p != learner and _sensing(p) == _sensing(learner)]
-    laws = list(laws)
+    laws = default_laws(table, learner) if laws is None else list(laws)
     missing = [law for law in laws if law not in policies]
     if missing:
         raise ValueError(f"laws {missing} are not in the table (policies: {policies})")
@@ -138,6 +147,42 @@ def dominance(
                 _line(scenario, c, by_policy[learner], best, theirs, seed, variant, learner)
             )
     return pd.DataFrame(rows, columns=[variant, *COLUMNS])
+
+
+def default_laws(table: pd.DataFrame, learner: str) -> list[str]:
+    """The laws :func:`dominance` meets by default: the table's other policies under the
+    learner's own sensing (``pn``, ``gsmpn``, ... for ``ppo``; ``pn+ideal``, ... for
+    ``ppo+ideal``)."""
+    policies = dict.fromkeys(table["policy"])
+    return [p for p in policies if p != learner and _sensing(p) == _sensing(learner)]
+
+
+def calibration(
+    table: pd.DataFrame,
+    laws: Sequence[str],
+    *,
+    criteria: Sequence[Criterion] = CRITERIA,
+    seed: int = 0,
+) -> dict[str, int]:
+    """How many requirements each law meets against the others (the bar :func:`dominance`
+    sets, applied to the laws themselves).
+
+    :param table: the episode table :func:`dominance` reads.
+    :param laws: the laws' labels, at least two.
+    :returns: ``{law: requirements met}`` (of ``scenarios x criteria``), in ``laws`` order.
+    :raises ValueError: with fewer than two laws, or as :func:`dominance` does.
+    """
+    laws = list(laws)
+    if len(laws) < 2:
+        raise ValueError(f"calibration needs at least two laws, got {laws}")
+    return {
+        law: int(
+            dominance(
+                table, law, [other for other in laws if other != law], criteria=criteria, seed=seed
+            )["meets"].sum()
+        )
+        for law in laws
+    }
 
 
 def _sensing(label: str) -> str:
@@ -188,11 +233,14 @@ def _line(
     return row
 
 
-def dominance_markdown(frame: pd.DataFrame, learner: str) -> str:
+def dominance_markdown(
+    frame: pd.DataFrame, learner: str, calibrated: dict[str, int] | None = None
+) -> str:
     """The table in markdown, after one line per criterion saying where it is met.
 
     :param frame: :func:`dominance` output.
     :param learner: the learner's label, for the text.
+    :param calibrated: :func:`calibration` of the same laws, said after the headline.
     """
     variant = frame.columns[0]
     scenarios = list(dict.fromkeys(frame[variant]))
@@ -202,6 +250,12 @@ def dominance_markdown(frame: pd.DataFrame, learner: str) -> str:
         f"`{learner}` {'dominates' if met_all else 'does not dominate'} the laws: "
         f"{int(frame['meets'].sum())} of {len(frame)} (scenario, criterion) requirements met."
     )
+    if calibrated:
+        each = ", ".join(f"{law} {met}" for law, met in calibrated.items())
+        lines.append(
+            f"For scale, each law against the other {len(calibrated) - 1} (the same test): "
+            f"{min(calibrated.values())}-{max(calibrated.values())} of {len(frame)} ({each})."
+        )
     lines.append("")
     for criterion in dict.fromkeys(frame["criterion"]):
         rows = frame[frame["criterion"] == criterion]

@@ -10,7 +10,7 @@ import pandas as pd
 import pytest
 
 from eval.cli import main
-from eval.dominance import CRITERIA, Criterion, dominance, dominance_markdown
+from eval.dominance import CRITERIA, Criterion, calibration, dominance, dominance_markdown
 
 METRICS = [c.metric for c in CRITERIA]
 
@@ -113,6 +113,36 @@ def test_the_report_names_where_each_requirement_is_missed() -> None:
     )
 
 
+def test_calibration_puts_each_law_through_the_test_against_the_others() -> None:
+    """Three laws on one scenario: pn centres best (significantly), mpn moves most smoothly,
+    gsmpn loses the person once. Each meets what it is no worse or better at against the best
+    of the other two, the same count :func:`dominance` gives with those laws."""
+    rng = np.random.default_rng(2)
+    base = list(rng.normal(30.0, 1.0, 12))
+    table = _table(
+        {
+            "pn": {"mean_offset_px": [v - 5.0 for v in base], "std_accel_mm_s2": [600.0] * 12},
+            "mpn": {"mean_offset_px": base, "std_accel_mm_s2": [500.0 + v for v in base]},
+            "gsmpn": {"mean_offset_px": base, "std_accel_mm_s2": [600.0] * 12,
+                      "lost_rate_pct": [100.0] + [0.0] * 11},
+        }
+    )  # fmt: skip
+    met = calibration(table, ["pn", "mpn", "gsmpn"])
+    assert list(met) == ["pn", "mpn", "gsmpn"]
+    # pn: in frame, lost, collision, distance (ties at 0) and MeanOffset; not StdAccel.
+    # mpn: the four ties and StdAccel; gsmpn: three ties (lost once: not at least as good).
+    assert met == {"pn": 5, "mpn": 5, "gsmpn": 3}
+    for law, count in met.items():
+        others = [p for p in met if p != law]
+        assert int(dominance(table, law, others)["meets"].sum()) == count
+    text = dominance_markdown(dominance(table, "pn", ["mpn", "gsmpn"]), "pn", met)
+    assert (
+        "For scale, each law against the other 2 (the same test): 3-5 of 6 (pn 5, mpn 5, " in text
+    )
+    with pytest.raises(ValueError, match=r"at least two laws, got \['pn'\]"):
+        calibration(table, ["pn"])
+
+
 @pytest.mark.parametrize(
     ("kwargs", "message"),
     [
@@ -144,6 +174,11 @@ def test_the_command_reads_a_run_folder_and_writes_its_tables(tmp_path: Path, ca
     assert main(["dominance", str(tmp_path), "--learner", "ppo"]) == 0
     out = capsys.readouterr().out
     assert "`ppo` does not dominate the laws" in out  # the other criteria are all ties at 0
+    assert "For scale" not in out  # one law: nothing to put it against
+    table = pd.concat([table, _table({"gsmpn": {"mean_offset_px": [2.0] * 6}})])
+    table.to_csv(tmp_path / "episodes.csv", index=False)
+    assert main(["dominance", str(tmp_path), "--learner", "ppo"]) == 0
+    assert "each law against the other 1 (the same test): 4-5 of 6" in capsys.readouterr().out
     written = pd.read_csv(tmp_path / "dominance-ppo.csv")
     assert list(written["criterion"]) == METRICS
     assert (tmp_path / "dominance-ppo.md").read_text().startswith("`ppo`")
