@@ -294,6 +294,12 @@ class VecShapedReward(VecEnvWrapper):
         "far_source": "true_distance_m",
         "offset_source": "true_offset_px",
     }
+    #: The info key each weighted term reads (the wrapper asks the env to include it).
+    WEIGHT_KEYS: ClassVar[dict[str, str]] = {
+        "blind_speed_weight": "detected",
+        "clearance_weight": "wall_clearance_m",
+        "bystander_weight": "bystander_clearance_m",
+    }
 
     def __init__(
         self,
@@ -346,15 +352,15 @@ class VecShapedReward(VecEnvWrapper):
         truthful = [name for name, value in sources.items() if value == "truth"]
         needs = [f"{name}=truth" for name in truthful]
         keys = [self.TRUTH_KEYS[name] for name in truthful]
-        if blind_speed_weight:
-            needs.append("blind_speed_weight")
-            keys.append("detected")
-        if clearance_weight:
-            needs.append("clearance_weight")
-            keys.append("wall_clearance_m")
-        if bystander_weight:
-            needs.append("bystander_weight")
-            keys.append("bystander_clearance_m")
+        weights = {
+            "blind_speed_weight": blind_speed_weight,
+            "clearance_weight": clearance_weight,
+            "bystander_weight": bystander_weight,
+        }
+        for name, key in self.WEIGHT_KEYS.items():
+            if weights[name]:
+                needs.append(name)
+                keys.append(key)
         if keys:
             try:  # every lane's env (the adapter keeps one set of keys for all its lanes)
                 venv.env_method("include_info", keys)
@@ -489,15 +495,16 @@ class VecShapedReward(VecEnvWrapper):
                 offset = np.asarray(obs, dtype=np.float64)[:, 1]
             shaped -= self.offset_weight * np.minimum(np.abs(offset) / self._half_width_px, 1.0)
         if self.blind_speed_weight:
-            blind = self._info("detected", infos) == 0.0
+            blind = self._info(self.WEIGHT_KEYS["blind_speed_weight"], infos) == 0.0
             forward = np.maximum(self._prev[:, self._v_entry], 0.0)
             shaped -= self.blind_speed_weight * np.where(blind, forward, 0.0)
-        for weight, key, within in (
-            (self.clearance_weight, "wall_clearance_m", self.clearance_m),
-            (self.bystander_weight, "bystander_clearance_m", self.bystander_m),
+        for name, weight, within in (
+            ("clearance_weight", self.clearance_weight, self.clearance_m),
+            ("bystander_weight", self.bystander_weight, self.bystander_m),
         ):
             if weight:
-                short = np.clip(within - self._info(key, infos), 0.0, within) / within
+                c = self._info(self.WEIGHT_KEYS[name], infos)
+                short = np.clip(within - c, 0.0, within) / within
                 shaped -= weight * short
         self._prev[dones] = 0.0
         return obs, shaped.astype(np.float32), dones, infos
