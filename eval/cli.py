@@ -289,10 +289,9 @@ def cmd_dominance(args: argparse.Namespace) -> int:
         raise UsageError(f"{path}: not an episode table ({e})") from None
     if not {"policy", "seed"} <= set(table.columns):
         raise UsageError(f"{path}: not an episode table (no policy and seed columns)")
-    laws = _names(args.laws, "laws") if args.laws else None
+    laws = _names(args.laws, "laws") if args.laws else default_laws(table, args.learner)
     frame = dominance(table, args.learner, laws)
-    chosen = laws if laws is not None else default_laws(table, args.learner)
-    calibrated = calibration(table, chosen) if len(chosen) > 1 else None
+    calibrated = calibration(table, laws) if len(laws) > 1 else None
     report = dominance_markdown(frame, args.learner, calibrated)
     stem = args.run / f"dominance-{safe_name(args.learner)}"
     atomic_write_text(f"{stem}.csv", frame.to_csv(index=False))
