@@ -4,11 +4,13 @@ filter (reference §1.3, §1.4).
 :func:`depth_ray` casts the pixel's ray through the world (people as upright boxes, walls and
 obstacles up to their height, the floor); :func:`measure` adds the D435i's noise (RMS growing
 with Z^2), whole-millimetre quantisation, range limits and random invalid pixels (read as 0,
-as on the camera); :func:`distance_filter` is the reference robot's asymmetric filter.
+as on the camera); :func:`distance_filter` is the reference robot's asymmetric filter;
+:func:`ahead` is the optional reading ahead, the nearest valid depth across the middle row.
 """
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -20,17 +22,23 @@ from follow_env.sim.schema import Block, f8, i8
 from follow_env.world.sight import cross_wall
 
 __all__ = [
+    "AHEAD_RAYS_MAX",
     "HISTORY_MAX",
     "PARAMS",
     "STATE",
+    "ahead",
+    "ahead_column",
     "depth_noise_std",
     "depth_ray",
     "distance_filter",
     "measure",
+    "measure_at",
 ]
 
 HISTORY_MAX = 32
 """Longest distance-filter history (``PerceptionConfig.filter_history``)."""
+AHEAD_RAYS_MAX = 16
+"""Most columns of the reading ahead (``PerceptionConfig.ahead_rays``)."""
 
 
 @njit(inline="always")
@@ -61,6 +69,13 @@ PARAMS = Block(
             "distance-filter history length",
             source="perception.filter_history",
         ),
+        f8("ahead_rays", "columns", "columns of the reading ahead", source="perception.ahead_rays"),
+        f8(
+            "ahead_tan",
+            "",
+            "tangent of the reading ahead's half-angle",
+            source=lambda c: math.tan(math.radians(c.perception.ahead_half_angle_deg)),
+        ),
     ],
 )
 
@@ -80,9 +95,17 @@ NOISE = streams.per_step(
 SCALE = streams.per_episode(
     "depth.scale", streams.RANDOMIZE, 7, 1, space="uniform", doc="depth noise scale (randomisation)"
 )
+AHEAD = streams.per_step(
+    "depth.ahead",
+    streams.DEPTH,
+    0,
+    2 * AHEAD_RAYS_MAX,
+    doc="the reading ahead: per column the noise (normal) and the invalid-pixel coin",
+)
 _DEPTH = streams.DEPTH.index
 _STRIDE = NOISE.stride
 _OFFSET = NOISE.offset
+_AHEAD_OFFSET = AHEAD.offset
 
 
 def randomize(
@@ -167,11 +190,17 @@ def depth_ray(
 
 @njit(inline="always")
 def measure(prm: np.void, z: float, keys: np.ndarray, step: int) -> float:
+    """What the depth stream reports for a true depth ``z`` (m) at the box centre of step
+    ``step``: :func:`measure_at` with this step's own draws."""
+    return measure_at(prm, z, keys[_DEPTH], step * _STRIDE + _OFFSET)
+
+
+@njit(inline="always")
+def measure_at(prm: np.void, z: float, kd: np.uint64, dslot: int) -> float:
     """What the depth stream reports for a true depth ``z`` (m): 0 (invalid) out of range or
     for a random invalid pixel, else ``z`` plus noise of RMS ``depth_k z^2`` (reference §1.3),
-    quantised to ``depth_unit``."""
-    kd = keys[_DEPTH]
-    dslot = step * _STRIDE + _OFFSET
+    quantised to ``depth_unit``. The noise is normal draw ``dslot`` of the depth key ``kd``,
+    the invalid-pixel coin its uniform draw ``dslot + 1``."""
     if z < prm.depth_min or z > prm.depth_max:
         return 0.0
     z += normal_pair_at(kd, dslot)[0] * prm.depth_k * z * z  # RMS ~ Z^2 (reference §1.3)
@@ -181,6 +210,48 @@ def measure(prm: np.void, z: float, keys: np.ndarray, step: int) -> float:
     if invalid or z < prm.depth_min or z > prm.depth_max:
         return 0.0  # out of range reads as invalid too, as on the camera
     return z
+
+
+@njit(inline="always")
+def ahead_column(k: int, n: int, cx: float, fx: float, tan_half: float) -> int:
+    """Image column (px) of the reading ahead's ``k``-th of ``n`` columns: evenly over
+    ``cx +- tan_half fx`` (one column: ``cx``), rounded to a pixel (reference §1.3 pixels)."""
+    frac = (2.0 * k / (n - 1) - 1.0) if n > 1 else 0.0
+    return int(np.round(cx + frac * tan_half * fx))
+
+
+@njit(inline="always")
+def ahead(
+    prm: np.void,
+    cam: np.void,
+    pose: tuple[float, float, float, float],
+    people: np.ndarray,
+    n_people: int,
+    body: tuple[float, float, float],
+    walls: np.ndarray,
+    n_walls: int,
+    keys: np.ndarray,
+    step: int,
+) -> float:
+    """The reading ahead (m): the nearest valid depth the camera reports at ``ahead_rays``
+    columns of the middle row ``cy``, spread evenly over +- ``atan(ahead_tan)`` about the
+    optical axis (one column: the axis), each through :func:`measure_at` with its own draws.
+    ``depth_max`` when no column reads a valid depth: beyond the range, too near (under
+    ``depth_min``) or invalid all read 0 on the camera, and a 0 among them is skipped. The
+    camera is at ``pose = (ox, oy, cos th, sin th)``; the rest is as for :func:`depth_ray`."""
+    ox, oy, c, s = pose
+    n = int(prm.ahead_rays)
+    kd = keys[_DEPTH]
+    base = step * _STRIDE + _AHEAD_OFFSET
+    cv = int(cam.cy)
+    best = prm.depth_max
+    for k in range(n):
+        cu = ahead_column(k, n, cam.cx, cam.fx, prm.ahead_tan)
+        z = depth_ray(cu, cv, cam, ox, oy, c, s, people, n_people, body, walls, n_walls)
+        reading = measure_at(prm, z, kd, base + 2 * k)
+        if 0.0 < reading < best:
+            best = reading
+    return best
 
 
 @njit(inline="always")

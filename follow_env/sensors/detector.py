@@ -106,6 +106,24 @@ class PerceptionConfig(Validated):
         doc="choice: the detector lists boxes by confidence, modelled as box area (largest first)",
         choices=("area",),
     )
+    ahead_rays: int = param(
+        0,
+        0,
+        16,
+        "columns",
+        "choice: 0 publishes the reference robot's two entries; n > 0 adds a third, ahead_m, "
+        "the nearest valid depth at n columns of the image's middle row (the depth image the "
+        "distance comes from, reference §1.3), so a controller can see what is in its way",
+        integer=True,
+    )
+    ahead_half_angle_deg: float = param(
+        14.0,
+        0.0,
+        45.0,
+        "deg",
+        "choice: the columns span +- this about the optical axis, evenly (14 deg: +-0.25 m at "
+        "1 m, about a robot's half-width)",
+    )
 
 
 @njit(inline="always")

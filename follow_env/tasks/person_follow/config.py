@@ -229,6 +229,14 @@ class EnvConfig(TaskConfig):
                 lat_max,
                 f"0 or >= perception.latency_frames ({self.perception.latency_frames})",
             )
+        # The reading ahead's outer columns must fall inside the image (reference §1.3 pixels).
+        half_fov = 0.5 * self.camera.hfov_deg
+        if self.perception.ahead_rays and self.perception.ahead_half_angle_deg >= half_fov:
+            raise out_of_range(
+                "PerceptionConfig.ahead_half_angle_deg",
+                self.perception.ahead_half_angle_deg,
+                f"< half the camera's horizontal field of view ({half_fov:.1f} deg)",
+            )
 
 
 THESIS = EnvConfig()

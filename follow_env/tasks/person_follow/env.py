@@ -57,6 +57,13 @@ class PersonFollowEnv(TaskEnv):
 
     When nothing is detected the observation keeps its last values, as on the robot.
 
+    With ``perception={"ahead_rays": n}`` (n > 0) it is ``Box(3,)``: entry 2 is the reading
+    ahead, in [0, depth_max_m] m, the nearest valid depth at n columns of the image's middle row
+    spread over +- ``ahead_half_angle_deg`` (14 deg), each with the D435i's noise, of this
+    frame (no detector latency); ``depth_max_m`` when no column reads (beyond the range, nearer
+    than ``depth_min_m`` or invalid all read 0 on the camera). It has draws of its own: every
+    other value of an episode is the same with it and without it.
+
     ## Rewards
 
     Dense, from ground truth, per step (weights in ``RewardConfig``)::

@@ -4,8 +4,9 @@ Composed from the sensors: every person's body box (camera), the part of it in s
 and world line of sight), the detector's view of it (bursts, misses, jitter, the list order),
 the association rule (first detection or tracker), the depth at the chosen box's centre pixel,
 the delay line of the detector's latency, and the distance filter. Nothing published leaves the
-observation as it was (the guidance law keeps acting on the last values). The frame also fills
-the ground truth of the target (person 0).
+observation as it was (the guidance law keeps acting on the last values). When configured, the
+reading ahead (the nearest depth across the middle row) is published every frame. The frame
+also fills the ground truth of the target (person 0).
 """
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from follow_env.sensors.camera import body_box, camera_origin, sight_box, world_to_camera
-from follow_env.sensors.depth import depth_ray, distance_filter, measure
+from follow_env.sensors.depth import ahead, depth_ray, distance_filter, measure
 from follow_env.sensors.detector import (
     associate,
     clip_box,
@@ -107,6 +108,13 @@ def frame(
         m_cu, m_cv = float(cu), float(cv)
         z = depth_ray(cu, cv, cam, ox, oy, c_th, s_th, people, n_people, dims, walls, n_walls)
         m_raw = measure(zp, z, keys, step)
+
+    # The reading ahead, when configured: from this frame's depth image, which needs no
+    # detector and so none of its latency.
+    if zp.ahead_rays > 0.0:
+        ts.obs_ahead = ahead(
+            zp, cam, (ox, oy, c_th, s_th), people, n_people, dims, walls, n_walls, keys, step
+        )
 
     # Publish what left the delay line this frame, through the distance filter (step 4).
     out = delay(dp, det, step, m_det, m_cu, m_cv, m_raw, chosen)

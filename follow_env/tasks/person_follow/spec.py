@@ -1,15 +1,20 @@
 """PersonFollow's contract in names and units (no simulation import): observation, info, ends.
 
 Policies read the observation through :data:`SPEC`; the robot bridge writes step logs with the
-same names. The action is the platform's (e.g. ``[v_mps, w_radps]`` for the differential drive),
-and so are the info keys of its wheels, placed after ``raw_depth_m``.
+same names. With ``PerceptionConfig.ahead_rays > 0`` the observation has a third entry,
+:data:`AHEAD` (``observation_names(ahead=True)``). The action is the platform's (e.g.
+``[v_mps, w_radps]`` for the differential drive), and so are the info keys of its wheels,
+placed after ``raw_depth_m``.
 """
 
 from __future__ import annotations
 
+from typing import Any
+
 from follow_env.tasks.spec import Quantity, TaskSpec
 
 __all__ = [
+    "AHEAD",
     "REASON_COLLISION_BYSTANDER",
     "REASON_COLLISION_PERSON",
     "REASON_COLLISION_WALL",
@@ -19,6 +24,8 @@ __all__ = [
     "REASON_WALK_OVER",
     "SPEC",
     "observation_bounds",
+    "observation_names",
+    "observation_size",
 ]
 
 REASON_NONE = 0
@@ -79,8 +86,34 @@ SPEC = TaskSpec(
 """The person-following task (reference §1)."""
 
 
-def observation_bounds(width_px: int, depth_max_m: float) -> tuple[list[float], list[float]]:
+AHEAD = _Q(
+    "ahead_m",
+    "m",
+    "nearest valid depth across the image's middle row (depth_max_m: none); only with "
+    "PerceptionConfig.ahead_rays > 0",
+)
+"""The optional third observation entry, the reading ahead."""
+
+
+def observation_names(ahead: bool = False) -> tuple[str, ...]:
+    """The observation's entries: :data:`SPEC`'s, then ``ahead_m`` with the reading ahead."""
+    return (*SPEC.observation_names, *((AHEAD.name,) if ahead else ()))
+
+
+def observation_size(cfg: Any) -> int:
+    """Entries of the observation under ``cfg`` (an ``EnvConfig``): 2, or 3 with the reading
+    ahead on."""
+    return SPEC.observation_size + (1 if cfg.perception.ahead_rays > 0 else 0)
+
+
+def observation_bounds(
+    width_px: int, depth_max_m: float, ahead: bool = False
+) -> tuple[list[float], list[float]]:
     """``(low, high)`` of the observation for a camera of ``width_px`` and a depth range to
-    ``depth_max_m``."""
+    ``depth_max_m`` (``ahead``: with the reading ahead, in ``[0, depth_max_m]``)."""
     half_w = width_px // 2
-    return [0.0, float(-half_w)], [float(depth_max_m), float(width_px - 1 - half_w)]
+    low, high = [0.0, float(-half_w)], [float(depth_max_m), float(width_px - 1 - half_w)]
+    if ahead:
+        low.append(0.0)
+        high.append(float(depth_max_m))
+    return low, high

@@ -15,6 +15,7 @@ In this order (units in the names; a real robot's log may leave out any optional
 | ``time_s`` | s | yes | time since reset; strictly increasing |
 | ``obs_distance_m`` | m | yes | published distance (reference §1.4; 0 = no reading yet) |
 | ``obs_offset_px`` | px | yes | published offset, > 0 right of centre (held when not detected) |
+| ``obs_ahead_m`` | m | no | the reading ahead, when configured (``PerceptionConfig.ahead_rays``) |
 | ``detected`` | 0/1 | no | a fresh detection was published at this step |
 | ``raw_depth_m`` | m | no | the depth pixel behind the last detection, before the filter |
 | ``action_v_mps``, ``action_w_radps`` | m/s, rad/s | no | command sent (final row: none) |
@@ -36,6 +37,7 @@ That is the reference robot's layout (the differential drive). On another platfo
 (:func:`log_columns`) the action columns are ``action_<entry>`` for each entry of its action
 (the mecanum base: ``action_v_mps, action_vy_mps, action_w_radps``) and its own info keys (its
 wheels) replace the wheel columns, placed before ``encoder_speed_mps``.
+With the reading ahead configured, ``obs_ahead_m`` follows ``obs_offset_px`` (``ahead=True``).
 
 One of ``accel_mps2`` and ``encoder_speed_mps`` is required; when only the speed is logged, the
 acceleration is computed from it as the robot does (finite difference per row).
@@ -49,6 +51,7 @@ from __future__ import annotations
 __all__ = [
     "ACCEL_SOURCES",
     "ACTION_COLUMNS",
+    "AHEAD_COLUMN",
     "COLUMNS",
     "FLAG_COLUMNS",
     "META_COLUMNS",
@@ -114,16 +117,21 @@ WHEEL_COLUMNS: tuple[str, ...] = (
 
 
 def log_columns(
-    action_names: tuple[str, ...] = ("v_mps", "w_radps"), platform_keys: tuple[str, ...] = ()
+    action_names: tuple[str, ...] = ("v_mps", "w_radps"),
+    platform_keys: tuple[str, ...] = (),
+    ahead: bool = False,
 ) -> tuple[str, ...]:
     """The step log's columns on a platform with these action entries and info keys: exactly
     :data:`COLUMNS` for the reference robot's (or no platform keys given), otherwise its
-    action and wheel columns in their places (module docstring)."""
+    action and wheel columns in their places, and :data:`AHEAD_COLUMN` with the reading
+    ahead (module docstring)."""
     actions = tuple(f"action_{name}" for name in action_names)
     out: list[str] = []
     keep_wheels = not platform_keys or set(platform_keys) == set(WHEEL_COLUMNS)
     for column in COLUMNS:
-        if column == ACTION_COLUMNS[0]:
+        if column == "obs_offset_px" and ahead:
+            out.extend((column, AHEAD_COLUMN))
+        elif column == ACTION_COLUMNS[0]:
             out.extend(actions)
         elif column == "encoder_speed_mps" and not keep_wheels:
             out.extend((*platform_keys, column))
@@ -140,5 +148,7 @@ REQUIRED_COLUMNS: tuple[str, ...] = ("time_s", "obs_distance_m", "obs_offset_px"
 ACCEL_SOURCES: tuple[str, ...] = ("accel_mps2", "encoder_speed_mps")
 #: The observation's columns, in the observation's order.
 OBS_COLUMNS: tuple[str, ...] = ("obs_distance_m", "obs_offset_px")
+#: The reading ahead's column (optional: only when it is configured).
+AHEAD_COLUMN = "obs_ahead_m"
 #: info flags written as 0/1.
 FLAG_COLUMNS: tuple[str, ...] = ("detected", "in_frame")

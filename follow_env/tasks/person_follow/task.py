@@ -25,7 +25,7 @@ from follow_env.tasks.person_follow import reward
 from follow_env.tasks.person_follow.config import PRESETS, THESIS, EnvConfig
 from follow_env.tasks.person_follow.people import PERSON, WAYPOINT
 from follow_env.tasks.person_follow.scenarios import ScenarioSpec, get_scenario
-from follow_env.tasks.person_follow.spec import SPEC, observation_bounds
+from follow_env.tasks.person_follow.spec import SPEC, observation_bounds, observation_size
 from follow_env.world.geometry import WALL, WALL_RADIUS_M
 
 __all__ = ["PARAMS", "STATE", "TASK", "PersonFollowTask", "batched_sim"]
@@ -80,6 +80,7 @@ STATE = Block(
         nested("filter", depth.STATE),
         f8("obs_d", "m", "published distance (observation 0)"),
         f8("obs_o", "px", "published offset (observation 1)"),
+        f8("obs_ahead", "m", "the reading ahead (observation 2, when configured)"),
         f8("detected", "", "1: this step's observation is a fresh detection"),
         i8("detected_id", "", "whose detection is published (-1: none)"),
         f8("raw_depth", "m", "unfiltered depth of the published detection"),
@@ -198,8 +199,11 @@ class PersonFollowTask(TaskPlatforms):
 
     def spaces(self, cfg: EnvConfig, platform: Platform) -> tuple[spaces.Box, spaces.Box]:
         """``(observation_space, action_space)`` of one robot, float32: ``[distance_m,
-        offset_px]`` and the platform's action, bounded by what it can do."""
-        low, high = observation_bounds(cfg.camera.width_px, cfg.camera.depth_max_m)
+        offset_px]`` (and ``ahead_m`` when configured) and the platform's action, bounded by
+        what it can do."""
+        low, high = observation_bounds(
+            cfg.camera.width_px, cfg.camera.depth_max_m, ahead=cfg.perception.ahead_rays > 0
+        )
         observation = spaces.Box(
             np.array(low, np.float32), np.array(high, np.float32), dtype=np.float32
         )
@@ -284,9 +288,10 @@ class PersonFollowTask(TaskPlatforms):
     # -- what the env faces read ---------------------------------------------------------------
 
     def observations(self, sim: BatchedSim) -> np.ndarray:
-        """The published observations of every lane, ``(N, 2)`` float32."""
+        """The published observations of every lane, ``(N, k)`` float32 (k: 2, or 3 with
+        the reading ahead)."""
         c = self._columns(sim)
-        return sim.state_words[:, c.obs : c.obs + 2].astype(np.float32)
+        return sim.state_words[:, c.obs : c.obs + observation_size(sim.cfg)].astype(np.float32)
 
     def _columns(self, sim: BatchedSim) -> _InfoColumns:
         """Where every info value sits in a lane's records seen as 8-byte words, in the info
@@ -318,7 +323,8 @@ class PersonFollowTask(TaskPlatforms):
             ]
             person = [float_column(sim.world[0].dtype, (f,)) for f in _PERSON_INFO.values()]
             obs = float_column(dtype, ("task", "obs_d"))
-            if float_column(dtype, ("task", "obs_o")) != obs + 1:
+            adjacent = [float_column(dtype, ("task", f)) for f in ("obs_o", "obs_ahead")]
+            if adjacent != [obs + 1, obs + 2]:
                 raise AssertionError("the observation's fields must be adjacent")
             columns = _InfoColumns(
                 tuple(names),
@@ -335,9 +341,9 @@ class PersonFollowTask(TaskPlatforms):
         return columns
 
     def observation(self, sim: BatchedSim, lane: int) -> np.ndarray:
-        """The published observation of one lane, ``(2,)`` float32."""
+        """The published observation of one lane, ``(k,)`` float32 (as :meth:`observations`)."""
         c = self._columns(sim)
-        return sim.state_words[lane, c.obs : c.obs + 2].astype(np.float32)
+        return sim.state_words[lane, c.obs : c.obs + observation_size(sim.cfg)].astype(np.float32)
 
     def lane_info(self, sim: BatchedSim, lane: int) -> dict[str, Any]:
         """The ``info`` dict of one lane, as Python scalars."""
