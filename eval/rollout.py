@@ -24,7 +24,6 @@ The task is PersonFollow's unless ``task=`` names another (``"line_trace"``): it
 
 from __future__ import annotations
 
-import copy
 import importlib
 import math
 import os
@@ -41,7 +40,8 @@ from follow_env.platforms import get_platform
 from follow_env.platforms.base import Platform
 from follow_env.sim.runner import BatchedSim
 from follow_env.tasks import get_task
-from policies import BatchPolicy, Policy, available_policies, for_platform, make_policy
+from policies import Policy, available_policies, for_platform, make_policy
+from policies.lanes import Lanes
 
 __all__ = [
     "BATCH_LANES",
@@ -138,15 +138,19 @@ class _Layout(NamedTuple):
     variant: str
 
 
-def _layout(platform: Platform, task: _Task) -> _Layout:
+def _layout(platform: Platform, task: _Task, n_obs: int | None = None) -> _Layout:
+    """The layout of a task's step log on ``platform``; ``n_obs``: the observation's entries
+    when a configuration adds optional ones (PersonFollow's reading ahead)."""
     actions = tuple(a.name for a in platform.actions)
     log = task.steplog
-    columns = log.log_columns(actions, tuple(key for key, *_ in platform.info))
+    obs = tuple(log.OBS_COLUMNS)
+    extra: dict[str, Any] = {}
+    if n_obs is not None and n_obs > len(obs):
+        obs, extra = (*obs, log.AHEAD_COLUMN), {"ahead": True}
+    columns = log.log_columns(actions, tuple(key for key, *_ in platform.info), **extra)
     keys = task.model.info_keys(platform)
     info = tuple(c for c in columns if c in keys and c != "termination")
-    return _Layout(
-        columns, info, actions, tuple(log.OBS_COLUMNS), tuple(log.FLAG_COLUMNS), log.META_COLUMNS[1]
-    )
+    return _Layout(columns, info, actions, obs, tuple(log.FLAG_COLUMNS), log.META_COLUMNS[1])
 
 
 def policy_spec(spec: PolicySpec) -> tuple[PolicySpec, str | None]:
@@ -173,18 +177,24 @@ MAX_EPISODES = 1_000_000
 
 
 def _env(
-    scenario: str, config: EnvConfigSpec, render: bool, platform: str | None, task: _Task
+    scenario: str,
+    config: EnvConfigSpec,
+    render: bool,
+    platform: str | None,
+    task: _Task,
+    needs: Mapping[str, Any],
 ) -> gym.Env:
-    """One env per (task, scenario, config, platform) per process: gym.make costs more than an
-    episode."""
+    """One env per (task, scenario, config, platform, the policy's needs) per process: gym.make
+    costs more than an episode."""
     kwargs: dict[str, Any] = {
         task.model.variant_key: scenario,
         "config": config,
         "platform": platform,
+        **needs,
     }
     if render:
         return gym.make(task.env_id, render_mode="rgb_array", **kwargs)
-    key = (task.name, scenario, repr(config), str(platform))
+    key = (task.name, scenario, repr(config), str(platform), repr(needs))
     env = _ENV_CACHE.get(key)
     if env is None:
         env = _ENV_CACHE[key] = gym.make(task.env_id, **kwargs)
@@ -194,6 +204,11 @@ def _env(
 def _policy(spec: PolicySpec, task: str = DEFAULT_TASK) -> Policy:
     # the task's policy of a name several tasks have (``ppo``: each task's shipped agent)
     return make_policy(spec, task) if isinstance(spec, str) else spec
+
+
+def _needs(policy: Policy) -> dict[str, Any]:
+    # What the policy needs on top of the run's configuration (policies.base.Policy).
+    return dict(getattr(policy, "env_overrides", None) or {})
 
 
 def _label(name: str, platform: str | None) -> str:
@@ -225,9 +240,10 @@ def run_episode(
     """
     spec, platform = policy_spec(policy)
     t = _task(task)
-    env = _env(scenario, config, on_frame is not None, platform, t)
-    layout = _layout(env.unwrapped.sim.platform, t)
-    law = for_platform(_policy(spec, task), layout.actions)
+    built = _policy(spec, task)
+    env = _env(scenario, config, on_frame is not None, platform, t, _needs(built))
+    layout = _layout(env.unwrapped.sim.platform, t, env.observation_space.shape[0])
+    law = for_platform(built, layout.actions)
     try:
         obs, info = env.reset(seed=int(seed))
         law.reset()
@@ -256,39 +272,6 @@ def run_episode(
     return Episode(name, scenario, int(seed), log)
 
 
-class _Actor:
-    """Actions for n lanes: the policy's own ``act_batch`` (one object, per-lane memory), or
-    one copy of the policy per lane for a policy that acts for one robot only."""
-
-    def __init__(self, spec: PolicySpec, n: int, actions: tuple[str, ...], task: str) -> None:
-        first = for_platform(_policy(spec, task), actions)
-        self.name = first.name
-        self.size = len(actions)
-        if isinstance(first, BatchPolicy):
-            self.batch: BatchPolicy | None = first
-            first.reset_batch(n)
-            self.lanes: list[Policy] = []
-        else:
-            self.batch = None
-            # A name builds fresh copies; an object is copied so lanes never share memory.
-            self.lanes = [first] + [
-                for_platform(make_policy(spec, task), actions)
-                if isinstance(spec, str)
-                else copy.deepcopy(first)
-                for _ in range(n - 1)
-            ]
-            for law in self.lanes:
-                law.reset()
-
-    def act(self, obs: np.ndarray, active: np.ndarray) -> np.ndarray:
-        if self.batch is not None:
-            return np.asarray(self.batch.act_batch(obs), dtype=np.float32)
-        out = np.zeros((len(obs), self.size), dtype=np.float32)
-        for i in np.flatnonzero(active):
-            out[i] = np.asarray(self.lanes[i].act(obs[i]), dtype=np.float32)
-        return out
-
-
 def run_batch(
     policy: PolicySpec,
     scenario: str,
@@ -311,12 +294,15 @@ def run_batch(
     spec, platform = policy_spec(policy)
     t = _task(task)
     model = t.model
-    cfg = model.resolve_config(config, platform=platform, **{model.variant_key: scenario})
+    built = _policy(spec, task)
+    variant = {model.variant_key: scenario}
+    cfg = model.resolve_config(config, platform=platform, **variant, **_needs(built))
     sim = BatchedSim(model, cfg, n)
-    layout = _layout(sim.platform, t)
+    layout = _layout(sim.platform, t, model.observations(sim).shape[1])
     try:
         sim.reset_lanes(np.arange(n), [int(s) for s in seeds])
-        actor = _Actor(spec, n, layout.actions, task)
+        fresh = (lambda: make_policy(spec, task)) if isinstance(spec, str) else None
+        actor = Lanes(built, n, layout.actions, fresh)
         active = np.ones(n, dtype=bool)
         ended_at = np.zeros(n, dtype=np.int64)  # the step each lane's episode ended at
         observations = [model.observations(sim)]

@@ -12,6 +12,10 @@ float32 array, shape (2,) (reference §1.4, step 5):
 | 0     | distance_m | m    | filtered distance to the person; 0 means no valid reading yet |
 | 1     | offset_px  | px   | box centre minus image centre; > 0 means right of centre     |
 
+With the reading ahead configured (``PerceptionConfig.ahead_rays > 0``) the observation has a
+third entry, ``ahead_m`` (m): the nearest valid depth across the image's middle row. The laws
+read the first two entries and ignore it; a learned agent trained with it needs it.
+
 ## Before the first reading
 ``distance_m <= 0`` means the perception has not measured the person yet (reference §1.4: the
 distance filter starts from nothing, and invalid depth reads as 0). The reference robot did not
@@ -46,13 +50,16 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from follow_env.sim.checks import check_number
-from follow_env.tasks.person_follow.spec import SPEC
+from follow_env.tasks.person_follow.spec import AHEAD, SPEC, observation_names
 
 # A distance at or below this means "no valid reading yet" (reference §1.4: invalid depth is 0).
 NO_READING_M = 0.0
 OBS_SIZE = SPEC.observation_size
 """Entries of an observation (the task spec's)."""
+OBS_SIZES = (OBS_SIZE, len(observation_names(ahead=True)))
+"""Entries of an observation without and with the reading ahead."""
 OBS_NAMES = "[" + ", ".join(SPEC.observation_names) + "]"
+_SHAPES = f"({OBS_SIZE},) = {OBS_NAMES} or ({OBS_SIZES[1]},) with {AHEAD.name}"
 LAW_ACTION_NAMES = ("v_mps", "w_radps")
 """What a guidance law commands: forward speed and yaw rate (the differential drive's action)."""
 
@@ -62,6 +69,10 @@ class Policy(Protocol):
     """Anything that maps an observation to an action: a guidance law or a learned agent.
 
     :param name: the name the policy is known by in tables and logs (e.g. ``"pn:tuned"``).
+
+    Optional: ``env_overrides``, configuration sections the policy needs of an env on top of
+    a run's (``{"perception": {"ahead_rays": 5}}``: a learned agent that reads the reading
+    ahead); evaluation applies them to that policy's episodes.
     """
 
     name: str
@@ -99,27 +110,35 @@ class BatchPolicy(Policy, Protocol):
 def validate_obs(obs: ArrayLike) -> tuple[float, float]:
     """Check an observation and return it as ``(distance_m, offset_px)`` Python floats.
 
-    :param obs: ``[distance_m, offset_px]``, shape (2,), finite.
+    :param obs: ``[distance_m, offset_px]``, shape (2,), or with ``ahead_m`` after them,
+        shape (3,); finite.
     :raises ValueError: on a wrong shape or a NaN/inf entry.
     """
-    arr = np.asarray(obs, dtype=np.float64)
-    if arr.shape != (OBS_SIZE,):
-        raise ValueError(f"obs must have shape ({OBS_SIZE},) = {OBS_NAMES}, got shape {arr.shape}")
-    if not np.all(np.isfinite(arr)):
-        raise ValueError(f"obs must be finite, got {OBS_NAMES} = {arr.tolist()}")
+    arr = validate_obs_row(obs)
     return float(arr[0]), float(arr[1])
 
 
+def validate_obs_row(obs: ArrayLike) -> np.ndarray:
+    """Check one observation of either size (:data:`OBS_SIZES`); returns it as float64.
+
+    :raises ValueError: on a wrong shape or a NaN/inf entry.
+    """
+    arr = np.asarray(obs, dtype=np.float64)
+    if arr.ndim != 1 or arr.shape[0] not in OBS_SIZES:
+        raise ValueError(f"obs must have shape {_SHAPES}, got shape {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"obs must be finite, got {arr.tolist()}")
+    return arr
+
+
 def validate_obs_batch(obs: ArrayLike) -> np.ndarray:
-    """Check a batch of observations ``(n, k)``; returns it as float64.
+    """Check a batch of observations ``(n, k)``, k of :data:`OBS_SIZES`; returns it as float64.
 
     :raises ValueError: on a wrong shape or a NaN/inf entry (naming the lanes).
     """
     arr = np.asarray(obs, dtype=np.float64)
-    if arr.ndim != 2 or arr.shape[1] != OBS_SIZE:
-        raise ValueError(
-            f"obs must have shape (n, {OBS_SIZE}) = rows of {OBS_NAMES}, got shape {arr.shape}"
-        )
+    if arr.ndim != 2 or arr.shape[1] not in OBS_SIZES:
+        raise ValueError(f"obs must have shape (n, k): rows of {_SHAPES}, got shape {arr.shape}")
     bad = ~np.isfinite(arr).all(axis=1)
     if bad.any():
         raise ValueError(f"obs of lanes {np.flatnonzero(bad).tolist()} must be finite")
@@ -242,8 +261,9 @@ class GuidanceLaw(LaneMemory, ABC):
         ``distance_m <= 0`` (no reading yet) gives ``[0, 0]`` and leaves the memory untouched
         (module docstring, "Before the first reading").
 
-        :raises ValueError: if ``obs`` is not a finite array of shape (2,). A rejected
-            observation leaves the law's memory untouched.
+        :raises ValueError: if ``obs`` is not a finite array of shape (2,) (or (3,), with the
+            reading ahead, which the law ignores). A rejected observation leaves the law's
+            memory untouched.
         """
         distance_m, offset_px = validate_obs(obs)
         if distance_m <= NO_READING_M:

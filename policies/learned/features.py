@@ -8,9 +8,8 @@ agent), actions inwards (agent to env), innermost step first, in the order of th
   range is the useful one (``w_max_radps`` 2 rad/s covers every turn rate the tuned laws command
   in any scenario), not the platform's 7.4 rad/s, which would make most of the agent's range and
   most of its exploration spin the person out of view.
-- :class:`ObservationAge`: appends how long the observation has been held (the perception
-  repeats its last values while the detector sees nothing), so the agent can tell a fresh offset
-  from a stale one.
+- :class:`ObservationAge`: appends how long the detection has been held (the perception repeats
+  its last values while the detector sees nothing): a fresh offset or a stale one.
 - :class:`ScaleObservation`: fixed scaling that keeps signed entries centred on 0 (needed by the
   mirror-symmetric policy, :mod:`policies.learned.mirror`).
 - :class:`IncrementalAction`: the agent changes the command by at most a set step and sees the
@@ -25,8 +24,7 @@ agent), actions inwards (agent to env), innermost step first, in the order of th
   the first observation instead.
 
 The arithmetic is exactly that of the training wrappers (they call these classes), so an agent's
-actions are bitwise the same in training, in an env, and on a robot. :class:`Pipeline` chains
-the steps for inference.
+actions are bitwise the same in training, in an env, and on a robot; :class:`Pipeline` chains.
 
 The action is the platform's, of any width: the differential drive's ``[v_mps, w_radps]``, the
 mecanum base's ``[v_mps, vy_mps, w_radps]``. A :class:`Box` carries the entries' names (the
@@ -247,19 +245,20 @@ class ObservationAge(Feature):
     a fresh one). It uses only what the robot publishes, so the real robot can compute it too.
 
     :param max_age_steps: where the age saturates at 1 (30 steps = the env's 3 s lost timeout).
+    :param entries: compare only the first this many entries (2: the detection's, not the
+        reading ahead, which is fresh every frame); None: all.
     """
 
-    def __init__(self, max_age_steps: int = 30) -> None:
-        self.max_age_steps = max_age_steps
-
-    def _check(self) -> None:
-        steps = self.max_age_steps
-        if not is_integer(steps) or steps < 1:
-            raise out_of_range(f"{self.owner}.max_age_steps", steps, "an integer >= 1")
-        self.max_age_steps = int(steps)
+    def __init__(self, max_age_steps: int = 30, entries: int | None = None) -> None:
+        self.max_age_steps, self.entries = max_age_steps, entries
 
     def bind(self, obs: Box, act: Box, n: int) -> tuple[Box, Box]:
-        self._check()
+        steps, entries = self.max_age_steps, self.entries
+        if not is_integer(steps) or steps < 1:
+            raise out_of_range(f"{self.owner}.max_age_steps", steps, "an integer >= 1")
+        if entries is not None and not (is_integer(entries) and 1 <= entries <= obs.shape[0]):
+            raise out_of_range(f"{self.owner}.entries", entries, f"None or 1 to {obs.shape[0]}")
+        self.max_age_steps, self._k = int(steps), obs.shape[0] if entries is None else int(entries)
         self._last = np.zeros((n, *obs.shape), dtype=np.float32)
         self._age = np.zeros(n, dtype=np.int64)
         return Box(np.append(obs.low, 0.0), np.append(obs.high, 1.0)), act
@@ -272,7 +271,8 @@ class ObservationAge(Feature):
 
     def observe(self, obs: np.ndarray, done: np.ndarray) -> np.ndarray:
         obs = np.asarray(obs, dtype=np.float32)
-        age = np.where(np.all(obs == self._last, axis=1), self._age + 1, 0)
+        k = self._k
+        age = np.where(np.all(obs[:, :k] == self._last[:, :k], axis=1), self._age + 1, 0)
         age[done] = 0  # the lanes that ended were reset: obs is a new episode's first
         self._last = obs.copy()
         self._age = age
@@ -280,7 +280,7 @@ class ObservationAge(Feature):
 
     def terminal(self, obs: np.ndarray, lane: int) -> np.ndarray:
         terminal = np.asarray(obs, dtype=np.float32)
-        stale = np.array_equal(terminal, self._last[lane])
+        stale = np.array_equal(terminal[: self._k], self._last[lane, : self._k])
         return self._join(terminal[None], np.array([self._age[lane] + 1 if stale else 0]))[0]
 
     def _join(self, obs: np.ndarray, age: np.ndarray) -> np.ndarray:

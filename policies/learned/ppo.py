@@ -47,7 +47,8 @@ from typing import Any, NamedTuple
 import numpy as np
 import yaml
 
-from policies.base import OBS_SIZE, validate_obs, validate_obs_batch
+from follow_env.tasks.person_follow.spec import AHEAD, SPEC
+from policies.base import OBS_SIZES, validate_obs_batch, validate_obs_row
 from policies.learned.features import Box, Feature, FrameStack, NormalizeObservation, Pipeline
 from policies.learned.networks import ALGOS, Memory, load_network
 
@@ -63,6 +64,9 @@ __all__ = [
     "load_shipped",
     "resolve_path",
 ]
+
+#: The perception settings that shape the reading ahead (``PerceptionConfig``'s fields).
+AHEAD_SETTINGS = ("ahead_rays", "ahead_half_angle_deg")
 
 #: The shipped agents' folder: ``agents/<name>`` is built by ``make_policy("<name>")``.
 AGENTS = Path(__file__).parents[1] / "agents"
@@ -172,6 +176,11 @@ class _Loaded:
         self.platform = config.get("platform", LEGACY_PLATFORM)
         if not isinstance(self.platform, str):
             raise AgentLoadError(f"{where}: platform={self.platform!r} must be a platform's name")
+        #: The perception settings the agent was trained with (``env_kwargs.perception``), the
+        #: reading ahead's among them; None: the configuration's defaults.
+        env_kwargs = hp.get("env_kwargs") or {}
+        self.perception = env_kwargs.get("perception") if isinstance(env_kwargs, dict) else None
+        self.env_id = config.get("env_id", SPEC.env_id)
         self.wrappers = _wrapper_entries(hp.get("vec_env_wrapper"), where)
         self.frame_stack = hp.get("frame_stack", 1)
         if (
@@ -299,14 +308,34 @@ class PPOPolicy:
         self._started = False
         self.action_names = self._agent.action_names
         self._obs_size = self._agent.observation_box.shape[0]
+        self._follows = self._agent.env_id == SPEC.env_id and self._obs_size in OBS_SIZES
+        #: The reading ahead this agent reads (``{"ahead_rays": n, "ahead_half_angle_deg": a}``,
+        #: its training's perception settings), or None: it reads ``[distance_m, offset_px]``.
+        #: Evaluation gives it the reading ahead (:mod:`eval.rollout`); a robot must publish it.
+        self.reads_ahead: dict[str, Any] | None = None
+        if self._follows and self._obs_size == OBS_SIZES[1]:
+            given = self._agent.perception or {}
+            self.reads_ahead = {k: given[k] for k in AHEAD_SETTINGS if k in given}
+        #: What the agent needs of an env on top of a run's configuration (the reading ahead's
+        #: settings); evaluation applies it (:mod:`eval.rollout`). The reading has draws of its
+        #: own, so every other policy's episodes on the same seeds are unchanged by it.
+        self.env_overrides: dict[str, Any] = (
+            {"perception": dict(self.reads_ahead)} if self.reads_ahead else {}
+        )
 
     def _rows(self, obs: np.ndarray, batch: bool) -> np.ndarray:
-        """Observations as float32 rows, checked: PersonFollow's by its own rules, another
-        task's by the saved observation size."""
-        if self._obs_size == OBS_SIZE:
-            if batch:
-                return validate_obs_batch(obs).astype(np.float32)
-            return np.array([validate_obs(obs)], dtype=np.float32)
+        """Observations as float32 rows, checked: PersonFollow's by its own rules (an agent
+        trained without the reading ahead reads the first two entries of an observation that
+        has it), another task's by the saved observation size."""
+        if self._follows:
+            arr = validate_obs_batch(obs) if batch else validate_obs_row(obs)[None]
+            if arr.shape[1] < self._obs_size:
+                raise ValueError(
+                    f"{self.name} reads the reading ahead ({AHEAD.name}, observation entry 2), "
+                    f"but obs has {arr.shape[1]} entries: make the env with perception="
+                    f"{self.reads_ahead!r}"
+                )
+            return arr[:, : self._obs_size].astype(np.float32)
         arr = np.asarray(obs, dtype=np.float64)
         shape = (arr.shape[0], self._obs_size) if batch and arr.ndim == 2 else (self._obs_size,)
         if arr.shape != shape or (batch and arr.ndim != 2):

@@ -59,11 +59,21 @@ def test_person_left_of_centre_gives_counter_clockwise_turn(name: str) -> None:
 
 
 @pytest.mark.parametrize(
-    "bad", [[1.0], [1.0, 2.0, 3.0], [[1.0, 2.0]], 1.0], ids=["1", "3", "1x2", "scalar"]
+    "bad", [[1.0], [1.0, 2.0, 3.0, 4.0], [[1.0, 2.0]], 1.0], ids=["1", "4", "1x2", "scalar"]
 )
 def test_obs_of_wrong_shape_is_rejected(bad: object) -> None:
-    with pytest.raises(ValueError, match=r"shape \(2,\)"):
+    with pytest.raises(ValueError, match=r"shape \(2,\) = \[distance_m, offset_px\] or \(3,\)"):
         PN().act(bad)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("name", LAWS)
+def test_a_law_ignores_the_reading_ahead(name: str) -> None:
+    for distance, offset in ((2.0, 50.0), (0.0, 10.0), (0.8, -30.0)):
+        plain, given = make_policy(name), make_policy(name)
+        np.testing.assert_array_equal(
+            plain.act(obs(distance, offset)),
+            given.act(np.array([distance, offset, 0.4], dtype=np.float32)),
+        )
 
 
 @pytest.mark.parametrize("bad", [[np.nan, 0.0], [1.0, np.inf], [-np.inf, 3.0]])
