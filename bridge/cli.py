@@ -240,7 +240,8 @@ def _run(args: argparse.Namespace, monitor: bool) -> int:
     try:
         policy = factory(policy_name) if policy_name not in ("stop", "manual") else None
         run_config = RunnerConfig(duration_s=args.duration, command=args.command)
-        perception = open_source(args.perception, args.port, args.seed)
+        ahead = getattr(policy, "reads_ahead", None)
+        perception = open_source(args.perception, args.port, args.seed, ahead)
     except (ValueError, PerceptionError) as exc:
         raise UsageError(str(exc)) from None
     try:

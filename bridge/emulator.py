@@ -399,6 +399,7 @@ class Emulator:
             "scenario": self.world.config.scenario.name,
             "seed": self.world.seed,
             "control_dt_s": self.world.dt,
+            "ahead": self.world.ahead,
             "walls": self.world.walls(),
             "wheels": wheels,
             "mcu": dataclasses.asdict(mcu.stats),

@@ -2,7 +2,9 @@
 
 A source hands the runner a :class:`Frame` at every control step: the published observation
 ``[distance_m, offset_px]`` (reference §1.4: held when nothing is detected), whether it is a
-fresh detection, and, where the source knows it, ground truth for the step log.
+fresh detection, the reading ahead when the source publishes it (``ahead_m``: the nearest valid
+depth across the image's middle row, ``PerceptionConfig.ahead_rays``; an agent trained with it
+needs it), and, where the source knows it, ground truth for the step log.
 
 * :class:`SimCamera` (``--perception sim``): the camera of the emulator's simulated world
   (:mod:`bridge.emulator`), over its JSON-lines socket; the robot is the emulated one, so this
@@ -26,6 +28,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Protocol
 from urllib.parse import urlsplit
+
+from follow_env.tasks.person_follow.steplog import AHEAD_COLUMN
 
 __all__ = [
     "Frame",
@@ -66,6 +70,7 @@ class Frame:
     :param done: the source has nothing more (the replay ended, the world's episode is over).
     :param termination: why it is over, if it is.
     :param truth: ground truth by step-log column name (simulated sources only).
+    :param ahead_m: the reading ahead, m (``None``: the source does not publish it).
     """
 
     distance_m: float
@@ -74,12 +79,25 @@ class Frame:
     done: bool = False
     termination: str = ""
     truth: dict[str, float | None] = field(default_factory=dict)
+    ahead_m: float | None = None
+
+    def observation(self) -> list[float]:
+        """The observation a policy reads: ``[distance_m, offset_px]``, then ``ahead_m`` when
+        the frame has it."""
+        extra = [] if self.ahead_m is None else [self.ahead_m]
+        return [self.distance_m, self.offset_px, *extra]
 
 
 class PerceptionSource(Protocol):
-    """What the runner reads from."""
+    """What the runner reads from.
+
+    ``ahead``: the settings of the reading ahead the source publishes (``{"ahead_rays": n,
+    "ahead_half_angle_deg": a}``), ``None`` if it publishes none, or ``"unknown"`` (a replay's
+    log does not say); known after :meth:`start`.
+    """
 
     name: str
+    ahead: dict[str, Any] | str | None
 
     def start(self) -> None:
         """Get ready (connect, reset the world, rewind); called once before the first read."""
@@ -111,6 +129,7 @@ class SimCamera:
         self._sock: socket.socket | None = None
         self._file: Any = None
         self.info: dict[str, Any] = {}
+        self.ahead: dict[str, Any] | str | None = None
 
     def start(self) -> None:
         try:
@@ -124,6 +143,7 @@ class SimCamera:
         self._sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         self._file = self._sock.makefile("rwb")
         self.info = self._ask({"op": "info"})
+        self.ahead = self.info.get("ahead")
         request: dict[str, Any] = {"op": "reset"}
         if self.seed is not None:
             request["seed"] = self.seed
@@ -139,6 +159,7 @@ class SimCamera:
             bool(reply["done"]),
             str(reply["termination"]),
             truth,
+            None if reply.get("ahead_m") is None else float(reply["ahead_m"]),
         )
 
     def _ask(self, request: dict[str, Any]) -> dict[str, Any]:
@@ -167,7 +188,7 @@ class SimCamera:
 
 # Not ground truth: the observation itself, and the world's own clock (the log keeps the runner's).
 _FRAME_KEYS = frozenset(
-    {"distance_m", "offset_px", "detected", "done", "termination", "time_s", "step"}
+    {"distance_m", "offset_px", "ahead_m", "detected", "done", "termination", "time_s", "step"}
 )
 
 
@@ -176,7 +197,7 @@ class Replay:
     the frame is the last row with ``time_s <= t``; done after the last row.
 
     :param path: a step log CSV (``time_s``, ``obs_distance_m``, ``obs_offset_px``; ``detected``
-        optional).
+        and ``obs_ahead_m``, the reading ahead, optional).
     :raises PerceptionError: naming the file and what is wrong with it.
     """
 
@@ -186,6 +207,8 @@ class Replay:
         self._clock = clock
         self._t0 = 0.0
         self.rows = _read_replay(self.path)
+        # The log holds the reading but not the settings it was taken with.
+        self.ahead: dict[str, Any] | str | None = "unknown" if self.rows[0][4] is not None else None
 
     def start(self) -> None:
         self._t0 = self._clock()
@@ -198,15 +221,15 @@ class Replay:
                 index = k
             else:
                 break
-        _, distance, offset, detected = self.rows[index]
+        _, distance, offset, detected, ahead = self.rows[index]
         done = index == len(self.rows) - 1 and t >= self.rows[-1][0]
-        return Frame(distance, offset, detected, done, "replay_over" if done else "")
+        return Frame(distance, offset, detected, done, "replay_over" if done else "", {}, ahead)
 
     def close(self) -> None:
         pass
 
 
-def _read_replay(path: Path) -> list[tuple[float, float, float, bool]]:
+def _read_replay(path: Path) -> list[tuple[float, float, float, bool, float | None]]:
     try:
         with path.open(newline="", encoding="utf-8") as f:
             rows = list(csv.DictReader(f))
@@ -219,16 +242,18 @@ def _read_replay(path: Path) -> list[tuple[float, float, float, bool]]:
     missing = [c for c in ("time_s", "obs_distance_m", "obs_offset_px") if c not in rows[0]]
     if missing:
         raise PerceptionError(f"{path}: missing column(s) {', '.join(missing)}")
-    out: list[tuple[float, float, float, bool]] = []
+    out: list[tuple[float, float, float, bool, float | None]] = []
+    has_ahead = AHEAD_COLUMN in rows[0]
     for line, row in enumerate(rows, start=2):
         try:
             t, d, o = (float(row[c]) for c in ("time_s", "obs_distance_m", "obs_offset_px"))
             detected = float(row.get("detected") or 1.0) > 0.5
+            ahead = float(row[AHEAD_COLUMN]) if has_ahead else None
         except (TypeError, ValueError):
             raise PerceptionError(f"{path}: line {line}: a value is not a number") from None
-        if not all(math.isfinite(x) for x in (t, d, o)):
+        if not all(math.isfinite(x) for x in (t, d, o, 0.0 if ahead is None else ahead)):
             raise PerceptionError(f"{path}: line {line}: a value is not finite")
         if out and t <= out[-1][0]:
             raise PerceptionError(f"{path}: line {line}: time_s={t} does not increase")
-        out.append((t, d, o, detected))
+        out.append((t, d, o, detected, ahead))
     return out

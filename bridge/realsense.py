@@ -4,7 +4,10 @@ The reference robot's camera node (reference §1.4), on real hardware: for every
 detect people, keep the **first** person box of the detector's output (YOLO lists boxes by
 confidence), read the depth at the box centre's integer pixel (the depth stream aligned to the
 colour image), filter it with the asymmetric distance filter (the simulator's own function)
-and publish ``[distance_m, offset_px]``; hold the last pair when nobody is detected.
+and publish ``[distance_m, offset_px]``; hold the last pair when nobody is detected. With
+``ahead_rays`` it also publishes the reading ahead of every frame, as the simulator does
+(``PerceptionConfig.ahead_rays``): the nearest valid depth at those columns of the middle row,
+the far limit when none reads.
 
 The camera and the detector are optional dependencies (``pip install '.[realsense]'``:
 pyrealsense2, ultralytics). Nothing is downloaded at run time: ``MODEL.pt`` must be a file on
@@ -22,7 +25,10 @@ from pathlib import Path
 import numpy as np
 
 from bridge.perception import Frame, PerceptionError
-from follow_env.sensors.depth import distance_filter
+from follow_env.sensors.camera import CameraConfig
+from follow_env.sensors.depth import ahead_column, distance_filter
+from follow_env.sensors.detector import PerceptionConfig
+from follow_env.sim.checks import out_of_range
 
 __all__ = ["PERSON_CLASS", "RealSensePerception", "realsense_grabber", "yolo_detector"]
 
@@ -35,6 +41,7 @@ Detect = Callable[[np.ndarray], Sequence[tuple[float, float, float, float, int]]
 """Returns boxes ``(x1, y1, x2, y2, class)`` in px, in the detector's order."""
 
 _filter = distance_filter.py_func  # the simulator's filter, run as plain Python
+_column = ahead_column.py_func  # and where its reading ahead looks
 
 
 class RealSensePerception:
@@ -48,6 +55,12 @@ class RealSensePerception:
     :param filter_history: the distance filter's history length (the simulator's default).
     :param grab: frames source instead of the RealSense pipeline (tests, other cameras).
     :param detect: detector instead of YOLO.
+    :param ahead: the reading ahead's settings, ``{"ahead_rays": n, "ahead_half_angle_deg":
+        a}`` (``PerceptionConfig``'s fields; an agent's ``reads_ahead``); None: not published.
+    :param fx_px: the colour image's focal length, px, for the reading's columns; None: the
+        camera's own (the RealSense reports it), or the simulator's camera model for ``grab``.
+    :param depth_range_m: valid depths ``(min, max)``, m (the simulator's D435i range); the
+        reading ahead skips the others, as the simulator does.
     """
 
     def __init__(
@@ -59,6 +72,9 @@ class RealSensePerception:
         filter_history: int = 5,
         grab: Grab | None = None,
         detect: Detect | None = None,
+        ahead: dict[str, float] | None = None,
+        fx_px: float | None = None,
+        depth_range_m: tuple[float, float] | None = None,
     ) -> None:
         if detect is None and (model is None or not Path(model).is_file()):
             raise PerceptionError(
@@ -75,6 +91,24 @@ class RealSensePerception:
         self._length = filter_history
         self._stop: Callable[[], None] | None = None
         self._started = False
+        # Checked by the simulator's own config (the same ranges and errors as an env's).
+        unknown = sorted(set(ahead or {}) - {"ahead_rays", "ahead_half_angle_deg"})
+        if unknown:
+            raise ValueError(f"ahead={ahead!r}: unknown setting(s) {', '.join(unknown)}")
+        settings = PerceptionConfig(**(ahead or {}))
+        self.ahead = dict(ahead) if ahead and settings.ahead_rays else None
+        self._rays = settings.ahead_rays
+        self._tan = float(np.tan(np.radians(settings.ahead_half_angle_deg)))
+        camera = CameraConfig(width_px=width, height_px=height)
+        self._fx = fx_px
+        self._fx_model = camera.fx
+        if self._rays and self._tan * (fx_px or camera.fx) >= width / 2.0:
+            raise out_of_range(
+                "PerceptionConfig.ahead_half_angle_deg",
+                settings.ahead_half_angle_deg,
+                "within the image's half-width",
+            )
+        self._range = depth_range_m or (camera.depth_min_m, camera.depth_max_m)
         self.reset()
 
     def reset(self) -> None:
@@ -86,7 +120,8 @@ class RealSensePerception:
 
     def start(self) -> None:
         if self._grab is None:
-            self._grab, self._stop = realsense_grabber(self.width, self.height, self.fps)
+            self._grab, self._stop, fx = realsense_grabber(self.width, self.height, self.fps)
+            self._fx = fx if self._fx is None else self._fx
         if self._detect is None:
             assert self.model is not None
             self._detect = yolo_detector(self.model)
@@ -97,9 +132,10 @@ class RealSensePerception:
         if not self._started or self._grab is None or self._detect is None:
             raise PerceptionError("realsense: call start() before read()")
         colour, depth_m = self._grab()
+        ahead = self.reading_ahead(depth_m) if self._rays else None
         box = next((b for b in self._detect(colour) if int(b[4]) == PERSON_CLASS), None)
         if box is None:  # nothing published: the guidance law acts on the last pair
-            return Frame(self._distance, self._offset, False)
+            return Frame(self._distance, self._offset, False, ahead_m=ahead)
         x1, y1, x2, y2 = (round(v) for v in box[:4])
         cu, cv = (x1 + x2) // 2, (y1 + y2) // 2  # the integer midpoint (reference §1.4)
         cu = min(max(cu, 0), depth_m.shape[1] - 1)
@@ -111,7 +147,22 @@ class RealSensePerception:
             raw, self._distance, self._history, self._count, self._head, self._length
         )
         self._offset = float(cu - colour.shape[1] // 2)
-        return Frame(float(self._distance), self._offset, True)
+        return Frame(float(self._distance), self._offset, True, ahead_m=ahead)
+
+    def reading_ahead(self, depth_m: np.ndarray) -> float:
+        """The reading ahead of a depth image (m, HxW): the nearest valid depth at the
+        configured columns of the middle row, the far limit when none is valid (as
+        :func:`follow_env.sensors.depth.ahead` reads the simulated camera)."""
+        lo, hi = self._range
+        height, width = depth_m.shape
+        fx = self._fx if self._fx is not None else self._fx_model
+        best = hi
+        for k in range(self._rays):
+            u = min(max(_column(k, self._rays, width / 2.0, fx, self._tan), 0), width - 1)
+            z = float(depth_m[height // 2, u])
+            if np.isfinite(z) and lo <= z <= hi and 0.0 < z < best:
+                best = z
+        return best
 
     def close(self) -> None:
         self._started = False
@@ -120,8 +171,9 @@ class RealSensePerception:
             self._stop = None
 
 
-def realsense_grabber(width: int, height: int, fps: int) -> tuple[Grab, Callable[[], None]]:
-    """A RealSense colour + aligned depth stream: ``(grab, stop)``."""
+def realsense_grabber(width: int, height: int, fps: int) -> tuple[Grab, Callable[[], None], float]:
+    """A RealSense colour + aligned depth stream: ``(grab, stop, fx_px)``, the last the colour
+    stream's focal length."""
     try:
         import pyrealsense2 as rs
     except ImportError:
@@ -137,6 +189,8 @@ def realsense_grabber(width: int, height: int, fps: int) -> tuple[Grab, Callable
     except RuntimeError as exc:
         raise PerceptionError(f"realsense: cannot start the camera: {exc}") from None
     scale = profile.get_device().first_depth_sensor().get_depth_scale()  # m per depth unit
+    colour_profile = profile.get_stream(rs.stream.color).as_video_stream_profile()
+    fx = float(colour_profile.get_intrinsics().fx)
     align = rs.align(rs.stream.color)
 
     def grab() -> tuple[np.ndarray, np.ndarray]:
@@ -145,7 +199,7 @@ def realsense_grabber(width: int, height: int, fps: int) -> tuple[Grab, Callable
         depth = np.asanyarray(frames.get_depth_frame().get_data()).astype(np.float64) * scale
         return colour, depth
 
-    return grab, pipeline.stop
+    return grab, pipeline.stop, fx
 
 
 def yolo_detector(model: Path) -> Detect:

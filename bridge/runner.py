@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import contextlib
 import csv
+import json
 import math
 import os
 import tempfile
@@ -37,16 +38,17 @@ from typing import Any
 import numpy as np
 
 from bridge.link import LinkError, SerialLink
-from bridge.perception import Frame, PerceptionSource
+from bridge.perception import Frame, PerceptionError, PerceptionSource
 from bridge.protocol import Capability, CommandKind, Feedback, Hello, PeerRole, WheelCommand
 from follow_env.platforms.diff_drive import DiffDriveConfig, diff_drive_ik
 from follow_env.platforms.wheels import pid_step
 from follow_env.sim.checks import out_of_range
-from follow_env.tasks.person_follow.steplog import COLUMNS
+from follow_env.tasks.person_follow.steplog import AHEAD_COLUMN, log_columns
 
-__all__ = ["COMMAND_MODES", "RunResult", "Runner", "RunnerConfig", "write_rows"]
+__all__ = ["COMMAND_MODES", "RunResult", "Runner", "RunnerConfig", "check_ahead", "write_rows"]
 
 COMMAND_MODES = ("auto", "duty", "speed")
+_COLUMNS = log_columns(ahead=True)  # the step log's, with the reading ahead's place
 _ZERO_REPEATS = 3  # stop commands sent at the end (one may be lost on a noisy line)
 _FIRST_FEEDBACK_S = 1.0  # longest wait for the MCU's first feedback, s
 
@@ -328,6 +330,11 @@ class Runner:
             "speed targets (PID on the MCU)" if mode == "speed" else "duty (PID on the PC)"
         )
         self.perception.start()
+        try:
+            check_ahead(self.policy, self.perception)
+        except PerceptionError:
+            self.perception.close()
+            raise
         walls = getattr(self.perception, "info", {}).get("walls")
         if self.monitor is not None and walls:
             self.monitor.scene = {"walls": walls}  # the emulated world's, for the top-down view
@@ -387,7 +394,12 @@ class Runner:
         elif policy == "manual":
             v, w = self.monitor.manual_command()
         else:
-            obs = np.array([frame.distance_m, frame.offset_px], dtype=np.float32)
+            if getattr(policy, "reads_ahead", None) and frame.ahead_m is None:
+                raise PerceptionError(
+                    f"{policy.name} reads the reading ahead (ahead_m), but "
+                    f"{self.perception.name} published a frame without it"
+                )
+            obs = np.array(frame.observation(), dtype=np.float32)
             v, w = (float(x) for x in policy.act(obs))
         v_max, w_max = self.platform.max_speed_mps, self.platform.max_turn_rate_radps
         v, w = min(max(v, -v_max), v_max), min(max(w, -w_max), w_max)
@@ -427,6 +439,7 @@ class Runner:
             "time_s": round(t, 9),
             "obs_distance_m": frame.distance_m,
             "obs_offset_px": frame.offset_px,
+            AHEAD_COLUMN: frame.ahead_m,
             "detected": int(frame.detected),
             "action_v_mps": v,
             "action_w_radps": w,
@@ -441,7 +454,7 @@ class Runner:
             "termination": frame.termination if v is None else "",
         }
         for key, value in frame.truth.items():
-            if key in COLUMNS:
+            if key in _COLUMNS:
                 row[key] = value
         self._rows.append(row)
         if self.monitor is not None:
@@ -449,7 +462,7 @@ class Runner:
                 {
                     "time_s": t,
                     "mode": self._mode,
-                    "obs": [frame.distance_m, frame.offset_px],
+                    "obs": frame.observation(),
                     "detected": frame.detected,
                     "command": [v, w],
                     "wheel_target_mps": target,
@@ -462,6 +475,31 @@ class Runner:
         return speed
 
 
+def check_ahead(policy: Any, perception: PerceptionSource) -> None:
+    """Refuse a perception that cannot feed the policy's reading ahead
+    (``PPOPolicy.reads_ahead``): one that publishes none, or publishes it with other settings
+    than the agent was trained with (the world's or the camera's, once started).
+
+    :raises PerceptionError: naming the policy, the source and what to change.
+    """
+    wanted = getattr(policy, "reads_ahead", None)
+    if not wanted:
+        return
+    given = getattr(perception, "ahead", None)
+    name = getattr(policy, "name", "the policy")
+    if given is None:
+        raise PerceptionError(
+            f"{name} reads the reading ahead ({wanted}), but {perception.name} does not publish "
+            f"it: start the emulator with --config '{{\"perception\": {json.dumps(wanted)}}}', "
+            "replay a log with an obs_ahead_m column, or use the realsense perception"
+        )
+    if isinstance(given, dict) and any(given.get(k) != v for k, v in wanted.items()):
+        raise PerceptionError(
+            f"{name} reads the reading ahead with {wanted}, but {perception.name} publishes it "
+            f"with {given}"
+        )
+
+
 def _pose(truth: dict[str, Any], who: str) -> list[float] | None:
     keys = (f"{who}_x_m", f"{who}_y_m", f"{who}_theta_rad")
     if not all(truth.get(k) is not None for k in keys):
@@ -472,7 +510,7 @@ def _pose(truth: dict[str, Any], who: str) -> list[float] | None:
 def write_rows(rows: list[dict[str, Any]], path: Path) -> Path:
     """Write step-log rows (the columns they use, in the layout's order) atomically."""
     used = {k for row in rows for k, v in row.items() if v is not None}
-    header = [c for c in COLUMNS if c in used]
+    header = [c for c in _COLUMNS if c in used]
     fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".tmp.csv", dir=path.parent)
     try:
         with os.fdopen(fd, "w", newline="", encoding="utf-8") as f:

@@ -7,8 +7,9 @@ period, and runs the task's own person, camera, detector, depth and contact mode
 a hardware-in-the-loop run (emulator + the runner with ``--perception sim``) meets the person
 and the detector noise the simulator would give on the same scenario and seed.
 
-Every frame is a plain dict (JSON-ready): the published observation, whether the episode is
-over, and the ground truth the step log records (robot and person poses, ``in_frame``, ...).
+Every frame is a plain dict (JSON-ready): the published observation (``ahead_m`` too when the
+configuration publishes the reading ahead), whether the episode is over, and the ground truth
+the step log records (robot and person poses, ``in_frame``, ...).
 """
 
 from __future__ import annotations
@@ -86,6 +87,16 @@ class EmulatedWorld:
         self.env = PersonFollowEnv(config=config, platform=twin)
         self.lock = threading.Lock()
         self.episodes = 0
+        perception = config.perception
+        #: The reading ahead's settings (None: the world publishes none).
+        self.ahead: dict[str, Any] | None = (
+            {
+                "ahead_rays": perception.ahead_rays,
+                "ahead_half_angle_deg": perception.ahead_half_angle_deg,
+            }
+            if perception.ahead_rays
+            else None
+        )
         # Load (or, the first time, compile) the kernels now rather than at the first step.
         self.env.reset(seed=self.seed)
         self.env.step(np.zeros(2))
@@ -153,6 +164,8 @@ class EmulatedWorld:
             "done": done,
             "termination": why,
         }
+        if len(obs) > 2:
+            frame["ahead_m"] = float(obs[2])
         for key in TRUTH_KEYS:
             value = float(info[key])
             frame[key] = value if math.isfinite(value) else None

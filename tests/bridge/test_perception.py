@@ -142,3 +142,70 @@ def test_the_realsense_node_never_downloads_a_model(tmp_path: Path) -> None:
         RealSensePerception(tmp_path / "yolov8n.pt")
     with pytest.raises(PerceptionError, match="call start"):
         RealSensePerception(grab=FakeCamera(), detect=lambda c: []).read()
+
+
+# ---- the reading ahead ---------------------------------------------------------------------
+
+
+def test_a_replay_carries_the_reading_ahead_when_its_log_has_it(tmp_path: Path) -> None:
+    log = tmp_path / "log.csv"
+    log.write_text("time_s,obs_distance_m,obs_offset_px,obs_ahead_m\n0,1.0,0,2.5\n0.1,1.1,5,0.8\n")
+    replay = Replay(log, clock=Clock())
+    replay.start()
+    frame = replay.read()
+    assert frame.ahead_m == 2.5
+    assert frame.observation() == [1.0, 0.0, 2.5]
+    assert replay.ahead == "unknown"  # the log holds the reading, not its settings
+    plain = tmp_path / "plain.csv"
+    plain.write_text("time_s,obs_distance_m,obs_offset_px\n0,1.0,0\n")
+    without = Replay(plain, clock=Clock())
+    without.start()
+    assert without.read().ahead_m is None
+    assert without.ahead is None
+    bad = tmp_path / "bad.csv"
+    bad.write_text("time_s,obs_distance_m,obs_offset_px,obs_ahead_m\n0,1.0,0,\n")
+    with pytest.raises(PerceptionError, match=r"bad\.csv: line 2: a value is not a number"):
+        Replay(bad)
+
+
+def test_the_realsense_node_reads_ahead_as_the_simulator_does() -> None:
+    """Five columns of the middle row over +-14 deg, the nearest valid depth; 0 (invalid) and
+    depths beyond the range skipped; the far limit when none reads."""
+    camera = FakeCamera()
+    node = RealSensePerception(
+        grab=camera, detect=lambda colour: [], ahead={"ahead_rays": 5}, fx_px=400.0
+    )
+    node.start()
+    assert node.ahead == {"ahead_rays": 5}
+    # tan(14 deg) * 400 = 99.7 px: columns 220, 270, 320, 370, 420 of row 240
+    depth = np.full((480, 640), 12.0)  # beyond the 10 m range: not valid
+    assert node.reading_ahead(depth) == 10.0
+    depth[240, 420] = 3.0
+    depth[240, 421] = 0.5  # not a column: not seen
+    assert node.reading_ahead(depth) == 3.0
+    depth[240, 270] = 0.0  # invalid
+    depth[240, 220] = np.nan
+    assert node.reading_ahead(depth) == 3.0
+    depth[240, 320] = 1.25
+    assert node.reading_ahead(depth) == 1.25
+    frame = node.read()  # FakeCamera's person spans rows 200-300 at 2 m, columns 300-400
+    assert not frame.detected
+    assert frame.ahead_m == 2.0
+    assert frame.observation() == [0.0, 0.0, 2.0]
+    off = RealSensePerception(grab=camera, detect=lambda colour: [])
+    off.start()
+    assert off.ahead is None
+    assert off.read().ahead_m is None
+
+
+@pytest.mark.parametrize(
+    ("ahead", "error"),
+    [
+        ({"ahead_rays": 99}, r"PerceptionConfig\.ahead_rays=99 is out of range"),
+        ({"ahead_rays": 5, "ahead_half_angle_deg": 40.0}, r"ahead_half_angle_deg=40\.0 is out"),
+        ({"ahead_rays": 5, "rows": 2}, "unknown setting"),
+    ],
+)
+def test_bad_reading_ahead_settings_are_refused(ahead: dict, error: str) -> None:
+    with pytest.raises(ValueError, match=error):
+        RealSensePerception(grab=FakeCamera(), detect=lambda colour: [], ahead=ahead)

@@ -71,7 +71,7 @@ function onState(s) {
   }
   $("mode").textContent = s.mode;
   $("time").textContent = fmt(s.time_s, 1) + " s" + (s.termination ? " (" + s.termination + ")" : "");
-  $("obs").textContent = s.obs ? fmt(s.obs[0], 2) + " m, " + fmt(s.obs[1], 0) + " px" + (s.detected ? "" : " (held)") : "-";
+  $("obs").textContent = s.obs ? fmt(s.obs[0], 2) + " m, " + fmt(s.obs[1], 0) + " px" + (s.detected ? "" : " (held)") + (s.obs.length > 2 ? "; ahead " + fmt(s.obs[2], 2) + " m" : "") : "-";
   $("cmd").textContent = s.command && s.command[0] !== null ? fmt(s.command[0], 2) + " m/s, " + fmt(s.command[1], 2) + " rad/s" : "-";
   $("wheels").textContent = s.wheel_target_mps ? fmt(s.wheel_target_mps[0], 2) + " / " + fmt(s.wheel_measured_mps[0], 2) +
     ", " + fmt(s.wheel_target_mps[1], 2) + " / " + fmt(s.wheel_measured_mps[1], 2) + " m/s" : "-";
