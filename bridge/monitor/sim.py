@@ -115,7 +115,7 @@ class SimDriver:
             {
                 "time_s": float(info["time_s"]),
                 "mode": mode,
-                "obs": [float(obs[0]), float(obs[1])],
+                "obs": [float(x) for x in obs],  # with ahead_m when the config publishes it
                 "detected": bool(info["detected"]),
                 "command": [float(action[0]), float(action[1])],
                 "wheel_target_mps": [info["wheel_target_r_mps"], info["wheel_target_l_mps"]],

@@ -137,3 +137,43 @@ def test_the_emulator_refuses_bad_settings() -> None:
         Emulator("socket://127.0.0.1:0", framing="v1")  # type: ignore[arg-type]
     with pytest.raises(ValueError, match="is not a socket://HOST:PORT address"):
         Emulator("/dev/ttyUSB0")
+
+
+def test_a_world_configured_with_the_reading_ahead_publishes_it() -> None:
+    """The world's frames carry ahead_m and its info the settings; the sim camera hands both
+    to the runner, which refuses an agent trained with other settings or a world without."""
+    from bridge.perception import PerceptionError, SimCamera
+    from bridge.runner import check_ahead
+    from follow_env.tasks.person_follow.config import THESIS
+
+    class Reader:  # what the runner asks of an agent that reads ahead
+        name = "agent"
+
+        def __init__(self, ahead: dict) -> None:
+            self.reads_ahead = ahead
+
+    config = THESIS.replace(perception={"ahead_rays": 3, "ahead_half_angle_deg": 10.0})
+    emu = Emulator("socket://127.0.0.1:0", config=config).start()
+    plain = Emulator("socket://127.0.0.1:0").start()
+    try:
+        camera = SimCamera(*emu.camera_address, seed=2)
+        camera.start()
+        frame = camera.read()
+        assert frame.ahead_m is not None
+        assert 0.1 <= frame.ahead_m <= 10.0
+        assert len(frame.observation()) == 3
+        assert camera.ahead == {"ahead_rays": 3, "ahead_half_angle_deg": 10.0}
+        check_ahead(Reader({"ahead_rays": 3, "ahead_half_angle_deg": 10.0}), camera)
+        with pytest.raises(PerceptionError, match="publishes it with"):
+            check_ahead(Reader({"ahead_rays": 5, "ahead_half_angle_deg": 14.0}), camera)
+        camera.close()
+        other = SimCamera(*plain.camera_address)
+        other.start()
+        assert other.read().ahead_m is None
+        assert other.ahead is None
+        with pytest.raises(PerceptionError, match=r"does not publish it: start the emulator"):
+            check_ahead(Reader({"ahead_rays": 5}), other)
+        other.close()
+    finally:
+        emu.stop()
+        plain.stop()

@@ -163,3 +163,17 @@ def test_its_draws_are_declared_apart_from_the_box_centres() -> None:
 def test_bad_settings_are_refused_naming_the_field(overrides: dict, field: str) -> None:
     with pytest.raises(ValueError, match=rf"PerceptionConfig\.{field}="):
         EnvConfig.from_overrides(THESIS, overrides)
+
+
+def test_gymnasium_and_sb3_checks_pass_with_it() -> None:
+    import warnings
+
+    from gymnasium.utils.env_checker import check_env as gym_check_env
+    from stable_baselines3.common.env_checker import check_env as sb3_check_env
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the SI action box's advisory warning (README)
+        gym_check_env(
+            gym.make("PersonFollow-v0", render_mode="rgb_array", perception=AHEAD_ON).unwrapped
+        )
+        sb3_check_env(gym.make("PersonFollow-v0", perception=AHEAD_ON).unwrapped)
