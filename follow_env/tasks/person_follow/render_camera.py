@@ -7,8 +7,10 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from follow_env.sensors.depth import ahead_column
 from follow_env.sim.drawing import ONE, SHIFT, dashed_polyline, put_text
 from follow_env.tasks.person_follow.render_style import (
+    C_AHEAD,
     C_BG,
     C_BODY,
     C_CENTRE,
@@ -29,6 +31,8 @@ from follow_env.tasks.person_follow.render_style import (
 )
 
 __all__ = ["CameraPanel"]
+
+_column = ahead_column.py_func  # where the perception reads ahead, as plain Python
 
 
 class CameraPanel:
@@ -152,6 +156,24 @@ class CameraPanel:
                     (centre[1] >> SHIFT) - 10,
                 )
                 put_text(img, f"published: bystander {owner}", org, C_TEXT, 0.45, True, C_STOLEN)
+
+        # The reading ahead: its columns on the middle row, and what it read.
+        if lane.ahead is not None:
+            cam = lane.camera
+            cx, cy, fx = float(cam["cx"]), float(cam["cy"]), float(cam["fx"])
+            for k in range(lane.ahead_rays):
+                u = _column(k, lane.ahead_rays, cx, fx, lane.ahead_tan)
+                cv2.drawMarker(
+                    img,
+                    tuple(q >> SHIFT for q in self._img_pt(u, cy)),
+                    C_AHEAD,
+                    cv2.MARKER_DIAMOND,
+                    8,
+                    2,
+                    cv2.LINE_AA,
+                )
+            org = (self.cam_x0 + 8, self.cam_y0 + 40)
+            put_text(img, f"ahead {lane.ahead:5.2f} m", org, C_AHEAD)
 
         # Warnings bottom right, away from the header and the legend.
         x_warn = self.cam_x0 + self.cam_w - 175

@@ -24,6 +24,7 @@ from follow_env.sim.drawing import (
     rect_corners,
 )
 from follow_env.tasks.person_follow.render_style import (
+    C_AHEAD,
     C_BG,
     C_DET,
     C_FLOOR,
@@ -194,7 +195,6 @@ class MapPanel:
         blend_poly(img, wedge_px, C_FRUSTUM, FRUSTUM_ALPHA)
         cv2.polylines(img, [wedge_px], True, (200, 160, 40), 1, cv2.LINE_AA, SHIFT)
         self._draw_walls(img)
-
         # Trails under the bodies.
         for trail, color in ((self.target_trail, C_TARGET), (self.robot_trail, C_ROBOT)):
             if trail.n >= 2:
@@ -232,6 +232,16 @@ class MapPanel:
                 labels.append(("target", (u + 8, v - 8), C_TARGET, 0.4))
             elif p != followed:
                 labels.append((f"bystander {p}", (u + 8, v + 16), (215, 215, 215), 0.35))
+
+        if lane.ahead is not None:
+            # The reading ahead, over the bodies: the line across its columns at the depth it
+            # read (a depth is measured along the optical axis, so the line is square to it).
+            axis = rth + az_l + 0.5 * sweep
+            ax, ay = math.cos(axis), math.sin(axis)
+            d, half = lane.ahead, lane.ahead * lane.ahead_tan
+            mx, my = camx + d * ax, camy + d * ay
+            ends = np.array([[mx - half * ay, my + half * ax], [mx + half * ay, my - half * ax]])
+            cv2.line(img, *map(tuple, view.px(ends)), C_AHEAD, 2, cv2.LINE_AA, SHIFT)
 
         # The person whose detection the perception took this frame: a ring, green on the
         # target, red with a label on a bystander (a stolen target).

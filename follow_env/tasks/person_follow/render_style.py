@@ -67,6 +67,7 @@ C_STOLEN = (220, 0, 0)  # a bystander's detection is followed: the stolen target
 C_TRACK = (0, 200, 235)
 C_CENTRE = (250, 250, 250)
 C_WARN = (235, 60, 50)
+C_AHEAD = (200, 40, 200)  # the reading ahead: what the depth row sees nearest
 # Line of sight to the target, by sight state (index = SIGHT_*).
 C_SIGHT = ((40, 170, 60), (245, 150, 0), (235, 60, 50), (140, 140, 140))
 
@@ -160,6 +161,10 @@ class Lane:
         self.reason = int(st["episode"]["reason"])
         self.x, self.y, self.th = float(body["x"]), float(body["y"]), float(body["th"])
         self.obs_d, self.obs_o = float(ts["obs_d"]), float(ts["obs_o"])
+        # The reading ahead (m) and the tangent of its half-angle, when it is configured.
+        self.ahead_rays = int(tp["depth"]["ahead_rays"])
+        self.ahead = float(ts["obs_ahead"]) if self.ahead_rays > 0 else None
+        self.ahead_tan = float(tp["depth"]["ahead_tan"])
         self.true_d, self.true_o = float(ts["true_d"]), float(ts["true_o"])
         self.vis_frac = float(ts["vis_frac"])
         self.in_frame = bool(ts["in_frame"] > 0.0)

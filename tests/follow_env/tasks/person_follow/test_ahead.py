@@ -177,3 +177,19 @@ def test_gymnasium_and_sb3_checks_pass_with_it() -> None:
             gym.make("PersonFollow-v0", render_mode="rgb_array", perception=AHEAD_ON).unwrapped
         )
         sb3_check_env(gym.make("PersonFollow-v0", perception=AHEAD_ON).unwrapped)
+
+
+def test_the_frame_shows_it() -> None:
+    """The rendered frame marks the reading's columns and value in its colour, only with it."""
+    from follow_env.tasks.person_follow.render_style import C_AHEAD
+
+    def frame(**kwargs: Any) -> np.ndarray:
+        env = gym.make("PersonFollow-v0", scenario="crowd", render_mode="rgb_array", **kwargs)
+        env.reset(seed=2)
+        return env.render()
+
+    def magenta(img: np.ndarray) -> int:
+        return int(np.all(img == np.array(C_AHEAD, dtype=np.uint8), axis=-1).sum())
+
+    assert magenta(frame()) == 0
+    assert magenta(frame(perception=AHEAD_ON)) > 50
