@@ -92,13 +92,14 @@ class RealSensePerception:
         self._stop: Callable[[], None] | None = None
         self._started = False
         # Checked by the simulator's own config (the same ranges and errors as an env's).
-        unknown = sorted(set(ahead or {}) - {"ahead_rays", "ahead_half_angle_deg"})
+        unknown = sorted(set(ahead or {}) - {"ahead_rays", "ahead_half_angle_deg", "ahead_target"})
         if unknown:
             raise ValueError(f"ahead={ahead!r}: unknown setting(s) {', '.join(unknown)}")
         settings = PerceptionConfig(**(ahead or {}))
         self.ahead = dict(ahead) if ahead and settings.ahead_rays else None
         self._rays = settings.ahead_rays
         self._tan = float(np.tan(np.radians(settings.ahead_half_angle_deg)))
+        self._exclude = settings.ahead_target == "exclude"
         camera = CameraConfig(width_px=width, height_px=height)
         self._fx = fx_px
         self._fx_model = camera.fx
@@ -132,10 +133,12 @@ class RealSensePerception:
         if not self._started or self._grab is None or self._detect is None:
             raise PerceptionError("realsense: call start() before read()")
         colour, depth_m = self._grab()
-        ahead = self.reading_ahead(depth_m) if self._rays else None
         box = next((b for b in self._detect(colour) if int(b[4]) == PERSON_CLASS), None)
         if box is None:  # nothing published: the guidance law acts on the last pair
+            ahead = self.reading_ahead(depth_m) if self._rays else None
             return Frame(self._distance, self._offset, False, ahead_m=ahead)
+        skip = (box[0], box[2]) if self._exclude else (1.0, 0.0)
+        ahead = self.reading_ahead(depth_m, skip) if self._rays else None
         x1, y1, x2, y2 = (round(v) for v in box[:4])
         cu, cv = (x1 + x2) // 2, (y1 + y2) // 2  # the integer midpoint (reference §1.4)
         cu = min(max(cu, 0), depth_m.shape[1] - 1)
@@ -149,16 +152,19 @@ class RealSensePerception:
         self._offset = float(cu - colour.shape[1] // 2)
         return Frame(float(self._distance), self._offset, True, ahead_m=ahead)
 
-    def reading_ahead(self, depth_m: np.ndarray) -> float:
+    def reading_ahead(self, depth_m: np.ndarray, skip: tuple[float, float] = (1.0, 0.0)) -> float:
         """The reading ahead of a depth image (m, HxW): the nearest valid depth at the
-        configured columns of the middle row, the far limit when none is valid (as
-        :func:`follow_env.sensors.depth.ahead` reads the simulated camera)."""
+        configured columns of the middle row but those in ``skip = (u1, u2)`` (px; with
+        ``ahead_target: exclude``, the detected person's box), the far limit when none is
+        valid (as :func:`follow_env.sensors.depth.ahead` reads the simulated camera)."""
         lo, hi = self._range
         height, width = depth_m.shape
         fx = self._fx if self._fx is not None else self._fx_model
         best = hi
         for k in range(self._rays):
             u = min(max(_column(k, self._rays, width / 2.0, fx, self._tan), 0), width - 1)
+            if skip[0] <= u <= skip[1]:
+                continue
             z = float(depth_m[height // 2, u])
             if np.isfinite(z) and lo <= z <= hi and 0.0 < z < best:
                 best = z

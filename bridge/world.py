@@ -93,6 +93,7 @@ class EmulatedWorld:
             {
                 "ahead_rays": perception.ahead_rays,
                 "ahead_half_angle_deg": perception.ahead_half_angle_deg,
+                "ahead_target": perception.ahead_target,
             }
             if perception.ahead_rays
             else None

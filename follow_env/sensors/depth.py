@@ -76,6 +76,12 @@ PARAMS = Block(
             "tangent of the reading ahead's half-angle",
             source=lambda c: math.tan(math.radians(c.perception.ahead_half_angle_deg)),
         ),
+        f8(
+            "ahead_skip",
+            "",
+            "1: the reading ahead skips the published box's columns",
+            source=lambda c: 1.0 if c.perception.ahead_target == "exclude" else 0.0,
+        ),
     ],
 )
 
@@ -232,10 +238,12 @@ def ahead(
     n_walls: int,
     keys: np.ndarray,
     step: int,
+    skip: tuple[float, float],
 ) -> float:
     """The reading ahead (m): the nearest valid depth the camera reports at ``ahead_rays``
     columns of the middle row ``cy``, spread evenly over +- ``atan(ahead_tan)`` about the
-    optical axis (one column: the axis), each through :func:`measure_at` with its own draws.
+    optical axis (one column: the axis), each through :func:`measure_at` with its own draws;
+    columns in ``skip = (u1, u2)`` (px, inclusive; empty when u1 > u2) are not read.
     ``depth_max`` when no column reads a valid depth: beyond the range, too near (under
     ``depth_min``) or invalid all read 0 on the camera, and a 0 among them is skipped. The
     camera is at ``pose = (ox, oy, cos th, sin th)``; the rest is as for :func:`depth_ray`."""
@@ -247,6 +255,8 @@ def ahead(
     best = prm.depth_max
     for k in range(n):
         cu = ahead_column(k, n, cam.cx, cam.fx, prm.ahead_tan)
+        if skip[0] <= cu <= skip[1]:
+            continue
         z = depth_ray(cu, cv, cam, ox, oy, c, s, people, n_people, body, walls, n_walls)
         reading = measure_at(prm, z, kd, base + 2 * k)
         if 0.0 < reading < best:

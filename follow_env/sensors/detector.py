@@ -124,6 +124,13 @@ class PerceptionConfig(Validated):
         "choice: the columns span +- this about the optical axis, evenly (14 deg: +-0.25 m at "
         "1 m, about a robot's half-width)",
     )
+    ahead_target: str = param(
+        "include",
+        doc="choice: 'include' reads every column; 'exclude' skips the columns inside the box "
+        "of the detection published this frame, so that the reading is of what else is ahead "
+        "(a bystander, a wall), not a second distance to the person followed",
+        choices=("include", "exclude"),
+    )
 
 
 @njit(inline="always")

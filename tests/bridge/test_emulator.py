@@ -162,10 +162,11 @@ def test_a_world_configured_with_the_reading_ahead_publishes_it() -> None:
         assert frame.ahead_m is not None
         assert 0.1 <= frame.ahead_m <= 10.0
         assert len(frame.observation()) == 3
-        assert camera.ahead == {"ahead_rays": 3, "ahead_half_angle_deg": 10.0}
-        check_ahead(Reader({"ahead_rays": 3, "ahead_half_angle_deg": 10.0}), camera)
+        settings = {"ahead_rays": 3, "ahead_half_angle_deg": 10.0, "ahead_target": "include"}
+        assert camera.ahead == settings
+        check_ahead(Reader(settings), camera)
         with pytest.raises(PerceptionError, match="publishes it with"):
-            check_ahead(Reader({"ahead_rays": 5, "ahead_half_angle_deg": 14.0}), camera)
+            check_ahead(Reader({**settings, "ahead_target": "exclude"}), camera)
         camera.close()
         other = SimCamera(*plain.camera_address)
         other.start()

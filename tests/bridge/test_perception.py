@@ -209,3 +209,15 @@ def test_the_realsense_node_reads_ahead_as_the_simulator_does() -> None:
 def test_bad_reading_ahead_settings_are_refused(ahead: dict, error: str) -> None:
     with pytest.raises(ValueError, match=error):
         RealSensePerception(grab=FakeCamera(), detect=lambda colour: [], ahead=ahead)
+
+
+def test_the_realsense_node_can_leave_the_person_out_of_the_reading() -> None:
+    camera = FakeCamera()  # the person: 2 m over columns 300-400; the rest of the row 5 m
+    person = (301.0, 201.0, 399.0, 299.0, PERSON_CLASS)
+    settings = {"ahead_rays": 5, "ahead_target": "exclude"}
+    node = RealSensePerception(grab=camera, detect=lambda c: [person], ahead=settings, fx_px=400.0)
+    node.start()
+    assert node.read().ahead_m == 5.0  # columns 320 and 370 are the person's: skipped
+    node = RealSensePerception(grab=camera, detect=lambda c: [], ahead=settings, fx_px=400.0)
+    node.start()
+    assert node.read().ahead_m == 2.0  # nobody detected: nothing to leave out

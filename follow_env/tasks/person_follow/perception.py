@@ -109,13 +109,6 @@ def frame(
         z = depth_ray(cu, cv, cam, ox, oy, c_th, s_th, people, n_people, dims, walls, n_walls)
         m_raw = measure(zp, z, keys, step)
 
-    # The reading ahead, when configured: from this frame's depth image, which needs no
-    # detector and so none of its latency.
-    if zp.ahead_rays > 0.0:
-        ts.obs_ahead = ahead(
-            zp, cam, (ox, oy, c_th, s_th), people, n_people, dims, walls, n_walls, keys, step
-        )
-
     # Publish what left the delay line this frame, through the distance filter (step 4).
     out = delay(dp, det, step, m_det, m_cu, m_cv, m_raw, chosen)
     ts.detected = det.dl_det[out]
@@ -133,6 +126,16 @@ def frame(
         ts.lost_t = 0.0
     elif step > 0:
         ts.lost_t += tp.dt
+
+    # The reading ahead, when configured: this frame's depth image, which needs no detector
+    # and so none of its latency; without the columns of the box just published, if asked.
+    if zp.ahead_rays > 0.0:
+        skip = (1.0, 0.0)  # nothing
+        if zp.ahead_skip > 0.0 and ts.detected > 0.0:
+            skip = (ts.box[0], ts.box[2])
+        ts.obs_ahead = ahead(
+            zp, cam, (ox, oy, c_th, s_th), people, n_people, dims, walls, n_walls, keys, step, skip
+        )
 
     # Ground truth of the target (person 0): distance from the camera to the body's front,
     # and the pixel column of the body's axis at camera height.

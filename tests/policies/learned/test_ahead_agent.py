@@ -43,7 +43,11 @@ def ahead_agent(tmp_path_factory: pytest.TempPathFactory) -> Path:
 def test_it_names_the_reading_it_needs(ahead_agent: Path) -> None:
     agent = make_policy(str(ahead_agent))
     assert isinstance(agent, PPOPolicy)
-    assert agent.reads_ahead == {"ahead_rays": 5, "ahead_half_angle_deg": 14.0}
+    assert agent.reads_ahead == {
+        "ahead_rays": 5,
+        "ahead_half_angle_deg": 14.0,
+        "ahead_target": "include",
+    }
     assert make_policy("ppo").reads_ahead is None
     agent.reset()
     with pytest.raises(ValueError, match=r"reads the reading ahead .* perception=\{'ahead_rays'"):

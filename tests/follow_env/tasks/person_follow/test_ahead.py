@@ -193,3 +193,28 @@ def test_the_frame_shows_it() -> None:
 
     assert magenta(frame()) == 0
     assert magenta(frame(perception=AHEAD_ON)) > 50
+
+
+def test_excluding_the_target_reads_what_else_is_ahead() -> None:
+    """With ahead_target 'exclude' the columns inside the box published this frame are not
+    read: at the start of `straight` (an ideal camera, no latency) the person's three columns
+    are skipped and the reading is of the hall behind them; without a fresh detection every
+    column is read again."""
+    include = gym.make("PersonFollow-v0", config="ideal", perception=AHEAD_ON)
+    exclude = gym.make(
+        "PersonFollow-v0", config="ideal", perception={**AHEAD_ON, "ahead_target": "exclude"}
+    )
+    obs_in, info = include.reset(seed=0)
+    obs_ex, _ = exclude.reset(seed=0)
+    assert info["detected"]
+    assert obs_in[2] == pytest.approx(info["true_distance_m"], abs=1e-3)
+    assert obs_ex[2] > info["true_distance_m"] + 2.0
+    np.testing.assert_array_equal(obs_ex[:2], obs_in[:2])
+    blind = gym.make(
+        "PersonFollow-v0",
+        config="ideal",
+        perception={**AHEAD_ON, "ahead_target": "exclude", "miss_prob": 1.0},
+    )
+    obs_blind, info_blind = blind.reset(seed=0)
+    assert not info_blind["detected"]
+    assert obs_blind[2] == pytest.approx(info["true_distance_m"], abs=1e-3)
