@@ -61,8 +61,9 @@ class PersonFollowEnv(TaskEnv):
     ahead, in [0, depth_max_m] m, the nearest valid depth at n columns of the image's middle row
     spread over +- ``ahead_half_angle_deg`` (14 deg), each with the D435i's noise, of this
     frame (no detector latency); ``depth_max_m`` when no column reads (beyond the range, nearer
-    than ``depth_min_m`` or invalid all read 0 on the camera). It has draws of its own: every
-    other value of an episode is the same with it and without it.
+    than ``depth_min_m`` or invalid all read 0 on the camera); ``ahead_target="exclude"`` skips
+    the columns inside the box published this frame. It has draws of its own: every other
+    value of an episode is the same with it and without it.
 
     ## Rewards
 
