@@ -13,8 +13,10 @@ from policies.base import make_action, validate_obs
 from policies.pn import PNParams
 
 
-def obs(distance_m: float, offset_px: float) -> np.ndarray:
-    return np.array([distance_m, offset_px], dtype=np.float32)
+def obs(distance_m: float, offset_px: float, policy: object = None) -> np.ndarray:
+    """An observation; for an agent that reads the reading ahead, with nothing near ahead."""
+    ahead = [10.0] if getattr(policy, "reads_ahead", None) else []
+    return np.array([distance_m, offset_px, *ahead], dtype=np.float32)
 
 
 # The sign rule of reference §1.5 is a property of the guidance laws' equations. A learned agent is
@@ -31,7 +33,7 @@ def test_every_registered_policy_satisfies_the_protocol(name: str) -> None:
 @pytest.mark.parametrize("name", available_policies("person_follow"))
 def test_action_is_float32_with_one_entry_per_action_name(name: str) -> None:
     policy = make_policy(name)
-    action = policy.act(obs(2.0, 30.0))
+    action = policy.act(obs(2.0, 30.0, policy))
     names = action_names(policy)
     assert action.shape == (len(names),)
     assert action.dtype == np.float32
@@ -96,7 +98,8 @@ def test_rejected_obs_leaves_law_memory_untouched() -> None:
 @pytest.mark.parametrize("distance_m", [0.0, -0.5])
 def test_no_distance_reading_yet_gives_zero_action(name: str, distance_m: float) -> None:
     # The reference robot did not move before its first reading; V = kv (0 - 1) would reverse.
-    action = make_policy(name).act(obs(distance_m, 120.0))
+    policy = make_policy(name)
+    action = policy.act(obs(distance_m, 120.0, policy))
     np.testing.assert_array_equal(action, np.zeros_like(action))
 
 

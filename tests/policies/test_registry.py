@@ -22,8 +22,10 @@ LAWS = ("pn", "mpn", "gsmpn", "gsmpn-listing", "gsmpn-equation")
 PRESETS = ("thesis", "tuned")
 
 
-def obs(distance_m: float, offset_px: float) -> np.ndarray:
-    return np.array([distance_m, offset_px], dtype=np.float32)
+def obs(distance_m: float, offset_px: float, policy: object = None) -> np.ndarray:
+    """An observation; for an agent that reads the reading ahead, with nothing near ahead."""
+    ahead = [10.0] if getattr(policy, "reads_ahead", None) else []
+    return np.array([distance_m, offset_px, *ahead], dtype=np.float32)
 
 
 def test_every_law_and_law_preset_name_is_available() -> None:
@@ -39,7 +41,7 @@ def test_available_policies_are_sorted() -> None:
 def test_every_available_name_builds_a_working_policy(name: str) -> None:
     policy = make_policy(name)
     policy.reset()
-    assert np.all(np.isfinite(policy.act(obs(2.0, 30.0))))
+    assert np.all(np.isfinite(policy.act(obs(2.0, 30.0, policy))))
 
 
 @pytest.mark.parametrize("law", LAWS)

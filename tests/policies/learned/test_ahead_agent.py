@@ -116,3 +116,21 @@ def test_the_runner_feeds_it_from_a_replay_and_refuses_a_source_without(
         runner = Runner(link, make_policy(str(ahead_agent)), Replay(plain))
         with pytest.raises(PerceptionError, match=r"does not publish it: start the emulator"):
             runner.run()
+
+
+@pytest.mark.slow
+def test_the_shipped_agent_that_reads_ahead() -> None:
+    """``ppo_ahead`` (policies/agents/ppo_ahead): it names the reading it was trained with, and
+    its episodes in evaluation carry it, batched as alone."""
+    agent = make_policy("ppo_ahead")
+    assert agent.name == "ppo_ahead"
+    assert agent.reads_ahead == {
+        "ahead_rays": 5,
+        "ahead_half_angle_deg": 14.0,
+        "ahead_target": "include",
+    }
+    (batched,) = run_batch("ppo_ahead", "crossing", [2])
+    alone = run_episode("ppo_ahead", "crossing", 2)
+    pd.testing.assert_frame_equal(batched.log, alone.log, check_exact=True)
+    assert batched.log["obs_ahead_m"].notna().all()
+    assert batched.log.termination.iloc[-1] == "walk_over"
