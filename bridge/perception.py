@@ -91,9 +91,9 @@ class Frame:
 class PerceptionSource(Protocol):
     """What the runner reads from.
 
-    ``ahead``: the settings of the reading ahead the source publishes (``{"ahead_rays": n,
-    "ahead_half_angle_deg": a}``), ``None`` if it publishes none, or ``"unknown"`` (a replay's
-    log does not say); known after :meth:`start`.
+    ``ahead``: the settings of the reading ahead the source publishes (``PerceptionConfig``'s
+    ``ahead_rays``, ``ahead_half_angle_deg``, ``ahead_target``), ``None`` if it publishes none,
+    or ``"unknown"`` (a replay's log does not say); known after :meth:`start`.
     """
 
     name: str
