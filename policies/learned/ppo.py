@@ -47,8 +47,7 @@ from typing import Any, NamedTuple
 import numpy as np
 import yaml
 
-from follow_env.sensors.detector import PerceptionConfig
-from follow_env.tasks.person_follow.spec import AHEAD, SPEC
+from follow_env.tasks.person_follow.spec import AHEAD, AHEAD_SETTINGS, SPEC
 from policies.base import OBS_SIZES, validate_obs_batch, validate_obs_row
 from policies.learned.features import Box, Feature, FrameStack, NormalizeObservation, Pipeline
 from policies.learned.networks import ALGOS, Memory, load_network
@@ -65,9 +64,6 @@ __all__ = [
     "load_shipped",
     "resolve_path",
 ]
-
-#: The perception settings that shape the reading ahead (``PerceptionConfig``'s fields).
-AHEAD_SETTINGS = ("ahead_rays", "ahead_half_angle_deg", "ahead_target")
 
 #: The shipped agents' folder: ``agents/<name>`` is built by ``make_policy("<name>")``.
 AGENTS = Path(__file__).parents[1] / "agents"
@@ -316,8 +312,8 @@ class PPOPolicy:
         self.reads_ahead: dict[str, Any] | None = None
         if self._follows and self._obs_size == OBS_SIZES[1]:
             # Every setting, the defaults of those its training left at theirs.
-            given, default = self._agent.perception or {}, PerceptionConfig()
-            self.reads_ahead = {k: given.get(k, getattr(default, k)) for k in AHEAD_SETTINGS}
+            given = self._agent.perception or {}
+            self.reads_ahead = {k: given.get(k, v) for k, v in AHEAD_SETTINGS.items()}
         #: What the agent needs of an env on top of a run's configuration (the reading ahead's
         #: settings); evaluation applies it (:mod:`eval.rollout`). The reading has draws of its
         #: own, so every other policy's episodes on the same seeds are unchanged by it.

@@ -15,6 +15,7 @@ from follow_env.tasks.spec import Quantity, TaskSpec
 
 __all__ = [
     "AHEAD",
+    "AHEAD_SETTINGS",
     "REASON_COLLISION_BYSTANDER",
     "REASON_COLLISION_PERSON",
     "REASON_COLLISION_WALL",
@@ -93,6 +94,14 @@ AHEAD = _Q(
     "PerceptionConfig.ahead_rays > 0",
 )
 """The optional third observation entry, the reading ahead."""
+
+AHEAD_SETTINGS: dict[str, Any] = {
+    "ahead_rays": 0,
+    "ahead_half_angle_deg": 14.0,
+    "ahead_target": "include",
+}
+"""The settings that shape the reading ahead (``PerceptionConfig``'s fields) and their defaults,
+for code that sees the task only through this spec (a learned agent names what it reads)."""
 
 
 def observation_names(ahead: bool = False) -> tuple[str, ...]:

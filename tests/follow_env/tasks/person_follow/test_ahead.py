@@ -142,6 +142,14 @@ def test_the_batched_core_publishes_the_same_reading() -> None:
     sim.close()
 
 
+def test_the_spec_names_its_settings_with_the_configs_defaults() -> None:
+    from follow_env.sensors.detector import PerceptionConfig
+    from follow_env.tasks.person_follow.spec import AHEAD_SETTINGS
+
+    default = PerceptionConfig()
+    assert {k: getattr(default, k) for k in AHEAD_SETTINGS} == AHEAD_SETTINGS
+
+
 def test_its_draws_are_declared_apart_from_the_box_centres() -> None:
     assert AHEAD.key == NOISE.key
     assert AHEAD.stride == NOISE.stride
