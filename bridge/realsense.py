@@ -29,6 +29,7 @@ from follow_env.sensors.camera import CameraConfig
 from follow_env.sensors.depth import ahead_column, distance_filter
 from follow_env.sensors.detector import PerceptionConfig
 from follow_env.sim.checks import out_of_range
+from follow_env.tasks.person_follow.spec import AHEAD_SETTINGS
 
 __all__ = ["PERSON_CLASS", "RealSensePerception", "realsense_grabber", "yolo_detector"]
 
@@ -92,11 +93,14 @@ class RealSensePerception:
         self._stop: Callable[[], None] | None = None
         self._started = False
         # Checked by the simulator's own config (the same ranges and errors as an env's).
-        unknown = sorted(set(ahead or {}) - {"ahead_rays", "ahead_half_angle_deg", "ahead_target"})
+        unknown = sorted(set(ahead or {}) - set(AHEAD_SETTINGS))
         if unknown:
             raise ValueError(f"ahead={ahead!r}: unknown setting(s) {', '.join(unknown)}")
         settings = PerceptionConfig(**(ahead or {}))
-        self.ahead = dict(ahead) if ahead and settings.ahead_rays else None
+        # Every setting, so that the runner can hold them to an agent's (bridge.runner).
+        self.ahead = (
+            {k: getattr(settings, k) for k in AHEAD_SETTINGS} if settings.ahead_rays else None
+        )
         self._rays = settings.ahead_rays
         self._tan = float(np.tan(np.radians(settings.ahead_half_angle_deg)))
         self._exclude = settings.ahead_target == "exclude"

@@ -176,7 +176,7 @@ def test_the_realsense_node_reads_ahead_as_the_simulator_does() -> None:
         grab=camera, detect=lambda colour: [], ahead={"ahead_rays": 5}, fx_px=400.0
     )
     node.start()
-    assert node.ahead == {"ahead_rays": 5}
+    assert node.ahead == {"ahead_rays": 5, "ahead_half_angle_deg": 14.0, "ahead_target": "include"}
     # tan(14 deg) * 400 = 99.7 px: columns 220, 270, 320, 370, 420 of row 240
     depth = np.full((480, 640), 12.0)  # beyond the 10 m range: not valid
     assert node.reading_ahead(depth) == 10.0
