@@ -29,7 +29,7 @@ from follow_env.sensors.camera import CameraConfig
 from follow_env.sensors.depth import ahead_column, distance_filter
 from follow_env.sensors.detector import PerceptionConfig
 from follow_env.sim.checks import out_of_range
-from follow_env.tasks.person_follow.spec import AHEAD_SETTINGS
+from follow_env.tasks.person_follow.spec import AHEAD_SETTINGS, ahead_settings
 
 __all__ = ["PERSON_CLASS", "RealSensePerception", "realsense_grabber", "yolo_detector"]
 
@@ -98,9 +98,7 @@ class RealSensePerception:
             raise ValueError(f"ahead={ahead!r}: unknown setting(s) {', '.join(unknown)}")
         settings = PerceptionConfig(**(ahead or {}))
         # Every setting, so that the runner can hold them to an agent's (bridge.runner).
-        self.ahead = (
-            {k: getattr(settings, k) for k in AHEAD_SETTINGS} if settings.ahead_rays else None
-        )
+        self.ahead = ahead_settings(settings)
         self._rays = settings.ahead_rays
         self._tan = float(np.tan(np.radians(settings.ahead_half_angle_deg)))
         self._exclude = settings.ahead_target == "exclude"

@@ -26,6 +26,7 @@ from follow_env.platforms.unicycle import UnicycleBody, UnicycleConfig
 from follow_env.tasks.person_follow.config import EnvConfig
 from follow_env.tasks.person_follow.env import PersonFollowEnv
 from follow_env.tasks.person_follow.render_style import Lane, W
+from follow_env.tasks.person_follow.spec import ahead_settings
 
 __all__ = ["TRUTH_KEYS", "EmulatedWorld", "scene_walls"]
 
@@ -87,17 +88,8 @@ class EmulatedWorld:
         self.env = PersonFollowEnv(config=config, platform=twin)
         self.lock = threading.Lock()
         self.episodes = 0
-        perception = config.perception
         #: The reading ahead's settings (None: the world publishes none).
-        self.ahead: dict[str, Any] | None = (
-            {
-                "ahead_rays": perception.ahead_rays,
-                "ahead_half_angle_deg": perception.ahead_half_angle_deg,
-                "ahead_target": perception.ahead_target,
-            }
-            if perception.ahead_rays
-            else None
-        )
+        self.ahead: dict[str, Any] | None = ahead_settings(config.perception)
         # Load (or, the first time, compile) the kernels now rather than at the first step.
         self.env.reset(seed=self.seed)
         self.env.step(np.zeros(2))

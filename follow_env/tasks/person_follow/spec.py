@@ -24,6 +24,7 @@ __all__ = [
     "REASON_STEP_LIMIT",
     "REASON_WALK_OVER",
     "SPEC",
+    "ahead_settings",
     "observation_bounds",
     "observation_names",
     "observation_size",
@@ -102,6 +103,14 @@ AHEAD_SETTINGS: dict[str, Any] = {
 }
 """The settings that shape the reading ahead (``PerceptionConfig``'s fields) and their defaults,
 for code that sees the task only through this spec (a learned agent names what it reads)."""
+
+
+def ahead_settings(perception: Any) -> dict[str, Any] | None:
+    """The reading ahead's settings of a ``PerceptionConfig`` (every one of
+    :data:`AHEAD_SETTINGS`), or None when it publishes no reading."""
+    if not perception.ahead_rays:
+        return None
+    return {k: getattr(perception, k) for k in AHEAD_SETTINGS}
 
 
 def observation_names(ahead: bool = False) -> tuple[str, ...]:
