@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from follow_env.tasks.person_follow import ENV_ID
@@ -317,3 +318,42 @@ def test_the_fast_file_is_ppo_yaml_with_more_lanes_larger_minibatches_fewer_epoc
         (action, "max_change"),
     }
     assert fast["n_steps"] * fast["n_envs"] % fast["batch_size"] == 0  # whole minibatches
+
+
+CONFIGS = sorted((Path(__file__).parents[2] / "train" / "configs").glob("*.yaml"))
+
+
+def _learner_of(path: Path) -> str:
+    """The ``--algo`` a shipped file is for, by its name (``sac_fast.yaml``: ``sac``)."""
+    for name in ("recurrent_ppo", "sac"):
+        if path.stem.startswith(name):
+            return name
+    return "ppo"
+
+
+@pytest.mark.parametrize("path", CONFIGS, ids=lambda p: p.name)
+def test_every_shipped_file_builds_the_env_its_agent_sees(path: Path) -> None:
+    """Each file in train/configs loads as its learner's arguments, and its env (with its
+    ``env_kwargs``) under its wrappers gives observations of the space the agent is built for."""
+    from follow_env.tasks import task_for_env
+    from train.config import sole_section
+    from train.envs import agent_env, base_env
+
+    env_id = sole_section(path)
+    hp = load_hyperparams(path, env_id, algo=_learner_of(path))
+    task = task_for_env(env_id)
+    preset = "thesis" if "thesis" in task.presets else next(iter(task.presets))
+    base = base_env(task.variants()[:1], 2, preset, env_id, hp.get("env_kwargs"))
+    venv = agent_env(base, hp, "eval")
+    try:
+        obs = venv.reset()
+        assert obs.shape == (2, *venv.observation_space.shape)
+        # finite rather than inside the space: SB3's VecFrameStack repeats each entry's bounds
+        # n_stack times (entry by entry) while it stacks the frames one after another
+        assert np.isfinite(obs).all()
+        actions = [venv.action_space.sample() for _ in range(2)]
+        obs, _, _, _ = venv.step(np.stack(actions))
+        assert obs.shape == (2, *venv.observation_space.shape)
+        assert np.isfinite(obs).all()
+    finally:
+        venv.close()
