@@ -324,11 +324,11 @@ CONFIGS = sorted((Path(__file__).parents[2] / "train" / "configs").glob("*.yaml"
 
 
 def _learner_of(path: Path) -> str:
-    """The ``--algo`` a shipped file is for, by its name (``sac_fast.yaml``: ``sac``)."""
-    for name in ("recurrent_ppo", "sac"):
-        if path.stem.startswith(name):
-            return name
-    return "ppo"
+    """The ``--algo`` a shipped file is for: the longest learner name its name starts with
+    (``sac_fast.yaml``: ``sac``; ``recurrent_ppo.yaml``: ``recurrent_ppo``)."""
+    from train.algos import ALGOS
+
+    return max((name for name in ALGOS if path.stem.startswith(name)), key=len)
 
 
 @pytest.mark.parametrize("path", CONFIGS, ids=lambda p: p.name)
