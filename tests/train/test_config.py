@@ -357,3 +357,16 @@ def test_every_shipped_file_builds_the_env_its_agent_sees(path: Path) -> None:
         assert np.isfinite(obs).all()
     finally:
         venv.close()
+
+
+def test_the_bursts_file_is_ppo_ahead_yaml_with_its_detector_harsher_in_training() -> None:
+    configs = DEFAULT_HYPERPARAMS.parent
+    bursts = load_hyperparams(configs / "ppo_ahead_bursts.yaml", ENV_ID)
+    ahead = load_hyperparams(configs / "ppo_ahead.yaml", ENV_ID)
+    assert {k for k in bursts if bursts[k] != ahead[k]} == {"env_kwargs"}
+    harsher, plain = bursts["env_kwargs"]["perception"], ahead["env_kwargs"]["perception"]
+    assert {k: v for k, v in harsher.items() if k not in plain} == {
+        "burst_start_prob": 0.02,
+        "burst_mean_frames": 10.0,
+    }
+    assert {k: harsher[k] for k in plain} == plain
