@@ -2,8 +2,12 @@
 
 A learned controller *dominates* when, on every scenario, it is at least as good as the best
 law on the outcome criteria (keeps the person in frame as often, loses them and collides no
-more often, holds the distance as well) and better on the quality criteria (centres the
-person and moves more smoothly), with paired CIs that exclude zero. "The best law" is taken
+more often, holds the distance as well), and on most scenarios (more than half) better on the
+quality criteria (centres the person and moves more smoothly), with paired CIs that exclude
+zero: the bar the learned-controller work set. The quality criteria are asked on most
+scenarios rather than every one because a criterion can be out of any controller's reach on a
+scenario (MeanOffset is the *observed* offset, most of it the detector's jitter on a straight
+walk), while an outcome lost on one scenario is a robot that crashes there. "The best law" is taken
 per scenario and per criterion: the law whose mean is best on that criterion there, from
 whichever laws the run compared (the thesis and tuned presets of pn / mpn / gsmpn, say), so
 the learner meets the strongest opponent on each line of the table.
@@ -18,6 +22,11 @@ is reproducible. Each line carries two judgements:
   no worse than the best law's (a strict reading: a lost person in 1 of 20 episodes against
   none does not meet it, significant or not); ``better`` criteria ask for ``verdict ==
   "better"``.
+
+Each criterion is then held to its scope (:func:`criterion_summary`): met on ``every``
+scenario, or on ``most`` of them; the learner dominates when every criterion holds
+(:func:`dominates`). The report also counts the (scenario, criterion) lines met, which shows
+progress where the verdict is still no.
 
 How high that bar is shows in :func:`calibration`: each law put through the same test against
 the other laws (the best of the rest on each line). The report gives those counts beside the
@@ -45,9 +54,11 @@ __all__ = [
     "CRITERIA",
     "Criterion",
     "calibration",
+    "criterion_summary",
     "default_laws",
     "dominance",
     "dominance_markdown",
+    "dominates",
 ]
 
 
@@ -59,15 +70,28 @@ class Criterion:
     :param higher_is_better: the metric's direction.
     :param need: ``"at_least"`` (mean no worse than the best law's) or ``"better"``
         (significantly better: the CI of the difference excludes zero).
+    :param scope: on how many scenarios the requirement must be met: ``"every"`` one, or
+        ``"most"`` (more than half).
     """
 
     metric: str
     higher_is_better: bool
     need: str
+    scope: str = "every"
 
     def __post_init__(self) -> None:
         if self.need not in ("at_least", "better"):
             raise ValueError(f"Criterion.need: {self.need!r} is not one of 'at_least', 'better'")
+        if self.scope not in SCOPES:
+            raise ValueError(f"Criterion.scope: {self.scope!r} is not one of 'every', 'most'")
+
+    def needed(self, scenarios: int) -> int:
+        """How many of ``scenarios`` scenarios must meet the requirement for it to hold."""
+        return scenarios if self.scope == "every" else scenarios // 2 + 1
+
+
+#: A criterion's scope: met on every scenario, or on more than half of them.
+SCOPES = ("every", "most")
 
 
 #: The requirement of a dominating agent, in table order.
@@ -76,13 +100,14 @@ CRITERIA = (
     Criterion("lost_rate_pct", False, "at_least"),
     Criterion("collision_rate_pct", False, "at_least"),
     Criterion("rms_distance_error_m", False, "at_least"),
-    Criterion("mean_offset_px", False, "better"),
-    Criterion("std_accel_mm_s2", False, "better"),
+    Criterion("mean_offset_px", False, "better", "most"),
+    Criterion("std_accel_mm_s2", False, "better", "most"),
 )
 
 COLUMNS = [
     "criterion",
     "need",
+    "scope",
     "learner_mean",
     "best_law",
     "law_mean",
@@ -202,7 +227,12 @@ def _line(
     learner: str,
 ) -> dict[str, object]:
     """One (scenario, criterion) row: the paired difference against the best law."""
-    row: dict[str, object] = {variant: scenario, "criterion": c.metric, "need": c.need}
+    row: dict[str, object] = {
+        variant: scenario,
+        "criterion": c.metric,
+        "need": c.need,
+        "scope": c.scope,
+    }
     if best is None or theirs is None:  # no law has a finite value here (e.g. never lost)
         row.update(best_law="", n=0, verdict="n/a", meets=False)
         return row
@@ -233,6 +263,43 @@ def _line(
     return row
 
 
+def criterion_summary(frame: pd.DataFrame) -> pd.DataFrame:
+    """Each criterion held to its scope.
+
+    :param frame: :func:`dominance` output.
+    :returns: one row per criterion, in table order: ``criterion``, ``need``, ``scope``,
+        ``met`` (scenarios meeting the requirement), ``scenarios``, ``needed`` (how many must,
+        :meth:`Criterion.needed`), ``holds`` (``met >= needed``) and ``missed`` (the scenarios
+        that do not meet it, comma-separated).
+    """
+    variant = frame.columns[0]
+    rows = []
+    for criterion in dict.fromkeys(frame["criterion"]):
+        lines = frame[frame["criterion"] == criterion]
+        need, scope = lines["need"].iloc[0], lines["scope"].iloc[0]
+        meets = lines["meets"].astype(bool)
+        needed = Criterion(str(criterion), True, need, scope).needed(len(lines))
+        rows.append(
+            {
+                "criterion": criterion,
+                "need": need,
+                "scope": scope,
+                "met": int(meets.sum()),
+                "scenarios": len(lines),
+                "needed": needed,
+                "holds": int(meets.sum()) >= needed,
+                "missed": ", ".join(map(str, lines.loc[~meets, variant])),
+            }
+        )
+    return pd.DataFrame(rows)
+
+
+def dominates(frame: pd.DataFrame) -> bool:
+    """Whether the learner dominates: every criterion of :func:`dominance`'s table holds on
+    its scope (:func:`criterion_summary`)."""
+    return bool(criterion_summary(frame)["holds"].all())
+
+
 def dominance_markdown(
     frame: pd.DataFrame, learner: str, calibrated: dict[str, int] | None = None
 ) -> str:
@@ -243,11 +310,12 @@ def dominance_markdown(
     :param calibrated: :func:`calibration` of the same laws, said after the headline.
     """
     variant = frame.columns[0]
-    scenarios = list(dict.fromkeys(frame[variant]))
+    summary = criterion_summary(frame)
     lines = []
-    met_all = bool(frame["meets"].all())
+    held = int(summary["holds"].sum())
     lines.append(
-        f"`{learner}` {'dominates' if met_all else 'does not dominate'} the laws: "
+        f"`{learner}` {'dominates' if dominates(frame) else 'does not dominate'} the laws: "
+        f"{held} of {len(summary)} criteria hold on their scope; "
         f"{int(frame['meets'].sum())} of {len(frame)} (scenario, criterion) requirements met."
     )
     if calibrated:
@@ -257,15 +325,14 @@ def dominance_markdown(
             f"{min(calibrated.values())}-{max(calibrated.values())} of {len(frame)} ({each})."
         )
     lines.append("")
-    for criterion in dict.fromkeys(frame["criterion"]):
-        rows = frame[frame["criterion"] == criterion]
-        need = rows["need"].iloc[0]
-        missed = rows[~rows["meets"].astype(bool)][variant].tolist()
-        what = "at least as good as" if need == "at_least" else "significantly better than"
-        where = f"; not in {', '.join(map(str, missed))}" if missed else ""
+    for s in summary.itertuples(index=False):
+        what = "at least as good as" if s.need == "at_least" else "significantly better than"
+        scope = "every scenario" if s.scope == "every" else f"most: {s.needed}"
+        where = f"; not in {s.missed}" if s.missed else ""
         lines.append(
-            f"- {metric_label(criterion)}: {what} the best law in "
-            f"{len(scenarios) - len(missed)} of {len(scenarios)} scenarios{where}"
+            f"- {metric_label(s.criterion)}: {what} the best law in "
+            f"{s.met} of {s.scenarios} scenarios (needed: {scope}; "
+            f"{'holds' if s.holds else '**does not hold**'}){where}"
         )
     lines.append("")
     lines.append(

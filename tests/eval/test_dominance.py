@@ -10,7 +10,15 @@ import pandas as pd
 import pytest
 
 from eval.cli import main
-from eval.dominance import CRITERIA, Criterion, calibration, dominance, dominance_markdown
+from eval.dominance import (
+    CRITERIA,
+    Criterion,
+    calibration,
+    criterion_summary,
+    dominance,
+    dominance_markdown,
+    dominates,
+)
 
 METRICS = [c.metric for c in CRITERIA]
 
@@ -104,13 +112,71 @@ def test_the_report_names_where_each_requirement_is_missed() -> None:
     text = dominance_markdown(frame, "agent")
     assert text.startswith("`agent` does not dominate the laws")
     assert (
-        "- MeanOffset (px): significantly better than the best law in 1 of 2 scenarios; "
-        "not in curve" in text
+        "- MeanOffset (px): significantly better than the best law in 1 of 2 scenarios "
+        "(needed: most: 2; **does not hold**); not in curve" in text
+    )
+    assert (
+        "- lost person (%): at least as good as the best law in 2 of 2 scenarios "
+        "(needed: every scenario; holds)" in text
     )
     assert (
         "| curve | MeanOffset (px) | better | 9.0 | pn | 1.0 | +8.0 [+8.0, +8.0] | worse | **no** |"
         in text
     )
+
+
+def _scenarios(n: int, offset_better: int, lost_once: int | None = None) -> pd.DataFrame:
+    """n scenarios of 10 seeds: the agent centres 5 px better than pn on the first
+    ``offset_better`` (a tie on the rest) and moves more smoothly everywhere; on scenario
+    ``lost_once`` it loses the person in one episode, pn in none."""
+    frames = []
+    for k in range(n):
+        base = list(np.random.default_rng(k).normal(30.0, 1.0, 10))
+        agent = {
+            "mean_offset_px": [v - 5.0 for v in base] if k < offset_better else base,
+            "std_accel_mm_s2": [2.0 * v + 400.0 for v in base],
+            "lost_rate_pct": [100.0 if (k == lost_once and j == 0) else 0.0 for j in range(10)],
+        }
+        law = {"mean_offset_px": base, "std_accel_mm_s2": [v + 500.0 for v in base]}
+        frames.append(_table({"agent": agent, "pn": law}, scenario=f"s{k}"))
+    return pd.concat(frames)
+
+
+@pytest.mark.parametrize(
+    ("offset_better", "lost_once", "expected"),
+    [
+        (3, None, True),  # MeanOffset better on 3 of 4: most; every outcome line met
+        (4, None, True),
+        (2, None, False),  # 2 of 4 is not more than half
+        (4, 1, False),  # one lost episode on one scenario: an outcome misses
+    ],
+)
+def test_outcomes_must_hold_on_every_scenario_and_quality_on_most(
+    offset_better: int, lost_once: int | None, expected: bool
+) -> None:
+    frame = dominance(_scenarios(4, offset_better, lost_once), "agent")
+    summary = criterion_summary(frame).set_index("criterion")
+    assert summary.loc["mean_offset_px", "met"] == offset_better
+    assert summary.loc["mean_offset_px", "needed"] == 3
+    assert summary.loc["lost_rate_pct", "needed"] == 4
+    assert summary.loc["std_accel_mm_s2", "holds"]
+    assert summary.loc["lost_rate_pct", "holds"] == (lost_once is None)
+    assert summary.loc["lost_rate_pct", "missed"] == ("" if lost_once is None else "s1")
+    assert dominates(frame) is expected
+    headline = dominance_markdown(frame, "agent").splitlines()[0]
+    assert headline.startswith(f"`agent` {'dominates' if expected else 'does not dominate'}")
+    held = int(summary["holds"].sum())
+    assert f": {held} of 6 criteria hold on their scope; " in headline
+
+
+def test_most_is_more_than_half() -> None:
+    most = Criterion("mean_offset_px", False, "better", "most")
+    assert [most.needed(n) for n in (1, 2, 3, 12, 13)] == [1, 2, 2, 7, 7]
+    assert Criterion("lost_rate_pct", False, "at_least").needed(12) == 12
+    assert {c.metric: c.scope for c in CRITERIA if c.scope == "most"} == {
+        "mean_offset_px": "most",
+        "std_accel_mm_s2": "most",
+    }
 
 
 def test_calibration_puts_each_law_through_the_test_against_the_others() -> None:
@@ -161,9 +227,11 @@ def test_bad_arguments_name_what_is_wrong(kwargs: dict, message: str) -> None:
         dominance(table, **kwargs)
 
 
-def test_a_criterion_needs_a_known_requirement() -> None:
+def test_a_criterion_needs_a_known_requirement_and_scope() -> None:
     with pytest.raises(ValueError, match=r"Criterion\.need: 'most'"):
         Criterion("mean_offset_px", False, "most")
+    with pytest.raises(ValueError, match=r"Criterion\.scope: 'all' is not one of 'every', 'most'"):
+        Criterion("mean_offset_px", False, "better", "all")
 
 
 def test_the_command_reads_a_run_folder_and_writes_its_tables(tmp_path: Path, capsys) -> None:
