@@ -304,21 +304,27 @@ def test_a_truth_source_needs_an_env_that_can_report_it() -> None:
         VecShapedReward(ScriptedVecEnv(constant_obs(1)), offset_source="truth")
 
 
-def test_blind_speed_weight_charges_the_forward_command_while_nothing_is_detected() -> None:
-    """The charge is ``w * max(v, 0)`` on the steps whose frame has no detection (the env's
-    ``detected``), nothing otherwise: the same shaping without it, on the same rollout, differs
-    by exactly that."""
+@pytest.mark.parametrize(("forward", "backward"), [(2.0, 0.0), (0.0, 3.0), (2.0, 3.0)])
+def test_the_blind_weights_charge_the_speed_command_while_nothing_is_detected(
+    forward: float, backward: float
+) -> None:
+    """The charge is ``blind_speed_weight * max(v, 0) + blind_reverse_weight * max(-v, 0)`` on
+    the steps whose frame has no detection (the env's ``detected``), nothing otherwise: the
+    same shaping without it, on the same rollout, differs by exactly that."""
     kwargs: dict[str, Any] = {"scenario": "occlusion", "episode": {"max_steps": 40}}
     weights = {"reward_floor": -1.0, "alive_bonus": 1.0, "v_rate_weight": 4.0}
     blind = VecShapedReward(
-        follow_env.make_sb3_vec_env(2, **kwargs), blind_speed_weight=2.0, **weights
+        follow_env.make_sb3_vec_env(2, **kwargs),
+        blind_speed_weight=forward,
+        blind_reverse_weight=backward,
+        **weights,
     )
     plain = VecShapedReward(follow_env.make_sb3_vec_env(2, full_info=True, **kwargs), **weights)
     for env in (blind, plain):
         env.seed(5)
         env.reset()
     rng = np.random.default_rng(0)
-    charged = 0
+    charged = np.zeros(2, dtype=int)
     for _ in range(60):  # lane 0 drives on at 1 m/s (into the walls), lane 1 backs away
         action = np.array([[1.0, rng.uniform(-1, 1)], [-0.5, 0.0]], dtype=np.float32)
         obs, shaped, dones, _ = blind.step(action)
@@ -326,10 +332,14 @@ def test_blind_speed_weight_charges_the_forward_command_while_nothing_is_detecte
         np.testing.assert_array_equal(obs, plain_obs)
         np.testing.assert_array_equal(dones, plain_dones)
         unseen = ~np.array([info["detected"] for info in infos])
-        expected = base - 2.0 * np.where(unseen, np.maximum(action[:, 0], 0.0), 0.0)
+        v = action[:, 0].astype(np.float64)
+        charge = forward * np.maximum(v, 0.0) + backward * np.maximum(-v, 0.0)
+        expected = base - np.where(unseen, charge, 0.0)
         np.testing.assert_allclose(shaped, expected, rtol=1e-6, atol=1e-6)
-        charged += int((unseen & (action[:, 0] > 0)).sum())
-    assert charged >= 5  # frames without a detection were met, and charged
+        charged += unseen & (charge > 0)
+    assert charged.sum() >= 5  # frames without a detection were met, and charged,
+    assert (charged[0] > 0) == (forward > 0)  # the forward lane by the forward weight only,
+    assert (charged[1] > 0) == (backward > 0)  # the reversing lane by the backward one only
 
 
 @pytest.mark.parametrize(
@@ -379,6 +389,10 @@ def test_blind_speed_and_clearance_weights_need_their_info_keys() -> None:
         VecShapedReward(ScriptedVecEnv(constant_obs(1)), blind_speed_weight=1.0)
     with pytest.raises(ValueError, match=r"blind_speed_weight=-1\.0 is out of range"):
         VecShapedReward(ScriptedVecEnv(constant_obs(1)), blind_speed_weight=-1.0)
+    with pytest.raises(ValueError, match=r"blind_reverse_weight needs an env whose infos can"):
+        VecShapedReward(ScriptedVecEnv(constant_obs(1)), blind_reverse_weight=1.0)
+    with pytest.raises(ValueError, match=r"blind_reverse_weight=-2\.0 is out of range"):
+        VecShapedReward(ScriptedVecEnv(constant_obs(1)), blind_reverse_weight=-2.0)
     with pytest.raises(ValueError, match=r"clearance_weight needs an env whose infos can carry"):
         VecShapedReward(ScriptedVecEnv(constant_obs(1)), clearance_weight=1.0)
     with pytest.raises(ValueError, match=r"clearance_m=0\.0 is out of range"):
