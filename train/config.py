@@ -209,6 +209,7 @@ def parse_hyperparams(
     _check_policy_kwargs(where, learner, policy, hp.setdefault("policy_kwargs", {}))
     specs = wrapper_specs(hp.setdefault("vec_env_wrapper", []), where=where)
     _refuse_double_stack(where, hp["frame_stack"], specs)
+    _check_privileged(where, hp, specs)
     if "env_kwargs" in hp:
         hp["env_kwargs"] = _check_env_kwargs(where, hp["env_kwargs"])
     unknown = sorted(set(hp) - set(ZOO_KEYS) - {"policy_kwargs"} - set(learner.rules))
@@ -467,6 +468,42 @@ def _refuse_double_stack(where: str, frame_stack: int, specs: list[tuple[str, di
                 f"{where}: frame_stack={frame_stack} is out of range beside the wrapper {name}, "
                 "which stacks frames itself: must be 1 (one history, not a stack of stacks)"
             )
+
+
+def _check_privileged(where: str, hp: Hyperparams, specs: list[tuple[str, dict]]) -> None:
+    """The critic's truth (:class:`train.privileged.VecPrivilegedCritic`) must be the last
+    entries of what the policy reads, and the policy must know them: the wrapper listed last,
+    no ``frame_stack`` or observation normalisation after it (they would stack or shift the
+    truth into the actor's view), and ``policy_kwargs.privileged_signs`` one per entry; and
+    ``privileged_signs`` without the wrapper would take the actor's own entries from it."""
+    from train.privileged import PRIVILEGED, VecPrivilegedCritic
+
+    at = [k for k, (name, _) in enumerate(specs) if import_object(name) is VecPrivilegedCritic]
+    signs = (hp.get("policy_kwargs") or {}).get("privileged_signs")
+    if not at:
+        if signs:
+            raise ConfigError(
+                f"{where}: policy_kwargs.privileged_signs needs the wrapper "
+                "train.privileged.VecPrivilegedCritic, listed last in vec_env_wrapper"
+            )
+        return
+    norm = hp["normalize"]
+    problems = [
+        (at != [len(specs) - 1], "it must be listed once, last"),
+        (hp["frame_stack"] != 1, f"frame_stack={hp['frame_stack']} must be 1"),
+        (
+            bool(norm) and (not isinstance(norm, Mapping) or norm.get("norm_obs", True)),
+            "normalize must leave observations alone (norm_obs: false)",
+        ),
+        (
+            not isinstance(signs, list | tuple) or len(signs) != len(PRIVILEGED),
+            f"policy_kwargs.privileged_signs={signs!r} must give {len(PRIVILEGED)} signs "
+            "(train.privileged.PRIVILEGED_SIGNS)",
+        ),
+    ]
+    for bad, why in problems:
+        if bad:
+            raise ConfigError(f"{where}: vec_env_wrapper VecPrivilegedCritic: {why}")
 
 
 def import_object(dotted: str) -> Any:

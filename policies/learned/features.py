@@ -4,10 +4,9 @@ Each step is a small class with its own per-lane memory. Observations flow outwa
 agent), actions inwards (agent to env), innermost step first, in the order of the agent's
 ``vec_env_wrapper`` list (then observation normalisation and frame stacking, rl-zoo3's order):
 
-- :class:`RescaleAction`: the agent acts in ``[-1, 1]``, mapped linearly onto SI speeds; the
-  range is the useful one (``w_max_radps`` 2 rad/s covers every turn rate the tuned laws command
-  in any scenario), not the platform's 7.4 rad/s, which would make most of the agent's range and
-  most of its exploration spin the person out of view.
+- :class:`RescaleAction`: the agent acts in ``[-1, 1]``, mapped linearly onto SI speeds over the
+  useful range (``w_max_radps`` 2 rad/s covers every turn rate the tuned laws command), not the
+  platform's 7.4 rad/s, over most of which the agent would spin the person out of view.
 - :class:`ObservationAge`: appends how long the detection has been held (the perception repeats
   its last values while the detector sees nothing): a fresh offset or a stale one.
 - :class:`ScaleObservation`: fixed scaling that keeps signed entries centred on 0 (needed by the
@@ -19,12 +18,13 @@ agent), actions inwards (agent to env), innermost step first, in the order of th
   statistics (when the agent was trained with it).
 - :class:`FrameStack`: the last ``n`` observations side by side, as ``VecFrameStack`` does: the
   raw observation is not Markov (a frame of detector latency, held values, the robot's own speed
-  unobserved). The agent's ``frame_stack`` pads an episode's start with zeros, as
-  ``VecFrameStack`` does; listed as the wrapper ``VecStackFrames`` (outermost) it can repeat
-  the first observation instead.
+  unobserved). The agent's ``frame_stack`` pads an episode's start with zeros, as ``VecFrameStack``
+  does; the wrapper ``VecStackFrames`` (outermost) can repeat the first observation instead.
 
 The arithmetic is exactly that of the training wrappers (they call these classes), so an agent's
 actions are bitwise the same in training, in an env, and on a robot; :class:`Pipeline` chains.
+Training-only wrappers (:meth:`Pipeline.view_entries`) have no step: the reward shaping, and
+the truth that an asymmetric critic reads beside the agent's view (:mod:`train.privileged`).
 
 The action is the platform's, of any width: the differential drive's ``[v_mps, w_radps]``, the
 mecanum base's ``[v_mps, vy_mps, w_radps]``. A :class:`Box` carries the entries' names (the
@@ -543,10 +543,10 @@ class Pipeline:
     @staticmethod
     def view_entries(entries: Sequence[tuple[str, dict]]) -> list[tuple[str, str, dict]]:
         """``(name, step, kwargs)`` of the ``vec_env_wrapper`` entries that make up an agent's
-        view (``train.wrappers.VecX`` is step ``X``; the reward shaping, which changes rewards
-        only, is left out)."""
+        view (``train.wrappers.VecX`` is step ``X``; the training-only ones are left out: the
+        reward shaping, and the truth an asymmetric critic reads)."""
         steps = [(name, name.rsplit(".", 1)[-1].removeprefix("Vec"), kw) for name, kw in entries]
-        return [entry for entry in steps if entry[1] != "ShapedReward"]
+        return [entry for entry in steps if entry[1] not in ("ShapedReward", "PrivilegedCritic")]
 
     @classmethod
     def from_wrappers(cls, entries: Sequence[tuple[str, dict[str, Any]]]) -> list[Feature]:

@@ -16,10 +16,16 @@ scale them (:class:`policies.learned.features.ScaleObservation`) rather than shi
 
 ``policy_kwargs``: ``mirror_obs`` (one ``+1``/``-1`` per entry of one frame; it is repeated
 over stacked frames) and ``mirror_action`` (one per action entry of the platform, in its order),
-plus any ``MlpPolicy`` argument. In a left-right reflection the forward speed keeps its sign and
-the sideways speed and the turn rate change it (:data:`ACTION_MIRROR_SIGNS`): the differential
-drive's ``[v_mps, w_radps]`` mirrors as ``[1, -1]``, the mecanum base's ``[v_mps, vy_mps,
-w_radps]`` as ``[1, -1, -1]``; :func:`check_mirror_action` holds a configuration to that.
+plus any ``MlpPolicy`` argument. ``privileged_signs`` (one sign per entry) makes it an
+asymmetric actor-critic: the last ``len(privileged_signs)`` observation entries are the
+simulation's truth that :class:`train.privileged.VecPrivilegedCritic` appends in training; the
+critic reads them, the actor is built on the entries before them, so at inference, where the
+agent's pipeline does not make them, it acts on its own view alone.
+
+In a left-right reflection the forward speed keeps its sign and the sideways speed and the turn
+rate change it (:data:`ACTION_MIRROR_SIGNS`): the differential drive's ``[v_mps, w_radps]``
+mirrors as ``[1, -1]``, the mecanum base's ``[v_mps, vy_mps, w_radps]`` as ``[1, -1, -1]``;
+:func:`check_mirror_action` holds a configuration to that.
 """
 
 from __future__ import annotations
@@ -30,6 +36,7 @@ from typing import Any
 import numpy as np
 import torch
 from stable_baselines3.common.policies import ActorCriticPolicy
+from stable_baselines3.common.torch_layers import MlpExtractor
 from torch import nn
 
 __all__ = ["ACTION_MIRROR_SIGNS", "MirrorMlpPolicy", "check_mirror_action"]
@@ -76,7 +83,8 @@ class _MirrorExtractor(nn.Module):
         return self.forward_actor(features), self.forward_critic(features)
 
     def forward_actor(self, features: torch.Tensor) -> torch.Tensor:
-        mirrored = features * self.obs_sign
+        # an actor's row may be its own view alone (inference): the signs of its entries
+        mirrored = features * self.obs_sign[: features.shape[-1]]
         return torch.cat(
             [self.inner.forward_actor(features), self.inner.forward_actor(mirrored)], dim=-1
         )
@@ -101,11 +109,35 @@ class _MirrorActionNet(nn.Module):
         return 0.5 * (direct + self.action_sign * mirrored)
 
 
+class _SplitExtractor(nn.Module):
+    """SB3's MLP extractor with the actor on the first ``actor_entries`` features and the
+    critic on all of them (the rest are the critic's privileged entries)."""
+
+    def __init__(self, actor: MlpExtractor, critic: MlpExtractor, actor_entries: int) -> None:
+        super().__init__()
+        self.policy_net = actor.policy_net
+        self.value_net = critic.value_net
+        self.actor_entries = actor_entries
+        self.latent_dim_pi = actor.latent_dim_pi
+        self.latent_dim_vf = critic.latent_dim_vf
+
+    def forward(self, features: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        return self.forward_actor(features), self.forward_critic(features)
+
+    def forward_actor(self, features: torch.Tensor) -> torch.Tensor:
+        return self.policy_net(features[..., : self.actor_entries])
+
+    def forward_critic(self, features: torch.Tensor) -> torch.Tensor:
+        return self.value_net(features)
+
+
 class MirrorMlpPolicy(ActorCriticPolicy):
     """SB3's ``MlpPolicy``, symmetrised under a reflection (module docstring).
 
     :param mirror_obs: the sign of each entry of one observation frame under the reflection.
     :param mirror_action: the sign of each action entry under the reflection.
+    :param privileged_signs: the sign of each of the critic's privileged entries, the last of
+        the observation (none: the actor and the critic read the same entries).
     """
 
     def __init__(
@@ -113,9 +145,14 @@ class MirrorMlpPolicy(ActorCriticPolicy):
         *args: Any,
         mirror_obs: Sequence[float] = (),
         mirror_action: Sequence[float] = (),
+        privileged_signs: Sequence[float] = (),
         **kwargs: Any,
     ) -> None:
-        for name, signs in (("mirror_obs", mirror_obs), ("mirror_action", mirror_action)):
+        for name, signs in (
+            ("mirror_obs", mirror_obs),
+            ("mirror_action", mirror_action),
+            ("privileged_signs", privileged_signs),
+        ):
             ok = isinstance(signs, list | tuple) and all(
                 not isinstance(s, bool) and isinstance(s, int | float) and s in (-1, 1)
                 for s in signs
@@ -126,20 +163,44 @@ class MirrorMlpPolicy(ActorCriticPolicy):
                 )
         self.mirror_obs = [float(s) for s in mirror_obs]
         self.mirror_action = [float(s) for s in mirror_action]
+        self.privileged_signs = [float(s) for s in privileged_signs]
         super().__init__(*args, **kwargs)
+
+    @property
+    def actor_entries(self) -> int:
+        """How many observation entries the actor reads: all but the privileged ones."""
+        return int(np.prod(self.observation_space.shape)) - len(self.privileged_signs)
+
+    def _build_mlp_extractor(self) -> None:
+        if not self.privileged_signs:
+            super()._build_mlp_extractor()
+            return
+        if self.actor_entries < 1:
+            raise ValueError(
+                f"MirrorMlpPolicy: privileged_signs ({len(self.privileged_signs)} signs) leave "
+                f"no entry of the observation ({self.features_dim}) to the actor"
+            )
+        args = (self.net_arch, self.activation_fn, self.device)
+        self.mlp_extractor = _SplitExtractor(
+            MlpExtractor(self.actor_entries, *args),
+            MlpExtractor(self.features_dim, *args),
+            self.actor_entries,
+        )
 
     def _build(self, lr_schedule: Any) -> None:
         super()._build(lr_schedule)
-        n_obs = int(np.prod(self.observation_space.shape))
+        n_obs = self.actor_entries
         n_act = int(np.prod(self.action_space.shape))
         frame = len(self.mirror_obs)
         if frame == 0 or n_obs % frame or len(self.mirror_action) != n_act:
             raise ValueError(
-                f"MirrorMlpPolicy: mirror_obs ({frame} signs) must divide the observation "
-                f"({n_obs} entries) and mirror_action needs {n_act} signs, "
+                f"MirrorMlpPolicy: mirror_obs ({frame} signs) must divide the actor's "
+                f"observation ({n_obs} entries) and mirror_action needs {n_act} signs, "
                 f"got {len(self.mirror_action)}"
             )
-        obs_sign = torch.tensor(self.mirror_obs * (n_obs // frame), dtype=torch.float32)
+        obs_sign = torch.tensor(
+            self.mirror_obs * (n_obs // frame) + self.privileged_signs, dtype=torch.float32
+        )
         half = self.mlp_extractor.latent_dim_pi
         # Wrapping reuses the parameters, so the optimizer built by super()._build still holds
         # every one of them.
@@ -150,4 +211,6 @@ class MirrorMlpPolicy(ActorCriticPolicy):
     def _get_constructor_parameters(self) -> dict[str, Any]:
         data = super()._get_constructor_parameters()
         data.update(mirror_obs=self.mirror_obs, mirror_action=self.mirror_action)
+        if self.privileged_signs:
+            data.update(privileged_signs=self.privileged_signs)
         return data

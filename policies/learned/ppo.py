@@ -287,9 +287,12 @@ class PPOPolicy:
                 f"{files.normalization}: does not fit the agent in {files.config} ({e})"
             ) from None
         model = self._agent.model
-        if model.observation_space.shape != view.observation_box.shape:
+        # an asymmetric actor-critic's critic reads entries of its own, which inference omits
+        privileged = len(getattr(model.policy, "privileged_signs", ()))
+        acts_on = (model.observation_space.shape[0] - privileged,)
+        if acts_on != view.observation_box.shape:
             raise AgentLoadError(
-                f"{files.model}: expects observations of shape {model.observation_space.shape}, "
+                f"{files.model}: expects observations of shape {acts_on}, "
                 f"but {files.config} builds {view.observation_box.shape}; the model and "
                 "the configuration are from different runs"
             )
