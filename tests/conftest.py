@@ -37,3 +37,50 @@ def local_ray():
     ray.init(address="local", num_cpus=2, include_dashboard=False, logging_level="warning")
     yield ray
     ray.shutdown()
+
+
+@pytest.fixture(scope="session")
+def acts_as_trained():
+    """A check that a loaded agent acts as it did in training: one lane of its training stack
+    (eval mode: frozen statistics), stepped by SB3's own ``load`` and ``predict``, against the
+    policy in the single env on the same seed: the same SI actions, step by step.
+    ``acts_as_trained(run_dir, policy, steps)``."""
+    import numpy as np
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.vec_env import VecEnvWrapper
+
+    from eval.rollout import run_episode
+    from train.envs import agent_env, base_env
+    from train.run import read_config
+
+    class RecordActions(VecEnvWrapper):  # the SI actions reaching lane 0, as float32
+        def __init__(self, venv) -> None:
+            super().__init__(venv)
+            self.actions: list = []
+
+        def reset(self):
+            return self.venv.reset()
+
+        def step_async(self, actions) -> None:
+            self.actions.append(np.asarray(actions, dtype=np.float32)[0].copy())
+            self.venv.step_async(actions)
+
+        def step_wait(self):
+            return self.venv.step_wait()
+
+    def check(run, policy, steps: int, scenario: str = "curve", seed: int = 7) -> None:
+        config = read_config(run)
+        model = PPO.load(run / "model.zip", device="cpu")
+        recorder = RecordActions(base_env([scenario], 1, config["args"]["env_config"]))
+        stats = run / "vecnormalize.pkl"
+        venv = agent_env(recorder, config["hyperparams"], "eval", normalization=stats)
+        venv.seed(seed)
+        agent_obs = venv.reset()
+        for _ in range(steps):
+            action, _ = model.predict(agent_obs, deterministic=True)
+            agent_obs, *_ = venv.step(action)
+        log = run_episode(policy, scenario, seed).log
+        expected = log[["action_v_mps", "action_w_radps"]].to_numpy()[:steps]  # row k: obs k
+        np.testing.assert_array_equal(np.array(recorder.actions), expected)
+
+    return check

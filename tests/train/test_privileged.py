@@ -8,7 +8,6 @@ from typing import Any
 import numpy as np
 import pytest
 import yaml
-from stable_baselines3.common.vec_env import VecEnvWrapper
 
 import follow_env
 from policies.learned.features import Pipeline
@@ -147,36 +146,15 @@ def test_a_file_must_give_the_truth_last_and_say_so_to_the_policy(
         parse_hyperparams(_asymmetric(**changes), where="f.yaml")
 
 
-class _RecordActions(VecEnvWrapper):
-    """Records the SI actions reaching the env, as float32 (a Policy returns float32)."""
-
-    def __init__(self, venv: Any) -> None:
-        super().__init__(venv)
-        self.actions: list[np.ndarray] = []
-
-    def reset(self) -> Any:
-        return self.venv.reset()
-
-    def step_async(self, actions: np.ndarray) -> None:
-        self.actions.append(np.asarray(actions, dtype=np.float32)[0].copy())
-        self.venv.step_async(actions)
-
-    def step_wait(self) -> Any:
-        return self.venv.step_wait()
-
-
 @pytest.mark.slow
-def test_an_asymmetric_run_trains_and_acts_on_its_own_view(tmp_path: Path) -> None:
+def test_an_asymmetric_run_trains_and_acts_on_its_own_view(tmp_path: Path, acts_as_trained) -> None:
     """follow-train with the truth for the critic: the run loads as a policy whose actions, in
     the single env without any truth, are SB3's ``predict`` on the training stack (truth
     appended), step by step; so the actor reads its own view only."""
     from stable_baselines3 import PPO
 
-    from eval.rollout import run_episode
     from policies import make_policy
     from train.cli import main
-    from train.envs import agent_env, base_env
-    from train.run import read_config
 
     section = _asymmetric(n_envs=4, n_steps=64, batch_size=128, n_epochs=2, n_timesteps=2000)
     section["vec_env_wrapper"] = [
@@ -190,19 +168,6 @@ def test_an_asymmetric_run_trains_and_acts_on_its_own_view(tmp_path: Path) -> No
     run = tmp_path / "run"
     args = ["--hyperparams", str(path), "--scenarios", "straight,curve", "--final-episodes", "0"]
     assert main([*args, "--no-progress", "--eval-freq", "1000", "--out", str(run)]) == 0
-    policy = make_policy(str(run))
-    config = read_config(run)
     model = PPO.load(run / "model.zip", device="cpu")
     assert model.observation_space.shape == (2 * 2 + len(PRIVILEGED),)
-    recorder = _RecordActions(base_env(["curve"], 1, config["args"]["env_config"]))
-    venv = agent_env(
-        recorder, config["hyperparams"], "eval", normalization=run / "vecnormalize.pkl"
-    )
-    venv.seed(7)
-    agent_obs = venv.reset()
-    for _ in range(40):
-        action, _ = model.predict(agent_obs, deterministic=True)
-        agent_obs, *_ = venv.step(action)
-    log = run_episode(policy, "curve", 7).log
-    expected = log[["action_v_mps", "action_w_radps"]].to_numpy()[:40]
-    np.testing.assert_array_equal(np.array(recorder.actions), expected)
+    acts_as_trained(run, make_policy(str(run)), 40)

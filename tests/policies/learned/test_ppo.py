@@ -5,12 +5,10 @@ from __future__ import annotations
 import pickle
 import shutil
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import pytest
 import yaml
-from stable_baselines3.common.vec_env import VecEnvWrapper
 
 from eval.rollout import run_episode
 from policies import Policy, for_platform, make_policy
@@ -101,46 +99,9 @@ def test_mirrored_observations_give_mirrored_actions() -> None:
         assert w_left == -w_right
 
 
-class _RecordActions(VecEnvWrapper):
-    """Records the SI actions reaching the env, rounded to float32 as a Policy returns them."""
-
-    def __init__(self, venv: Any) -> None:
-        super().__init__(venv)
-        self.actions: list[np.ndarray] = []
-
-    def reset(self) -> Any:
-        return self.venv.reset()
-
-    def step_async(self, actions: np.ndarray) -> None:
-        actions = np.asarray(actions, dtype=np.float32)
-        self.actions.append(actions[0].copy())
-        self.venv.step_async(actions)
-
-    def step_wait(self) -> Any:
-        return self.venv.step_wait()
-
-
 @pytest.mark.slow
-def test_policy_acts_as_the_agent_did_in_its_training_env() -> None:
-    # One lane of the training stack (eval mode: frozen statistics), stepped by the model itself,
-    # against the policy in the single env on the same seed: the same SI actions, step by step.
-    from stable_baselines3 import PPO
-
-    config = read_config(DEFAULT_AGENT)
-    policy = PPOPolicy(DEFAULT_AGENT)
-    model = PPO.load(DEFAULT_AGENT / "model.zip", device="cpu")  # SB3's own loader and predict
-    recorder = _RecordActions(base_env(["curve"], 1, config["args"]["env_config"]))
-    venv = agent_env(
-        recorder, config["hyperparams"], "eval", normalization=DEFAULT_AGENT / "vecnormalize.pkl"
-    )
-    venv.seed(7)
-    agent_obs = venv.reset()
-    for _ in range(60):
-        action, _ = model.predict(agent_obs, deterministic=True)
-        agent_obs, *_ = venv.step(action)
-    episode = run_episode(policy, "curve", 7).log
-    expected = episode[["action_v_mps", "action_w_radps"]].to_numpy()[:60]  # row k: act on obs k
-    np.testing.assert_array_equal(np.array(recorder.actions), expected)
+def test_policy_acts_as_the_agent_did_in_its_training_env(acts_as_trained) -> None:
+    acts_as_trained(DEFAULT_AGENT, PPOPolicy(DEFAULT_AGENT), 60)
 
 
 def test_a_stack_of_frames_among_the_wrappers_is_seen_alike_in_training_and_at_inference() -> None:
