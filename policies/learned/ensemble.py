@@ -82,9 +82,13 @@ class EnsemblePolicy:
         self._policies = [PPOPolicy(folder) for folder in self._folders]
         self._agents: list[_Loaded] = [policy._agent for policy in self._policies]
         first, view = self._agents[0], Pipeline.view_entries
-        for folder, agent in zip(self._folders[1:], self._agents[1:], strict=True):
+        lead = self._policies[0]
+        for folder, agent, policy in zip(
+            self._folders[1:], self._agents[1:], self._policies[1:], strict=True
+        ):
             for what, mine, theirs in (
                 ("platform", agent.platform, first.platform),
+                ("reading ahead", policy.reads_ahead, lead.reads_ahead),
                 ("action", repr(agent.action_box), repr(first.action_box)),
                 ("observation", repr(agent.observation_box), repr(first.observation_box)),
                 ("feature steps", view(agent.wrappers), view(first.wrappers)),
@@ -97,6 +101,10 @@ class EnsemblePolicy:
                     )
         self.platform: str = first.platform
         self.action_names: tuple[str, ...] = first.action_names
+        #: The reading ahead the members read (they read the same), and what an env needs for
+        #: it: evaluation applies it, a robot's perception must publish it (as for one agent).
+        self.reads_ahead: dict[str, Any] | None = lead.reads_ahead
+        self.env_overrides: dict[str, Any] = lead.env_overrides
         self._rows = self._policies[0]._rows
         self._single: _Views | None = None
         self._batch: _Views | None = None

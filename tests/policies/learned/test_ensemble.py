@@ -175,3 +175,31 @@ def test_a_missing_member_names_its_file(pair: Path) -> None:
 def test_a_missing_ensemble_file_is_named(tmp_path: Path) -> None:
     with pytest.raises(AgentLoadError, match=r"ensemble\.yaml: ensemble file not found"):
         EnsemblePolicy(tmp_path)
+
+
+def _copy_shipped(source: Path, folder: Path) -> Path:
+    folder.mkdir()
+    for name in FILES:
+        shutil.copy(source / name, folder / name)
+    return folder
+
+
+def test_members_that_read_ahead_make_an_ensemble_that_reads_ahead(tmp_path: Path) -> None:
+    """Two copies of the shipped agent that reads ahead: the ensemble names the reading as its
+    members do, evaluation gives it the reading (its episode is the lone agent's, frame for
+    frame), and a member that reads no reading beside one that does is refused."""
+    ahead = DEFAULT_AGENT.parent / "ppo_ahead"
+    for k in (0, 1):
+        _copy_shipped(ahead, tmp_path / f"seed-{k}")
+    ensemble = make_policy(str(write(tmp_path, ["seed-0", "seed-1"])))
+    lone = make_policy("ppo_ahead")
+    assert ensemble.reads_ahead == lone.reads_ahead is not None
+    assert ensemble.env_overrides == lone.env_overrides
+    mine, theirs = run_episode(ensemble, "crossing", 3).log, run_episode(lone, "crossing", 3).log
+    assert mine["obs_ahead_m"].notna().all()
+    action = ["action_v_mps", "action_w_radps", "obs_ahead_m"]
+    np.testing.assert_array_equal(mine[action].to_numpy(), theirs[action].to_numpy())
+    copy_agent(tmp_path / "plain")
+    write(tmp_path, ["seed-0", "plain"])
+    with pytest.raises(AgentLoadError, match=r"plain does not see the env.*reading ahead"):
+        make_policy(str(tmp_path))
