@@ -141,7 +141,8 @@ class _FeatureWrapper(VecEnvWrapper):
 class VecRescaleAction(_FeatureWrapper):
     """:class:`policies.learned.features.RescaleAction`: the agent acts in ``[-1, 1]``, mapped
     onto SI speeds (``v_max_mps`` for the entries in m/s, ``w_max_radps`` for those in rad/s,
-    each a number or one per such entry: the agent's range, at most the env's)."""
+    each a number or one per such entry: the agent's range, at most the env's;
+    ``reverse_max_mps``: a smaller backward speed on ``v_mps``)."""
 
     feature_class = RescaleAction
 

@@ -41,6 +41,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from follow_env.sim.checks import check_number, is_integer, out_of_range
+from policies.learned.boxes import LEGACY_ACTION_NAMES, Box, agent_to_si, as_numbers
 
 __all__ = [
     "FEATURES",
@@ -55,79 +56,6 @@ __all__ = [
     "ScaleObservation",
     "agent_to_si",
 ]
-
-
-#: The action entries of a two-entry box that names none (an agent saved before the names were
-#: recorded was trained on the differential drive).
-LEGACY_ACTION_NAMES = ("v_mps", "w_radps")
-
-
-class Box:
-    """A box of float32 bounds (what a step sees of the spaces around it; numpy only).
-
-    :param low: lower bounds. :param high: upper bounds.
-    :param names: the entries' names (an action box: the platform's action names), or None.
-    """
-
-    def __init__(
-        self,
-        low: Sequence[float] | np.ndarray,
-        high: Sequence[float] | np.ndarray,
-        names: Sequence[str] | None = None,
-    ) -> None:
-        self.low = np.asarray(low, dtype=np.float32)
-        self.high = np.asarray(high, dtype=np.float32)
-        if self.low.shape != self.high.shape or self.low.ndim != 1:
-            raise ValueError(
-                f"a Box needs matching flat bounds, got {self.low.shape}, {self.high.shape}"
-            )
-        self.names = None if names is None else tuple(str(n) for n in names)
-        if self.names is not None and len(self.names) != self.low.shape[0]:
-            raise ValueError(
-                f"a Box of {self.low.shape[0]} entries needs as many names, got {list(names)}"
-            )
-
-    @property
-    def shape(self) -> tuple[int, ...]:
-        """The box's shape."""
-        return self.low.shape
-
-    def entry_names(self) -> tuple[str, ...]:
-        """The entries' names: given ones, or for a two-entry box without names
-        :data:`LEGACY_ACTION_NAMES`, or else ``a0, a1, ...``."""
-        if self.names is not None:
-            return self.names
-        if self.shape == (2,):
-            return LEGACY_ACTION_NAMES
-        return tuple(f"a{k}" for k in range(self.shape[0]))
-
-    def __repr__(self) -> str:
-        names = "" if self.names is None else f", names={list(self.names)}"
-        return f"Box(low={self.low.tolist()}, high={self.high.tolist()}{names})"
-
-
-def agent_to_si(action: np.ndarray, low: np.ndarray, high: np.ndarray) -> np.ndarray:
-    """Map an agent action in ``[-1, 1]`` (clipped first) linearly onto ``[low, high]``.
-
-    :param action: shape (..., m), agent units (m: the platform's action entries).
-    :param low: the SI box's lower bounds, e.g. ``[-1.44 m/s, -7.2 rad/s]``.
-    :param high: the SI box's upper bounds.
-    """
-    a = np.clip(np.asarray(action, dtype=np.float64), -1.0, 1.0)
-    return low + (a + 1.0) * 0.5 * (high - low)
-
-
-def _numbers(values: Any) -> np.ndarray | None:
-    """``values`` as a float64 array of numbers, or None if they are not numbers (a string, a
-    bool, a mapping, a ragged list), so that a step can name its argument in the error."""
-    items = values if isinstance(values, list | tuple | np.ndarray) else [values]
-    flat = np.asarray(items, dtype=object).ravel()
-    if any(isinstance(v, bool) or not isinstance(v, int | float | np.number) for v in flat):
-        return None
-    try:
-        return np.asarray(values, dtype=np.float64)
-    except (TypeError, ValueError):
-        return None
 
 
 class Feature:
@@ -185,6 +113,12 @@ class RescaleAction(Feature):
     :param v_max_mps: the agent's largest speed(s) [m/s]; None, or each at most the env's bound.
     :param w_max_radps: the agent's largest turn rate(s) [rad/s]; None, or each at most the
         env's bound.
+    :param reverse_max_mps: the agent's largest backward speed [m/s] on the forward-speed
+        entry ``v_mps``, in (0, its forward bound]; None: as fast back as forward. The camera
+        looks forward, so backing up is driving blind: a robot builder may want less of it
+        than the platform allows. The agent's box for ``v_mps`` is then ``[-reverse / v_max,
+        1]`` (the same metres per second per agent unit both ways, so an incremental command
+        steps as finely back as forward and rests at 0).
     """
 
     #: The limits, and the unit suffix of the action entries each bounds.
@@ -194,8 +128,10 @@ class RescaleAction(Feature):
         self,
         v_max_mps: float | Sequence[float | None] | None = None,
         w_max_radps: float | Sequence[float | None] | None = None,
+        reverse_max_mps: float | None = None,
     ) -> None:
         self.limits = (v_max_mps, w_max_radps)
+        self.reverse_max_mps = reverse_max_mps
 
     def bind(self, obs: Box, act: Box, n: int) -> tuple[Box, Box]:
         if not np.all(np.isfinite([act.low, act.high])) or not np.allclose(act.low, -act.high):
@@ -229,11 +165,26 @@ class RescaleAction(Feature):
                         f"{self.owner}.{label}", v, 0.0, float(high[k]), lo_open=True
                     )
         self.si_low, self.si_high = -high, high
-        ones = np.ones(len(names))
-        return obs, Box(-ones, ones, act.names)
+        self.agent_low = -np.ones(len(names))
+        if self.reverse_max_mps is not None:
+            if "v_mps" not in names:
+                raise ValueError(
+                    f"{self.owner}.reverse_max_mps: the env's action [{', '.join(names)}] has "
+                    "no forward-speed entry v_mps"
+                )
+            k = names.index("v_mps")
+            reverse = check_number(
+                f"{self.owner}.reverse_max_mps", self.reverse_max_mps, 0.0, float(high[k]),
+                lo_open=True,
+            )  # fmt: skip
+            self.agent_low[k] = -reverse / high[k]
+        return obs, Box(self.agent_low, np.ones(len(names)), act.names)
 
     def act(self, action: np.ndarray) -> np.ndarray:
-        return agent_to_si(action, self.si_low, self.si_high)
+        if self.reverse_max_mps is None:
+            return agent_to_si(action, self.si_low, self.si_high)
+        # The box is asymmetric on v_mps: the same scale both ways (a * v_max), clipped to it.
+        return np.clip(np.asarray(action, dtype=np.float64), self.agent_low, 1.0) * self.si_high
 
 
 class ObservationAge(Feature):
@@ -302,7 +253,7 @@ class ScaleObservation(Feature):
         self.given = scale
 
     def bind(self, obs: Box, act: Box, n: int) -> tuple[Box, Box]:
-        factors = _numbers(self.given)
+        factors = as_numbers(self.given)
         if factors is None or factors.shape != obs.shape:
             raise ValueError(
                 f"{self.owner}.scale={self.given!r} is out of range: must be one factor per "
@@ -376,7 +327,7 @@ class IncrementalAction(Feature):
 
     def _steps(self, field: str, given: Any, act: Box) -> np.ndarray:
         """``given`` as one positive step per action entry, or a ValueError naming ``field``."""
-        steps = _numbers(given)
+        steps = as_numbers(given)
         good = steps is not None and steps.shape == act.shape
         if not (good and np.all(np.isfinite(steps) & (steps > 0))):
             may = "None or " if field == "brake_change" else ""

@@ -159,7 +159,7 @@ def test_every_field_is_checked_naming_key_value_and_range(override: dict, messa
 
 
 def test_wrapper_arguments_are_checked_against_its_signature_listing_them() -> None:
-    with pytest.raises(ConfigError, match=r"\(accepted: v_max_mps, w_max_radps\)"):
+    with pytest.raises(ConfigError, match=r"\(accepted: reverse_max_mps, v_max_mps, w_max_radps\)"):
         parse_hyperparams(MINIMAL | {"vec_env_wrapper": [{W: {"w_max": 2.0}}]})
 
 

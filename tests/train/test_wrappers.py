@@ -2,14 +2,17 @@
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
+import yaml
 from gymnasium import spaces
 from stable_baselines3.common.vec_env import VecEnv, VecFrameStack
 
 import follow_env
+from policies.learned.features import Box, RescaleAction
 from train.wrappers import (
     ConcatVecEnv,
     VecIncrementalAction,
@@ -103,6 +106,47 @@ def test_rescale_action_defaults_to_the_env_box_and_takes_smaller_limits() -> No
 def test_rescale_action_rejects_a_limit_beyond_the_env_box() -> None:
     with pytest.raises(ValueError, match=r"w_max_radps=5.0 is out of range"):
         VecRescaleAction(ScriptedVecEnv(constant_obs(1)), w_max_radps=5.0)
+
+
+def test_rescale_action_reverse_max_bounds_only_the_backward_speed() -> None:
+    env = ScriptedVecEnv(constant_obs(4))  # v within +-2 m/s, w within +-4 rad/s
+    wrapped = VecRescaleAction(env, reverse_max_mps=0.5)
+    np.testing.assert_allclose(wrapped.action_space.low, [-0.25, -1.0])
+    np.testing.assert_allclose(wrapped.action_space.high, [1.0, 1.0])
+    wrapped.reset()
+    for action, si in (([-1.0, -1.0], [-0.5, -4.0]), ([-0.1, 0.5], [-0.2, 2.0]), ([1, 1], [2, 4])):
+        wrapped.step(np.array([action]))
+        np.testing.assert_allclose(env.actions[-1], [si])
+
+
+def test_an_incremental_command_rests_at_the_reverse_bound() -> None:
+    env = ScriptedVecEnv(constant_obs(6))
+    rescaled = VecRescaleAction(env, reverse_max_mps=0.5)
+    wrapped = VecIncrementalAction(rescaled, max_change=[0.2, 0.1])
+    wrapped.reset()
+    for _ in range(4):
+        obs, *_ = wrapped.step(np.array([[-1.0, 0.0]]))
+    np.testing.assert_allclose(env.actions[-1], [[-0.5, 0.0]])  # -0.2, -0.25 (the bound), ...
+    np.testing.assert_allclose(obs[0, -2:], [-0.25, 0.0])  # the command in agent units
+    obs, *_ = wrapped.step(np.array([[1.0, 0.0]]))
+    np.testing.assert_allclose(env.actions[-1], [[-0.1, 0.0]])  # forward from the bound at once
+
+
+@pytest.mark.parametrize(
+    ("value", "names", "message"),
+    [
+        (3.0, ("v_mps", "w_radps"), r"RescaleAction\.reverse_max_mps=3\.0 is out of range"),
+        (0.0, ("v_mps", "w_radps"), r"RescaleAction\.reverse_max_mps=0\.0 is out of range"),
+        ("1", ("v_mps", "w_radps"), r"RescaleAction\.reverse_max_mps='1' is out of range"),
+        (0.5, ("vy_mps", "w_radps"), r"\[vy_mps, w_radps\] has no forward-speed entry v_mps"),
+    ],
+)
+def test_rescale_action_refuses_a_bad_reverse_bound(
+    value: object, names: tuple[str, ...], message: str
+) -> None:
+    act = Box([-2.0, -4.0], [2.0, 4.0], names)
+    with pytest.raises(ValueError, match=message):
+        RescaleAction(reverse_max_mps=value).bind(Box([0.0], [1.0]), act, 1)  # type: ignore[arg-type]
 
 
 def test_incremental_action_moves_the_command_by_at_most_max_change() -> None:
@@ -621,3 +665,49 @@ def test_concat_vec_env_refuses_envs_of_different_platforms() -> None:
     mecanum = follow_env.make_sb3_vec_env(1, scenario="straight", platform="mecanum")
     with pytest.raises(ValueError, match="differ"):
         ConcatVecEnv([follow_env.make_sb3_vec_env(1, scenario="straight"), mecanum])
+
+
+@pytest.mark.slow
+def test_an_agent_bounded_backwards_trains_loads_and_keeps_the_bound(
+    tmp_path: Path, acts_as_trained
+) -> None:
+    """follow-train with reverse_max_mps on the outermost step (the model's own action space is
+    then asymmetric): the run loads as a policy that acts as SB3's ``predict`` did on the
+    training stack, and never commands more than the bound backwards."""
+    from stable_baselines3 import PPO
+
+    from eval.rollout import run_episode
+    from policies import make_policy
+    from train.cli import main
+
+    section = {
+        "policy": "MlpPolicy",
+        "n_envs": 4,
+        "n_steps": 64,
+        "batch_size": 128,
+        "n_epochs": 2,
+        "n_timesteps": 2000,
+        "normalize": {"norm_obs": False, "norm_reward": True},
+        "policy_kwargs": {"log_std_init": 0.5},  # wide: the untrained agent tries to back up
+        "vec_env_wrapper": [
+            {"train.wrappers.VecScaleObservation": {"scale": [1.0, 0.01]}},
+            {"train.wrappers.VecRescaleAction": {"w_max_radps": 2.0, "reverse_max_mps": 0.3}},
+        ],
+    }
+    path = tmp_path / "back.yaml"
+    path.write_text(yaml.safe_dump({"PersonFollow-v0": section}))
+    run = tmp_path / "run"
+    args = ["--hyperparams", str(path), "--scenarios", "straight,occlusion", "--final-episodes"]
+    assert main([*args, "0", "--no-progress", "--eval-freq", "1000", "--out", str(run)]) == 0
+    model = PPO.load(run / "model.zip", device="cpu")
+    v_max = follow_env.make_sb3_vec_env(1).action_space.high[0]
+    np.testing.assert_allclose(model.action_space.low, [-0.3 / v_max, -1.0], rtol=1e-6)
+    policy = make_policy(str(run))
+    acts_as_trained(run, policy, 40)
+    v = np.concatenate(
+        [run_episode(policy, "occlusion", seed).log["action_v_mps"] for seed in range(3)]
+    )
+    assert np.nanmin(v) >= -0.3 - 1e-6
+    view = policy._agent.pipeline(1)  # the loaded agent's own steps: full reverse is 0.3 m/s
+    view.start(np.array([[1.0, 0.0]], dtype=np.float32))
+    np.testing.assert_allclose(view.act(np.array([[-1.0, 1.0]])), [[-0.3, 2.0]], rtol=1e-6)
