@@ -173,10 +173,8 @@ class RescaleAction(Feature):
                     "no forward-speed entry v_mps"
                 )
             k = names.index("v_mps")
-            reverse = check_number(
-                f"{self.owner}.reverse_max_mps", self.reverse_max_mps, 0.0, float(high[k]),
-                lo_open=True,
-            )  # fmt: skip
+            where = f"{self.owner}.reverse_max_mps"
+            reverse = check_number(where, self.reverse_max_mps, 0.0, float(high[k]), lo_open=True)
             self.agent_low[k] = -reverse / high[k]
         return obs, Box(self.agent_low, np.ones(len(names)), act.names)
 

@@ -688,7 +688,6 @@ def test_an_agent_bounded_backwards_trains_loads_and_keeps_the_bound(
         "n_epochs": 2,
         "n_timesteps": 2000,
         "normalize": {"norm_obs": False, "norm_reward": True},
-        "policy_kwargs": {"log_std_init": 0.5},  # wide: the untrained agent tries to back up
         "vec_env_wrapper": [
             {"train.wrappers.VecScaleObservation": {"scale": [1.0, 0.01]}},
             {"train.wrappers.VecRescaleAction": {"w_max_radps": 2.0, "reverse_max_mps": 0.3}},
