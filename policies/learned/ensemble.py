@@ -81,11 +81,10 @@ class EnsemblePolicy:
         # Each member is checked as a lone agent is (its files, shapes and statistics).
         self._policies = [PPOPolicy(folder) for folder in self._folders]
         self._agents: list[_Loaded] = [policy._agent for policy in self._policies]
-        first, view = self._agents[0], Pipeline.view_entries
-        lead = self._policies[0]
-        for folder, agent, policy in zip(
-            self._folders[1:], self._agents[1:], self._policies[1:], strict=True
-        ):
+        lead, view = self._policies[0], Pipeline.view_entries
+        first = lead._agent
+        for folder, policy in zip(self._folders[1:], self._policies[1:], strict=True):
+            agent = policy._agent
             for what, mine, theirs in (
                 ("platform", agent.platform, first.platform),
                 ("reading ahead", policy.reads_ahead, lead.reads_ahead),
@@ -105,7 +104,7 @@ class EnsemblePolicy:
         #: it: evaluation applies it, a robot's perception must publish it (as for one agent).
         self.reads_ahead: dict[str, Any] | None = lead.reads_ahead
         self.env_overrides: dict[str, Any] = lead.env_overrides
-        self._rows = self._policies[0]._rows
+        self._rows = lead._rows
         self._single: _Views | None = None
         self._batch: _Views | None = None
         self._batch_n: int | None = None
