@@ -294,7 +294,8 @@ class VecShapedReward(VecEnvWrapper):
         of ``far_weight``'s charge [reward per m per step], >= 0; 0: none.
     """
 
-    #: Changes rewards only: :func:`train.envs.agent_env` leaves it out at inference.
+    #: Changes rewards only: the agent's pipeline leaves it out at inference
+    #: (:meth:`policies.learned.features.Pipeline.view_entries`).
     training_only = True
 
     #: What a term may measure, and the info key of the truth for each term.

@@ -710,3 +710,24 @@ def test_an_agent_bounded_backwards_trains_loads_and_keeps_the_bound(
     view = policy._agent.pipeline(1)  # the loaded agent's own steps: full reverse is 0.3 m/s
     view.start(np.array([[1.0, 0.0]], dtype=np.float32))
     np.testing.assert_allclose(view.act(np.array([[-1.0, 1.0]])), [[-0.3, 2.0]], rtol=1e-6)
+
+
+def test_the_agent_pipeline_keeps_exactly_the_wrappers_that_are_not_training_only() -> None:
+    """``Pipeline.view_entries`` names the training-only wrappers (policies cannot import train);
+    each wrapper's ``training_only`` says the same, and every other one is a feature step."""
+    import train.privileged
+    import train.wrappers
+    from policies.learned.features import FEATURES, Pipeline
+
+    classes = {
+        f"{module.__name__}.{name}": cls
+        for module in (train.wrappers, train.privileged)
+        for name, cls in vars(module).items()
+        if name.startswith("Vec") and isinstance(cls, type) and cls.__module__ == module.__name__
+    }
+    training = {"train.wrappers.VecShapedReward", "train.privileged.VecPrivilegedCritic"}
+    assert training <= set(classes)
+    kept = {name: short for name, short, _ in Pipeline.view_entries([(n, {}) for n in classes])}
+    for name, cls in classes.items():
+        assert (name in kept) != getattr(cls, "training_only", False), name
+        assert name not in kept or kept[name] in FEATURES, name
