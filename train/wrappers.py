@@ -15,6 +15,8 @@ Innermost first:
   of ending an episode early pays (a fresh agent otherwise learns to lose the person on
   purpose), minus penalties on command changes (smoothness) and on the observed offset.
   Training-only: the policy leaves it out, and every evaluation scores the env's own reward.
+- :class:`VecJumpGate`: holds the last detection when the reading jumps further in a step than
+  a person can walk (a bystander taking the person's place), so that it reads as stale.
 - :class:`VecObservationAge`: appends how long the observation has been held (the perception
   repeats its last values while the detector sees nothing), so the agent can tell a fresh
   offset from a stale one.
@@ -22,7 +24,8 @@ Innermost first:
   the mirror-symmetric policy, :mod:`train.mirror`).
 - :class:`VecIncrementalAction`: the agent changes the command by at most a set step, and sees
   the command in force: smooth by construction, and the missing robot state (its own speed
-  command) becomes part of the observation. The observation ``[distance_m, offset_px]`` alone is
+  command) becomes part of the observation; ``held_floor`` keeps it from backing up while the
+  detection is held. The observation ``[distance_m, offset_px]`` alone is
   not Markov (a frame of detector latency, held values, unobserved robot speed); the config's
   ``frame_stack`` adds the recent history on top.
 - :class:`VecStackFrames`: that history as a wrapper of its own, listed last, which can start
@@ -54,6 +57,7 @@ from policies.learned.features import (
     Feature,
     FrameStack,
     IncrementalAction,
+    JumpGate,
     ObservationAge,
     RescaleAction,
     ScaleObservation,
@@ -64,6 +68,7 @@ from train.vecenvs import ConcatVecEnv, env_action_names, env_platform
 __all__ = [
     "ConcatVecEnv",
     "VecIncrementalAction",
+    "VecJumpGate",
     "VecObservationAge",
     "VecRescaleAction",
     "VecScaleObservation",
@@ -152,6 +157,13 @@ class VecObservationAge(_FeatureWrapper):
     been held (``max_age_steps``)."""
 
     feature_class = ObservationAge
+
+
+class VecJumpGate(_FeatureWrapper):
+    """:class:`policies.learned.gate.JumpGate`: holds the last detection when the reading jumps
+    further in a step than the person can walk (``max_jump_m``, ``max_jump_px``)."""
+
+    feature_class = JumpGate
 
 
 class VecScaleObservation(_FeatureWrapper):

@@ -42,13 +42,17 @@ import numpy as np
 
 from follow_env.sim.checks import check_number, is_integer, out_of_range
 from policies.learned.boxes import LEGACY_ACTION_NAMES, Box, agent_to_si, as_numbers
+from policies.learned.feature import Feature
+from policies.learned.gate import JumpGate
 
 __all__ = [
     "FEATURES",
     "LEGACY_ACTION_NAMES",
     "Box",
+    "Feature",
     "FrameStack",
     "IncrementalAction",
+    "JumpGate",
     "NormalizeObservation",
     "ObservationAge",
     "Pipeline",
@@ -56,48 +60,6 @@ __all__ = [
     "ScaleObservation",
     "agent_to_si",
 ]
-
-
-class Feature:
-    """One step of the pipeline (see the module docstring). The defaults pass things through.
-
-    :meth:`bind` is called once with the boxes seen from inside (the env's side) and returns
-    the boxes seen from outside; :meth:`start` begins every lane's episode; :meth:`observe`
-    follows a step (lanes flagged in ``done`` have just been reset: their observation is a new
-    episode's first); :meth:`act` turns the outer action into the inner one.
-    """
-
-    training_only = False
-
-    @property
-    def owner(self) -> str:
-        """The name errors are reported under (a training wrapper gives its own)."""
-        return getattr(self, "_owner", type(self).__name__)
-
-    @owner.setter
-    def owner(self, name: str) -> None:
-        self._owner = name
-
-    def bind(self, obs: Box, act: Box, n: int) -> tuple[Box, Box]:
-        """Remember the inner boxes and the lane count; return the outer boxes."""
-        return obs, act
-
-    def start(self, obs: np.ndarray) -> np.ndarray:
-        """Every lane starts an episode with observation ``obs`` (n, k)."""
-        return self.observe(obs, np.zeros(len(obs), dtype=bool))
-
-    def observe(self, obs: np.ndarray, done: np.ndarray) -> np.ndarray:
-        """The outer observation after a step."""
-        return obs
-
-    def terminal(self, obs: np.ndarray, lane: int) -> np.ndarray:
-        """The outer view of lane ``lane``'s final observation (SB3's ``terminal_observation``),
-        taken before :meth:`observe` of the step that ended it."""
-        return obs
-
-    def act(self, action: np.ndarray) -> np.ndarray:
-        """The inner action for the outer ``action`` (n, m)."""
-        return action
 
 
 class RescaleAction(Feature):
@@ -290,6 +252,13 @@ class IncrementalAction(Feature):
         units), or None: ``max_change`` both ways. Given, an action against the command's sign
         takes ``|u|`` down by up to ``brake_change * |a|``, stopping at rest (README, "Tried
         on top of ppo_fast.yaml": it did not stop the overshoot at stops).
+    :param held_index: the observation entry that is > 0 while the detection is held (not
+        fresh), :class:`ObservationAge`'s age; or None. Needs ``held_floor``.
+    :param held_floor: while the detection is held, the lowest command of each entry (inner
+        units; None: the box's), one per entry. ``[0, null]``: no backing up while the person
+        is not seen, the robot's camera looking forward. A command below the floor when the
+        detection goes stale rises to it by ``max_change`` a step, so the acceleration bound
+        holds (README, "No backing up blind").
     """
 
     def __init__(
@@ -297,10 +266,14 @@ class IncrementalAction(Feature):
         max_change: Sequence[float] = (0.1, 0.1),
         reading_index: int | None = None,
         brake_change: Sequence[float] | None = None,
+        held_index: int | None = None,
+        held_floor: Sequence[float | None] | None = None,
     ) -> None:
         self.given = max_change
         self.reading_index = reading_index
         self.given_brake = brake_change
+        self.held_index = held_index
+        self.given_floor = held_floor
 
     def bind(self, obs: Box, act: Box, n: int) -> tuple[Box, Box]:
         change = self._steps("max_change", self.given, act)
@@ -308,18 +281,21 @@ class IncrementalAction(Feature):
             None if self.given_brake is None else self._steps("brake_change", self.given_brake, act)
         )
         n_obs = obs.shape[0]
-        index = self.reading_index
-        if index is not None and not (is_integer(index) and 0 <= index < n_obs):
-            raise ValueError(
-                f"{self.owner}.reading_index={index!r} is out of range: must be None or an "
-                f"observation index in [0, {n_obs - 1}]"
-            )
+        for field in ("reading_index", "held_index"):
+            index = getattr(self, field)
+            if index is not None and not (is_integer(index) and 0 <= index < n_obs):
+                raise ValueError(
+                    f"{self.owner}.{field}={index!r} is out of range: must be None or an "
+                    f"observation index in [0, {n_obs - 1}]"
+                )
         self.max_change = change
         self.brake_change = brake
         self._low = act.low.astype(np.float64)
         self._high = act.high.astype(np.float64)
+        self._floor = self._held_floor(act)
         self._command = np.zeros((n, act.shape[0]))
         self._reading = np.ones(n, dtype=bool)
+        self._held = np.zeros(n, dtype=bool)
         outer_obs = Box(np.concatenate([obs.low, act.low]), np.concatenate([obs.high, act.high]))
         return outer_obs, Box(-np.ones(act.shape), np.ones(act.shape), act.names)
 
@@ -335,6 +311,28 @@ class IncrementalAction(Feature):
             )
         return steps
 
+    def _held_floor(self, act: Box) -> np.ndarray | None:
+        """``held_floor`` as one lower bound per entry (the box's for null), or None."""
+        given, index = self.given_floor, self.held_index
+        if (given is None) != (index is None):
+            raise ValueError(
+                f"{self.owner}.held_floor={given!r} and held_index={index!r}: give both or neither"
+            )
+        if given is None:
+            return None
+        names = act.entry_names()
+        if not isinstance(given, list | tuple) or len(given) != len(names):
+            raise ValueError(
+                f"{self.owner}.held_floor={given!r} is out of range: must be {len(names)} "
+                f"entries, one per action entry [{', '.join(names)}] (a number or null)"
+            )
+        floor = act.low.astype(np.float64).copy()
+        for k, value in enumerate(given):
+            if value is not None:
+                label = f"{self.owner}.held_floor[{k}] ({names[k]})"
+                floor[k] = check_number(label, value, float(act.low[k]), float(act.high[k]))
+        return floor
+
     def start(self, obs: np.ndarray) -> np.ndarray:
         self._command[:] = 0.0
         self._note_reading(obs)
@@ -348,6 +346,10 @@ class IncrementalAction(Feature):
         if self.brake_change is not None:  # towards rest: down by up to brake_change, to zero
             slowed = np.sign(u) * np.maximum(np.abs(u) - self.brake_change * np.abs(a), 0.0)
             moved = np.where(a * u < 0.0, slowed, moved)
+        if self._floor is not None and self._held.any():
+            # held: no lower than the floor, or than a command rising to it at the largest step
+            low = np.minimum(self._floor, u + self.max_change)
+            moved[self._held] = np.maximum(moved[self._held], low[self._held])
         self._command = np.clip(moved, self._low, self._high)
         return self._command.astype(np.float32)
 
@@ -362,6 +364,8 @@ class IncrementalAction(Feature):
     def _note_reading(self, obs: np.ndarray) -> None:
         if self.reading_index is not None:
             self._reading = np.asarray(obs)[:, self.reading_index] > 0
+        if self.held_index is not None:
+            self._held = np.asarray(obs)[:, self.held_index] > 0
 
     @staticmethod
     def _join(obs: np.ndarray, command: np.ndarray) -> np.ndarray:
@@ -450,6 +454,7 @@ FEATURES: dict[str, type[Feature]] = {
     "ScaleObservation": ScaleObservation,
     "IncrementalAction": IncrementalAction,
     "StackFrames": FrameStack,
+    "JumpGate": JumpGate,
 }
 """Feature steps by name (an agent's ``vec_env_wrapper`` entry ``train.wrappers.VecX`` names
 step ``X``)."""

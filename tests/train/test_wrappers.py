@@ -12,10 +12,17 @@ from gymnasium import spaces
 from stable_baselines3.common.vec_env import VecEnv, VecFrameStack
 
 import follow_env
-from policies.learned.features import Box, RescaleAction
+from policies.learned.features import (
+    Box,
+    IncrementalAction,
+    ObservationAge,
+    Pipeline,
+    RescaleAction,
+)
 from train.wrappers import (
     ConcatVecEnv,
     VecIncrementalAction,
+    VecJumpGate,
     VecObservationAge,
     VecRescaleAction,
     VecScaleObservation,
@@ -206,6 +213,53 @@ def test_incremental_action_keeps_the_robot_at_rest_until_a_distance_reading() -
     wrapped.step(np.array([[1.0, 1.0]]))
     wrapped.step(np.array([[1.0, 1.0]]))
     np.testing.assert_allclose(np.concatenate(env.actions), [[0, 0], [0, 0], [0.5, 0.5]])
+
+
+def test_incremental_action_does_not_go_below_the_held_floor_while_the_detection_is_held() -> None:
+    held = [0.0, 0.0, 1.0, 1.0, 1.0, 0.0, 0.0]  # obs entry 1 > 0: the detection is held
+    env = ScriptedVecEnv([[[1.0, h]] for h in held])
+    wrapped = VecIncrementalAction(env, max_change=[0.5, 0.5], held_index=1, held_floor=[0.0, None])
+    wrapped.reset()
+    for a in ([-1, -1], [-1, -1], [-1, -1], [-1, -1], [0.4, 0.0], [-1.0, 0.0]):
+        obs, *_ = wrapped.step(np.array([a], dtype=float))
+    np.testing.assert_allclose(
+        np.concatenate(env.actions),
+        [
+            [-0.5, -0.5],  # fresh: backwards at max_change
+            [-1.0, -1.0],
+            [-0.5, -1.5],  # held: v rises to the floor at max_change (w has no floor)
+            [0.0, -2.0],  # at the floor, however hard the agent pushes
+            [0.2, -2.0],  # above it as it likes
+            [-0.3, -2.0],  # fresh again: below it
+        ],
+    )
+    np.testing.assert_allclose(obs[0, 2:], [-0.3, -2.0])  # the agent sees the command in force
+
+
+def test_the_held_floor_acts_the_same_in_the_agents_pipeline() -> None:
+    """The exported agent's steps (ObservationAge, then IncrementalAction reading its age)
+    give the training wrappers' actions."""
+    script = [[[1.0, 5.0]], [[1.0, 4.0]], [[1.0, 4.0]], [[1.0, 4.0]], [[1.1, 3.0]]]
+    kwargs = {"max_change": [0.5, 0.5], "held_index": 2, "held_floor": [-0.25, None]}
+    env = ScriptedVecEnv(script)
+    wrapped = VecIncrementalAction(VecObservationAge(env, max_age_steps=5, entries=1), **kwargs)
+    act = Box(np.array([-2.0, -4.0]), np.array([2.0, 4.0]))
+    pipeline = Pipeline(
+        [ObservationAge(max_age_steps=5, entries=1), IncrementalAction(**kwargs)],
+        Box(np.full(2, -1000.0), np.full(2, 1000.0)),
+        act,
+        1,
+    )
+    obs, mine = wrapped.reset(), pipeline.start(np.asarray(script[0], dtype=np.float32))
+    np.testing.assert_array_equal(obs, mine)
+    for t in range(1, len(script)):
+        obs, *_ = wrapped.step(np.array([[-1.0, 1.0]]))
+        applied = pipeline.act(np.array([[-1.0, 1.0]]))
+        mine = pipeline.observe(np.asarray(script[t], dtype=np.float32))
+        np.testing.assert_array_equal(env.actions[-1], applied)
+        np.testing.assert_array_equal(obs, mine)
+    # the age compares the distance only: held from the second observation on
+    np.testing.assert_allclose(np.concatenate(env.actions)[:, 0], [-0.5, -0.25, -0.25, -0.25])
 
 
 def test_observation_age_counts_steps_without_change() -> None:
@@ -532,7 +586,29 @@ def test_concat_vec_env_lane_j_replays_its_scenario_seeded_s_plus_j() -> None:
             r"VecIncrementalAction\.brake_change=\[0\.5, 0\.0\] is out of range: must be None or 2 "
             r"positive numbers",
         ),
+        (
+            lambda e: VecIncrementalAction(e, held_index=1),
+            r"VecIncrementalAction\.held_floor=None and held_index=1: give both or neither",
+        ),
+        (
+            lambda e: VecIncrementalAction(e, held_index=1, held_floor=[0.0]),
+            r"VecIncrementalAction\.held_floor=\[0\.0\] is out of range: must be 2 entries, one "
+            r"per action entry \[v_mps, w_radps\]",
+        ),
+        (
+            lambda e: VecIncrementalAction(e, held_index=1, held_floor=[3.0, None]),
+            r"VecIncrementalAction\.held_floor\[0\] \(v_mps\)=3\.0 is out of range",
+        ),
+        (
+            lambda e: VecIncrementalAction(e, held_index=7, held_floor=[0.0, None]),
+            r"VecIncrementalAction\.held_index=7 is out of range: must be None or an "
+            r"observation index in \[0, 1\]",
+        ),
         (lambda e: VecObservationAge(e, max_age_steps=2.5), r"max_age_steps=2\.5 is out of range"),
+        (
+            lambda e: VecJumpGate(e, max_jump_m=-1.0),
+            r"VecJumpGate\.max_jump_m=-1\.0 is out of range",
+        ),
         (lambda e: VecShapedReward(e, v_rate_weight=-1), r"v_rate_weight=-1 is out of range"),
         (
             lambda e: VecShapedReward(e, far_weight=-1.0),
@@ -731,3 +807,62 @@ def test_the_agent_pipeline_keeps_exactly_the_wrappers_that_are_not_training_onl
     for name, cls in classes.items():
         assert (name in kept) != getattr(cls, "training_only", False), name
         assert name not in kept or kept[name] in FEATURES, name
+
+
+@pytest.mark.slow
+def test_an_agent_behind_the_gate_and_the_held_floor_loads_and_acts_as_trained(
+    tmp_path: Path, acts_as_trained
+) -> None:
+    """follow-train with VecJumpGate and VecIncrementalAction's held floor: the run loads as a
+    policy whose own steps include both, acting as SB3's ``predict`` did on the training stack
+    through a crowd (bystanders, detector misses)."""
+    from eval.rollout import run_episode
+    from policies import make_policy
+    from train.cli import main
+
+    section = {
+        "policy": "MlpPolicy",
+        "n_envs": 4,
+        "n_steps": 64,
+        "batch_size": 128,
+        "n_epochs": 2,
+        "n_timesteps": 2000,
+        "normalize": {"norm_obs": False, "norm_reward": True},
+        "vec_env_wrapper": [
+            {"train.wrappers.VecRescaleAction": {"w_max_radps": 2.0}},
+            {"train.wrappers.VecJumpGate": {"max_jump_m": 0.5, "accept_after": 10}},
+            {"train.wrappers.VecObservationAge": {"max_age_steps": 30}},
+            {"train.wrappers.VecScaleObservation": {"scale": [1.0, 0.01, 1.0]}},
+            {
+                "train.wrappers.VecIncrementalAction": {
+                    "max_change": [0.2, 0.15],
+                    "reading_index": 0,
+                    "held_index": 2,
+                    "held_floor": [0.0, None],
+                }
+            },
+        ],
+    }
+    path = tmp_path / "gated.yaml"
+    path.write_text(yaml.safe_dump({"PersonFollow-v0": section}))
+    run = tmp_path / "run"
+    args = ["--hyperparams", str(path), "--scenarios", "crowd,occlusion", "--final-episodes"]
+    assert main([*args, "0", "--no-progress", "--eval-freq", "1000", "--out", str(run)]) == 0
+    policy = make_policy(str(run))
+    steps = [type(step).__name__ for step in policy._agent.pipeline(1).steps]
+    assert steps[:2] == ["RescaleAction", "JumpGate"]
+    acts_as_trained(run, policy, 60, scenario="crowd", seed=4)
+    # Where the view holds the detection, the speed command does not fall below the floor
+    # (0 m/s) but by rising towards it: replay an episode's observations through the steps.
+    log = run_episode(policy, "occlusion", 0).log
+    obs = log[["obs_distance_m", "obs_offset_px"]].to_numpy(np.float32)
+    v = log["action_v_mps"].to_numpy()
+    rise = 0.2 * follow_env.make_sb3_vec_env(1).action_space.high[0]
+    view = policy._agent.pipeline(1)
+    held_steps = 0
+    for k in np.flatnonzero(np.isfinite(v)):  # row k: the action taken on observation k
+        seen = view.start(obs[:1]) if k == 0 else view.observe(obs[k : k + 1])
+        if seen[0, 2] > 0:  # the view's age: the detection is held
+            held_steps += 1
+            assert v[k] >= min(0.0, (v[k - 1] if k else 0.0) + rise) - 1e-5
+    assert held_steps > 0
