@@ -370,3 +370,22 @@ def test_the_bursts_file_is_ppo_ahead_yaml_with_its_detector_harsher_in_training
         "burst_mean_frames": 10.0,
     }
     assert {k: harsher[k] for k in plain} == plain
+
+
+def test_the_held_file_is_the_bursts_file_with_no_backing_up_blind() -> None:
+    configs = DEFAULT_HYPERPARAMS.parent
+    held = load_hyperparams(configs / "ppo_ahead_held.yaml", ENV_ID)
+    bursts = load_hyperparams(configs / "ppo_ahead_bursts.yaml", ENV_ID)
+    assert {k for k in held if held[k] != bursts[k]} == {"vec_env_wrapper"}
+    changed = [
+        (a, b)
+        for a, b in zip(held["vec_env_wrapper"], bursts["vec_env_wrapper"], strict=True)
+        if a != b
+    ]
+    ((mine, theirs),) = changed
+    (name, kwargs), (name_b, kwargs_b) = next(iter(mine.items())), next(iter(theirs.items()))
+    assert name == name_b == "train.wrappers.VecIncrementalAction"
+    assert kwargs == {**kwargs_b, "held_index": 3, "held_floor": [0.0, None]}
+    # entry 3 of the view at that step is the age (distance, offset, ahead, age)
+    names = [next(iter(entry)) for entry in held["vec_env_wrapper"]]
+    assert names.index("train.wrappers.VecObservationAge") < names.index(name)
