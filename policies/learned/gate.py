@@ -47,12 +47,14 @@ class JumpGate(Feature):
 
     def bind(self, obs: Box, act: Box, n: int) -> tuple[Box, Box]:
         where = self.owner
-        self.max_jump_m = check_number(f"{where}.max_jump_m", self.max_jump_m, 0.0, optional=True,
-                                       lo_open=True)  # fmt: skip
-        self.max_jump_px = check_number(f"{where}.max_jump_px", self.max_jump_px, 0.0,
-                                        optional=True, lo_open=True)  # fmt: skip
-        self.accept_after = check_number(f"{where}.accept_after", self.accept_after, 1,
-                                         integer=True)  # fmt: skip
+        for field in ("max_jump_m", "max_jump_px"):
+            limit = check_number(
+                f"{where}.{field}", getattr(self, field), 0.0, lo_open=True, optional=True
+            )
+            setattr(self, field, limit)
+        self.accept_after = check_number(
+            f"{where}.accept_after", self.accept_after, 1, integer=True
+        )
         if obs.shape[0] < 2:
             raise ValueError(
                 f"{where} needs [distance_m, offset_px, ...], got {obs.shape[0]} entries"

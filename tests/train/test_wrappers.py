@@ -743,6 +743,29 @@ def test_concat_vec_env_refuses_envs_of_different_platforms() -> None:
         ConcatVecEnv([follow_env.make_sb3_vec_env(1, scenario="straight"), mecanum])
 
 
+def train_tiny(tmp_path: Path, wrappers: list[dict], scenarios: str) -> Path:
+    """A 2,000-step follow-train run of a small PPO behind ``wrappers`` (its view, not its
+    skill); returns the run folder."""
+    from train.cli import main
+
+    section = {
+        "policy": "MlpPolicy",
+        "n_envs": 4,
+        "n_steps": 64,
+        "batch_size": 128,
+        "n_epochs": 2,
+        "n_timesteps": 2000,
+        "normalize": {"norm_obs": False, "norm_reward": True},
+        "vec_env_wrapper": wrappers,
+    }
+    path = tmp_path / "tiny.yaml"
+    path.write_text(yaml.safe_dump({"PersonFollow-v0": section}))
+    run = tmp_path / "run"
+    args = ["--hyperparams", str(path), "--scenarios", scenarios, "--final-episodes"]
+    assert main([*args, "0", "--no-progress", "--eval-freq", "1000", "--out", str(run)]) == 0
+    return run
+
+
 @pytest.mark.slow
 def test_an_agent_bounded_backwards_trains_loads_and_keeps_the_bound(
     tmp_path: Path, acts_as_trained
@@ -754,26 +777,12 @@ def test_an_agent_bounded_backwards_trains_loads_and_keeps_the_bound(
 
     from eval.rollout import run_episode
     from policies import make_policy
-    from train.cli import main
 
-    section = {
-        "policy": "MlpPolicy",
-        "n_envs": 4,
-        "n_steps": 64,
-        "batch_size": 128,
-        "n_epochs": 2,
-        "n_timesteps": 2000,
-        "normalize": {"norm_obs": False, "norm_reward": True},
-        "vec_env_wrapper": [
-            {"train.wrappers.VecScaleObservation": {"scale": [1.0, 0.01]}},
-            {"train.wrappers.VecRescaleAction": {"w_max_radps": 2.0, "reverse_max_mps": 0.3}},
-        ],
-    }
-    path = tmp_path / "back.yaml"
-    path.write_text(yaml.safe_dump({"PersonFollow-v0": section}))
-    run = tmp_path / "run"
-    args = ["--hyperparams", str(path), "--scenarios", "straight,occlusion", "--final-episodes"]
-    assert main([*args, "0", "--no-progress", "--eval-freq", "1000", "--out", str(run)]) == 0
+    wrappers = [
+        {"train.wrappers.VecScaleObservation": {"scale": [1.0, 0.01]}},
+        {"train.wrappers.VecRescaleAction": {"w_max_radps": 2.0, "reverse_max_mps": 0.3}},
+    ]
+    run = train_tiny(tmp_path, wrappers, "straight,occlusion")
     model = PPO.load(run / "model.zip", device="cpu")
     v_max = follow_env.make_sb3_vec_env(1).action_space.high[0]
     np.testing.assert_allclose(model.action_space.low, [-0.3 / v_max, -1.0], rtol=1e-6)
@@ -818,36 +827,22 @@ def test_an_agent_behind_the_gate_and_the_held_floor_loads_and_acts_as_trained(
     through a crowd (bystanders, detector misses)."""
     from eval.rollout import run_episode
     from policies import make_policy
-    from train.cli import main
 
-    section = {
-        "policy": "MlpPolicy",
-        "n_envs": 4,
-        "n_steps": 64,
-        "batch_size": 128,
-        "n_epochs": 2,
-        "n_timesteps": 2000,
-        "normalize": {"norm_obs": False, "norm_reward": True},
-        "vec_env_wrapper": [
-            {"train.wrappers.VecRescaleAction": {"w_max_radps": 2.0}},
-            {"train.wrappers.VecJumpGate": {"max_jump_m": 0.5, "accept_after": 10}},
-            {"train.wrappers.VecObservationAge": {"max_age_steps": 30}},
-            {"train.wrappers.VecScaleObservation": {"scale": [1.0, 0.01, 1.0]}},
-            {
-                "train.wrappers.VecIncrementalAction": {
-                    "max_change": [0.2, 0.15],
-                    "reading_index": 0,
-                    "held_index": 2,
-                    "held_floor": [0.0, None],
-                }
-            },
-        ],
-    }
-    path = tmp_path / "gated.yaml"
-    path.write_text(yaml.safe_dump({"PersonFollow-v0": section}))
-    run = tmp_path / "run"
-    args = ["--hyperparams", str(path), "--scenarios", "crowd,occlusion", "--final-episodes"]
-    assert main([*args, "0", "--no-progress", "--eval-freq", "1000", "--out", str(run)]) == 0
+    wrappers = [
+        {"train.wrappers.VecRescaleAction": {"w_max_radps": 2.0}},
+        {"train.wrappers.VecJumpGate": {"max_jump_m": 0.5, "accept_after": 10}},
+        {"train.wrappers.VecObservationAge": {"max_age_steps": 30}},
+        {"train.wrappers.VecScaleObservation": {"scale": [1.0, 0.01, 1.0]}},
+        {
+            "train.wrappers.VecIncrementalAction": {
+                "max_change": [0.2, 0.15],
+                "reading_index": 0,
+                "held_index": 2,
+                "held_floor": [0.0, None],
+            }
+        },
+    ]
+    run = train_tiny(tmp_path, wrappers, "crowd,occlusion")
     policy = make_policy(str(run))
     steps = [type(step).__name__ for step in policy._agent.pipeline(1).steps]
     assert steps[:2] == ["RescaleAction", "JumpGate"]
