@@ -22,8 +22,9 @@ import pandas as pd
 from eval.atomic import atomic_path
 from eval.metrics import OUTCOME_METRICS, metric_digits, metric_label
 from follow_env.tasks import task_for_env
+from policies.learned.feature import IN_TRAINING
 from train.algos import ALGOS, DEFAULT_ALGO
-from train.config import platform_label
+from train.config import platform_label, wrapper_specs
 
 __all__ = [
     "CARD_METRICS",
@@ -186,6 +187,24 @@ def outcome_summary(comparison: pd.DataFrame) -> str:
     )
 
 
+def _deploy_only_lines(hp: dict[str, Any]) -> list[str]:
+    """The card's words on the steps of the agent's view left out of its training env
+    (``in_training: false``): they act in evaluation and on the robot, not in training."""
+    names = [
+        name.rsplit(".", 1)[-1]
+        for name, kwargs in wrapper_specs(hp.get("vec_env_wrapper") or [])
+        if kwargs.get(IN_TRAINING) is False
+    ]
+    if not names:
+        return []
+    return [
+        "",
+        f"Not trained with: {', '.join(f'`{n}`' for n in names)} (`{IN_TRAINING}: false`) acts "
+        "in the exported agent's view (evaluation, the robot) but passed observations through "
+        "in training, so the held-out return below is the agent's without it.",
+    ]
+
+
 def model_card(
     *,
     run: Path,
@@ -229,6 +248,7 @@ def model_card(
         + (f" (or `make_policy({shipped})` for the shipped copy)" if learner.name == "ppo" else "")
         + "; the",
         "policy applies the saved normalisation and the agent's wrappers itself.",
+        *_deploy_only_lines(hp),
         "",
         "## How it was trained",
         "",

@@ -42,7 +42,6 @@ from the env): every wrapper keeps the names, and every per-action parameter (``
 
 from __future__ import annotations
 
-import inspect
 from collections.abc import Sequence
 from typing import Any, ClassVar
 
@@ -54,7 +53,6 @@ from stable_baselines3.common.vec_env.base_vec_env import VecEnvObs, VecEnvStepR
 from follow_env.sim.checks import check_number
 from policies.learned.features import (
     Box,
-    Feature,
     FrameStack,
     IncrementalAction,
     JumpGate,
@@ -63,6 +61,7 @@ from policies.learned.features import (
     ScaleObservation,
     agent_to_si,
 )
+from train.feature_wrapper import FeatureWrapper
 from train.vecenvs import ConcatVecEnv, env_action_names, env_platform
 
 __all__ = [
@@ -83,67 +82,7 @@ __all__ = [
 # an env's platform with the VecEnvs (train.vecenvs).
 
 
-class _FeatureWrapper(VecEnvWrapper):
-    """A step of the agent's feature pipeline (:mod:`policies.learned.features`) as an SB3
-    ``VecEnvWrapper``: the same code the policy runs at inference, wrapped for training. Each
-    subclass's constructor takes ``venv`` and its feature's own arguments (its signature says
-    which, for the hyperparameter checks)."""
-
-    feature_class: type[Feature]
-
-    def __init_subclass__(cls, **kwargs: Any) -> None:
-        super().__init_subclass__(**kwargs)
-        params = list(inspect.signature(cls.feature_class.__init__).parameters.values())
-        venv = inspect.Parameter("venv", inspect.Parameter.POSITIONAL_OR_KEYWORD)
-
-        def __init__(self: _FeatureWrapper, venv: VecEnv, *args: Any, **kwargs: Any) -> None:  # noqa: N807
-            _FeatureWrapper._setup(self, venv, *args, **kwargs)
-
-        __init__.__signature__ = inspect.Signature([params[0], venv, *params[1:]])  # type: ignore[attr-defined]
-        __init__.__doc__ = cls.feature_class.__init__.__doc__
-        cls.__init__ = __init__  # type: ignore[method-assign]
-
-    def _setup(self, venv: VecEnv, *args: Any, **kwargs: Any) -> None:
-        name = type(self).__name__
-        obs_box, act_box = venv.observation_space, venv.action_space
-        if not (isinstance(obs_box, spaces.Box) and isinstance(act_box, spaces.Box)):
-            raise ValueError(f"{name} needs Box observation and action spaces")
-        if len(obs_box.shape) != 1:
-            raise ValueError(f"{name} needs a flat Box observation space")
-        try:
-            self.feature = self.feature_class(*args, **kwargs)
-        except TypeError as e:
-            raise ValueError(f"{name}: {e}") from None
-        self.feature.owner = name
-        names = env_action_names(venv)
-        obs, act = self.feature.bind(
-            Box(obs_box.low, obs_box.high), Box(act_box.low, act_box.high, names), venv.num_envs
-        )
-        super().__init__(
-            venv,
-            observation_space=spaces.Box(obs.low, obs.high, dtype=np.float32),
-            action_space=spaces.Box(act.low, act.high, dtype=np.float32),
-        )
-        #: The action entries' names (the platform's; every feature keeps them).
-        self.action_names = act.names
-
-    def reset(self) -> VecEnvObs:
-        return self.feature.start(self.venv.reset())
-
-    def step_async(self, actions: np.ndarray) -> None:
-        self.venv.step_async(self.feature.act(actions))
-
-    def step_wait(self) -> VecEnvStepReturn:
-        obs, rewards, dones, infos = self.venv.step_wait()
-        for i in np.flatnonzero(dones):
-            if "terminal_observation" in infos[i]:
-                infos[i]["terminal_observation"] = self.feature.terminal(
-                    infos[i]["terminal_observation"], i
-                )
-        return self.feature.observe(obs, np.asarray(dones, dtype=bool)), rewards, dones, infos
-
-
-class VecRescaleAction(_FeatureWrapper):
+class VecRescaleAction(FeatureWrapper):
     """:class:`policies.learned.features.RescaleAction`: the agent acts in ``[-1, 1]``, mapped
     onto SI speeds (``v_max_mps`` for the entries in m/s, ``w_max_radps`` for those in rad/s,
     each a number or one per such entry: the agent's range, at most the env's;
@@ -152,34 +91,34 @@ class VecRescaleAction(_FeatureWrapper):
     feature_class = RescaleAction
 
 
-class VecObservationAge(_FeatureWrapper):
+class VecObservationAge(FeatureWrapper):
     """:class:`policies.learned.features.ObservationAge`: appends how long the observation has
     been held (``max_age_steps``)."""
 
     feature_class = ObservationAge
 
 
-class VecJumpGate(_FeatureWrapper):
+class VecJumpGate(FeatureWrapper):
     """:class:`policies.learned.gate.JumpGate`: holds the last detection when the reading jumps
     further in a step than the person can walk (``max_jump_m``, ``max_jump_px``)."""
 
     feature_class = JumpGate
 
 
-class VecScaleObservation(_FeatureWrapper):
+class VecScaleObservation(FeatureWrapper):
     """:class:`policies.learned.features.ScaleObservation`: ``obs * scale``."""
 
     feature_class = ScaleObservation
 
 
-class VecIncrementalAction(_FeatureWrapper):
+class VecIncrementalAction(FeatureWrapper):
     """:class:`policies.learned.features.IncrementalAction`: the agent changes the command by at
     most ``max_change`` a step and sees the command in force."""
 
     feature_class = IncrementalAction
 
 
-class VecStackFrames(_FeatureWrapper):
+class VecStackFrames(FeatureWrapper):
     """:class:`policies.learned.features.FrameStack`: the last ``n_stack`` observations side
     by side, with ``pad: first`` the episode's first observation repeated before it (not
     ``VecFrameStack``'s zeros, which read as a person moving away fast). List it last (the

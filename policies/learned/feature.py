@@ -3,11 +3,31 @@ the steps; :mod:`train.wrappers` wraps each for training), numpy only."""
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from policies.learned.boxes import Box
 
-__all__ = ["Feature"]
+__all__ = ["IN_TRAINING", "Feature", "split_in_training"]
+
+#: The keyword a ``vec_env_wrapper`` entry of a feature step may carry: ``in_training: false``
+#: leaves the step out of the training env (observations pass through there) and keeps it in the
+#: exported agent's view, for a filter measured in front of agents trained without it. Only a
+#: step that keeps the observation and action shapes can be left out of training.
+IN_TRAINING = "in_training"
+
+
+def split_in_training(kwargs: dict[str, Any], where: str) -> tuple[bool, dict[str, Any]]:
+    """``(in_training, the step's own arguments)`` of a wrapper entry's keyword arguments.
+
+    :raises ValueError: ``in_training`` is not a bool (naming ``where``, the entry's name).
+    """
+    own = dict(kwargs)
+    flag = own.pop(IN_TRAINING, True)
+    if not isinstance(flag, bool):
+        raise ValueError(f"{where}.{IN_TRAINING}={flag!r} must be true or false")
+    return flag, own
 
 
 class Feature:

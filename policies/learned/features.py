@@ -25,6 +25,9 @@ The arithmetic is exactly that of the training wrappers (they call these classes
 actions are bitwise the same in training, in an env, and on a robot; :class:`Pipeline` chains.
 Training-only wrappers (:meth:`Pipeline.view_entries`) have no step: the reward shaping, and
 the truth that an asymmetric critic reads beside the agent's view (:mod:`train.privileged`).
+The other way round, a step listed with ``in_training: false`` (:mod:`policies.learned.feature`)
+is in the agent's view but not in its training env: a filter added in front of an agent trained
+without it, such as :class:`JumpGate` in ``train/configs/ppo_ahead_gated.yaml``.
 
 The action is the platform's, of any width: the differential drive's ``[v_mps, w_radps]``, the
 mecanum base's ``[v_mps, vy_mps, w_radps]``. A :class:`Box` carries the entries' names (the
@@ -42,7 +45,7 @@ import numpy as np
 
 from follow_env.sim.checks import check_number, is_integer, out_of_range
 from policies.learned.boxes import LEGACY_ACTION_NAMES, Box, agent_to_si, as_numbers
-from policies.learned.feature import Feature
+from policies.learned.feature import Feature, split_in_training
 from policies.learned.gate import JumpGate
 
 __all__ = [
@@ -505,10 +508,13 @@ class Pipeline:
     @classmethod
     def from_wrappers(cls, entries: Sequence[tuple[str, dict[str, Any]]]) -> list[Feature]:
         """The inference steps of an agent's ``vec_env_wrapper`` list (training-only ones, such
-        as the reward shaping, left out: :meth:`view_entries`): ``[(name, kwargs), ...]``."""
+        as the reward shaping, left out: :meth:`view_entries`; ones left out of training with
+        ``in_training: false`` kept): ``[(name, kwargs), ...]``."""
         steps: list[Feature] = []
         for name, short, kwargs in cls.view_entries(entries):
             if short not in FEATURES:
                 raise ValueError(f"unknown feature {name!r}; known: {', '.join(FEATURES)}")
-            steps.append(FEATURES[short](**kwargs))
+            # A step left out of training (in_training: false) is part of the view all the same.
+            _, own = split_in_training(kwargs, name)
+            steps.append(FEATURES[short](**own))
         return steps

@@ -159,7 +159,9 @@ def test_every_field_is_checked_naming_key_value_and_range(override: dict, messa
 
 
 def test_wrapper_arguments_are_checked_against_its_signature_listing_them() -> None:
-    with pytest.raises(ConfigError, match=r"\(accepted: reverse_max_mps, v_max_mps, w_max_radps\)"):
+    with pytest.raises(
+        ConfigError, match=r"\(accepted: in_training, reverse_max_mps, v_max_mps, w_max_radps\)"
+    ):
         parse_hyperparams(MINIMAL | {"vec_env_wrapper": [{W: {"w_max": 2.0}}]})
 
 
@@ -389,3 +391,22 @@ def test_the_held_file_is_the_bursts_file_with_no_backing_up_blind() -> None:
     # entry 3 of the view at that step is the age (distance, offset, ahead, age)
     names = [next(iter(entry)) for entry in held["vec_env_wrapper"]]
     assert names.index("train.wrappers.VecObservationAge") < names.index(name)
+
+
+def test_the_gated_file_is_ppo_ahead_yaml_with_the_gate_left_out_of_training() -> None:
+    """ppo_ahead_gated.yaml trains as ppo_ahead.yaml does (the gate passes observations through
+    there), and its agent's view holds the gate before the age that reads its held detection."""
+    configs = DEFAULT_HYPERPARAMS.parent
+    gated = load_hyperparams(configs / "ppo_ahead_gated.yaml", ENV_ID)
+    ahead = load_hyperparams(configs / "ppo_ahead.yaml", ENV_ID)
+    assert {k for k in gated if gated[k] != ahead[k]} == {"vec_env_wrapper"}
+    gate = {
+        "train.wrappers.VecJumpGate": {"max_jump_m": 0.5, "accept_after": 10, "in_training": False}
+    }
+    entries = gated["vec_env_wrapper"]
+    assert [e for e in entries if e != gate] == ahead["vec_env_wrapper"]
+    names = [next(iter(entry)) for entry in entries]
+    assert names.index("train.wrappers.VecJumpGate") + 1 == names.index(
+        "train.wrappers.VecObservationAge"
+    )
+    assert [kw.get("in_training", True) for _, kw in wrapper_specs(entries)].count(False) == 1

@@ -29,11 +29,16 @@ def broken_comparison() -> pd.DataFrame:
     return compare_with_law(Reverse(), "gsmpn:tuned", ["straight"], range(2), "thesis")
 
 
-def card(tmp_path: Path, comparison: pd.DataFrame | None, sessions: list[dict]) -> str:
+def card(
+    tmp_path: Path,
+    comparison: pd.DataFrame | None,
+    sessions: list[dict],
+    wrappers: list | None = None,
+) -> str:
     return model_card(
         run=tmp_path,
         args=Args(scenarios=("straight",)),
-        hp={"n_envs": 4, "n_timesteps": 2000},
+        hp={"n_envs": 4, "n_timesteps": 2000, "vec_env_wrapper": wrappers or []},
         sessions=sessions,
         comparison=comparison,
         seeds=range(2),
@@ -118,3 +123,12 @@ def test_killed_and_interrupted_sessions_are_listed_and_counted(tmp_path: Path) 
     assert "(0 -> 800 steps, 30 s, 33 env-steps/s, 1 torch thread(s), killed;" in text
     assert "interrupted 2026-01-01T00:00:00+00:00; steps after its last checkpoint" in text
     assert "total: 2,000 env steps in 2.5 min of training" in text  # 30 + 60 + 60 s
+
+
+def test_a_card_names_the_steps_the_agent_was_not_trained_with(tmp_path: Path) -> None:
+    gate = "train.wrappers.VecJumpGate"
+    text = card(tmp_path, None, [SESSION], [{gate: {"max_jump_m": 0.5, "in_training": False}}])
+    assert "Not trained with: `VecJumpGate` (`in_training: false`)" in text
+    assert "held-out return below is the agent's without it" in text
+    for wrappers in ([{gate: {"max_jump_m": 0.5}}], [{gate: {"in_training": True}}], None):
+        assert "Not trained with" not in card(tmp_path, None, [SESSION], wrappers)

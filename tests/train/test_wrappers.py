@@ -262,6 +262,64 @@ def test_the_held_floor_acts_the_same_in_the_agents_pipeline() -> None:
     np.testing.assert_allclose(np.concatenate(env.actions)[:, 0], [-0.5, -0.25, -0.25, -0.25])
 
 
+def test_a_step_left_out_of_training_passes_through_and_stays_in_the_agents_view() -> None:
+    """``in_training: false``: the training wrapper hands on the env's observations and the
+    agent's actions untouched, and the exported agent's pipeline (built from the same entry)
+    gates the bystander's jump."""
+    script = [[[1.0, 0.0]], [[1.25, 10.0]], [[3.0, 300.0]], [[3.0, 300.0]], [[1.5, 20.0]]]
+    kwargs = {"max_jump_m": 0.5, "accept_after": 10, "in_training": False}
+    env = ScriptedVecEnv(script)
+    wrapped = VecJumpGate(env, **kwargs)
+    assert not wrapped.in_training
+    assert wrapped.observation_space == env.observation_space
+    assert wrapped.action_space == env.action_space
+    [step] = Pipeline.from_wrappers([("train.wrappers.VecJumpGate", kwargs)])
+    assert type(step).__name__ == "JumpGate"
+    pipeline = Pipeline(
+        [step], Box(np.full(2, -1000.0), np.full(2, 1000.0)), Box(-np.ones(2), np.ones(2)), 1
+    )
+    np.testing.assert_array_equal(wrapped.reset(), script[0])
+    np.testing.assert_array_equal(pipeline.start(np.asarray(script[0], np.float32)), script[0])
+    seen = []
+    for t in range(1, len(script)):
+        obs, *_ = wrapped.step(np.array([[0.3, -0.7]]))
+        np.testing.assert_array_equal(obs, script[t])  # the training env's, untouched
+        np.testing.assert_array_equal(env.actions[-1], [[0.3, -0.7]])
+        seen.append(pipeline.observe(np.asarray(script[t], np.float32))[0].tolist())
+    # the agent's view holds the person's reading through the jump, as a trained-in gate does
+    gated = VecJumpGate(ScriptedVecEnv(script), max_jump_m=0.5, accept_after=10)
+    trained = [gated.reset()] + [gated.step(np.zeros((1, 2)))[0] for _ in script[1:]]
+    np.testing.assert_allclose(seen, np.concatenate(trained[1:]))
+    np.testing.assert_allclose(seen[1:], [[1.25, 10.0], [1.25, 10.0], [1.5, 20.0]])
+
+
+@pytest.mark.parametrize(
+    ("build", "message"),
+    [
+        (
+            lambda e: VecObservationAge(e, max_age_steps=5, in_training=False),
+            r"VecObservationAge\.in_training=False needs a step that keeps the observation and "
+            r"action shapes; VecObservationAge turns \(2,\) / \(2,\) into \(3,\) / \(2,\)",
+        ),
+        (
+            lambda e: VecJumpGate(e, in_training="no"),
+            r"VecJumpGate\.in_training='no' must be true or false",
+        ),
+        (
+            lambda e: VecJumpGate(e, max_jump_m=-1.0, in_training=False),
+            r"VecJumpGate\.max_jump_m=-1\.0 is out of range",
+        ),
+    ],
+)
+def test_a_step_left_out_of_training_is_refused_where_it_cannot_be(
+    build: Any, message: str
+) -> None:
+    with pytest.raises(ValueError, match=message):
+        build(ScriptedVecEnv(constant_obs(1)))
+    with pytest.raises(ValueError, match=r"train\.wrappers\.VecJumpGate\.in_training=1 must be"):
+        Pipeline.from_wrappers([("train.wrappers.VecJumpGate", {"in_training": 1})])
+
+
 def test_observation_age_counts_steps_without_change() -> None:
     script = [[[1.0, 5.0]], [[1.0, 5.0]], [[1.0, 5.0]], [[1.1, 5.0]], [[1.1, 5.0]]]
     wrapped = VecObservationAge(ScriptedVecEnv(script), max_age_steps=2)
