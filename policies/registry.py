@@ -21,7 +21,8 @@ Learned agents: ``ppo`` is each task's shipped PPO agent (PersonFollow's
 ``policies/agents/ppo``; with ``task="line_trace"``, ``policies/agents/ppo_line``),
 ``ppo_mecanum`` PersonFollow's on the mecanum base (``policies/agents/ppo_mecanum``),
 ``ppo_ahead`` PersonFollow's that also reads the reading ahead (``policies/agents/ppo_ahead``;
-its observation has ``ahead_m``, ``PerceptionConfig.ahead_rays``), and a path
+its observation has ``ahead_m``, ``PerceptionConfig.ahead_rays``; its view gates the detection's
+jumps), and a path
 (a run folder of ``follow-train``, its ``model.zip``, or a checkpoint ``.zip``) loads that
 agent under the path as its name (:mod:`policies.learned.ppo`).
 
@@ -288,8 +289,9 @@ register_law(
 register_policy("ppo", ppo.load_default)
 # The mecanum base's agent (its action is [v_mps, vy_mps, w_radps]: ppo_mecanum@mecanum).
 register_policy("ppo_mecanum", partial(ppo.load_shipped, "ppo_mecanum"))
-# The agent that reads the reading ahead too (train/configs/ppo_ahead.yaml); evaluation gives
-# it the reading, a robot's perception must publish it.
+# The agent that reads the reading ahead too (train/configs/ppo_ahead.yaml's weights, the view
+# of ppo_ahead_gated.yaml: the jump gate, left out of training); evaluation gives it the
+# reading, a robot's perception must publish it.
 register_policy("ppo_ahead", partial(ppo.load_shipped, "ppo_ahead"))
 register_policy("ppo", partial(ppo.load_shipped, "ppo_line", name="ppo"), task="line_trace")
 # A folder with an ensemble.yaml (a seed study's) is the mean of its members' actions.

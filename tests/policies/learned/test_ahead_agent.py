@@ -134,3 +134,41 @@ def test_the_shipped_agent_that_reads_ahead() -> None:
     pd.testing.assert_frame_equal(batched.log, alone.log, check_exact=True)
     assert batched.log["obs_ahead_m"].notna().all()
     assert batched.log.termination.iloc[-1] == "walk_over"
+
+
+@pytest.mark.slow
+def test_the_shipped_agent_that_reads_ahead_runs_the_gate_it_was_not_trained_with(
+    tmp_path: Path,
+) -> None:
+    """Its view holds the jump gate (``in_training: false``) before the age. Through a crowd
+    where the detection jumps to a bystander, it acts as the same weights without the gate up to
+    the first jump, and otherwise after it."""
+    import shutil
+
+    import yaml
+
+    shipped = ROOT / "policies/agents/ppo_ahead"
+    config = yaml.safe_load((shipped / "config.yaml").read_text())
+    entries = config["hyperparams"]["vec_env_wrapper"]
+    gate = {
+        "train.wrappers.VecJumpGate": {"max_jump_m": 0.5, "accept_after": 10, "in_training": False}
+    }
+    assert gate in entries
+    steps = [type(s).__name__ for s in make_policy("ppo_ahead")._agent.pipeline(1).steps]
+    assert steps[1:3] == ["JumpGate", "ObservationAge"]
+    plain = tmp_path / "plain"
+    plain.mkdir()
+    for name in ("model.zip", "vecnormalize.pkl"):
+        shutil.copy(shipped / name, plain / name)
+    config["hyperparams"]["vec_env_wrapper"] = [e for e in entries if e != gate]
+    (plain / "config.yaml").write_text(yaml.safe_dump(config))
+    gated, ungated = (
+        run_episode("ppo_ahead", "crowd", 4).log,
+        run_episode(str(plain), "crowd", 4).log,
+    )
+    distance = gated["obs_distance_m"].to_numpy()
+    first = int(np.flatnonzero(np.abs(np.diff(distance)) > 0.5)[0]) + 1  # the first jump's row
+    action = ["action_v_mps", "action_w_radps"]
+    np.testing.assert_array_equal(gated[action][:first], ungated[action][:first])
+    n = min(len(gated), len(ungated))
+    assert not np.array_equal(gated[action][first:n], ungated[action][first:n])
