@@ -62,17 +62,16 @@ class FeatureWrapper(VecEnvWrapper):
         obs, act = self.feature.bind(
             Box(obs_box.low, obs_box.high), Box(act_box.low, act_box.high, names), venv.num_envs
         )
-        if not self.in_training and (
-            obs.shape != obs_box.shape or act.shape != act_box.shape or act.names != names
-        ):
-            # Left out of training, a step that changes what the agent sees or does would hand
-            # the exported agent a view it has never had the shape of.
-            raise ValueError(
-                f"{name}.{IN_TRAINING}=False needs a step that keeps the observation and action "
-                f"shapes; {name} turns {obs_box.shape} / {act_box.shape} into {obs.shape} / "
-                f"{act.shape}"
-            )
         if not self.in_training:
+            if obs.shape != obs_box.shape or act.shape != act_box.shape or act.names != names:
+                # Left out of training, a step that changes what the agent sees or does would
+                # hand the exported agent a view it has never had the shape of.
+                raise ValueError(
+                    f"{name}.{IN_TRAINING}=False needs a step that keeps the observation and "
+                    f"action shapes; {name} turns {obs_box.shape} / {act_box.shape} into "
+                    f"{obs.shape} / {act.shape}"
+                )
+            # observations and actions pass through: the training env keeps its own boxes
             obs, act = Box(obs_box.low, obs_box.high), Box(act_box.low, act_box.high, names)
         super().__init__(
             venv,
