@@ -284,16 +284,11 @@ register_law(
 register_law(
     "pid", pid_line.PIDLine, pid_line.PRESETS, task="line_trace", search_space=pid_line.SEARCH_SPACE
 )
-# Learned agents: the shipped PPO agent by name, any other by its path (a run folder or a .zip).
-# policies.learned.ppo loads torch and stable-baselines3 only when an agent is built.
-register_policy("ppo", ppo.load_default)
-# The mecanum base's agent (its action is [v_mps, vy_mps, w_radps]: ppo_mecanum@mecanum).
-register_policy("ppo_mecanum", partial(ppo.load_shipped, "ppo_mecanum"))
-# The agent that reads the reading ahead too (train/configs/ppo_ahead.yaml's weights, the view
-# of ppo_ahead_gated.yaml: the jump gate, left out of training); evaluation gives it the
-# reading, a robot's perception must publish it.
-register_policy("ppo_ahead", partial(ppo.load_shipped, "ppo_ahead"))
-register_policy("ppo", partial(ppo.load_shipped, "ppo_line", name="ppo"), task="line_trace")
+# Learned agents: the shipped ones by name (policies.learned.ppo.SHIPPED says which folder is
+# which), any other by its path (a run folder or a .zip). policies.learned.ppo loads torch and
+# stable-baselines3 only when an agent is built.
+for _folder, (_name, _task) in ppo.SHIPPED.items():
+    register_policy(_name, partial(ppo.load_shipped, _folder, name=_name), task=_task)
 # A folder with an ensemble.yaml (a seed study's) is the mean of its members' actions.
 register_resolver(ensemble.resolve_path)
 register_resolver(ppo.resolve_path)

@@ -21,8 +21,9 @@ import pandas as pd
 
 from eval.atomic import atomic_path
 from eval.metrics import OUTCOME_METRICS, metric_digits, metric_label
-from follow_env.tasks import task_for_env
 from policies.learned.feature import IN_TRAINING
+from policies.learned.ppo import shipped_name
+from policies.registry import DEFAULT_TASK
 from train.algos import ALGOS, DEFAULT_ALGO
 from train.config import platform_label, wrapper_specs
 
@@ -205,6 +206,21 @@ def _deploy_only_lines(hp: dict[str, Any]) -> list[str]:
     ]
 
 
+def _load_line(run: Path, export: Path | str | None) -> str:
+    """How the card's reader loads the agent: the exported copy (by its registered name when
+    it is a shipped agent's folder, :data:`policies.learned.ppo.SHIPPED`), and the run folder."""
+    at_run = f"`make_policy({str(run)!r})`"
+    if export is None:
+        return at_run
+    shipped = shipped_name(export)
+    if shipped is None:
+        call = f"make_policy({str(export)!r})"
+    else:
+        name, task = shipped
+        call = f'make_policy("{name}"' + ("" if task == DEFAULT_TASK else f', task="{task}"') + ")"
+    return f"`{call}` (the copy in `{export}`) or {at_run} (the run folder)"
+
+
 def model_card(
     *,
     run: Path,
@@ -233,10 +249,6 @@ def model_card(
     platform = platform_label((hp.get("env_kwargs") or {}).get("platform"))
     on = f", platform `{platform}`" if platform else ""
     env_id = getattr(args, "env_id", None) or "PersonFollow-v0"
-    task = task_for_env(env_id).name
-    shipped = '"ppo"' if task == "person_follow" else f'"ppo", task="{task}"'
-    if task == "person_follow" and (platform or "").split(" ")[0] == "mecanum":
-        shipped = '"ppo_mecanum"'  # the registry's name of the mecanum base's agent
     learner = ALGOS[getattr(args, "algo", None) or DEFAULT_ALGO]
     lines = [
         f"# {learner.label} agent for {env_id}",
@@ -244,9 +256,7 @@ def model_card(
         f"A learned controller for {env_id}: {learner.library} {learner.label} "
         f"({hp.get('policy', learner.policies[0])}), trained by",
         "the project's own command on the batched simulation. Load it with",
-        f"`make_policy({str(run)!r})`"
-        + (f" (or `make_policy({shipped})` for the shipped copy)" if learner.name == "ppo" else "")
-        + "; the",
+        f"{_load_line(run, getattr(args, 'export', None))}; the",
         "policy applies the saved normalisation and the agent's wrappers itself.",
         *_deploy_only_lines(hp),
         "",

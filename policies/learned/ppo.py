@@ -55,6 +55,7 @@ from policies.learned.networks import ALGOS, Memory, load_network
 __all__ = [
     "AGENTS",
     "DEFAULT_AGENT",
+    "SHIPPED",
     "AgentFiles",
     "AgentLoadError",
     "PPOPolicy",
@@ -63,10 +64,24 @@ __all__ = [
     "load_default",
     "load_shipped",
     "resolve_path",
+    "shipped_name",
 ]
 
 #: The shipped agents' folder: ``agents/<name>`` is built by ``make_policy("<name>")``.
 AGENTS = Path(__file__).parents[1] / "agents"
+#: The shipped agents: each folder of :data:`AGENTS` with the name and task
+#: :func:`policies.registry.make_policy` builds it under (the registry registers this table, and
+#: a model card names the copy an export wrote into one of these folders).
+SHIPPED: dict[str, tuple[str, str]] = {
+    "ppo": ("ppo", "person_follow"),  # PersonFollow's agent
+    # the mecanum base's (its action is [v_mps, vy_mps, w_radps]: ppo_mecanum@mecanum)
+    "ppo_mecanum": ("ppo_mecanum", "person_follow"),
+    # reads the reading ahead too (train/configs/ppo_ahead.yaml's weights, the view of
+    # ppo_ahead_gated.yaml: the jump gate, left out of training); evaluation gives it the
+    # reading, a robot's perception must publish it
+    "ppo_ahead": ("ppo_ahead", "person_follow"),
+    "ppo_line": ("ppo", "line_trace"),  # LineTrace-v0's agent
+}
 #: The shipped agent, trained by ``follow-train --export policies/agents/ppo``.
 DEFAULT_AGENT = AGENTS / "ppo"
 #: The platform of an agent whose configuration names none (saved before platforms were named).
@@ -413,6 +428,15 @@ def load_shipped(folder: str, name: str | None = None) -> PPOPolicy:
     """The shipped agent ``policies/agents/<folder>`` (e.g. ``"ppo_line"``), named ``name``
     (default: ``folder``)."""
     return PPOPolicy(AGENTS / folder, name=name or folder)
+
+
+def shipped_name(folder: str | Path) -> tuple[str, str] | None:
+    """``(name, task)`` that ``make_policy`` builds the agent in ``folder`` under, when
+    ``folder`` is one of the shipped agents' (:data:`SHIPPED`); None for any other folder."""
+    path = Path(folder).resolve()
+    if path.parent != AGENTS.resolve():
+        return None
+    return SHIPPED.get(path.name)
 
 
 def resolve_path(name: str) -> PPOPolicy | None:

@@ -198,3 +198,15 @@ def test_a_bare_line_follower_name_means_its_tuned_preset() -> None:
     assert make_policy("coordinate").name == "coordinate:tuned"
     assert make_policy("pid").name == "pid:tuned"
     assert {"coordinate:signed", "pid:hand"} <= set(available_policies("line_trace"))
+
+
+def test_every_shipped_agent_is_built_by_its_name_from_its_own_folder() -> None:
+    from policies.learned.ppo import AGENTS, SHIPPED, shipped_name
+
+    assert sorted(p.name for p in AGENTS.iterdir() if (p / "model.zip").is_file()) == sorted(
+        SHIPPED
+    )
+    for folder, (name, task) in SHIPPED.items():
+        assert make_policy(name, task).path == str(AGENTS / folder)
+        assert shipped_name(AGENTS / folder) == (name, task)
+        assert shipped_name(AGENTS.parent / folder) is None  # the same name elsewhere

@@ -8,6 +8,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from policies.learned.ppo import AGENTS, shipped_name
+from policies.registry import available_policies
 from train.ppo import Args
 from train.report import CARD_METRICS, compare_with_law, model_card, outcome_summary
 
@@ -34,10 +36,11 @@ def card(
     comparison: pd.DataFrame | None,
     sessions: list[dict],
     wrappers: list | None = None,
+    **args: object,
 ) -> str:
     return model_card(
         run=tmp_path,
-        args=Args(scenarios=("straight",)),
+        args=Args(scenarios=("straight",), **args),
         hp={"n_envs": 4, "n_timesteps": 2000, "vec_env_wrapper": wrappers or []},
         sessions=sessions,
         comparison=comparison,
@@ -132,3 +135,25 @@ def test_a_card_names_the_steps_the_agent_was_not_trained_with(tmp_path: Path) -
     assert "held-out return below is the agent's without it" in text
     for wrappers in ([{gate: {"max_jump_m": 0.5}}], [{gate: {"in_training": True}}], None):
         assert "Not trained with" not in card(tmp_path, None, [SESSION], wrappers)
+
+
+def test_a_card_says_how_to_load_the_run_and_the_copy_an_export_wrote(tmp_path: Path) -> None:
+    run = f"`make_policy({str(tmp_path)!r})`"
+    assert f"Load it with\n{run}; the" in card(tmp_path, None, [SESSION])
+    # a shipped agent's folder is loaded by the name the registry gives it
+    for folder, call in (
+        ("ppo_ahead", 'make_policy("ppo_ahead")'),
+        ("ppo_mecanum", 'make_policy("ppo_mecanum")'),
+        ("ppo", 'make_policy("ppo")'),
+        ("ppo_line", 'make_policy("ppo", task="line_trace")'),
+    ):
+        export = AGENTS / folder
+        text = card(tmp_path, None, [SESSION], export=export)
+        assert f"`{call}` (the copy in `{export}`) or {run} (the run folder)" in text
+        name, task = shipped_name(export)
+        assert name in available_policies(task)
+    # any other folder by its path
+    other = tmp_path / "agents" / "ppo_ahead"
+    text = card(tmp_path, None, [SESSION], export=other)
+    assert f"`make_policy({str(other)!r})` (the copy in `{other}`)" in text
+    assert "ppo_ahead\")" not in text
