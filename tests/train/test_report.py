@@ -156,4 +156,4 @@ def test_a_card_says_how_to_load_the_run_and_the_copy_an_export_wrote(tmp_path: 
     other = tmp_path / "agents" / "ppo_ahead"
     text = card(tmp_path, None, [SESSION], export=other)
     assert f"`make_policy({str(other)!r})` (the copy in `{other}`)" in text
-    assert "ppo_ahead\")" not in text
+    assert 'ppo_ahead")' not in text
