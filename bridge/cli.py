@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import dataclasses
 import signal
 import sys
 import time
@@ -184,13 +185,58 @@ def _emulate(args: argparse.Namespace) -> int:
     return 0
 
 
-def _policy_factory() -> Any:
+def _policy_factory(built: dict[str, Any] | None = None) -> Any:
     from policies import make_policy
 
     def build(name: str) -> Any:
-        return make_policy(name)
+        # an agent built to see whether the robot can run it is handed out once, then new ones
+        policy = (built or {}).pop(name, None)
+        return make_policy(name) if policy is None else policy
 
     return build
+
+
+def _shipped_agents() -> dict[str, Any]:
+    """The shipped PersonFollow agents a monitor may offer beyond its fixed modes (``ppo_ahead``,
+    ``ppo_mecanum``), built: whether a robot can run one is read from the agent itself."""
+    from bridge.monitor.hub import MODES
+    from policies import make_policy
+    from policies.learned.ppo import SHIPPED
+
+    names = [n for n, task in SHIPPED.values() if task == "person_follow" and n not in MODES]
+    return {name: make_policy(name) for name in names}
+
+
+def _ahead_of(agents: dict[str, Any]) -> dict[str, Any] | None:
+    """The one reading ahead the agents read (None if none reads one, or they differ)."""
+    reads = [getattr(a, "reads_ahead", None) for a in agents.values()]
+    wanted = {repr(r): r for r in reads if r}
+    return next(iter(wanted.values())) if len(wanted) == 1 else None
+
+
+def _offer(agents: dict[str, Any], check: Any) -> tuple[dict[str, Any], list[str]]:
+    """The agents ``check`` accepts (it raises ``ValueError`` for one the robot cannot run),
+    and why each other one is not offered."""
+    offered, skipped = {}, []
+    for name, agent in agents.items():
+        try:
+            check(agent)
+        except ValueError as exc:
+            skipped.append(str(exc))
+        else:
+            offered[name] = agent
+    return offered, skipped
+
+
+def _modes(start: str, offered: dict[str, Any], skipped: list[str]) -> tuple[str, ...]:
+    """The monitor's modes (said on stdout): the fixed ones, the offered agents, and the
+    starting policy's name when it is none of them."""
+    from bridge.monitor.hub import monitor_modes
+
+    modes = monitor_modes([*offered, start] if start not in ("stop", "manual") else offered)
+    note = f" (not offered: {'; '.join(skipped)})" if skipped else ""
+    print(f"{PROG}: monitor modes {', '.join(modes)}{note}", flush=True)
+    return modes
 
 
 def _start_monitor(args: argparse.Namespace, hub: Any) -> Any:
@@ -209,15 +255,24 @@ def _start_monitor(args: argparse.Namespace, hub: Any) -> Any:
 def _monitor_sim(args: argparse.Namespace) -> int:
     from bridge.monitor.hub import MonitorHub
     from bridge.monitor.sim import SimDriver
+    from follow_env.tasks.person_follow.spec import ahead_settings
 
     config = _env_config(args, args.scenario)
-    factory = _policy_factory()
+    agents = _shipped_agents()
+    ahead = _ahead_of(agents)
+    if ahead and ahead_settings(config.perception) is None:
+        # the simulated camera publishes what the agents read ahead (the laws and ``ppo`` read
+        # the first two entries; the reading has draws of its own, so the world is the same)
+        config = dataclasses.replace(
+            config, perception=dataclasses.replace(config.perception, **ahead)
+        )
+    hub = MonitorHub(args.policy)
     try:
-        driver = SimDriver(MonitorHub(args.policy), factory, config=config, seed=args.seed or 0)
-        if args.policy not in ("stop", "manual"):
-            factory(args.policy)  # a bad name fails here, not in the driver's thread
+        driver = SimDriver(hub, _policy_factory(), config=config, seed=args.seed or 0)
+        driver.check(args.policy)  # a bad name fails here, not in the driver's thread
     except ValueError as exc:
         raise UsageError(str(exc)) from None
+    hub.modes = _modes(args.policy, *_offer(agents, driver.runnable))
     server = _start_monitor(args, driver.hub)
     driver.start()
     try:
@@ -232,15 +287,21 @@ def _monitor_sim(args: argparse.Namespace) -> int:
 
 
 def _run(args: argparse.Namespace, monitor: bool) -> int:
+    from bridge.fit import check_command
     from bridge.runner import Runner, RunnerConfig
 
     config = _env_config(args)
-    factory = _policy_factory()
+    # with the monitor, the shipped agents that command [v, w] are modes too; the perception
+    # is checked when one is chosen (Runner._runnable), as it is known once started
+    agents, skipped = _offer(_shipped_agents() if monitor else {}, check_command)
+    factory = _policy_factory(dict(agents))
     policy_name = args.policy if args.subcommand == "run" else "stop"
     try:
         policy = factory(policy_name) if policy_name not in ("stop", "manual") else None
         run_config = RunnerConfig(duration_s=args.duration, command=args.command)
-        ahead = getattr(policy, "reads_ahead", None)
+        # a camera that can publish the reading ahead does so for the policy, or else for the
+        # agents the monitor offers
+        ahead = getattr(policy, "reads_ahead", None) or _ahead_of(agents)
         perception = open_source(args.perception, args.port, args.seed, ahead)
     except (ValueError, PerceptionError) as exc:
         raise UsageError(str(exc)) from None
@@ -252,7 +313,7 @@ def _run(args: argparse.Namespace, monitor: bool) -> int:
     if monitor:
         from bridge.monitor.hub import MonitorHub
 
-        hub = MonitorHub(policy_name)
+        hub = MonitorHub(policy_name, modes=_modes(policy_name, agents, skipped))
         server = _start_monitor(args, hub)
     meta = {"policy": policy_name, "scenario": f"robot:{args.perception}", "seed": args.seed}
     runner = Runner(

@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import contextlib
 import csv
-import json
 import math
 import os
 import tempfile
@@ -37,6 +36,7 @@ from typing import Any
 
 import numpy as np
 
+from bridge.fit import check_ahead, check_command
 from bridge.link import LinkError, SerialLink
 from bridge.perception import Frame, PerceptionError, PerceptionSource
 from bridge.protocol import Capability, CommandKind, Feedback, Hello, PeerRole, WheelCommand
@@ -45,7 +45,7 @@ from follow_env.platforms.wheels import pid_step
 from follow_env.sim.checks import out_of_range
 from follow_env.tasks.person_follow.steplog import AHEAD_COLUMN, log_columns
 
-__all__ = ["COMMAND_MODES", "RunResult", "Runner", "RunnerConfig", "check_ahead", "write_rows"]
+__all__ = ["COMMAND_MODES", "RunResult", "Runner", "RunnerConfig", "write_rows"]
 
 COMMAND_MODES = ("auto", "duty", "speed")
 _COLUMNS = log_columns(ahead=True)  # the step log's, with the reading ahead's place
@@ -421,10 +421,24 @@ class Runner:
                 if mode == getattr(self.policy, "name", None) or self.policy_factory is None:
                     self._policies[mode] = self.policy
                 else:
-                    self._policies[mode] = self.policy_factory(mode)
+                    try:
+                        self._policies[mode] = self._runnable(self.policy_factory(mode))
+                    except (ValueError, PerceptionError) as exc:
+                        # the robot keeps doing what it did; the browser is told why
+                        self.monitor.refuse(mode, self._mode, str(exc))
+                        if self._mode in ("stop", "manual"):
+                            return self._mode
+                        return self._policies.setdefault(self._mode, self.policy)
             self._policies[mode].reset()
             self._mode = mode
         return self._policies[mode]
+
+    def _runnable(self, policy: Any) -> Any:
+        """``policy``, if this robot can run it (:func:`check_command`, :func:`check_ahead`);
+        ``ValueError`` or ``PerceptionError`` if not."""
+        check_command(policy)
+        check_ahead(policy, self.perception)
+        return policy
 
     def _record(
         self, step: int, t: float, frame: Frame, v: float | None, w: float | None, prev: float
@@ -473,31 +487,6 @@ class Runner:
                 }
             )
         return speed
-
-
-def check_ahead(policy: Any, perception: PerceptionSource) -> None:
-    """Refuse a perception that cannot feed the policy's reading ahead
-    (``PPOPolicy.reads_ahead``): one that publishes none, or publishes it with other settings
-    than the agent was trained with (the world's or the camera's, once started).
-
-    :raises PerceptionError: naming the policy, the source and what to change.
-    """
-    wanted = getattr(policy, "reads_ahead", None)
-    if not wanted:
-        return
-    given = getattr(perception, "ahead", None)
-    name = getattr(policy, "name", "the policy")
-    if given is None:
-        raise PerceptionError(
-            f"{name} reads the reading ahead ({wanted}), but {perception.name} does not publish "
-            f"it: start the emulator with --config '{{\"perception\": {json.dumps(wanted)}}}', "
-            "replay a log with an obs_ahead_m column, or use the realsense perception"
-        )
-    if isinstance(given, dict) and any(given.get(k) != v for k, v in wanted.items()):
-        raise PerceptionError(
-            f"{name} reads the reading ahead with {wanted}, but {perception.name} publishes it "
-            f"with {given}"
-        )
 
 
 def _pose(truth: dict[str, Any], who: str) -> list[float] | None:

@@ -186,7 +186,14 @@ def test_the_leaves_keep_to_themselves() -> None:
 # What runs on a robot's PC: the link, the protocol, the runner, the perception sources and the
 # command line. They may read the platform's and the task's definitions, never build a
 # simulation (the emulator, its world and the monitor's --sim driver do, on purpose).
-ROBOT_SIDE = ("bridge.link", "bridge.runner", "bridge.perception", "bridge.sources", "bridge.cli")
+ROBOT_SIDE = (
+    "bridge.fit",
+    "bridge.link",
+    "bridge.runner",
+    "bridge.perception",
+    "bridge.sources",
+    "bridge.cli",
+)
 
 
 def test_the_robot_side_of_the_bridge_builds_no_simulation() -> None:

@@ -3,11 +3,13 @@
 ``GET /`` serves the page (``static/index.html``: Canvas2D, no framework, no CDN: it works
 offline, beside the robot). ``/ws`` is the WebSocket:
 
-* server to client, JSON: ``{"type": "scene", ...}`` once (walls to draw), then ``{"type":
+* server to client, JSON: ``{"type": "scene", "modes": [[mode, label], ...], ...}`` once (the
+  mode buttons, in order, and walls to draw), then ``{"type":
   "state", ...}`` at ``rate_hz`` (10 Hz) whenever the driver has published a newer state;
   replies ``{"type": "ack", ...}`` or ``{"type": "error", "error": ...}`` to every message;
 * client to server, JSON validated with pydantic: ``{"type": "mode", "mode": "gsmpn"}``
-  (one of ``pn, mpn, gsmpn, ppo, stop, manual``), ``{"type": "manual", "v_mps": 0.3,
+  (one of the hub's modes: ``pn, mpn, gsmpn, ppo, manual, stop``, and any policy the robot's
+  command line added, such as ``ppo_ahead``), ``{"type": "manual", "v_mps": 0.3,
   "w_radps": 0.0}`` and ``{"type": "ping", "t": ...}``. A malformed message gets an error
   reply; the connection and the server go on.
 
@@ -34,7 +36,7 @@ from fastapi.responses import FileResponse
 from fastapi.staticfiles import StaticFiles
 from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, ValidationError
 
-from bridge.monitor.hub import MANUAL_LIMITS, MODES, MonitorHub
+from bridge.monitor.hub import MANUAL_LIMITS, MonitorHub
 
 __all__ = ["LOOPBACK_HOSTS", "MAX_MESSAGE_BYTES", "Server", "create_app", "serve"]
 
@@ -43,9 +45,6 @@ MAX_MESSAGE_BYTES = 4096
 """Longest client message accepted."""
 LOOPBACK_HOSTS = frozenset({"127.0.0.1", "localhost", "::1"})
 _POLL_S = 0.005  # how often a client's sender looks for a new state, s
-
-Mode = Literal["pn", "mpn", "gsmpn", "ppo", "stop", "manual"]
-assert set(Mode.__args__) == set(MODES)  # one list of modes
 
 
 class _Message(BaseModel):
@@ -56,7 +55,7 @@ class ModeMessage(_Message):
     """Select an operating mode."""
 
     type: Literal["mode"]
-    mode: Mode
+    mode: str = Field(min_length=1, max_length=64)  # one of the hub's modes (it checks)
 
 
 class ManualMessage(_Message):
@@ -136,7 +135,7 @@ def create_app(hub: MonitorHub, token: str | None = None, rate_hz: float = 10.0)
 async def _send_states(ws: WebSocket, hub: MonitorHub, period_s: float) -> None:
     # A new state goes out within a few ms of being published (polled every 5 ms), and no
     # client gets more than one per period.
-    await ws.send_text(json.dumps({"type": "scene", **hub.scene}))
+    await ws.send_text(json.dumps({"type": "scene", **hub.scene, "modes": hub.buttons()}))
     last, last_sent = -1, -math.inf
     loop = asyncio.get_running_loop()
     while True:
@@ -176,7 +175,11 @@ async def _receive(ws: WebSocket, hub: MonitorHub) -> None:
             await ws.send_json({"type": "error", "error": _error_text(exc)})
             continue
         if isinstance(message, ModeMessage):
-            hub.set_mode(message.mode)
+            try:
+                hub.set_mode(message.mode)
+            except ValueError as exc:  # not a mode of this robot: the mode stays as it was
+                await ws.send_json({"type": "error", "error": str(exc)})
+                continue
             await ws.send_json({"type": "ack", "mode": message.mode})
         elif isinstance(message, ManualMessage):
             hub.set_manual(message.v_mps, message.w_radps)

@@ -19,6 +19,7 @@ import numpy as np
 from bridge.monitor.hub import MonitorHub
 from bridge.world import scene_walls
 from follow_env.tasks.person_follow.env import PersonFollowEnv
+from follow_env.tasks.person_follow.spec import ahead_settings
 
 __all__ = ["SimDriver"]
 
@@ -69,9 +70,48 @@ class SimDriver:
 
     def _policy(self, mode: str) -> Any:
         if mode not in self._policies:
-            self._policies[mode] = self.policy_factory(mode)
+            self._policies[mode] = self.runnable(self.policy_factory(mode))
             self._policies[mode].reset()
         return self._policies[mode]
+
+    def runnable(self, policy: Any) -> Any:
+        """``policy``, if it can drive this env: it commands the platform's action, and what it
+        reads ahead is what the env publishes. ``ValueError`` naming the difference if not."""
+        name = getattr(policy, "name", "the policy")
+        actions = tuple(a.name for a in self.env.sim.platform.actions)
+        names = tuple(getattr(policy, "action_names", actions))
+        if names != actions:
+            raise ValueError(
+                f"{name} commands [{', '.join(names)}], but the simulated robot takes "
+                f"[{', '.join(actions)}]"
+            )
+        wanted = getattr(policy, "reads_ahead", None)
+        given = ahead_settings(self.env.config.perception)
+        if wanted and wanted != given:
+            raise ValueError(
+                f"{name} reads the reading ahead with {wanted}, but the simulation publishes "
+                + ("none" if given is None else f"it with {given}")
+            )
+        return policy
+
+    def check(self, mode: str) -> None:
+        """Build the policy of ``mode`` now (a bad name or a policy this env cannot feed fails
+        here, as a ``ValueError``, not in the driver's thread)."""
+        if mode not in ("stop", "manual"):
+            self._policy(mode)
+
+    def _switch(self, mode: str, new: str) -> str:
+        """The mode that acts after the browser chose ``new``: ``new``, or ``mode`` if the env
+        cannot feed it (the hub is told why)."""
+        if new in ("stop", "manual"):
+            return new
+        try:
+            policy = self._policy(new)
+        except ValueError as exc:
+            self.hub.refuse(new, mode, str(exc))
+            return mode
+        policy.reset()
+        return new
 
     def _act(self, mode: str, obs: np.ndarray) -> np.ndarray:
         if mode == "stop":
@@ -81,13 +121,15 @@ class SimDriver:
         return np.asarray(self._policy(mode).act(obs), dtype=np.float64)
 
     def _run(self) -> None:
+        mode = "stop"
         while not self._stop.is_set():
             obs, info = self.env.reset(seed=self.seed + self.episodes)
             self.episodes += 1
             self.hub.scene = {"walls": scene_walls(self.env)}
             for policy in self._policies.values():
                 policy.reset()
-            mode = self.hub.mode
+            if self.hub.mode != mode:
+                mode = self._switch(mode, self.hub.mode)
             action = np.zeros(2)
             self._publish(info, obs, action, mode)
             start = time.monotonic()
@@ -99,9 +141,7 @@ class SimDriver:
                 if delay > 0 and self._stop.wait(delay):
                     return
                 if self.hub.mode != mode:  # a new mode starts from a fresh memory
-                    mode = self.hub.mode
-                    if mode in self._policies:
-                        self._policies[mode].reset()
+                    mode = self._switch(mode, self.hub.mode)
                 action = self._act(mode, obs)
                 obs, _, terminated, truncated, info = self.env.step(action)
                 done = terminated or truncated

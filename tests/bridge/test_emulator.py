@@ -142,8 +142,8 @@ def test_the_emulator_refuses_bad_settings() -> None:
 def test_a_world_configured_with_the_reading_ahead_publishes_it() -> None:
     """The world's frames carry ahead_m and its info the settings; the sim camera hands both
     to the runner, which refuses an agent trained with other settings or a world without."""
+    from bridge.fit import check_ahead
     from bridge.perception import PerceptionError, SimCamera
-    from bridge.runner import check_ahead
     from follow_env.tasks.person_follow.config import THESIS
 
     class Reader:  # what the runner asks of an agent that reads ahead

@@ -10,7 +10,7 @@ from fastapi.testclient import TestClient
 from starlette.websockets import WebSocketDisconnect
 
 from bridge.monitor.app import create_app, serve
-from bridge.monitor.hub import MonitorHub
+from bridge.monitor.hub import MODES, MonitorHub, monitor_modes
 from bridge.monitor.sim import SimDriver
 from policies import make_policy
 
@@ -35,6 +35,16 @@ def _next(ws, kind: str) -> dict:  # type: ignore[no-untyped-def]
     raise AssertionError(f"no {kind} message")
 
 
+BUTTONS = [
+    ["pn", "PN"],
+    ["mpn", "MPN"],
+    ["gsmpn", "GS-MPN"],
+    ["ppo", "PPO"],
+    ["manual", "manual"],
+    ["stop", "STOP"],
+]
+
+
 @pytest.fixture
 def hub() -> MonitorHub:
     h = MonitorHub("stop", scene={"walls": [[0, 0, 1, 0]]})
@@ -55,7 +65,7 @@ def test_the_page_and_its_script_are_served(hub: MonitorHub) -> None:
 def test_states_stream_and_modes_change(hub: MonitorHub) -> None:
     client = TestClient(create_app(hub, rate_hz=50))
     with client.websocket_connect("/ws") as ws:
-        assert ws.receive_json() == {"type": "scene", "walls": [[0, 0, 1, 0]]}
+        assert ws.receive_json() == {"type": "scene", "walls": [[0, 0, 1, 0]], "modes": BUTTONS}
         first = _next(ws, "state")
         assert first["obs"] == [1.0, 12.0]
         _state(hub, 0.1)
@@ -173,3 +183,117 @@ def test_the_sim_driver_steps_in_real_time_under_the_hubs_mode() -> None:
         assert stopped["command"] == [0.0, 0.0]
     finally:
         driver.stop()
+
+
+def test_a_hub_offers_the_reference_modes_and_the_policies_it_is_given() -> None:
+    assert MonitorHub().modes == ("pn", "mpn", "gsmpn", "ppo", "manual", "stop")
+    assert set(MonitorHub().modes) == set(MODES)
+    modes = monitor_modes(["ppo_ahead", "gsmpn", "ppo_ahead", "pn:thesis"])
+    assert modes == ("pn", "mpn", "gsmpn", "ppo", "ppo_ahead", "pn:thesis", "manual", "stop")
+    hub = MonitorHub(modes=modes)
+    assert hub.buttons()[4:6] == [["ppo_ahead", "PPO (ahead)"], ["pn:thesis", "pn:thesis"]]
+    hub.set_mode("ppo_ahead")
+    assert hub.mode == "ppo_ahead"
+    with pytest.raises(ValueError, match=r"mode='ppo_ahead' is out of range: must be one of pn"):
+        MonitorHub().set_mode("ppo_ahead")
+    for bad in (("pn", "gsmpn"), ("pn", "stop", "pn"), ("stop", "")):
+        with pytest.raises(ValueError, match=r"modes=.* is out of range"):
+            MonitorHub(modes=bad)
+
+
+def test_a_mode_the_robot_does_not_offer_gets_an_error_and_the_mode_stays(hub: MonitorHub) -> None:
+    client = TestClient(create_app(hub))
+    with client.websocket_connect("/ws") as ws:
+        ws.send_json({"type": "mode", "mode": "gsmpn"})
+        _next(ws, "ack")
+        ws.send_json({"type": "mode", "mode": "ppo_ahead"})
+        assert "mode='ppo_ahead' is out of range" in _next(ws, "error")["error"]
+        ws.send_json({"type": "mode", "mode": "x" * 65})
+        assert "mode" in _next(ws, "error")["error"]
+        assert hub.mode == "gsmpn"
+
+
+def test_a_refused_mode_goes_back_and_every_state_says_why(hub: MonitorHub) -> None:
+    hub.set_mode("gsmpn")
+    hub.set_mode("ppo")
+    hub.refuse("ppo", "gsmpn", "ppo needs the reading ahead")
+    assert hub.mode == "gsmpn"
+    _state(hub, 0.2)
+    assert hub.latest()["notice"] == "ppo needs the reading ahead"
+    assert hub.latest()["refusals"] == 1
+    hub.set_mode("pn")
+    hub.refuse("ppo", "gsmpn", "ppo again")  # the browser has moved on: its choice stays
+    assert hub.mode == "pn"
+    assert hub.notice == "ppo again"
+    assert hub.refusals == 2
+
+
+def test_the_sim_driver_refuses_an_agent_it_cannot_feed_and_keeps_driving() -> None:
+    hub = MonitorHub("gsmpn", modes=monitor_modes(["ppo_mecanum", "ppo_ahead"]))
+    driver = SimDriver(hub, make_policy, scenario="straight", speed=5.0)
+    with pytest.raises(ValueError, match=r"ppo_mecanum commands \[v_mps, vy_mps, w_radps\]"):
+        driver.check("ppo_mecanum")
+    with pytest.raises(ValueError, match=r"ppo_ahead reads the reading ahead .* publishes none"):
+        driver.check("ppo_ahead")
+    driver.start()
+    try:
+        time.sleep(0.5)
+        hub.set_mode("ppo_ahead")
+        time.sleep(0.5)
+        state = hub.latest()
+        assert hub.mode == state["mode"] == "gsmpn"
+        assert state["notice"].startswith("ppo_ahead reads the reading ahead")
+        assert state["command"][0] != 0.0
+    finally:
+        driver.stop()
+
+
+def test_the_sim_driver_runs_the_agent_that_reads_ahead_where_the_camera_publishes_it() -> None:
+    ahead = make_policy("ppo_ahead").reads_ahead
+    hub = MonitorHub("stop", modes=monitor_modes(["ppo_ahead"]))
+    driver = SimDriver(hub, make_policy, scenario="straight", config={"perception": ahead})
+    driver.check("ppo_ahead")
+    driver.speed = 5.0
+    driver.start()
+    try:
+        hub.set_mode("ppo_ahead")
+        time.sleep(1.0)
+        state = hub.latest()
+        assert state["mode"] == "ppo_ahead"
+        assert len(state["obs"]) == 3  # distance, offset and the reading ahead
+        assert state["notice"] == ""
+    finally:
+        driver.stop()
+
+
+@pytest.mark.slow
+def test_the_sim_monitor_offers_the_shipped_agents_its_simulation_can_run() -> None:
+    import json
+    import signal
+    import subprocess
+    import sys
+    import urllib.request
+
+    from .conftest import ROOT
+
+    command = [sys.executable, "-m", "bridge", "monitor", "--sim", "--http", "127.0.0.1:0"]
+    proc = subprocess.Popen(command, cwd=ROOT, stdout=subprocess.PIPE, text=True)
+    try:
+        modes, served = proc.stdout.readline(), proc.stdout.readline()
+        url = served.split("monitor on ", 1)[1].strip()
+        deadline = time.monotonic() + 20.0
+        state: dict = {}
+        while "obs" not in state and time.monotonic() < deadline:
+            time.sleep(0.2)
+            state = json.loads(urllib.request.urlopen(url + "state", timeout=5).read())
+    finally:
+        proc.send_signal(signal.SIGINT)
+        proc.wait(timeout=10)
+    assert modes == (
+        "follow-robot: monitor modes pn, mpn, gsmpn, ppo, ppo_ahead, manual, stop (not offered: "
+        "ppo_mecanum commands [v_mps, vy_mps, w_radps], but the simulated robot takes "
+        "[v_mps, w_radps])\n"
+    )
+    # the simulated camera publishes the reading ahead that ppo_ahead reads
+    assert state["mode"] == "stop"
+    assert len(state["obs"]) == 3

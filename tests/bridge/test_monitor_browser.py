@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 from bridge.monitor.app import Server, create_app
-from bridge.monitor.hub import MonitorHub
+from bridge.monitor.hub import MonitorHub, monitor_modes
 from bridge.monitor.sim import SimDriver
 from policies import make_policy
 
@@ -34,7 +34,8 @@ ARGS = [
 
 @pytest.fixture
 def monitor() -> Iterator[tuple[MonitorHub, Server]]:
-    hub = MonitorHub("stop")
+    # the agent that reads ahead is offered, but this simulated camera publishes no reading
+    hub = MonitorHub("stop", modes=monitor_modes(["ppo_ahead"]))
     driver = SimDriver(hub, make_policy, scenario="curve", speed=2.0).start()
     server = Server(create_app(hub, token="t0k"), "127.0.0.1", 0).start()
     yield hub, server
@@ -54,6 +55,12 @@ def test_the_page_streams_draws_and_changes_the_mode(
         page = browser.new_page()
         page.goto(server.url + "?token=t0k")
         page.wait_for_function("window.monitorStats && window.monitorStats.frames >= 3")
+        # one button per mode the robot offers, in its order, from the server's scene message
+        buttons = page.eval_on_selector_all(
+            "#modes button", "bs => bs.map(b => [b.dataset.mode, b.textContent])"
+        )
+        assert buttons == hub.buttons()
+        assert ["ppo_ahead", "PPO (ahead)"] in buttons
         before = page.evaluate("document.getElementById('view').toDataURL()")
         page.click("button[data-mode='gsmpn']")
         page.wait_for_function("window.monitorStats.mode === 'gsmpn'", timeout=5000)
@@ -66,6 +73,13 @@ def test_the_page_streams_draws_and_changes_the_mode(
         assert "active" in (page.get_attribute("button[data-mode='gsmpn']", "class") or "")
         latency = page.evaluate("window.monitorStats.latencyMs.slice(-5)")
         assert all(0 <= ms < 1000 for ms in latency)
+        # a mode the simulation cannot feed: refused, the robot drives on, the page says why
+        page.click("button[data-mode='ppo_ahead']")
+        page.wait_for_function("window.monitorStats.notice !== ''", timeout=5000)
+        assert page.text_content("#msg").startswith("refused: ppo_ahead reads the reading ahead")
+        page.wait_for_function("window.monitorStats.mode === 'gsmpn'", timeout=5000)
+        assert hub.mode == "gsmpn"
+        assert "active" in (page.get_attribute("button[data-mode='gsmpn']", "class") or "")
         shot = tmp_path / "monitor.png"
         page.screenshot(path=str(shot))
         assert shot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

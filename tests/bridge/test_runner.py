@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 import signal
 import subprocess
 import sys
@@ -171,6 +172,98 @@ def test_a_replayed_log_drives_the_policy_and_is_logged_as_it_was(tmp_path: Path
         for o in original[["obs_distance_m", "obs_offset_px"]].to_numpy()[:n]
     ]
     np.testing.assert_allclose(replayed["action_v_mps"].to_numpy()[:n], expected, rtol=1e-6)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    ("mode", "why"),
+    [
+        ("ppo_ahead", "reads the reading ahead .* but replay:.* does not publish it"),
+        ("ppo_mecanum", r"commands \[v_mps, vy_mps, w_radps\], but this robot takes"),
+    ],
+)
+def test_a_mode_the_robot_cannot_run_is_refused_and_the_robot_drives_on(
+    tmp_path: Path, mode: str, why: str
+) -> None:
+    from bridge.monitor.hub import MonitorHub, monitor_modes
+
+    source = tmp_path / "source.csv"
+    write_step_log(run_episode("pn", "curve", 1).log, source)
+    log = tmp_path / "replayed.csv"
+    hub = MonitorHub("pn", modes=monitor_modes([mode]))
+    hub.set_mode(mode)  # chosen in the browser before the first step
+    with SerialLink("loop://", "reference") as link:
+        runner = Runner(
+            link,
+            make_policy("pn"),
+            Replay(source),
+            config=RunnerConfig(duration_s=1.0),
+            log=log,
+            monitor=hub,
+            policy_factory=make_policy,
+        )
+        result = runner.run()
+    assert result.reason == "duration 1 s reached"
+    assert hub.mode == "pn:tuned"  # back to what the robot was running
+    assert re.search(f"^{mode} {why}", hub.notice), hub.notice
+    assert hub.latest()["notice"] == hub.notice
+    replayed, original = read_step_log(log), read_step_log(source)
+    n = len(replayed) - 1
+    law = make_policy("pn")
+    law.reset()
+    expected = [
+        law.act(np.array(o, dtype=np.float32))[0]
+        for o in original[["obs_distance_m", "obs_offset_px"]].to_numpy()[:n]
+    ]
+    np.testing.assert_allclose(replayed["action_v_mps"].to_numpy()[:n], expected, rtol=1e-6)
+
+
+@pytest.mark.slow
+def test_the_robots_monitor_refuses_an_agent_its_camera_cannot_feed(
+    emulator_process: Start,
+) -> None:
+    # follow-robot monitor on the emulated robot: the world's camera publishes no reading ahead,
+    # so ppo_ahead is offered (it commands [v, w]) but refused once chosen, and the robot stays
+    # stopped; the mecanum base's agent is not offered at all.
+    import asyncio
+    import json
+
+    import websockets
+
+    emu = emulator_process("--framing", "robust", "--firmware", "fixed", "--seed", "0")
+    command = [sys.executable, "-m", "bridge", "monitor", "--port", emu.url, "--perception"]
+    proc = subprocess.Popen(
+        [*command, "sim", "--framing", "robust", "--http", "127.0.0.1:0"],
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+
+    async def choose(url: str) -> list[dict]:
+        async with websockets.connect(url) as ws:
+            scene = json.loads(await ws.recv())
+            await ws.send(json.dumps({"type": "mode", "mode": "ppo_ahead"}))
+            seen = [scene]
+            while not (seen[-1].get("type") == "state" and seen[-1]["refusals"]):
+                seen.append(json.loads(await asyncio.wait_for(ws.recv(), 10.0)))
+            return seen
+
+    try:
+        modes, served = proc.stdout.readline(), proc.stdout.readline()
+        url = served.split("monitor on http://", 1)[1].strip()
+        seen = asyncio.run(choose(f"ws://{url}ws"))
+    finally:
+        proc.send_signal(signal.SIGINT)
+        out, _ = proc.communicate(timeout=20)
+    assert modes.startswith("follow-robot: monitor modes pn, mpn, gsmpn, ppo, ppo_ahead, manual")
+    assert "not offered: ppo_mecanum commands [v_mps, vy_mps, w_radps]" in modes
+    assert ["ppo_ahead", "PPO (ahead)"] in seen[0]["modes"]
+    assert {"type": "ack", "mode": "ppo_ahead"} in seen
+    last = seen[-1]
+    assert last["mode"] == "stop"
+    assert last["notice"].startswith("ppo_ahead reads the reading ahead")
+    assert last["command"] == [0.0, 0.0]
+    assert proc.returncode == 0, out
 
 
 def test_runner_settings_are_checked() -> None:

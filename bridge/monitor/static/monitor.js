@@ -2,7 +2,7 @@
 // No framework and no network beyond this server: the page works beside the robot, offline.
 "use strict";
 
-const stats = { frames: 0, lastSeq: 0, latencyMs: [], mode: null, acks: 0, errors: 0, draws: 0 };
+const stats = { frames: 0, lastSeq: 0, latencyMs: [], mode: null, acks: 0, errors: 0, draws: 0, notice: "", refusals: 0 };
 window.monitorStats = stats;  // read by the browser test and the latency benchmark
 
 const view = document.getElementById("view").getContext("2d");
@@ -28,7 +28,7 @@ function connect() {
   ws.onmessage = (event) => {
     const msg = JSON.parse(event.data);
     if (msg.type === "state") onState(msg);
-    else if (msg.type === "scene") { scene = msg; scene.walls = scene.walls || []; }
+    else if (msg.type === "scene") { scene = msg; scene.walls = scene.walls || []; showModes(msg.modes || []); }
     else if (msg.type === "ack") { stats.acks += 1; $("msg").textContent = "ok"; }
     else if (msg.type === "error") { stats.errors += 1; $("msg").textContent = "error: " + msg.error; }
   };
@@ -36,8 +36,19 @@ function connect() {
 
 function send(obj) { if (ws && ws.readyState === WebSocket.OPEN) ws.send(JSON.stringify(obj)); }
 
-for (const button of document.querySelectorAll("#modes button")) {
-  button.addEventListener("click", () => send({ type: "mode", mode: button.dataset.mode }));
+// The robot says which modes it offers ([[mode, label], ...]: the laws, its agents, manual,
+// stop); a button per mode, rebuilt on every (re)connection.
+function showModes(modes) {
+  const box = $("modes");
+  box.replaceChildren();
+  for (const [mode, label] of modes) {
+    const button = document.createElement("button");
+    button.dataset.mode = mode;
+    button.textContent = label;
+    button.classList.toggle("active", mode === stats.mode);
+    button.addEventListener("click", () => send({ type: "mode", mode }));
+    box.appendChild(button);
+  }
 }
 for (const id of ["v", "w"]) {
   $(id).addEventListener("input", () => {
@@ -69,6 +80,8 @@ function onState(s) {
   for (const b of document.querySelectorAll("#modes button")) {
     b.classList.toggle("active", b.dataset.mode === s.mode);
   }
+  if (stats.frames === 1) stats.refusals = s.refusals || 0;  // refusals before this page: not news
+  if (s.refusals > stats.refusals) { stats.refusals = s.refusals; stats.notice = s.notice; $("msg").textContent = "refused: " + s.notice; }
   $("mode").textContent = s.mode;
   $("time").textContent = fmt(s.time_s, 1) + " s" + (s.termination ? " (" + s.termination + ")" : "");
   $("obs").textContent = s.obs ? fmt(s.obs[0], 2) + " m, " + fmt(s.obs[1], 0) + " px" + (s.detected ? "" : " (held)") + (s.obs.length > 2 ? "; ahead " + fmt(s.obs[2], 2) + " m" : "") : "-";
