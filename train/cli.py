@@ -7,6 +7,7 @@ before anything is written; Ctrl-C names the run to resume.
 from __future__ import annotations
 
 import argparse
+import shlex
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -89,6 +90,22 @@ def build_parser() -> argparse.ArgumentParser:
         "were changed: only files named like the agent's are replaced, none is deleted",
     )
     p.add_argument("--no-progress", dest="progress", action="store_false", default=None)
+    edit = p.add_argument_group(
+        "a step added to a trained agent's view, without training (train.edit)"
+    )
+    edit.add_argument(
+        "--add-step",
+        type=Path,
+        metavar="DIR",
+        help="the agent's folder (a run or an export); with --step, and --force for files "
+        "changed since its export",
+    )
+    edit.add_argument(
+        "--step",
+        help="YAML: '{train.wrappers.VecJumpGate: {max_jump_m: 0.5}}' (in_training: false is "
+        "added)",
+    )
+    edit.add_argument("--before", metavar="NAME", help="the entry it goes before (default: first)")
     study = p.add_argument_group(
         "several training seeds (train.seeds): one run per seed in OUT/seed-<k>, and a summary"
     )
@@ -118,6 +135,8 @@ _RESUME_OPTIONS = {"resume", "algo", "n_timesteps", "threads", "progress", "expo
 
 # Options of a study (--seeds), not of one run.
 _STUDY_OPTIONS = ("seeds", "backend", "workers", "address")
+# Options of --add-step (train.edit), which trains nothing.
+_EDIT_OPTIONS = ("add_step", "step", "before")
 
 
 def parse_study(argv: Sequence[str] | None = None) -> tuple[Args, tuple[int, ...], Backend] | None:
@@ -165,8 +184,31 @@ def parse_args(argv: Sequence[str] | None = None) -> Args:
     return _args(build_parser().parse_args(argv))
 
 
+def _edit(ns: argparse.Namespace) -> tuple[Path, str, str | None, bool] | None:
+    """``(folder, step, before, force)`` of an ``--add-step`` command line, or None.
+
+    :raises UsageError: for --step or --before without --add-step, --add-step without --step,
+        or a training option beside it.
+    """
+    given = {k for k, v in vars(ns).items() if v is not None}
+    if "add_step" not in given:
+        if given & {"step", "before"}:
+            raise UsageError("--step and --before apply to --add-step only")
+        return None
+    if "step" not in given:
+        raise UsageError("--add-step needs --step (the step's YAML)")
+    extra = sorted(given - {*_EDIT_OPTIONS, "force"})
+    if extra:
+        raise UsageError(
+            ", ".join("--" + k.replace("_", "-") for k in extra)
+            + ": --add-step trains nothing; it takes --step, --before and --force only"
+        )
+    return ns.add_step, ns.step, ns.before, bool(ns.force)
+
+
 def _args(ns: argparse.Namespace) -> Args:
-    given = {k: v for k, v in vars(ns).items() if v is not None and k not in _STUDY_OPTIONS}
+    skip = (*_STUDY_OPTIONS, *_EDIT_OPTIONS)
+    given = {k: v for k, v in vars(ns).items() if v is not None and k not in skip}
     if "resume" in given and set(given) - _RESUME_OPTIONS:
         extra = ", ".join("--" + k.replace("_", "-") for k in sorted(set(given) - _RESUME_OPTIONS))
         raise UsageError(
@@ -205,6 +247,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     try:
         ns = build_parser().parse_args(argv)
+        edit = _edit(ns)
+        if edit is not None:
+            return _main_edit(*edit, command=shlex.join([PROG, *argv]))
         study = _study(ns)
         if study is not None:
             return _main_study(*study, command=" ".join([PROG, *argv]))
@@ -230,6 +275,21 @@ def main(argv: Sequence[str] | None = None) -> int:
         f"{last['wall_s']:.0f} s ({last['env_steps_per_s'] or 0:,} env-steps/s). Wrote {run}/: "
         + _written(run)
         + (f"; exported the agent to {args.export}/" if args.export else "")
+    )
+    return 0
+
+
+def _main_edit(folder: Path, step: str, before: str | None, force: bool, command: str) -> int:
+    """``follow-train --add-step``: see :mod:`train.edit`."""
+    from train.edit import add_step
+
+    done = add_step(folder, step, before, force=force, command=command)
+    ((name, kwargs),) = done.entry.items()
+    where = f"before {before}" if before else "first"
+    print(
+        f"Added {name} {kwargs} to the view of the agent in {folder}/ ({where}; "
+        "left out of training): config.yaml, MODEL_CARD.md"
+        + (", follow-train-export.json" if (folder / "follow-train-export.json").exists() else "")
     )
     return 0
 

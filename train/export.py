@@ -44,6 +44,8 @@ __all__ = [
     "ExportPlan",
     "check_export",
     "export_agent",
+    "read_manifest",
+    "sha256",
 ]
 
 #: The files that make an agent (what policies.ppo loads).
@@ -77,7 +79,8 @@ class ExportPlan:
     exported: dict[str, list[str]]
 
 
-def _sha256(path: Path) -> str:
+def sha256(path: Path) -> str:
+    """The SHA-256 of a file's bytes, hex."""
     digest = hashlib.sha256()
     with path.open("rb") as f:
         for block in iter(lambda: f.read(1 << 20), b""):
@@ -85,7 +88,7 @@ def _sha256(path: Path) -> str:
     return digest.hexdigest()
 
 
-def _read_manifest(dest: Path) -> dict[str, list[str]] | None:
+def read_manifest(dest: Path) -> dict[str, list[str]] | None:
     """The files an earlier export listed (name -> hashes), or None if there is no valid
     manifest (missing, unreadable, or not written by an export)."""
     try:
@@ -109,7 +112,7 @@ def _read_manifest(dest: Path) -> dict[str, list[str]] | None:
 def _is_exported(dest: Path, name: str, exported: dict[str, list[str]]) -> bool:
     """``dest/name`` is a regular file an earlier export wrote, unchanged since."""
     path = dest / name
-    return path.is_file() and not path.is_symlink() and _sha256(path) in exported.get(name, [])
+    return path.is_file() and not path.is_symlink() and sha256(path) in exported.get(name, [])
 
 
 def check_export(dest: str | Path, *, force: bool = False, run: Path | None = None) -> ExportPlan:
@@ -153,7 +156,7 @@ def check_export(dest: str | Path, *, force: bool = False, run: Path | None = No
         )
     if not any(dest.iterdir()):
         return ExportPlan(dest, create=False, exported={})
-    exported = _read_manifest(dest)
+    exported = read_manifest(dest)
     hint = (
         "choose a new or empty folder, or give --force to write the agent's files into it "
         f"({', '.join(EXPORT_NAMES)} are replaced, nothing else is touched)"
@@ -197,7 +200,7 @@ def export_agent(run: Path, dest: str | Path, *, force: bool = False) -> Path:
             sources[name] = source
         elif name not in _OPTIONAL:
             raise FileNotFoundError(f"{source}: missing; is the run finished?")
-    hashes = {name: _sha256(path) for name, path in sources.items()}
+    hashes = {name: sha256(path) for name, path in sources.items()}
     if plan.create:
         with atomic_folder(plan.dest) as tmp:
             for name, source in sources.items():

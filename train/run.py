@@ -53,6 +53,7 @@ __all__ = [
     "AtomicCheckpointCallback",
     "HeldOutEvalCallback",
     "SessionLog",
+    "config_text",
     "new_run_dir",
     "newest_checkpoint",
     "read_config",
@@ -101,10 +102,14 @@ def new_run_dir(root: str | Path = "runs", prefix: str = "ppo") -> Path:
         return path
 
 
+def config_text(config: dict[str, Any]) -> str:
+    """The text of a ``config.yaml`` holding ``config``."""
+    return yaml.safe_dump(config, sort_keys=False, default_flow_style=None, width=100)
+
+
 def write_config(run: Path, config: dict[str, Any]) -> Path:
     """Write the resolved configuration as ``config.yaml`` (atomically)."""
-    text = yaml.safe_dump(config, sort_keys=False, default_flow_style=None, width=100)
-    return atomic_write_text(run / CONFIG, text)
+    return atomic_write_text(run / CONFIG, config_text(config))
 
 
 def read_config(path: str | Path) -> dict[str, Any]:

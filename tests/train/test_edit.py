@@ -1,0 +1,192 @@
+"""train/edit.py and ``follow-train --add-step``: a step put into a trained agent's view."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from policies.learned.ppo import AGENTS, PPOPolicy
+from train.cli import main
+from train.edit import EDITED, add_step, parse_step
+from train.export import MANIFEST, check_export, export_agent, sha256
+
+GATE = "train.wrappers.VecJumpGate"
+AGE = "train.wrappers.VecObservationAge"
+STEP = "{train.wrappers.VecJumpGate: {max_jump_m: 0.5, accept_after: 10}}"
+
+
+@pytest.fixture
+def agent(tmp_path: Path) -> Path:
+    """A copy of the shipped agent, as its export wrote it (no gate in its view)."""
+    folder = tmp_path / "agent"
+    shutil.copytree(AGENTS / "ppo", folder)
+    return folder
+
+
+def _view(folder: Path) -> list:
+    config = yaml.safe_load((folder / "config.yaml").read_text())
+    return config["hyperparams"]["vec_env_wrapper"]
+
+
+def _files(folder: Path) -> dict[str, bytes]:
+    return {p.name: p.read_bytes() for p in sorted(folder.iterdir())}
+
+
+def test_the_step_goes_into_the_view_the_card_and_the_manifest(agent: Path) -> None:
+    before = _view(agent)
+    done = add_step(agent, STEP, AGE, command="follow-train --add-step agent")
+    view = _view(agent)
+    entry = {GATE: {"max_jump_m": 0.5, "accept_after": 10, "in_training": False}}
+    index = [next(iter(e)) for e in before].index(AGE)
+    assert view == [*before[:index], entry, *before[index:]]
+    assert (done.entry, done.index, done.before) == (entry, index, AGE)
+    card = (agent / "MODEL_CARD.md").read_text()
+    assert card.count(EDITED) == 1
+    assert (
+        "`follow-train --add-step agent` added `train.wrappers.VecJumpGate: {max_jump_m: 0.5, "
+        "accept_after: 10, in_training: false}` to the agent's view, before "
+        "`train.wrappers.VecObservationAge`" in card
+    )
+    assert "measured without it" in card
+    # the export's record knows the new files as its own: a new export needs no --force
+    manifest = json.loads((agent / MANIFEST).read_text())
+    for name in ("config.yaml", "MODEL_CARD.md"):
+        assert manifest["files"][name][-1] == sha256(agent / name)
+        assert len(manifest["files"][name]) == 2
+    assert len(manifest["edited_utc"]) == 1
+    check_export(agent)
+    # the other files are the export's, byte for byte
+    for name in ("model.zip", "vecnormalize.pkl", "learning_curve.png"):
+        assert (agent / name).read_bytes() == (AGENTS / "ppo" / name).read_bytes()
+
+
+def test_the_edited_agent_acts_as_before_until_the_detection_jumps(agent: Path) -> None:
+    plain = PPOPolicy(AGENTS / "ppo")
+    add_step(agent, STEP)  # first: innermost
+    assert next(iter(_view(agent)[0])) == GATE
+    gated = PPOPolicy(agent)
+    assert gated.name == str(agent)
+    plain.reset()
+    gated.reset()
+    walk = [np.array([1.2 + 0.01 * k, 20.0 - k], dtype=np.float32) for k in range(15)]
+    for obs in walk:  # a person walking: no jump, the gate lets every reading through
+        np.testing.assert_array_equal(gated.act(obs), plain.act(obs))
+    jump = np.array([4.5, 300.0], dtype=np.float32)  # a bystander 3 m further, 300 px aside
+    assert not np.array_equal(gated.act(jump), plain.act(jump))
+
+
+def test_a_second_step_adds_a_line_to_the_same_section(tmp_path: Path) -> None:
+    agent = tmp_path / "line"
+    shutil.copytree(AGENTS / "ppo_line", agent)  # its view has room for two steps
+    add_step(agent, f"{{train.wrappers.VecScaleObservation: {{scale: {[1.0] * 25}}}}}")
+    add_step(agent, "{train.wrappers.VecJumpGate: {max_jump_m: null}}")
+    assert [next(iter(e)) for e in _view(agent)[:2]] == [GATE, "train.wrappers.VecScaleObservation"]
+    PPOPolicy(agent)  # loads
+    card = (agent / "MODEL_CARD.md").read_text()
+    assert card.count(EDITED) == 1
+    assert card.count("to the agent's view") == 2
+    assert len(json.loads((agent / MANIFEST).read_text())["files"]["config.yaml"]) == 3
+
+
+@pytest.mark.parametrize(
+    ("step", "before", "error"),
+    [
+        ("train.wrappers.VecShapedReward", None, "not a step of an agent's view"),
+        ("{train.wrappers.VecJumpGate: {in_training: true}}", None, "in_training=True"),
+        ("{train.wrappers.VecJumpGate: {jump: 1}}", None, "'jump' is not one of its arguments"),
+        ("{train.wrappers.VecJumpGate: {max_jump_m: -1}}", None, "max_jump_m=-1 is out of range"),
+        ("foo.Bar", None, "does not import"),
+        ("[1", None, "not valid YAML"),
+        ("[1, 2]", None, "give a step's name"),
+        (GATE, "train.wrappers.VecNope", "--before train.wrappers.VecNope: not in the agent's"),
+        ("train.wrappers.VecScaleObservation", None, "already in the agent's view"),
+    ],
+)
+def test_a_bad_step_is_refused_and_nothing_is_written(
+    agent: Path, step: str, before: str | None, error: str
+) -> None:
+    files = _files(agent)
+    with pytest.raises(ValueError, match=error):
+        add_step(agent, step, before)
+    assert _files(agent) == files
+
+
+@pytest.mark.parametrize(
+    ("step", "error"),
+    [
+        (AGE, r"turns observations \(25,\) into \(26,\) and actions \(3,\) into \(3,\)"),
+        ("{train.wrappers.VecStackFrames: {n_stack: 2}}", "must keep both shapes"),
+    ],
+)
+def test_a_step_that_changes_a_shape_is_refused(tmp_path: Path, step: str, error: str) -> None:
+    agent = tmp_path / "line"
+    shutil.copytree(AGENTS / "ppo_line", agent)
+    files = _files(agent)
+    with pytest.raises(ValueError, match=error):
+        add_step(agent, step)
+    assert _files(agent) == files
+
+
+def test_a_folder_that_is_no_agent_is_refused(tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match="no such folder"):
+        add_step(tmp_path / "missing", STEP)
+    with pytest.raises(ValueError, match=r"no model\.zip in it"):
+        add_step(tmp_path, STEP)
+
+
+def test_files_changed_since_the_export_need_force(agent: Path) -> None:
+    card = agent / "MODEL_CARD.md"
+    card.write_text(card.read_text() + "\nmy notes\n")
+    files = _files(agent)
+    with pytest.raises(ValueError, match=r"MODEL_CARD\.md changed since the export"):
+        add_step(agent, STEP)
+    assert _files(agent) == files
+    add_step(agent, STEP, force=True)
+    assert "my notes" in card.read_text()
+    assert next(iter(_view(agent)[0])) == GATE
+
+
+def test_a_run_folder_without_a_manifest_is_edited_too(agent: Path, tmp_path: Path) -> None:
+    (agent / MANIFEST).unlink()  # a run folder: no export wrote it
+    add_step(agent, STEP)
+    assert not (agent / MANIFEST).exists()
+    assert next(iter(_view(agent)[0])) == GATE
+    # and an export of it carries the step
+    export_agent(agent, tmp_path / "exported")
+    assert next(iter(_view(tmp_path / "exported")[0])) == GATE
+
+
+def test_parse_step_takes_a_name_or_a_one_entry_mapping() -> None:
+    assert parse_step(GATE) == (GATE, {})
+    assert parse_step(f"{{{GATE}: }}") == (GATE, {})
+    assert parse_step(STEP) == (GATE, {"max_jump_m": 0.5, "accept_after": 10})
+
+
+def test_the_command_line_adds_the_step_or_says_in_one_line_why_not(
+    agent: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main(["--add-step", str(agent), "--step", STEP, "--before", AGE]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith(f"Added {GATE} ")
+    assert "config.yaml, MODEL_CARD.md, follow-train-export.json" in out
+    # the card quotes the command as a shell would take it
+    assert (
+        f"`follow-train --add-step {agent} --step '{STEP}' --before {AGE}`"
+        in (agent / "MODEL_CARD.md").read_text()
+    )
+    for argv, error in [
+        (["--add-step", str(agent)], "--add-step needs --step"),
+        (["--step", GATE], "--step and --before apply to --add-step only"),
+        (["--add-step", str(agent), "--step", GATE, "--seed", "3"], "--seed: --add-step trains"),
+        (["--add-step", str(agent), "--step", GATE], "already in the agent's view"),
+    ]:
+        assert main(argv) == 2
+        err = capsys.readouterr().err
+        assert err.startswith("follow-train: error: "), err
+        assert error in err, err
+        assert err.count("\n") == 1

@@ -1,0 +1,258 @@
+"""``follow-train --add-step DIR --step STEP [--before NAME]``: put a step into a trained
+agent's view without training it again.
+
+A filter measured in front of an agent trained without it (the jump gate in front of
+``ppo_ahead``: README, "A step left out of training") is one more ``vec_env_wrapper`` entry of
+the agent's ``config.yaml``, marked ``in_training: false``: the exported agent's pipeline runs
+it in evaluation and on the robot, and a run resumed from the folder passes observations
+through it, as the agent was trained. This command writes that entry, so that nobody edits an
+agent's files by hand:
+
+- ``DIR`` is an agent folder: a run folder of ``follow-train``, or a folder an export wrote.
+- ``STEP`` is YAML: ``train.wrappers.VecJumpGate`` or ``{train.wrappers.VecJumpGate:
+  {max_jump_m: 0.5}}``. It must be a step of an agent's view (:data:`FEATURES`) that keeps the
+  observation and action shapes it is given; ``in_training: false`` is added (``true`` is
+  refused: the weights were trained without it).
+- ``--before NAME`` puts it before the first entry of that name; without it, it goes first
+  (innermost: it sees the env's own observation).
+
+Checked before anything is written: the step's class and arguments, the shapes, and the agent
+loading with the new view (its model and statistics, as ``make_policy`` loads it). Then the
+model card gets a line under "Edited after training" (when, the command, the step, and that
+the scores above were measured without it), and ``config.yaml`` the entry; each file is
+replaced atomically. In a folder an export wrote, the manifest (:mod:`train.export`) lists the
+new contents beside the exported ones, so a later export over the folder still recognises it
+as its own; files changed since that export by anything else are refused unless ``force``.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import os
+import tempfile
+from dataclasses import dataclass
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from eval.atomic import atomic_write_text
+from policies.learned.boxes import Box
+from policies.learned.feature import IN_TRAINING, split_in_training
+from policies.learned.features import FEATURES, Pipeline
+from train import run as runs
+from train.config import wrapper_specs
+from train.export import MANIFEST, read_manifest, sha256
+
+__all__ = ["EDITED", "AddedStep", "add_step", "parse_step"]
+
+#: The model card's section that lists the edits made after training.
+EDITED = "## Edited after training"
+
+
+@dataclass(frozen=True)
+class AddedStep:
+    """What :func:`add_step` did.
+
+    :param folder: the agent folder. :param entry: the ``vec_env_wrapper`` entry written.
+    :param index: its place in the list (0: innermost). :param before: the entry it precedes.
+    """
+
+    folder: Path
+    entry: dict[str, dict[str, Any]]
+    index: int
+    before: str | None
+
+
+def parse_step(text: str) -> tuple[str, dict[str, Any]]:
+    """``--step``'s YAML as ``(dotted.name, kwargs)``.
+
+    :raises ValueError: for text that is not a name or a one-entry mapping of a name to its
+        arguments.
+    """
+    try:
+        value = yaml.safe_load(text)
+    except yaml.YAMLError as e:
+        mark = getattr(e, "problem_mark", None)
+        at = f" at column {mark.column + 1}" if mark is not None else ""
+        problem = getattr(e, "problem", None) or type(e).__name__
+        raise ValueError(f"--step {text!r}: not valid YAML ({problem}{at})") from None
+    if isinstance(value, str):
+        return value, {}
+    if isinstance(value, dict) and len(value) == 1:
+        name, kwargs = next(iter(value.items()))
+        kwargs = {} if kwargs is None else kwargs
+        if isinstance(name, str) and isinstance(kwargs, dict):
+            return name, dict(kwargs)
+    raise ValueError(
+        f"--step {text!r}: give a step's name, or {{name: {{argument: value}}}} "
+        "(e.g. '{train.wrappers.VecJumpGate: {max_jump_m: 0.5}}')"
+    )
+
+
+def _entries(hp: dict[str, Any], where: Path) -> list[Any]:
+    value = hp.get("vec_env_wrapper")
+    entries = value if isinstance(value, list) else [value] if value else []
+    for entry in entries:
+        if not (isinstance(entry, str) or (isinstance(entry, dict) and len(entry) == 1)):
+            raise ValueError(f"{where}: vec_env_wrapper entry {entry!r} is malformed")
+    return list(entries)
+
+
+def _name(entry: Any) -> str:
+    return entry if isinstance(entry, str) else next(iter(entry))
+
+
+def _pairs(entries: list[Any]) -> list[tuple[str, dict[str, Any]]]:
+    return [(e, {}) if isinstance(e, str) else (_name(e), dict(e[_name(e)] or {})) for e in entries]
+
+
+def _check_shapes(config: dict[str, Any], inner: list[Any], name: str, kwargs: dict) -> None:
+    """The step keeps the observation and action shapes the steps inside it give."""
+    spaces = config.get("env_spaces") or {}
+    try:
+        obs = Box(spaces["observation"]["low"], spaces["observation"]["high"])
+        act = Box(spaces["action"]["low"], spaces["action"]["high"])
+    except (KeyError, TypeError, ValueError) as e:
+        raise ValueError(f"config.yaml: env_spaces is not usable ({e})") from None
+    steps = Pipeline.from_wrappers(_pairs(inner))
+    view = Pipeline(steps, obs, act, 1)
+    short = name.rsplit(".", 1)[-1].removeprefix("Vec")
+    _, own = split_in_training(kwargs, name)
+    step = FEATURES[short](**own)
+    step.owner = name
+    out_obs, out_act = step.bind(view.observation_box, view.action_box, 1)
+    if (out_obs.shape, out_act.shape) != (view.observation_box.shape, view.action_box.shape):
+        raise ValueError(
+            f"--step {name}: turns observations {view.observation_box.shape} into "
+            f"{out_obs.shape} and actions {view.action_box.shape} into {out_act.shape} there; "
+            "a step added after training must keep both shapes (the network reads them)"
+        )
+
+
+def _check_loads(folder: Path, config: dict[str, Any]) -> None:
+    """The agent loads with ``config`` as make_policy would load it (model and statistics)."""
+    from policies.learned.ppo import PPOPolicy
+
+    with tempfile.TemporaryDirectory(prefix=".add-step-") as tmp:
+        for name in (runs.MODEL, runs.NORMALIZATION):
+            if (folder / name).exists():
+                os.symlink((folder / name).resolve(), Path(tmp) / name)
+        runs.write_config(Path(tmp), config)
+        PPOPolicy(tmp, name=str(folder))
+
+
+def _card_line(command: str, entry: dict[str, dict[str, Any]], before: str | None) -> str:
+    name = _name(entry)
+    args = yaml.safe_dump(entry[name], default_flow_style=True, sort_keys=False, width=1000)
+    args = args.strip()
+    where = f"before `{before}`" if before else "first (innermost)"
+    when = datetime.now(UTC).isoformat(timespec="seconds")
+    return (
+        f"- {when}: `{command}` added `{name}: {args}` to the agent's view, {where}. It was not "
+        "trained with it (`in_training: false`): the weights and the normalisation statistics "
+        "are unchanged, and the held-out return and the scores above were measured without it."
+    )
+
+
+def add_step(
+    folder: str | Path,
+    step: str,
+    before: str | None = None,
+    *,
+    force: bool = False,
+    command: str = "follow-train --add-step",
+) -> AddedStep:
+    """Add ``step`` (``--step``'s YAML) to the view of the agent in ``folder`` (module
+    docstring).
+
+    :param before: the name of the entry it goes before (None: first).
+    :param force: write although ``config.yaml`` or ``MODEL_CARD.md`` changed since the export
+        that wrote ``folder``.
+    :param command: the command line, for the model card.
+    :raises ValueError: naming the folder, file, step or option, before anything is written.
+    """
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise ValueError(f"--add-step {folder}: no such folder (give an agent's folder)")
+    if not (folder / runs.MODEL).is_file():
+        raise ValueError(
+            f"--add-step {folder}: no {runs.MODEL} in it; give an agent's folder (a run or an "
+            "export)"
+        )
+    config = runs.read_config(folder)
+    name, kwargs = parse_step(step)
+    wrapper_specs([{name: kwargs}], where="--step")  # the class imports and takes these
+    short = name.rsplit(".", 1)[-1].removeprefix("Vec")
+    if short not in FEATURES:
+        known = ", ".join(f"train.wrappers.Vec{k}" for k in FEATURES)
+        raise ValueError(f"--step {name}: not a step of an agent's view; the steps: {known}")
+    flag = kwargs.get(IN_TRAINING, False)
+    if flag is not False:
+        raise ValueError(
+            f"--step {name}: {IN_TRAINING}={flag!r}; the agent was trained without this step, "
+            f"so it is added with {IN_TRAINING}: false (leave the argument out)"
+        )
+    entry = {name: {**kwargs, IN_TRAINING: False}}
+    hp = config["hyperparams"]
+    entries = _entries(hp, folder / runs.CONFIG)
+    names = [_name(e) for e in entries]
+    if name in names:
+        raise ValueError(
+            f"--step {name}: already in the agent's view (entry {names.index(name) + 1} of "
+            f"{folder / runs.CONFIG}); a step is added once"
+        )
+    if before is None:
+        index = 0
+    elif before in names:
+        index = names.index(before)
+    else:
+        raise ValueError(
+            f"--before {before}: not in the agent's view; its vec_env_wrapper entries: "
+            + (", ".join(names) or "none")
+        )
+    _check_shapes(config, entries[:index], name, entry[name])
+    edited = copy.deepcopy(config)
+    edited["hyperparams"]["vec_env_wrapper"] = [*entries[:index], entry, *entries[index:]]
+    _check_loads(folder, edited)
+
+    card_path = folder / runs.CARD
+    card = card_path.read_text(encoding="utf-8") if card_path.is_file() else ""
+    manifest = read_manifest(folder)
+    if manifest is not None and not force:
+        changed = [
+            n
+            for n in (runs.CONFIG, runs.CARD)
+            if (folder / n).is_file() and sha256(folder / n) not in manifest.get(n, [])
+        ]
+        if changed:
+            raise ValueError(
+                f"--add-step {folder}: {', '.join(changed)} changed since the export that wrote "
+                "the folder; give --force to edit it all the same"
+            )
+    line = _card_line(command, entry, before)
+    card = card.rstrip("\n") + ("\n" if card else "")
+    card += ("\n" if EDITED in card else f"\n{EDITED}\n\n") + line + "\n"
+    config_text = runs.config_text(edited)
+    if manifest is not None:  # the export's record lists the new contents as its own too
+        _record(folder, {runs.CONFIG: config_text, runs.CARD: card})
+    atomic_write_text(folder / runs.CONFIG, config_text)
+    atomic_write_text(card_path, card)
+    return AddedStep(folder, entry, index, before)
+
+
+def _record(folder: Path, texts: dict[str, str]) -> None:
+    """Add the new contents' SHA-256 to the export manifest's lists (before the files are
+    replaced: a kill between leaves a folder whose files the manifest still recognises)."""
+    import hashlib
+
+    document = json.loads((folder / MANIFEST).read_text(encoding="utf-8"))
+    for name, text in texts.items():
+        digest = hashlib.sha256(text.encode("utf-8")).hexdigest()
+        hashes = document["files"].setdefault(name, [])
+        if digest not in hashes:
+            hashes.append(digest)
+    document.setdefault("edited_utc", []).append(datetime.now(UTC).isoformat(timespec="seconds"))
+    atomic_write_text(folder / MANIFEST, json.dumps(document, indent=2) + "\n")
