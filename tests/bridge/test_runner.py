@@ -10,6 +10,7 @@ import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -148,6 +149,17 @@ def test_ctrl_c_stops_the_wheels_and_keeps_the_log(emulator_process: Start, tmp_
     assert not list(tmp_path.glob(".*"))  # no temporary file left
 
 
+def _assert_pn_drove(replayed: Any, original: Any, n: int) -> None:
+    """The first ``n`` commands of the replayed run are pn's on the original observations."""
+    law = make_policy("pn")
+    law.reset()
+    expected = [
+        law.act(np.array(o, dtype=np.float32))[0]
+        for o in original[["obs_distance_m", "obs_offset_px"]].to_numpy()[:n]
+    ]
+    np.testing.assert_allclose(replayed["action_v_mps"].to_numpy()[:n], expected, rtol=1e-6)
+
+
 def test_a_replayed_log_drives_the_policy_and_is_logged_as_it_was(tmp_path: Path) -> None:
     # loop:// echoes our commands, which the PC side reads as feedback: enough for the plumbing.
     source = tmp_path / "source.csv"
@@ -165,13 +177,7 @@ def test_a_replayed_log_drives_the_policy_and_is_logged_as_it_was(tmp_path: Path
     np.testing.assert_allclose(
         replayed["obs_offset_px"].to_numpy()[:n], original["obs_offset_px"].to_numpy()[:n]
     )
-    law = make_policy("pn")
-    law.reset()
-    expected = [
-        law.act(np.array(o, dtype=np.float32))[0]
-        for o in original[["obs_distance_m", "obs_offset_px"]].to_numpy()[:n]
-    ]
-    np.testing.assert_allclose(replayed["action_v_mps"].to_numpy()[:n], expected, rtol=1e-6)
+    _assert_pn_drove(replayed, original, n)
 
 
 @pytest.mark.slow
@@ -209,13 +215,7 @@ def test_a_mode_the_robot_cannot_run_is_refused_and_the_robot_drives_on(
     assert hub.latest()["notice"] == hub.notice
     replayed, original = read_step_log(log), read_step_log(source)
     n = len(replayed) - 1
-    law = make_policy("pn")
-    law.reset()
-    expected = [
-        law.act(np.array(o, dtype=np.float32))[0]
-        for o in original[["obs_distance_m", "obs_offset_px"]].to_numpy()[:n]
-    ]
-    np.testing.assert_allclose(replayed["action_v_mps"].to_numpy()[:n], expected, rtol=1e-6)
+    _assert_pn_drove(replayed, original, n)
 
 
 @pytest.mark.slow
