@@ -20,6 +20,7 @@ from bridge.monitor.hub import MonitorHub
 from bridge.world import scene_walls
 from follow_env.tasks.person_follow.env import PersonFollowEnv
 from follow_env.tasks.person_follow.spec import ahead_settings
+from policies.adapt import for_platform
 
 __all__ = ["SimDriver"]
 
@@ -52,6 +53,8 @@ class SimDriver:
         self.seed = seed
         self.speed = speed
         self.dt = self.env.config.episode.control_dt_s
+        self._actions = tuple(a.name for a in self.env.sim.platform.actions)
+        self._v, self._w = self._actions.index("v_mps"), self._actions.index("w_radps")
         self._policies: dict[str, Any] = {}
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="sim-driver", daemon=True)
@@ -75,16 +78,12 @@ class SimDriver:
         return self._policies[mode]
 
     def runnable(self, policy: Any) -> Any:
-        """``policy``, if it can drive this env: it commands the platform's action, and what it
-        reads ahead is what the env publishes. ``ValueError`` naming the difference if not."""
+        """``policy`` acting in this env's platform action (:func:`~policies.adapt.for_platform`:
+        a law's ``[v, w]`` on the mecanum base has ``vy = 0``; an agent runs only on the
+        platform it was trained on), if what it reads ahead is what the env publishes;
+        ``ValueError`` naming the difference if not."""
         name = getattr(policy, "name", "the policy")
-        actions = tuple(a.name for a in self.env.sim.platform.actions)
-        names = tuple(getattr(policy, "action_names", actions))
-        if names != actions:
-            raise ValueError(
-                f"{name} commands [{', '.join(names)}], but the simulated robot takes "
-                f"[{', '.join(actions)}]"
-            )
+        adapted = for_platform(policy, self._actions)
         wanted = getattr(policy, "reads_ahead", None)
         given = ahead_settings(self.env.config.perception)
         if wanted and wanted != given:
@@ -92,7 +91,7 @@ class SimDriver:
                 f"{name} reads the reading ahead with {wanted}, but the simulation publishes "
                 + ("none" if given is None else f"it with {given}")
             )
-        return policy
+        return adapted
 
     def check(self, mode: str) -> None:
         """Build the policy of ``mode`` now (a bad name or a policy this env cannot feed fails
@@ -114,11 +113,12 @@ class SimDriver:
         return new
 
     def _act(self, mode: str, obs: np.ndarray) -> np.ndarray:
-        if mode == "stop":
-            return np.zeros(2)
-        if mode == "manual":
-            return np.array(self.hub.manual_command())
-        return np.asarray(self._policy(mode).act(obs), dtype=np.float64)
+        action = np.zeros(len(self._actions))
+        if mode == "manual":  # the browser's [v, w] (a mecanum base: vy = 0)
+            action[[self._v, self._w]] = self.hub.manual_command()
+        elif mode != "stop":
+            action[:] = self._policy(mode).act(obs)
+        return action
 
     def _run(self) -> None:
         mode = "stop"
@@ -130,7 +130,7 @@ class SimDriver:
                 policy.reset()
             if self.hub.mode != mode:
                 mode = self._switch(mode, self.hub.mode)
-            action = np.zeros(2)
+            action = np.zeros(len(self._actions))
             self._publish(info, obs, action, mode)
             start = time.monotonic()
             step = 0
@@ -157,9 +157,12 @@ class SimDriver:
                 "mode": mode,
                 "obs": [float(x) for x in obs],  # with ahead_m when the config publishes it
                 "detected": bool(info["detected"]),
-                "command": [float(action[0]), float(action[1])],
-                "wheel_target_mps": [info["wheel_target_r_mps"], info["wheel_target_l_mps"]],
-                "wheel_measured_mps": [info["wheel_measured_r_mps"], info["wheel_measured_l_mps"]],
+                "command": [float(action[self._v]), float(action[self._w])],
+                # every wheel of the platform, in the env's order (right, left; or four)
+                "wheel_target_mps": [v for k, v in info.items() if k.startswith("wheel_target_")],
+                "wheel_measured_mps": [
+                    v for k, v in info.items() if k.startswith("wheel_measured_")
+                ],
                 "robot": [info["robot_x_m"], info["robot_y_m"], info["robot_theta_rad"]],
                 "person": [info["person_x_m"], info["person_y_m"], info["person_theta_rad"]],
                 "link": None,

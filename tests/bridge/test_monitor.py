@@ -231,7 +231,7 @@ def test_a_refused_mode_goes_back_and_every_state_says_why(hub: MonitorHub) -> N
 def test_the_sim_driver_refuses_an_agent_it_cannot_feed_and_keeps_driving() -> None:
     hub = MonitorHub("gsmpn", modes=monitor_modes(["ppo_mecanum", "ppo_ahead"]))
     driver = SimDriver(hub, make_policy, scenario="straight", speed=5.0)
-    with pytest.raises(ValueError, match=r"ppo_mecanum commands \[v_mps, vy_mps, w_radps\]"):
+    with pytest.raises(ValueError, match="'ppo_mecanum' was trained on the mecanum platform"):
         driver.check("ppo_mecanum")
     with pytest.raises(ValueError, match=r"ppo_ahead reads the reading ahead .* publishes none"):
         driver.check("ppo_ahead")
@@ -291,9 +291,36 @@ def test_the_sim_monitor_offers_the_shipped_agents_its_simulation_can_run() -> N
         proc.wait(timeout=10)
     assert modes == (
         "follow-robot: monitor modes pn, mpn, gsmpn, ppo, ppo_ahead, manual, stop (not offered: "
-        "ppo_mecanum commands [v_mps, vy_mps, w_radps], but the simulated robot takes "
-        "[v_mps, w_radps])\n"
+        "policy 'ppo_mecanum' was trained on the mecanum platform, acting [v_mps, vy_mps, "
+        "w_radps]; it cannot drive a platform acting [v_mps, w_radps] (train an agent for that "
+        "platform, or run it @mecanum))\n"
     )
     # the simulated camera publishes the reading ahead that ppo_ahead reads
     assert state["mode"] == "stop"
     assert len(state["obs"]) == 3
+
+
+def test_the_sim_driver_drives_a_mecanum_base_with_its_agent_and_the_laws() -> None:
+    hub = MonitorHub("gsmpn", modes=monitor_modes(["ppo_mecanum"]))
+    driver = SimDriver(hub, make_policy, scenario="straight", config={"platform": "mecanum"})
+    with pytest.raises(ValueError, match="'ppo' was trained on the diff_drive platform"):
+        driver.check("ppo")
+    driver.speed = 5.0
+    driver.start()
+    try:
+        time.sleep(0.8)
+        law = hub.latest()
+        assert law["mode"] == "gsmpn"
+        assert law["command"][0] != 0.0  # the law's [v, w], with vy = 0
+        assert len(law["wheel_target_mps"]) == len(law["wheel_measured_mps"]) == 4
+        hub.set_mode("ppo_mecanum")
+        time.sleep(0.8)
+        agent = hub.latest()
+        assert agent["mode"] == "ppo_mecanum"
+        assert agent["notice"] == ""
+        hub.set_mode("manual")
+        hub.set_manual(0.0, 0.0)
+        time.sleep(0.3)
+        assert hub.latest()["command"] == [0.0, 0.0]
+    finally:
+        driver.stop()

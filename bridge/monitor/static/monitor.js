@@ -86,8 +86,8 @@ function onState(s) {
   $("time").textContent = fmt(s.time_s, 1) + " s" + (s.termination ? " (" + s.termination + ")" : "");
   $("obs").textContent = s.obs ? fmt(s.obs[0], 2) + " m, " + fmt(s.obs[1], 0) + " px" + (s.detected ? "" : " (held)") + (s.obs.length > 2 ? "; ahead " + fmt(s.obs[2], 2) + " m" : "") : "-";
   $("cmd").textContent = s.command && s.command[0] !== null ? fmt(s.command[0], 2) + " m/s, " + fmt(s.command[1], 2) + " rad/s" : "-";
-  $("wheels").textContent = s.wheel_target_mps ? fmt(s.wheel_target_mps[0], 2) + " / " + fmt(s.wheel_measured_mps[0], 2) +
-    ", " + fmt(s.wheel_target_mps[1], 2) + " / " + fmt(s.wheel_measured_mps[1], 2) + " m/s" : "-";
+  $("wheels").textContent = s.wheel_target_mps ? s.wheel_target_mps.map((t, i) => fmt(t, 2) + " / " +
+    fmt(s.wheel_measured_mps[i], 2)).join(", ") + " m/s" : "-";  // two wheels, or a mecanum base's four
   $("link").textContent = s.link ? s.link.frames_ok + " frames ok, " + s.link.bytes_skipped + " bytes skipped, " +
     s.link.crc_failures + " CRC failures, " + s.link.seq_gaps + " sequence gaps" : "simulation";
   $("latency").textContent = latency.toFixed(1) + " ms";
