@@ -154,7 +154,8 @@ class Runner:
     :param config: periods, timeout, duration and command mode.
     :param log: where to write the step log (``None``: no log).
     :param meta: the step log's ``policy``, ``scenario`` and ``seed`` values.
-    :param monitor: a :class:`bridge.monitor.hub.MonitorHub` to publish to and take modes from.
+    :param monitor: a :class:`bridge.monitor.hub.MonitorHub` to publish to and take modes from;
+        its starting mode, unless ``stop`` or ``manual``, is taken to name ``policy``.
     :param policy_factory: builds the policy of a mode the monitor selects (``pn``, ...).
     """
 
@@ -184,6 +185,11 @@ class Runner:
         self._rows: list[dict[str, Any]] = []
         self._policies: dict[str, Any] = {}
         self._mode = getattr(policy, "name", "policy")
+        if monitor is not None and monitor.mode not in ("stop", "manual"):
+            # the mode the browser shows is the name the policy was built from ("gsmpn"), not
+            # its full name ("gsmpn:tuned"): the same policy, not a second one built for it
+            self._mode = monitor.mode
+            self._policies[self._mode] = policy
         if self.log is not None and not self.log.parent.is_dir():
             raise ValueError(f"--log {self.log}: the folder {self.log.parent} does not exist")
 
