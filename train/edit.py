@@ -28,6 +28,7 @@ as its own; files changed since that export by anything else are refused unless 
 from __future__ import annotations
 
 import copy
+import hashlib
 import json
 import os
 import tempfile
@@ -246,8 +247,6 @@ def add_step(
 def _record(folder: Path, texts: dict[str, str]) -> None:
     """Add the new contents' SHA-256 to the export manifest's lists (before the files are
     replaced: a kill between leaves a folder whose files the manifest still recognises)."""
-    import hashlib
-
     document = json.loads((folder / MANIFEST).read_text(encoding="utf-8"))
     for name, text in texts.items():
         digest = hashlib.sha256(text.encode("utf-8")).hexdigest()
