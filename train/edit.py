@@ -110,14 +110,16 @@ def _pairs(entries: list[Any]) -> list[tuple[str, dict[str, Any]]]:
     return [(e, {}) if isinstance(e, str) else (_name(e), dict(e[_name(e)] or {})) for e in entries]
 
 
-def _check_shapes(config: dict[str, Any], inner: list[Any], name: str, kwargs: dict) -> None:
+def _check_shapes(
+    config: dict[str, Any], where: Path, inner: list[Any], name: str, kwargs: dict
+) -> None:
     """The step keeps the observation and action shapes the steps inside it give."""
     spaces = config.get("env_spaces") or {}
     try:
         obs = Box(spaces["observation"]["low"], spaces["observation"]["high"])
         act = Box(spaces["action"]["low"], spaces["action"]["high"])
     except (KeyError, TypeError, ValueError) as e:
-        raise ValueError(f"config.yaml: env_spaces is not usable ({e})") from None
+        raise ValueError(f"{where}: env_spaces is missing or not usable ({e!r})") from None
     steps = Pipeline.from_wrappers(_pairs(inner))
     view = Pipeline(steps, obs, act, 1)
     short = name.rsplit(".", 1)[-1].removeprefix("Vec")
@@ -214,7 +216,7 @@ def add_step(
             f"--before {before}: not in the agent's view; its vec_env_wrapper entries: "
             + (", ".join(names) or "none")
         )
-    _check_shapes(config, entries[:index], name, entry[name])
+    _check_shapes(config, folder / runs.CONFIG, entries[:index], name, entry[name])
     edited = copy.deepcopy(config)
     edited["hyperparams"]["vec_env_wrapper"] = [*entries[:index], entry, *entries[index:]]
     _check_loads(folder, edited)

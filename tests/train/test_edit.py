@@ -132,6 +132,16 @@ def test_a_step_that_changes_a_shape_is_refused(tmp_path: Path, step: str, error
     assert _files(agent) == files
 
 
+def test_a_configuration_without_the_env_spaces_is_named(agent: Path) -> None:
+    config = yaml.safe_load((agent / "config.yaml").read_text())
+    del config["env_spaces"]
+    (agent / "config.yaml").write_text(yaml.safe_dump(config))
+    files = _files(agent)
+    with pytest.raises(ValueError, match=r"agent/config\.yaml: env_spaces is missing"):
+        add_step(agent, STEP)
+    assert _files(agent) == files
+
+
 def test_a_folder_that_is_no_agent_is_refused(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match="no such folder"):
         add_step(tmp_path / "missing", STEP)
