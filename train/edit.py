@@ -237,7 +237,7 @@ def add_step(
             )
     line = _card_line(command, entry, before)
     card = card.rstrip("\n") + ("\n" if card else "")
-    card += ("\n" if EDITED in card else f"\n{EDITED}\n\n") + line + "\n"
+    card += ("" if EDITED in card else f"\n{EDITED}\n\n") + line + "\n"  # one list
     config_text = runs.config_text(edited)
     if manifest is not None:  # the export's record lists the new contents as its own too
         _record(folder, {runs.CONFIG: config_text, runs.CARD: card})

@@ -90,6 +90,9 @@ def test_a_second_step_adds_a_line_to_the_same_section(tmp_path: Path) -> None:
     card = (agent / "MODEL_CARD.md").read_text()
     assert card.count(EDITED) == 1
     assert card.count("to the agent's view") == 2
+    section = card.split(EDITED)[1].strip().splitlines()
+    assert len(section) == 2  # one bullet a step, no blank line between
+    assert all(line.startswith("- ") for line in section)
     assert len(json.loads((agent / MANIFEST).read_text())["files"]["config.yaml"]) == 3
 
 
