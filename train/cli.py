@@ -87,7 +87,8 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         default=None,
         help="let --export write into a folder it did not make, or over exported files that "
-        "were changed: only files named like the agent's are replaced, none is deleted",
+        "were changed: only files named like the agent's are replaced, none is deleted; let "
+        "--add-step edit files changed since the folder's export",
     )
     p.add_argument("--no-progress", dest="progress", action="store_false", default=None)
     edit = p.add_argument_group(
