@@ -196,15 +196,22 @@ def _policy_factory(built: dict[str, Any] | None = None) -> Any:
     return build
 
 
-def _shipped_agents() -> dict[str, Any]:
+def _shipped_agents() -> tuple[dict[str, Any], list[str]]:
     """The shipped PersonFollow agents a monitor may offer beyond its fixed modes (``ppo_ahead``,
-    ``ppo_mecanum``), built: whether a robot can run one is read from the agent itself."""
+    ``ppo_mecanum``), built (whether a robot can run one is read from the agent itself), and
+    why any of them could not be loaded."""
     from bridge.monitor.hub import MODES
     from policies import make_policy
     from policies.learned.ppo import SHIPPED
 
     names = [n for n, task in SHIPPED.values() if task == "person_follow" and n not in MODES]
-    return {name: make_policy(name) for name in names}
+    agents, broken = {}, []
+    for name in names:
+        try:
+            agents[name] = make_policy(name)
+        except ValueError as exc:  # a missing or damaged agent folder: not offered, said why
+            broken.append(f"{name} ({exc})")
+    return agents, broken
 
 
 def _ahead_of(agents: dict[str, Any]) -> dict[str, Any] | None:
@@ -258,7 +265,7 @@ def _monitor_sim(args: argparse.Namespace) -> int:
     from follow_env.tasks.person_follow.spec import ahead_settings
 
     config = _env_config(args, args.scenario)
-    agents = _shipped_agents()
+    agents, broken = _shipped_agents()
     ahead = _ahead_of(agents)
     if ahead and ahead_settings(config.perception) is None:
         # the simulated camera publishes what the agents read ahead (the laws and ``ppo`` read
@@ -272,7 +279,8 @@ def _monitor_sim(args: argparse.Namespace) -> int:
         driver.check(args.policy)  # a bad name fails here, not in the driver's thread
     except ValueError as exc:
         raise UsageError(str(exc)) from None
-    hub.modes = _modes(args.policy, *_offer(agents, driver.runnable))
+    offered, skipped = _offer(agents, driver.runnable)
+    hub.modes = _modes(args.policy, offered, [*skipped, *broken])
     server = _start_monitor(args, driver.hub)
     driver.start()
     try:
@@ -293,7 +301,9 @@ def _run(args: argparse.Namespace, monitor: bool) -> int:
     config = _env_config(args)
     # with the monitor, the shipped agents that command [v, w] are modes too; the perception
     # is checked when one is chosen (Runner._runnable), as it is known once started
-    agents, skipped = _offer(_shipped_agents() if monitor else {}, check_command)
+    agents, broken = _shipped_agents() if monitor else ({}, [])
+    agents, skipped = _offer(agents, check_command)
+    skipped += broken
     factory = _policy_factory(dict(agents))
     policy_name = args.policy if args.subcommand == "run" else "stop"
     try:

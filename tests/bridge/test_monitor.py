@@ -324,3 +324,24 @@ def test_the_sim_driver_drives_a_mecanum_base_with_its_agent_and_the_laws() -> N
         assert hub.latest()["command"] == [0.0, 0.0]
     finally:
         driver.stop()
+
+
+def test_a_shipped_agent_that_does_not_load_is_not_offered_and_said_why(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    import policies
+    from bridge import cli
+    from policies.learned.ppo import AgentLoadError
+
+    real = policies.make_policy
+
+    def make(name: str, task: str | None = None) -> object:
+        if name == "ppo_ahead":
+            raise AgentLoadError("policies/agents/ppo_ahead/model.zip: model file not found")
+        return real(name, task)
+
+    monkeypatch.setattr(policies, "make_policy", make)
+    agents, broken = cli._shipped_agents()
+    assert "ppo_ahead" not in agents
+    assert "ppo_mecanum" in agents
+    assert broken == ["ppo_ahead (policies/agents/ppo_ahead/model.zip: model file not found)"]
