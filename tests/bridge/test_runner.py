@@ -149,13 +149,14 @@ def test_ctrl_c_stops_the_wheels_and_keeps_the_log(emulator_process: Start, tmp_
     assert not list(tmp_path.glob(".*"))  # no temporary file left
 
 
-def _assert_pn_drove(replayed: Any, original: Any, n: int) -> None:
-    """The first ``n`` commands of the replayed run are pn's on the original observations."""
+def _assert_pn_drove(replayed: Any, n: int) -> None:
+    """The first ``n`` commands of the replayed run are pn's on the observations it logged
+    (the replay is in time: on a loaded machine a late first step reads a later row)."""
     law = make_policy("pn")
     law.reset()
     expected = [
         law.act(np.array(o, dtype=np.float32))[0]
-        for o in original[["obs_distance_m", "obs_offset_px"]].to_numpy()[:n]
+        for o in replayed[["obs_distance_m", "obs_offset_px"]].to_numpy()[:n]
     ]
     np.testing.assert_allclose(replayed["action_v_mps"].to_numpy()[:n], expected, rtol=1e-6)
 
@@ -177,7 +178,7 @@ def test_a_replayed_log_drives_the_policy_and_is_logged_as_it_was(tmp_path: Path
     np.testing.assert_allclose(
         replayed["obs_offset_px"].to_numpy()[:n], original["obs_offset_px"].to_numpy()[:n]
     )
-    _assert_pn_drove(replayed, original, n)
+    _assert_pn_drove(replayed, n)
 
 
 @pytest.mark.slow
@@ -196,6 +197,7 @@ def test_a_mode_the_robot_cannot_run_is_refused_and_the_robot_drives_on(
     source = tmp_path / "source.csv"
     write_step_log(run_episode("pn", "curve", 1).log, source)
     log = tmp_path / "replayed.csv"
+    make_policy(mode)  # loaded once before: building it in the loop then takes ms, not seconds
     hub = MonitorHub("pn", modes=monitor_modes([mode]))
     with SerialLink("loop://", "reference") as link:
         runner = Runner(
@@ -213,9 +215,10 @@ def test_a_mode_the_robot_cannot_run_is_refused_and_the_robot_drives_on(
     assert hub.mode == "pn"  # back to what the robot was running
     assert re.search(f"^{mode} {why}", hub.notice), hub.notice
     assert hub.latest()["notice"] == hub.notice
-    replayed, original = read_step_log(log), read_step_log(source)
+    replayed = read_step_log(log)
     n = len(replayed) - 1
-    _assert_pn_drove(replayed, original, n)
+    assert n >= 8
+    _assert_pn_drove(replayed, n)
 
 
 @pytest.mark.slow
