@@ -283,6 +283,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 def _main_edit(folder: Path, step: str, before: str | None, force: bool, command: str) -> int:
     """``follow-train --add-step``: see :mod:`train.edit`."""
     from train.edit import add_step
+    from train.export import MANIFEST
 
     done = add_step(folder, step, before, force=force, command=command)
     ((name, kwargs),) = done.entry.items()
@@ -290,7 +291,7 @@ def _main_edit(folder: Path, step: str, before: str | None, force: bool, command
     print(
         f"Added {name} {kwargs} to the view of the agent in {folder}/ ({where}; "
         "left out of training): config.yaml, MODEL_CARD.md"
-        + (", follow-train-export.json" if (folder / "follow-train-export.json").exists() else "")
+        + (f", {MANIFEST}" if (folder / MANIFEST).exists() else "")
     )
     return 0
 

@@ -93,25 +93,8 @@ def parse_step(text: str) -> tuple[str, dict[str, Any]]:
     )
 
 
-def _entries(hp: dict[str, Any], where: Path) -> list[Any]:
-    value = hp.get("vec_env_wrapper")
-    entries = value if isinstance(value, list) else [value] if value else []
-    for entry in entries:
-        if not (isinstance(entry, str) or (isinstance(entry, dict) and len(entry) == 1)):
-            raise ValueError(f"{where}: vec_env_wrapper entry {entry!r} is malformed")
-    return list(entries)
-
-
-def _name(entry: Any) -> str:
-    return entry if isinstance(entry, str) else next(iter(entry))
-
-
-def _pairs(entries: list[Any]) -> list[tuple[str, dict[str, Any]]]:
-    return [(e, {}) if isinstance(e, str) else (_name(e), dict(e[_name(e)] or {})) for e in entries]
-
-
 def _check_shapes(
-    config: dict[str, Any], where: Path, inner: list[Any], name: str, kwargs: dict
+    config: dict[str, Any], where: Path, inner: list[tuple[str, dict]], name: str, kwargs: dict
 ) -> None:
     """The step keeps the observation and action shapes the steps inside it give."""
     spaces = config.get("env_spaces") or {}
@@ -120,7 +103,7 @@ def _check_shapes(
         act = Box(spaces["action"]["low"], spaces["action"]["high"])
     except (KeyError, TypeError, ValueError) as e:
         raise ValueError(f"{where}: env_spaces is missing or not usable ({e!r})") from None
-    steps = Pipeline.from_wrappers(_pairs(inner))
+    steps = Pipeline.from_wrappers(inner)
     view = Pipeline(steps, obs, act, 1)
     short = name.rsplit(".", 1)[-1].removeprefix("Vec")
     _, own = split_in_training(kwargs, name)
@@ -148,8 +131,8 @@ def _check_loads(folder: Path, config: dict[str, Any]) -> None:
 
 
 def _card_line(command: str, entry: dict[str, dict[str, Any]], before: str | None) -> str:
-    name = _name(entry)
-    args = yaml.safe_dump(entry[name], default_flow_style=True, sort_keys=False, width=1000)
+    ((name, kwargs),) = entry.items()
+    args = yaml.safe_dump(kwargs, default_flow_style=True, sort_keys=False, width=1000)
     args = args.strip()
     where = f"before `{before}`" if before else "first (innermost)"
     when = datetime.now(UTC).isoformat(timespec="seconds")
@@ -199,13 +182,15 @@ def add_step(
             f"so it is added with {IN_TRAINING}: false (leave the argument out)"
         )
     entry = {name: {**kwargs, IN_TRAINING: False}}
-    hp = config["hyperparams"]
-    entries = _entries(hp, folder / runs.CONFIG)
-    names = [_name(e) for e in entries]
+    where = folder / runs.CONFIG
+    raw = config["hyperparams"].get("vec_env_wrapper")
+    entries = raw if isinstance(raw, list) else [raw] if raw else []  # as written, to keep
+    specs = wrapper_specs(entries, where=str(where))
+    names = [n for n, _ in specs]
     if name in names:
         raise ValueError(
             f"--step {name}: already in the agent's view (entry {names.index(name) + 1} of "
-            f"{folder / runs.CONFIG}); a step is added once"
+            f"{where}); a step is added once"
         )
     if before is None:
         index = 0
@@ -216,13 +201,7 @@ def add_step(
             f"--before {before}: not in the agent's view; its vec_env_wrapper entries: "
             + (", ".join(names) or "none")
         )
-    _check_shapes(config, folder / runs.CONFIG, entries[:index], name, entry[name])
-    edited = copy.deepcopy(config)
-    edited["hyperparams"]["vec_env_wrapper"] = [*entries[:index], entry, *entries[index:]]
-    _check_loads(folder, edited)
-
-    card_path = folder / runs.CARD
-    card = card_path.read_text(encoding="utf-8") if card_path.is_file() else ""
+    _check_shapes(config, where, specs[:index], name, entry[name])
     manifest = read_manifest(folder)
     if manifest is not None and not force:
         changed = [
@@ -235,6 +214,12 @@ def add_step(
                 f"--add-step {folder}: {', '.join(changed)} changed since the export that wrote "
                 "the folder; give --force to edit it all the same"
             )
+    edited = copy.deepcopy(config)
+    edited["hyperparams"]["vec_env_wrapper"] = [*entries[:index], entry, *entries[index:]]
+    _check_loads(folder, edited)  # the dearest check last: it loads the model
+
+    card_path = folder / runs.CARD
+    card = card_path.read_text(encoding="utf-8") if card_path.is_file() else ""
     line = _card_line(command, entry, before)
     card = card.rstrip("\n") + ("\n" if card else "")
     card += ("" if EDITED in card else f"\n{EDITED}\n\n") + line + "\n"  # one list
