@@ -64,12 +64,7 @@ class MonitorHub:
         scene: dict[str, Any] | None = None,
         modes: Sequence[str] | None = None,
     ) -> None:
-        modes = monitor_modes() if modes is None else tuple(modes)
-        if "stop" not in modes or len(set(modes)) != len(modes):
-            raise ValueError(f"modes={modes!r} is out of range: must hold 'stop', each mode once")
-        if not all(isinstance(m, str) and m for m in modes):
-            raise ValueError(f"modes={modes!r} is out of range: must be non-empty names")
-        self.modes = modes
+        self.modes = monitor_modes() if modes is None else modes
         self._lock = threading.Lock()
         self._mode = mode
         self._manual = (0.0, 0.0)
@@ -81,6 +76,20 @@ class MonitorHub:
         self.mode_changes = 0
         self._notice = ""
         self.refusals = 0
+
+    @property
+    def modes(self) -> tuple[str, ...]:
+        """The modes a browser may select, in the page's order (set before serving)."""
+        return self._modes
+
+    @modes.setter
+    def modes(self, modes: Sequence[str]) -> None:
+        modes = tuple(modes)
+        if "stop" not in modes or len(set(modes)) != len(modes):
+            raise ValueError(f"modes={modes!r} is out of range: must hold 'stop', each mode once")
+        if not all(isinstance(m, str) and m for m in modes):
+            raise ValueError(f"modes={modes!r} is out of range: must be non-empty names")
+        self._modes = modes
 
     @property
     def mode(self) -> str:
