@@ -38,6 +38,7 @@ import numpy as np
 
 from bridge.fit import check_ahead, check_command
 from bridge.link import LinkError, SerialLink
+from bridge.loader import PolicyLoader
 from bridge.perception import Frame, PerceptionError, PerceptionSource
 from bridge.protocol import Capability, CommandKind, Feedback, Hello, PeerRole, WheelCommand
 from follow_env.platforms.diff_drive import DiffDriveConfig, diff_drive_ik
@@ -185,6 +186,10 @@ class Runner:
         self._rows: list[dict[str, Any]] = []
         self._policies: dict[str, Any] = {}
         self._mode = getattr(policy, "name", "policy")
+        # a mode chosen in the browser is built beside the control loop (bridge/loader.py)
+        self._loader = (
+            PolicyLoader(policy_factory, self._runnable) if policy_factory is not None else None
+        )
         if monitor is not None and monitor.mode not in ("stop", "manual"):
             # the mode the browser shows is the name the policy was built from ("gsmpn"), not
             # its full name ("gsmpn:tuned"): the same policy, not a second one built for it
@@ -382,6 +387,8 @@ class Runner:
             wheel_thread.join(timeout=1.0)
             self._stop_wheels(mode)
             self.perception.close()
+            if self._loader is not None:
+                self._loader.close()
             if self._wheels.failure and not result.reason:
                 result.reason = self._wheels.failure
             if frame is not None:
@@ -424,20 +431,27 @@ class Runner:
             return mode
         if mode != self._mode or mode not in self._policies:
             if mode not in self._policies:
-                if mode == getattr(self.policy, "name", None) or self.policy_factory is None:
+                if mode == getattr(self.policy, "name", None) or self._loader is None:
                     self._policies[mode] = self.policy
                 else:
                     try:
-                        self._policies[mode] = self._runnable(self.policy_factory(mode))
+                        built = self._loader.get(mode)
                     except (ValueError, PerceptionError) as exc:
                         # the robot keeps doing what it did; the browser is told why
                         self.monitor.refuse(mode, self._mode, str(exc))
-                        if self._mode in ("stop", "manual"):
-                            return self._mode
-                        return self._policies.setdefault(self._mode, self.policy)
+                        return self._running()
+                    if built is None:  # still being built: keep doing what it did meanwhile
+                        return self._running()
+                    self._policies[mode] = built
             self._policies[mode].reset()
             self._mode = mode
         return self._policies[mode]
+
+    def _running(self) -> Any:
+        """What the robot runs now: ``stop``, ``manual`` or the running mode's policy."""
+        if self._mode in ("stop", "manual"):
+            return self._mode
+        return self._policies.setdefault(self._mode, self.policy)
 
     def _runnable(self, policy: Any) -> Any:
         """``policy``, if this robot can run it (:func:`check_command`, :func:`check_ahead`);
@@ -482,6 +496,7 @@ class Runner:
                 {
                     "time_s": t,
                     "mode": self._mode,
+                    "loading": [] if self._loader is None else self._loader.pending,
                     "obs": frame.observation(),
                     "detected": frame.detected,
                     "command": [v, w],

@@ -221,6 +221,61 @@ def test_a_mode_the_robot_cannot_run_is_refused_and_the_robot_drives_on(
     _assert_pn_drove(replayed, n)
 
 
+def test_a_mode_is_built_beside_the_control_loop_which_runs_the_old_one_meanwhile(
+    tmp_path: Path,
+) -> None:
+    # An agent's first load (torch, weights) takes about 2 s; built inside the loop it would
+    # leave the wheels at their last targets that long. Here building mpn takes 1 s: the loop
+    # goes on with pn meanwhile, publishing that mpn is loading, then switches.
+    from bridge.monitor.hub import MonitorHub, monitor_modes
+
+    class Recording(MonitorHub):
+        def publish(self, state: dict[str, Any]) -> None:
+            states.append(state)
+            super().publish(state)
+
+    def slow(mode: str) -> Any:
+        time.sleep(1.0)
+        return make_policy(mode)
+
+    states: list[dict[str, Any]] = []
+    source = tmp_path / "source.csv"
+    write_step_log(run_episode("pn", "curve", 1).log, source)
+    log = tmp_path / "replayed.csv"
+    hub = Recording("pn", modes=monitor_modes())
+    with SerialLink("loop://", "reference") as link:
+        runner = Runner(
+            link,
+            make_policy("pn"),
+            Replay(source),
+            config=RunnerConfig(duration_s=2.5),
+            log=log,
+            monitor=hub,
+            policy_factory=slow,
+        )
+        hub.set_mode("mpn")
+        result = runner.run()
+    assert result.reason == "duration 2.5 s reached"
+    acted = [s for s in states if s["command"][0] is not None]
+    modes = [s["mode"] for s in acted]
+    loading = [s for s in acted if s["loading"]]
+    assert loading
+    assert all(s["mode"] == "pn" and s["loading"] == ["mpn"] for s in loading)
+    assert len(loading) >= 5  # the loop did not wait: built inside it, there would be none
+    switch = modes.index("mpn")
+    assert modes[:switch] == ["pn"] * switch
+    assert modes[switch:] == ["mpn"] * (len(modes) - switch)
+    assert not any(s["loading"] for s in acted[switch:])
+    replayed = read_step_log(log)
+    _assert_pn_drove(replayed, switch)
+    law = make_policy("mpn")  # reset at the switch, then fed the observations from there on
+    law.reset()
+    rows = replayed[["obs_distance_m", "obs_offset_px"]].to_numpy()[switch : len(acted)]
+    expected = [law.act(np.array(o, dtype=np.float32))[0] for o in rows]
+    got = replayed["action_v_mps"].to_numpy()[switch : len(acted)]
+    np.testing.assert_allclose(got, expected, rtol=1e-6)
+
+
 @pytest.mark.slow
 def test_the_robots_monitor_refuses_an_agent_its_camera_cannot_feed(
     emulator_process: Start,

@@ -82,7 +82,8 @@ function onState(s) {
   }
   if (stats.frames === 1) stats.refusals = s.refusals || 0;  // refusals before this page: not news
   if (s.refusals > stats.refusals) { stats.refusals = s.refusals; stats.notice = s.notice; $("msg").textContent = "refused: " + s.notice; }
-  $("mode").textContent = s.mode;
+  // a chosen agent is built beside the control loop; the robot runs the old mode meanwhile
+  $("mode").textContent = s.mode + (s.loading && s.loading.length ? " (loading " + s.loading.join(", ") + ")" : "");
   $("time").textContent = fmt(s.time_s, 1) + " s" + (s.termination ? " (" + s.termination + ")" : "");
   $("obs").textContent = s.obs ? fmt(s.obs[0], 2) + " m, " + fmt(s.obs[1], 0) + " px" + (s.detected ? "" : " (held)") + (s.obs.length > 2 ? "; ahead " + fmt(s.obs[2], 2) + " m" : "") : "-";
   $("cmd").textContent = s.command && s.command[0] !== null ? fmt(s.command[0], 2) + " m/s, " + fmt(s.command[1], 2) + " rad/s" : "-";

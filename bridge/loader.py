@@ -1,0 +1,59 @@
+"""Build the policy of a mode chosen on the robot without stalling its control loop.
+
+Building a learned agent the first time imports torch and loads its weights: about 2 s on the
+reference PC, 40 control periods. Built inside the control loop, that would leave the wheels at
+their last targets, with no fresh command, for as long. :class:`PolicyLoader` builds it in a
+thread of its own instead; until it is ready the robot goes on doing what it did (the previous
+mode's policy, or standing still), and a mode that cannot be built or run is refused then.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from concurrent.futures import Future, ThreadPoolExecutor
+from typing import Any
+
+__all__ = ["PolicyLoader"]
+
+
+class PolicyLoader:
+    """Builds the policies of modes one at a time, in a background thread.
+
+    :param factory: builds a mode's policy (``make_policy``).
+    :param check: checks that the robot can run a built policy and returns it; raises the
+        reason it cannot (``ValueError``, ``PerceptionError``).
+    """
+
+    def __init__(self, factory: Callable[[str], Any], check: Callable[[Any], Any]) -> None:
+        self._factory = factory
+        self._check = check
+        self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="policy-loader")
+        self._pending: dict[str, Future[Any]] = {}
+
+    def get(self, mode: str) -> Any | None:
+        """``mode``'s policy once built and checked, ``None`` while it is being built (the
+        first call starts building it). Once built, the policy is handed over once: the caller
+        keeps it, and a later call builds afresh.
+
+        :raises: what building or checking it raised, once, when it finishes.
+        """
+        future = self._pending.get(mode)
+        if future is None:
+            future = self._pending[mode] = self._pool.submit(self._build, mode)
+        if not future.done():
+            return None
+        del self._pending[mode]
+        return future.result()
+
+    @property
+    def pending(self) -> list[str]:
+        """The modes being built, in the order they were asked for."""
+        return list(self._pending)
+
+    def close(self) -> None:
+        """Forget the modes not started yet; one being built finishes in its thread, unused."""
+        self._pool.shutdown(wait=False, cancel_futures=True)
+        self._pending.clear()
+
+    def _build(self, mode: str) -> Any:
+        return self._check(self._factory(mode))
