@@ -262,6 +262,11 @@ class IncrementalAction(Feature):
         is not seen, the robot's camera looking forward. A command below the floor when the
         detection goes stale rises to it by ``max_change`` a step, so the acceleration bound
         holds (README, "No backing up blind").
+    :param held_keep: while the detection is held, the entries whose command stays as it was
+        (one bool per entry), or None: none. ``[false, true]`` keeps turning at the rate the
+        robot turned when the person was last seen, as the laws do on a stale offset: a
+        person walking round the robot behind something is still in view when they come out.
+        Needs ``held_index``; the floor, if given, still applies to the others.
     """
 
     def __init__(
@@ -271,12 +276,14 @@ class IncrementalAction(Feature):
         brake_change: Sequence[float] | None = None,
         held_index: int | None = None,
         held_floor: Sequence[float | None] | None = None,
+        held_keep: Sequence[bool] | None = None,
     ) -> None:
         self.given = max_change
         self.reading_index = reading_index
         self.given_brake = brake_change
         self.held_index = held_index
         self.given_floor = held_floor
+        self.given_keep = held_keep
 
     def bind(self, obs: Box, act: Box, n: int) -> tuple[Box, Box]:
         change = self._steps("max_change", self.given, act)
@@ -296,6 +303,7 @@ class IncrementalAction(Feature):
         self._low = act.low.astype(np.float64)
         self._high = act.high.astype(np.float64)
         self._floor = self._held_floor(act)
+        self._keep = self._held_keep(act)
         self._command = np.zeros((n, act.shape[0]))
         self._reading = np.ones(n, dtype=bool)
         self._held = np.zeros(n, dtype=bool)
@@ -314,12 +322,30 @@ class IncrementalAction(Feature):
             )
         return steps
 
+    def _held_keep(self, act: Box) -> np.ndarray | None:
+        """``held_keep`` as one bool per entry, or None."""
+        given = self.given_keep
+        if given is None:
+            return None
+        names = act.entry_names()
+        ok = isinstance(given, list | tuple) and all(isinstance(b, bool) for b in given)
+        if not ok or len(given) != len(names):
+            raise ValueError(
+                f"{self.owner}.held_keep={given!r} is out of range: must be {len(names)} "
+                f"booleans, one per action entry [{', '.join(names)}]"
+            )
+        return np.array(given, dtype=bool)
+
     def _held_floor(self, act: Box) -> np.ndarray | None:
         """``held_floor`` as one lower bound per entry (the box's for null), or None."""
         given, index = self.given_floor, self.held_index
-        if (given is None) != (index is None):
+        held = {"held_floor": given, "held_keep": self.given_keep}
+        uses = [f"{name}={value!r}" for name, value in held.items() if value is not None]
+        if uses and index is None:
+            raise ValueError(f"{self.owner}.{' and '.join(uses)}: needs held_index")
+        if index is not None and not uses:
             raise ValueError(
-                f"{self.owner}.held_floor={given!r} and held_index={index!r}: give both or neither"
+                f"{self.owner}.held_index={index!r}: needs held_floor or held_keep (or neither)"
             )
         if given is None:
             return None
@@ -353,6 +379,9 @@ class IncrementalAction(Feature):
             # held: no lower than the floor, or than a command rising to it at the largest step
             low = np.minimum(self._floor, u + self.max_change)
             moved[self._held] = np.maximum(moved[self._held], low[self._held])
+        if self._keep is not None and self._held.any():
+            kept = self._held[:, None] & self._keep[None, :]
+            moved[kept] = u[kept]
         self._command = np.clip(moved, self._low, self._high)
         return self._command.astype(np.float32)
 

@@ -236,6 +236,28 @@ def test_incremental_action_does_not_go_below_the_held_floor_while_the_detection
     np.testing.assert_allclose(obs[0, 2:], [-0.3, -2.0])  # the agent sees the command in force
 
 
+def test_incremental_action_keeps_the_held_entries_while_the_detection_is_held() -> None:
+    held = [0.0, 0.0, 1.0, 1.0, 0.0, 0.0]  # obs entry 1 > 0: the detection is held
+    env = ScriptedVecEnv([[[1.0, h]] for h in held])
+    wrapped = VecIncrementalAction(
+        env, max_change=[0.5, 0.5], held_index=1, held_floor=[0.0, None], held_keep=[False, True]
+    )
+    wrapped.reset()
+    for a in ([-1, 1], [-1, 1], [-1, -1], [1, -1], [0, -1]):
+        obs, *_ = wrapped.step(np.array([a], dtype=float))
+    np.testing.assert_allclose(
+        np.concatenate(env.actions),
+        [
+            [-0.5, 0.5],  # fresh: as the agent asks
+            [-1.0, 1.0],
+            [-0.5, 1.0],  # held: the turn as it was, v rising to its floor
+            [0.0, 1.0],  # and v free above it
+            [0.0, 0.5],  # fresh again: the turn changes
+        ],
+    )
+    np.testing.assert_allclose(obs[0, 2:], [0.0, 0.5])
+
+
 def test_the_held_floor_acts_the_same_in_the_agents_pipeline() -> None:
     """The exported agent's steps (ObservationAge, then IncrementalAction reading its age)
     give the training wrappers' actions."""
@@ -646,7 +668,20 @@ def test_concat_vec_env_lane_j_replays_its_scenario_seeded_s_plus_j() -> None:
         ),
         (
             lambda e: VecIncrementalAction(e, held_index=1),
-            r"VecIncrementalAction\.held_floor=None and held_index=1: give both or neither",
+            r"VecIncrementalAction\.held_index=1: needs held_floor or held_keep \(or neither\)",
+        ),
+        (
+            lambda e: VecIncrementalAction(e, held_floor=[0.0, None]),
+            r"VecIncrementalAction\.held_floor=\[0\.0, None\]: needs held_index",
+        ),
+        (
+            lambda e: VecIncrementalAction(e, held_index=1, held_keep=[True]),
+            r"VecIncrementalAction\.held_keep=\[True\] is out of range: must be 2 booleans, one "
+            r"per action entry \[v_mps, w_radps\]",
+        ),
+        (
+            lambda e: VecIncrementalAction(e, held_index=1, held_keep=[0, 1]),
+            r"VecIncrementalAction\.held_keep=\[0, 1\] is out of range: must be 2 booleans",
         ),
         (
             lambda e: VecIncrementalAction(e, held_index=1, held_floor=[0.0]),
