@@ -267,6 +267,14 @@ class IncrementalAction(Feature):
         robot turned when the person was last seen, as the laws do on a stale offset: a
         person walking round the robot behind something is still in view when they come out.
         Needs ``held_index``; the floor, if given, still applies to the others.
+    :param ahead_index: with ``held_keep``, the observation entry holding the reading ahead, or
+        None: keep in every gap. Given, the entries are kept only in a gap in which the reading
+        ahead has read nearer than the held distance (entry ``reading_index``) by more than
+        ``behind_margin_m``: something came between the robot and the person, who is then
+        taken to walk on as they did. A gap with nothing nearer (the detector missed the person)
+        leaves the agent free to turn back towards where it last saw them.
+    :param behind_margin_m: how much nearer than the held distance the reading ahead must read
+        (m, > 0).
     """
 
     def __init__(
@@ -277,6 +285,8 @@ class IncrementalAction(Feature):
         held_index: int | None = None,
         held_floor: Sequence[float | None] | None = None,
         held_keep: Sequence[bool] | None = None,
+        ahead_index: int | None = None,
+        behind_margin_m: float = 0.2,
     ) -> None:
         self.given = max_change
         self.reading_index = reading_index
@@ -284,6 +294,8 @@ class IncrementalAction(Feature):
         self.held_index = held_index
         self.given_floor = held_floor
         self.given_keep = held_keep
+        self.ahead_index = ahead_index
+        self.behind_margin_m = behind_margin_m
 
     def bind(self, obs: Box, act: Box, n: int) -> tuple[Box, Box]:
         change = self._steps("max_change", self.given, act)
@@ -291,7 +303,7 @@ class IncrementalAction(Feature):
             None if self.given_brake is None else self._steps("brake_change", self.given_brake, act)
         )
         n_obs = obs.shape[0]
-        for field in ("reading_index", "held_index"):
+        for field in ("reading_index", "held_index", "ahead_index"):
             index = getattr(self, field)
             if index is not None and not (is_integer(index) and 0 <= index < n_obs):
                 raise ValueError(
@@ -304,6 +316,16 @@ class IncrementalAction(Feature):
         self._high = act.high.astype(np.float64)
         self._floor = self._held_floor(act)
         self._keep = self._held_keep(act)
+        if self.ahead_index is not None:
+            if self._keep is None or self.reading_index is None:
+                raise ValueError(
+                    f"{self.owner}.ahead_index={self.ahead_index!r}: needs held_keep and "
+                    "reading_index"
+                )
+            self.behind_margin_m = check_number(
+                f"{self.owner}.behind_margin_m", self.behind_margin_m, 0.0, None, lo_open=True
+            )
+        self._behind = np.zeros(n, dtype=bool)
         self._command = np.zeros((n, act.shape[0]))
         self._reading = np.ones(n, dtype=bool)
         self._held = np.zeros(n, dtype=bool)
@@ -380,7 +402,8 @@ class IncrementalAction(Feature):
             low = np.minimum(self._floor, u + self.max_change)
             moved[self._held] = np.maximum(moved[self._held], low[self._held])
         if self._keep is not None and self._held.any():
-            kept = self._held[:, None] & self._keep[None, :]
+            gap = self._held if self.ahead_index is None else self._held & self._behind
+            kept = gap[:, None] & self._keep[None, :]
             moved[kept] = u[kept]
         self._command = np.clip(moved, self._low, self._high)
         return self._command.astype(np.float32)
@@ -398,6 +421,11 @@ class IncrementalAction(Feature):
             self._reading = np.asarray(obs)[:, self.reading_index] > 0
         if self.held_index is not None:
             self._held = np.asarray(obs)[:, self.held_index] > 0
+        if self.ahead_index is not None:
+            # latched for the rest of the gap: turning, the robot may leave the occluder's side
+            rows = np.asarray(obs)
+            nearer = rows[:, self.ahead_index] < rows[:, self.reading_index] - self.behind_margin_m
+            self._behind = self._held & (self._behind | nearer)
 
     @staticmethod
     def _join(obs: np.ndarray, command: np.ndarray) -> np.ndarray:

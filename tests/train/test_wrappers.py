@@ -258,6 +258,30 @@ def test_incremental_action_keeps_the_held_entries_while_the_detection_is_held()
     np.testing.assert_allclose(obs[0, 2:], [0.0, 0.5])
 
 
+def test_with_ahead_index_the_turn_is_kept_only_in_a_gap_with_something_nearer() -> None:
+    # obs [distance, held, ahead]: a gap with nothing nearer (a detector miss), then one in which
+    # the reading ahead comes 0.5 m nearer than the held distance (an occluder), latched
+    # for the rest of that gap, then a new gap with nothing nearer.
+    script = [[1.0, 0, 1.0], [1.0, 0, 1.0], [1.0, 1, 0.95], [1.0, 1, 0.5], [1.0, 1, 5.0]]
+    script += [[1.0, 0, 1.0], [1.0, 1, 1.0], [1.0, 1, 1.0]]
+    env = ScriptedVecEnv([[row] for row in script])
+    wrapped = VecIncrementalAction(
+        env,
+        max_change=[0.25, 0.25],
+        reading_index=0,
+        held_index=1,
+        held_keep=[False, True],
+        ahead_index=2,
+        behind_margin_m=0.2,
+    )
+    wrapped.reset()
+    for _ in range(len(script) - 1):
+        wrapped.step(np.array([[0.0, 1.0]]))
+    np.testing.assert_allclose(
+        np.concatenate(env.actions)[:, 1], [0.25, 0.5, 0.75, 0.75, 0.75, 1.0, 1.25]
+    )
+
+
 def test_the_held_floor_acts_the_same_in_the_agents_pipeline() -> None:
     """The exported agent's steps (ObservationAge, then IncrementalAction reading its age)
     give the training wrappers' actions."""
@@ -678,6 +702,21 @@ def test_concat_vec_env_lane_j_replays_its_scenario_seeded_s_plus_j() -> None:
             lambda e: VecIncrementalAction(e, held_index=1, held_keep=[True]),
             r"VecIncrementalAction\.held_keep=\[True\] is out of range: must be 2 booleans, one "
             r"per action entry \[v_mps, w_radps\]",
+        ),
+        (
+            lambda e: VecIncrementalAction(e, held_index=1, held_keep=[False, True], ahead_index=0),
+            r"VecIncrementalAction\.ahead_index=0: needs held_keep and reading_index",
+        ),
+        (
+            lambda e: VecIncrementalAction(
+                e,
+                reading_index=0,
+                held_index=1,
+                held_keep=[False, True],
+                ahead_index=0,
+                behind_margin_m=0.0,
+            ),
+            r"VecIncrementalAction\.behind_margin_m=0\.0 is out of range",
         ),
         (
             lambda e: VecIncrementalAction(e, held_index=1, held_keep=[0, 1]),
