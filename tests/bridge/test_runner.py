@@ -181,6 +181,28 @@ def test_a_replayed_log_drives_the_policy_and_is_logged_as_it_was(tmp_path: Path
     _assert_pn_drove(replayed, n)
 
 
+def _replay_choosing(
+    tmp_path: Path, hub: Any, mode: str, factory: Callable[[str], Any], duration_s: float
+) -> tuple[Any, Path]:
+    """pn drives a replayed curve walk with ``hub`` as its monitor, ``mode`` chosen in the
+    browser before the first step and built by ``factory``; the result and the run's log."""
+    source = tmp_path / "source.csv"
+    write_step_log(run_episode("pn", "curve", 1).log, source)
+    log = tmp_path / "replayed.csv"
+    with SerialLink("loop://", "reference") as link:
+        runner = Runner(
+            link,
+            make_policy("pn"),
+            Replay(source),
+            config=RunnerConfig(duration_s=duration_s),
+            log=log,
+            monitor=hub,
+            policy_factory=factory,
+        )
+        hub.set_mode(mode)
+        return runner.run(), log
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize(
     ("mode", "why"),
@@ -194,23 +216,9 @@ def test_a_mode_the_robot_cannot_run_is_refused_and_the_robot_drives_on(
 ) -> None:
     from bridge.monitor.hub import MonitorHub, monitor_modes
 
-    source = tmp_path / "source.csv"
-    write_step_log(run_episode("pn", "curve", 1).log, source)
-    log = tmp_path / "replayed.csv"
-    make_policy(mode)  # loaded once before: building it in the loop then takes ms, not seconds
+    make_policy(mode)  # loaded once before: building it then takes ms, not seconds
     hub = MonitorHub("pn", modes=monitor_modes([mode]))
-    with SerialLink("loop://", "reference") as link:
-        runner = Runner(
-            link,
-            make_policy("pn"),
-            Replay(source),
-            config=RunnerConfig(duration_s=1.0),
-            log=log,
-            monitor=hub,
-            policy_factory=make_policy,
-        )
-        hub.set_mode(mode)  # chosen in the browser before the first step
-        result = runner.run()
+    result, log = _replay_choosing(tmp_path, hub, mode, make_policy, 1.0)
     assert result.reason == "duration 1 s reached"
     assert hub.mode == "pn"  # back to what the robot was running
     assert re.search(f"^{mode} {why}", hub.notice), hub.notice
@@ -239,22 +247,8 @@ def test_a_mode_is_built_beside_the_control_loop_which_runs_the_old_one_meanwhil
         return make_policy(mode)
 
     states: list[dict[str, Any]] = []
-    source = tmp_path / "source.csv"
-    write_step_log(run_episode("pn", "curve", 1).log, source)
-    log = tmp_path / "replayed.csv"
     hub = Recording("pn", modes=monitor_modes())
-    with SerialLink("loop://", "reference") as link:
-        runner = Runner(
-            link,
-            make_policy("pn"),
-            Replay(source),
-            config=RunnerConfig(duration_s=2.5),
-            log=log,
-            monitor=hub,
-            policy_factory=slow,
-        )
-        hub.set_mode("mpn")
-        result = runner.run()
+    result, log = _replay_choosing(tmp_path, hub, "mpn", slow, 2.5)
     assert result.reason == "duration 2.5 s reached"
     acted = [s for s in states if s["command"][0] is not None]
     modes = [s["mode"] for s in acted]
