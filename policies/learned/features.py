@@ -367,7 +367,8 @@ class IncrementalAction(Feature):
             raise ValueError(f"{self.owner}.{' and '.join(uses)}: needs held_index")
         if index is not None and not uses:
             raise ValueError(
-                f"{self.owner}.held_index={index!r}: needs held_floor or held_keep (or neither)"
+                f"{self.owner}.held_index={index!r} serves nothing: give held_floor or "
+                "held_keep, or leave held_index out"
             )
         if given is None:
             return None

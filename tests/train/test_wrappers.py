@@ -692,7 +692,8 @@ def test_concat_vec_env_lane_j_replays_its_scenario_seeded_s_plus_j() -> None:
         ),
         (
             lambda e: VecIncrementalAction(e, held_index=1),
-            r"VecIncrementalAction\.held_index=1: needs held_floor or held_keep \(or neither\)",
+            r"VecIncrementalAction\.held_index=1 serves nothing: give held_floor or held_keep, or "
+            r"leave held_index out",
         ),
         (
             lambda e: VecIncrementalAction(e, held_floor=[0.0, None]),
