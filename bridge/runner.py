@@ -157,7 +157,9 @@ class Runner:
     :param meta: the step log's ``policy``, ``scenario`` and ``seed`` values.
     :param monitor: a :class:`bridge.monitor.hub.MonitorHub` to publish to and take modes from;
         its starting mode, unless ``stop`` or ``manual``, is taken to name ``policy``.
-    :param policy_factory: builds the policy of a mode the monitor selects (``pn``, ...).
+    :param policy_factory: builds the policy of a mode the monitor selects (``pn``, ...), in
+        a thread of its own (:class:`bridge.loader.PolicyLoader`): the robot runs the mode it
+        was in until the new one is built.
     """
 
     def __init__(
