@@ -112,7 +112,7 @@ class VecScaleObservation(FeatureWrapper):
 
 
 class VecIncrementalAction(FeatureWrapper):
-    """:class:`policies.learned.features.IncrementalAction`: the agent changes the command by at
+    """:class:`policies.learned.incremental.IncrementalAction`: the agent changes the command by at
     most ``max_change`` a step and sees the command in force."""
 
     feature_class = IncrementalAction
