@@ -57,6 +57,7 @@ from typing import Any
 
 import yaml
 
+from policies.learned.feature import wrapper_entries
 from train.algos import DEFAULT_ALGO, PPO_RULES, Algo, algo
 from train.rules import (
     ConfigError,
@@ -424,9 +425,8 @@ def wrapper_specs(value: Any, *, where: str = "vec_env_wrapper") -> list[tuple[s
     """
     from stable_baselines3.common.vec_env import VecEnvWrapper
 
-    entries = value if isinstance(value, list) else [value] if value else []
     specs = []
-    for entry in entries:
+    for entry in wrapper_entries(value):
         if isinstance(entry, str):
             name, kwargs = entry, {}
         elif isinstance(entry, Mapping) and len(entry) == 1:

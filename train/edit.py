@@ -41,7 +41,7 @@ import yaml
 
 from eval.atomic import atomic_write_text
 from policies.learned.boxes import Box
-from policies.learned.feature import IN_TRAINING, split_in_training
+from policies.learned.feature import IN_TRAINING, split_in_training, wrapper_entries
 from policies.learned.features import FEATURES, Pipeline
 from train import run as runs
 from train.config import wrapper_specs
@@ -183,8 +183,7 @@ def add_step(
         )
     entry = {name: {**kwargs, IN_TRAINING: False}}
     where = folder / runs.CONFIG
-    raw = config["hyperparams"].get("vec_env_wrapper")
-    entries = raw if isinstance(raw, list) else [raw] if raw else []  # as written, to keep
+    entries = wrapper_entries(config["hyperparams"].get("vec_env_wrapper"))  # to write back
     specs = wrapper_specs(entries, where=str(where))
     names = [n for n, _ in specs]
     if name in names:

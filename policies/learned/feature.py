@@ -9,13 +9,19 @@ import numpy as np
 
 from policies.learned.boxes import Box
 
-__all__ = ["IN_TRAINING", "Feature", "split_in_training"]
+__all__ = ["IN_TRAINING", "Feature", "split_in_training", "wrapper_entries"]
 
 #: The keyword a ``vec_env_wrapper`` entry of a feature step may carry: ``in_training: false``
 #: leaves the step out of the training env (observations pass through there) and keeps it in the
 #: exported agent's view, for a filter measured in front of agents trained without it. Only a
 #: step that keeps the observation and action shapes can be left out of training.
 IN_TRAINING = "in_training"
+
+
+def wrapper_entries(value: Any) -> list[Any]:
+    """rl-zoo3's ``vec_env_wrapper`` value as the list of its entries, as written: a single
+    entry may stand alone, and none (null, missing) is an empty list."""
+    return list(value) if isinstance(value, list) else [value] if value else []
 
 
 def split_in_training(kwargs: dict[str, Any], where: str) -> tuple[bool, dict[str, Any]]:

@@ -49,6 +49,7 @@ import yaml
 
 from follow_env.tasks.person_follow.spec import AHEAD, AHEAD_SETTINGS, SPEC
 from policies.base import OBS_SIZES, validate_obs_batch, validate_obs_row
+from policies.learned.feature import wrapper_entries
 from policies.learned.features import Box, Feature, FrameStack, NormalizeObservation, Pipeline
 from policies.learned.networks import ALGOS, Memory, load_network
 
@@ -141,9 +142,8 @@ class _Statistics(NamedTuple):
 
 def _wrapper_entries(value: Any, where: Path) -> list[tuple[str, dict[str, Any]]]:
     """rl-zoo3's ``vec_env_wrapper`` list as ``[(name, kwargs), ...]``."""
-    entries = value if isinstance(value, list) else [value] if value else []
     out = []
-    for entry in entries:
+    for entry in wrapper_entries(value):
         if isinstance(entry, str):
             out.append((entry, {}))
         elif isinstance(entry, dict) and len(entry) == 1:
