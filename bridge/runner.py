@@ -182,7 +182,6 @@ class Runner:
         self.log = Path(log) if log is not None else None
         self.meta = dict(meta or {})
         self.monitor = monitor
-        self.policy_factory = policy_factory
         self._wheels = _Wheels()
         self._stop = threading.Event()
         self._rows: list[dict[str, Any]] = []

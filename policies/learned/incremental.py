@@ -100,17 +100,9 @@ class IncrementalAction(Feature):
         self.brake_change = brake
         self._low = act.low.astype(np.float64)
         self._high = act.high.astype(np.float64)
+        self._check_held_options()
         self._floor = self._held_floor(act)
         self._keep = self._held_keep(act)
-        if self.ahead_index is not None:
-            if self._keep is None or self.reading_index is None:
-                raise ValueError(
-                    f"{self.owner}.ahead_index={self.ahead_index!r}: needs held_keep and "
-                    "reading_index"
-                )
-            self.behind_margin_m = check_number(
-                f"{self.owner}.behind_margin_m", self.behind_margin_m, 0.0, None, lo_open=True
-            )
         self._behind = np.zeros(n, dtype=bool)
         self._command = np.zeros((n, act.shape[0]))
         self._reading = np.ones(n, dtype=bool)
@@ -130,6 +122,30 @@ class IncrementalAction(Feature):
             )
         return steps
 
+    def _check_held_options(self) -> None:
+        """The options that act while the detection is held go together: ``held_floor`` and
+        ``held_keep`` need ``held_index`` (and it needs one of them); ``ahead_index`` needs
+        ``held_keep`` and ``reading_index``, and a positive ``behind_margin_m``."""
+        index = self.held_index
+        held = {"held_floor": self.given_floor, "held_keep": self.given_keep}
+        uses = [f"{name}={value!r}" for name, value in held.items() if value is not None]
+        if uses and index is None:
+            raise ValueError(f"{self.owner}.{' and '.join(uses)}: needs held_index")
+        if index is not None and not uses:
+            raise ValueError(
+                f"{self.owner}.held_index={index!r} serves nothing: give held_floor or "
+                "held_keep, or leave held_index out"
+            )
+        if self.ahead_index is not None:
+            if self.given_keep is None or self.reading_index is None:
+                raise ValueError(
+                    f"{self.owner}.ahead_index={self.ahead_index!r}: needs held_keep and "
+                    "reading_index"
+                )
+            self.behind_margin_m = check_number(
+                f"{self.owner}.behind_margin_m", self.behind_margin_m, 0.0, None, lo_open=True
+            )
+
     def _held_keep(self, act: Box) -> np.ndarray | None:
         """``held_keep`` as one bool per entry, or None."""
         given = self.given_keep
@@ -146,16 +162,7 @@ class IncrementalAction(Feature):
 
     def _held_floor(self, act: Box) -> np.ndarray | None:
         """``held_floor`` as one lower bound per entry (the box's for null), or None."""
-        given, index = self.given_floor, self.held_index
-        held = {"held_floor": given, "held_keep": self.given_keep}
-        uses = [f"{name}={value!r}" for name, value in held.items() if value is not None]
-        if uses and index is None:
-            raise ValueError(f"{self.owner}.{' and '.join(uses)}: needs held_index")
-        if index is not None and not uses:
-            raise ValueError(
-                f"{self.owner}.held_index={index!r} serves nothing: give held_floor or "
-                "held_keep, or leave held_index out"
-            )
+        given = self.given_floor
         if given is None:
             return None
         names = act.entry_names()
@@ -189,7 +196,7 @@ class IncrementalAction(Feature):
             low = np.minimum(self._floor, u + self.max_change)
             moved[self._held] = np.maximum(moved[self._held], low[self._held])
         if self._keep is not None and self._held.any():
-            gap = self._held if self.ahead_index is None else self._held & self._behind
+            gap = self._held if self.ahead_index is None else self._behind  # held, behind
             kept = gap[:, None] & self._keep[None, :]
             moved[kept] = u[kept]
         self._command = np.clip(moved, self._low, self._high)
