@@ -5,7 +5,8 @@ Building a learned agent the first time imports torch and loads its weights: abo
 wheels at their last targets, with no fresh command, for as long. :class:`PolicyLoader` builds
 it in a thread of its own instead; until it is ready the robot goes on doing what it did (the
 previous mode's policy, or standing still), and a mode that cannot be built or run is refused
-then.
+then. Modes are built side by side, so a law chosen while an agent is loading (the user
+changed their mind) takes over at once instead of waiting for that load.
 """
 
 from __future__ import annotations
@@ -14,11 +15,15 @@ from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
 from typing import Any
 
-__all__ = ["PolicyLoader"]
+__all__ = ["MAX_BUILDS", "PolicyLoader"]
+
+#: How many modes are built at once; a mode chosen while as many are building waits for one
+#: of them. Each learned agent being built holds its weights and a torch model (tens of MB).
+MAX_BUILDS = 4
 
 
 class PolicyLoader:
-    """Builds the policies of modes one at a time, in a background thread.
+    """Builds the policies of modes in background threads, up to :data:`MAX_BUILDS` at once.
 
     :param factory: builds a mode's policy (``make_policy``).
     :param check: checks that the robot can run a built policy and returns it; raises the
@@ -28,7 +33,7 @@ class PolicyLoader:
     def __init__(self, factory: Callable[[str], Any], check: Callable[[Any], Any]) -> None:
         self._factory = factory
         self._check = check
-        self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="policy-loader")
+        self._pool = ThreadPoolExecutor(max_workers=MAX_BUILDS, thread_name_prefix="policy-loader")
         self._pending: dict[str, Future[Any]] = {}
 
     def get(self, mode: str) -> Any | None:
@@ -52,7 +57,7 @@ class PolicyLoader:
         return list(self._pending)
 
     def close(self) -> None:
-        """Forget the modes not started yet; one being built finishes in its thread, unused."""
+        """Forget the modes not started yet; those being built finish in their threads, unused."""
         self._pool.shutdown(wait=False, cancel_futures=True)
         self._pending.clear()
 

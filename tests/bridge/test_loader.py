@@ -8,7 +8,7 @@ from typing import Any
 
 import pytest
 
-from bridge.loader import PolicyLoader
+from bridge.loader import MAX_BUILDS, PolicyLoader
 
 
 def _wait(loader: PolicyLoader, mode: str) -> Any:
@@ -54,22 +54,45 @@ def test_a_policy_the_check_refuses_raises_once_when_built() -> None:
     assert loader.pending == []
 
 
+def test_a_mode_asked_for_while_another_builds_does_not_wait_for_it() -> None:
+    gate = threading.Event()
+
+    def factory(mode: str) -> str:
+        if mode == "ppo":  # an agent: torch and its weights take a while
+            gate.wait(10.0)
+        return f"policy {mode}"
+
+    loader = PolicyLoader(factory, lambda p: p)
+    assert loader.get("ppo") is None
+    assert _wait(loader, "gsmpn") == "policy gsmpn"  # the law is ready; ppo is not
+    assert loader.pending == ["ppo"]
+    assert loader.get("ppo") is None
+    gate.set()
+    assert _wait(loader, "ppo") == "policy ppo"
+    loader.close()
+
+
 def test_close_drops_the_modes_not_started() -> None:
-    gate, done = threading.Event(), threading.Event()
+    gate = threading.Event()
     built: list[str] = []
+    lock = threading.Lock()
 
     def factory(mode: str) -> str:
         gate.wait(10.0)
-        built.append(mode)
-        done.set()
+        with lock:
+            built.append(mode)
         return mode
 
     loader = PolicyLoader(factory, lambda p: p)
-    loader.get("ppo")
-    loader.get("ppo_ahead")  # queued behind ppo: one is built at a time
-    assert loader.pending == ["ppo", "ppo_ahead"]
+    modes = [f"agent{k}" for k in range(MAX_BUILDS + 1)]
+    for mode in modes:  # the last waits for a free builder
+        loader.get(mode)
+    assert loader.pending == modes
     loader.close()
+    assert loader.pending == []
     gate.set()
-    assert done.wait(10.0)
-    time.sleep(0.1)  # time for a queued build to start, were it not dropped
-    assert built == ["ppo"]  # the one under way finished unused; the queued one never ran
+    deadline = time.monotonic() + 10.0
+    while len(built) < MAX_BUILDS and time.monotonic() < deadline:
+        time.sleep(0.01)
+    time.sleep(0.1)  # time for the queued build to start, were it not dropped
+    assert sorted(built) == sorted(modes[:MAX_BUILDS])  # finished unused; the queued one never ran
