@@ -208,17 +208,22 @@ def _deploy_only_lines(hp: dict[str, Any]) -> list[str]:
 
 def _load_line(run: Path, export: Path | str | None) -> str:
     """How the card's reader loads the agent: the exported copy (by its registered name when
-    it is a shipped agent's folder, :data:`policies.learned.ppo.SHIPPED`), and the run folder."""
+    it is a shipped agent's folder, :data:`policies.learned.ppo.SHIPPED`), and the run folder.
+
+    A shipped agent's card travels with the project, so it names its run folder without the
+    path, which is only good on the machine that trained it."""
     at_run = f"`make_policy({str(run)!r})`"
     if export is None:
         return at_run
     shipped = shipped_name(export)
     if shipped is None:
-        call = f"make_policy({str(export)!r})"
-    else:
-        name, task = shipped
-        call = f'make_policy("{name}"' + ("" if task == DEFAULT_TASK else f', task="{task}"') + ")"
-    return f"`{call}` (the copy in `{export}`) or {at_run} (the run folder)"
+        return (
+            f"`make_policy({str(export)!r})` (the copy in `{export}`) or {at_run} (the run folder)"
+        )
+    name, task = shipped
+    call = f'make_policy("{name}"' + ("" if task == DEFAULT_TASK else f', task="{task}"') + ")"
+    copy = f"policies/agents/{Path(export).name}"
+    return f"`{call}` (the copy in `{copy}`, exported from the run folder `{Path(run).name}`)"
 
 
 def model_card(

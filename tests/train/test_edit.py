@@ -39,6 +39,7 @@ def _files(folder: Path) -> dict[str, bytes]:
 
 def test_the_step_goes_into_the_view_the_card_and_the_manifest(agent: Path) -> None:
     before = _view(agent)
+    recorded = json.loads((agent / MANIFEST).read_text())
     done = add_step(agent, STEP, AGE, command="follow-train --add-step agent")
     view = _view(agent)
     entry = {GATE: {"max_jump_m": 0.5, "accept_after": 10, "in_training": False}}
@@ -57,8 +58,8 @@ def test_the_step_goes_into_the_view_the_card_and_the_manifest(agent: Path) -> N
     manifest = json.loads((agent / MANIFEST).read_text())
     for name in ("config.yaml", "MODEL_CARD.md"):
         assert manifest["files"][name][-1] == sha256(agent / name)
-        assert len(manifest["files"][name]) == 2
-    assert len(manifest["edited_utc"]) == 1
+        assert manifest["files"][name] == [*recorded["files"][name], sha256(agent / name)]
+    assert len(manifest["edited_utc"]) == len(recorded.get("edited_utc", [])) + 1
     check_export(agent)
     # the other files are the export's, byte for byte
     for name in ("model.zip", "vecnormalize.pkl", "learning_curve.png"):

@@ -149,11 +149,18 @@ def test_a_card_says_how_to_load_the_run_and_the_copy_an_export_wrote(tmp_path: 
     ):
         export = AGENTS / folder
         text = card(tmp_path, None, [SESSION], export=export)
-        assert f"`{call}` (the copy in `{export}`) or {run} (the run folder)" in text
+        copy = f"policies/agents/{folder}"  # the card travels with the project: no local paths
+        assert (
+            f"`{call}` (the copy in `{copy}`, exported from the run folder `{tmp_path.name}`)"
+            in text
+        )
+        assert str(tmp_path) not in text.split("## How it was trained")[0]
         name, task = shipped_name(export)
         assert name in available_policies(task)
     # any other folder by its path
     other = tmp_path / "agents" / "ppo_ahead"
     text = card(tmp_path, None, [SESSION], export=other)
-    assert f"`make_policy({str(other)!r})` (the copy in `{other}`)" in text
+    assert (
+        f"`make_policy({str(other)!r})` (the copy in `{other}`) or {run} (the run folder)" in text
+    )
     assert 'ppo_ahead")' not in text
