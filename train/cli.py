@@ -288,6 +288,13 @@ def _main_edit(folder: Path, step: str, before: str | None, force: bool, command
     done = add_step(folder, step, before, force=force, command=command)
     ((name, kwargs),) = done.entry.items()
     where = f"before {before}" if before else "first"
+    if done.members:  # an ensemble: every member that lacked it
+        listed = ", ".join(f"{m}/" for m in done.members)
+        print(
+            f"Added {name} {kwargs} to the view of the ensemble in {folder}/ ({where}; left "
+            f"out of training): config.yaml and MODEL_CARD.md of {listed}"
+        )
+        return 0
     print(
         f"Added {name} {kwargs} to the view of the agent in {folder}/ ({where}; "
         "left out of training): config.yaml, MODEL_CARD.md"

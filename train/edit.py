@@ -8,7 +8,10 @@ it in evaluation and on the robot, and a run resumed from the folder passes obse
 through it, as the agent was trained. This command writes that entry, so that nobody edits an
 agent's files by hand:
 
-- ``DIR`` is an agent folder: a run folder of ``follow-train``, or a folder an export wrote.
+- ``DIR`` is an agent folder: a run folder of ``follow-train``, or a folder an export wrote;
+  or an ensemble's folder (``ensemble.yaml``, :mod:`policies.learned.ensemble`), whose members
+  must see the env alike: the step then goes into every member's view, each checked (and the
+  ensemble loaded with the new views) before any is written.
 - ``STEP`` is YAML: ``train.wrappers.VecJumpGate`` or ``{train.wrappers.VecJumpGate:
   {max_jump_m: 0.5}}``. It must be a step of an agent's view (:data:`FEATURES`) that keeps the
   observation and action shapes it is given; ``in_training: false`` is added (``true`` is
@@ -41,8 +44,10 @@ import yaml
 
 from eval.atomic import atomic_write_text
 from policies.learned.boxes import Box
+from policies.learned.ensemble import ENSEMBLE, member_folders
 from policies.learned.feature import IN_TRAINING, split_in_training, wrapper_entries
 from policies.learned.features import FEATURES, Pipeline
+from policies.learned.ppo import AgentLoadError
 from train import run as runs
 from train.config import wrapper_specs
 from train.export import MANIFEST, read_manifest, sha256
@@ -59,12 +64,14 @@ class AddedStep:
 
     :param folder: the agent folder. :param entry: the ``vec_env_wrapper`` entry written.
     :param index: its place in the list (0: innermost). :param before: the entry it precedes.
+    :param members: for an ensemble, the member folders edited (those that lacked the step).
     """
 
     folder: Path
     entry: dict[str, dict[str, Any]]
     index: int
     before: str | None
+    members: tuple[Path, ...] = ()
 
 
 def parse_step(text: str) -> tuple[str, dict[str, Any]]:
@@ -154,6 +161,10 @@ def add_step(
     """Add ``step`` (``--step``'s YAML) to the view of the agent in ``folder`` (module
     docstring).
 
+    :param folder: an agent's folder, or an ensemble's (``ensemble.yaml``): then the step goes
+        into every member's view, which must stay alike. Every member is checked before any
+        is written; a member that already has this very entry is left as it is, so a command
+        interrupted between two members can be run again.
     :param before: the name of the entry it goes before (None: first).
     :param force: write although ``config.yaml`` or ``MODEL_CARD.md`` changed since the export
         that wrote ``folder``.
@@ -163,12 +174,6 @@ def add_step(
     folder = Path(folder)
     if not folder.is_dir():
         raise ValueError(f"--add-step {folder}: no such folder (give an agent's folder)")
-    if not (folder / runs.MODEL).is_file():
-        raise ValueError(
-            f"--add-step {folder}: no {runs.MODEL} in it; give an agent's folder (a run or an "
-            "export)"
-        )
-    config = runs.read_config(folder)
     name, kwargs = parse_step(step)
     wrapper_specs([{name: kwargs}], where="--step")  # the class imports and takes these
     short = name.rsplit(".", 1)[-1].removeprefix("Vec")
@@ -182,11 +187,66 @@ def add_step(
             f"so it is added with {IN_TRAINING}: false (leave the argument out)"
         )
     entry = {name: {**kwargs, IN_TRAINING: False}}
+    line = _card_line(command, entry, before)
+    if not (folder / ENSEMBLE).is_file():
+        edit = _plan(folder, entry, before, force, line, member=False)
+        assert edit is not None  # a lone agent that has the step is refused in _plan
+        _write(edit)
+        return AddedStep(folder, entry, edit.index, before)
+    try:
+        members = member_folders(folder / ENSEMBLE)
+    except AgentLoadError as e:
+        raise ValueError(f"--add-step {folder}: {e}") from None
+    edits = [_plan(m, entry, before, force, line, member=True) for m in members]
+    todo = [e for e in edits if e is not None]
+    if not todo:
+        raise ValueError(
+            f"--step {name}: already in the view of every member of the ensemble {folder}; a "
+            "step is added once"
+        )
+    _check_ensemble_loads(folder, members, edits)
+    for edit in todo:
+        _write(edit)
+    first = next(e for e in edits if e is not None)
+    return AddedStep(folder, entry, first.index, before, tuple(e.folder for e in todo))
+
+
+@dataclass(frozen=True)
+class _Edit:
+    """One agent folder's new ``config.yaml`` and model card, checked, not yet written."""
+
+    folder: Path
+    config: dict[str, Any]
+    card: str
+    index: int
+    exported: bool
+
+
+def _plan(
+    folder: Path,
+    entry: dict[str, dict[str, Any]],
+    before: str | None,
+    force: bool,
+    line: str,
+    *,
+    member: bool,
+) -> _Edit | None:
+    """The edit that puts ``entry`` into the view of the agent in ``folder``, checked; for an
+    ensemble's ``member``, None if it has this very entry already."""
+    ((name, kwargs),) = entry.items()
+    if not (folder / runs.MODEL).is_file():
+        raise ValueError(
+            f"--add-step {folder}: no {runs.MODEL} in it; give an agent's folder (a run or an "
+            "export) or an ensemble's"
+        )
+    config = runs.read_config(folder)
     where = folder / runs.CONFIG
     entries = wrapper_entries(config["hyperparams"].get("vec_env_wrapper"))  # to write back
     specs = wrapper_specs(entries, where=str(where))
     names = [n for n, _ in specs]
     if name in names:
+        if member and specs[names.index(name)][1] == kwargs:
+            return None  # written by an earlier run of the same command
         raise ValueError(
             f"--step {name}: already in the agent's view (entry {names.index(name) + 1} of "
             f"{where}); a step is added once"
@@ -197,10 +257,10 @@ def add_step(
         index = names.index(before)
     else:
         raise ValueError(
-            f"--before {before}: not in the agent's view; its vec_env_wrapper entries: "
-            + (", ".join(names) or "none")
+            f"--before {before}: not in the agent's view ({where}); its vec_env_wrapper "
+            "entries: " + (", ".join(names) or "none")
         )
-    _check_shapes(config, where, specs[:index], name, entry[name])
+    _check_shapes(config, where, specs[:index], name, kwargs)
     manifest = read_manifest(folder)
     if manifest is not None and not force:
         changed = [
@@ -216,18 +276,51 @@ def add_step(
     edited = copy.deepcopy(config)
     edited["hyperparams"]["vec_env_wrapper"] = [*entries[:index], entry, *entries[index:]]
     _check_loads(folder, edited)  # the dearest check last: it loads the model
-
     card_path = folder / runs.CARD
     card = card_path.read_text(encoding="utf-8") if card_path.is_file() else ""
-    line = _card_line(command, entry, before)
     card = card.rstrip("\n") + ("\n" if card else "")
     card += ("" if EDITED in card else f"\n{EDITED}\n\n") + line + "\n"  # one list
-    config_text = runs.config_text(edited)
-    if manifest is not None:  # the export's record lists the new contents as its own too
-        _record(folder, {runs.CONFIG: config_text, runs.CARD: card})
-    atomic_write_text(folder / runs.CONFIG, config_text)
-    atomic_write_text(card_path, card)
-    return AddedStep(folder, entry, index, before)
+    return _Edit(folder, edited, card, index, manifest is not None)
+
+
+def _check_ensemble_loads(folder: Path, members: list[Path], edits: list[_Edit | None]) -> None:
+    """The ensemble loads with its members' new views (they must stay alike), as make_policy
+    would load it: from a copy of the ensemble file and of each member's agent files."""
+    from policies.learned.ensemble import EnsemblePolicy
+
+    with tempfile.TemporaryDirectory(prefix=".add-step-") as tmp:
+        listed = []
+        for k, (member, edit) in enumerate(zip(members, edits, strict=True)):
+            copy_ = Path(tmp) / f"member-{k}"
+            copy_.mkdir()
+            for name in (runs.MODEL, runs.NORMALIZATION):
+                if (member / name).exists():
+                    os.symlink((member / name).resolve(), copy_ / name)
+            config = runs.read_config(member) if edit is None else edit.config
+            runs.write_config(copy_, config)
+            listed.append(copy_.name)
+        (Path(tmp) / ENSEMBLE).write_text(yaml.safe_dump({"members": listed}), encoding="utf-8")
+        try:
+            EnsemblePolicy(tmp, name=str(folder))
+        except AgentLoadError as e:
+            # named as the user knows them: the ensemble's file and the member folders
+            places = {str(Path(tmp) / ENSEMBLE): str(folder / ENSEMBLE)}
+            places |= {str(Path(tmp) / n): str(m) for n, m in zip(listed, members, strict=True)}
+            message = str(e)
+            for temporary in sorted(places, key=len, reverse=True):
+                message = message.replace(temporary, places[temporary])
+            raise ValueError(
+                f"--add-step {folder}: the edited ensemble would not load: {message}"
+            ) from None
+
+
+def _write(edit: _Edit) -> None:
+    """Write one checked edit: the manifest's record first, then each file atomically."""
+    config_text = runs.config_text(edit.config)
+    if edit.exported:  # the export's record lists the new contents as its own too
+        _record(edit.folder, {runs.CONFIG: config_text, runs.CARD: edit.card})
+    atomic_write_text(edit.folder / runs.CONFIG, config_text)
+    atomic_write_text(edit.folder / runs.CARD, edit.card)
 
 
 def _record(folder: Path, texts: dict[str, str]) -> None:

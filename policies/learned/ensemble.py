@@ -34,7 +34,7 @@ from policies.learned.features import Pipeline
 from policies.learned.networks import Memory
 from policies.learned.ppo import AgentLoadError, PPOPolicy, _Loaded
 
-__all__ = ["ENSEMBLE", "EnsemblePolicy", "resolve_path"]
+__all__ = ["ENSEMBLE", "EnsemblePolicy", "member_folders", "resolve_path"]
 
 #: The file that makes a folder an ensemble.
 ENSEMBLE = "ensemble.yaml"
@@ -43,7 +43,7 @@ ENSEMBLE = "ensemble.yaml"
 _Views = tuple[Pipeline, list[Pipeline], list[Memory | None]]
 
 
-def _members(path: Path) -> list[Path]:
+def member_folders(path: Path) -> list[Path]:
     """The member folders listed in ``path`` (an ``ensemble.yaml``), checked."""
     try:
         data = yaml.safe_load(path.read_text(encoding="utf-8"))
@@ -77,7 +77,7 @@ class EnsemblePolicy:
         where = where / ENSEMBLE if where.is_dir() else where
         if not where.exists():
             raise AgentLoadError(f"{where}: ensemble file not found")
-        self._folders = _members(where)
+        self._folders = member_folders(where)
         # Each member is checked as a lone agent is (its files, shapes and statistics).
         self._policies = [PPOPolicy(folder) for folder in self._folders]
         self._agents: list[_Loaded] = [policy._agent for policy in self._policies]

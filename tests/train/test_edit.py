@@ -204,3 +204,71 @@ def test_the_command_line_adds_the_step_or_says_in_one_line_why_not(
         assert err.startswith("follow-train: error: "), err
         assert error in err, err
         assert err.count("\n") == 1
+
+
+@pytest.fixture
+def ensemble(tmp_path: Path) -> Path:
+    """An ensemble of two copies of the shipped agent (its members as an export wrote them)."""
+    folder = tmp_path / "study"
+    for member in ("seed-0", "seed-1"):
+        shutil.copytree(AGENTS / "ppo", folder / member)
+    (folder / "ensemble.yaml").write_text("members: [seed-0, seed-1]\n")
+    return folder
+
+
+def test_a_step_goes_into_every_member_of_an_ensemble(
+    ensemble: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from policies.learned.ensemble import EnsemblePolicy
+
+    before = _view(ensemble / "seed-0")
+    assert main(["--add-step", str(ensemble), "--step", STEP, "--before", AGE]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith(f"Added {GATE} ")
+    assert f"of {ensemble / 'seed-0'}/, {ensemble / 'seed-1'}/" in out
+    entry = {GATE: {"max_jump_m": 0.5, "accept_after": 10, "in_training": False}}
+    index = [next(iter(e)) for e in before].index(AGE)
+    for member in ("seed-0", "seed-1"):
+        assert _view(ensemble / member) == [*before[:index], entry, *before[index:]]
+        assert EDITED in (ensemble / member / "MODEL_CARD.md").read_text()
+        check_export(ensemble / member)  # each member's manifest knows its new files
+    EnsemblePolicy(ensemble)  # the members still see the env alike
+    # run again: every member has it
+    with pytest.raises(ValueError, match="already in the view of every member"):
+        add_step(ensemble, STEP, AGE)
+
+
+def test_an_ensemble_is_edited_whole_or_not_at_all(ensemble: Path) -> None:
+    card = ensemble / "seed-1" / "MODEL_CARD.md"
+    card.write_text(card.read_text() + "\nmy notes\n")  # the second member needs --force
+    files = {m: _files(ensemble / m) for m in ("seed-0", "seed-1")}
+    with pytest.raises(ValueError, match=r"seed-1: MODEL_CARD\.md changed since the export"):
+        add_step(ensemble, STEP)
+    assert {m: _files(ensemble / m) for m in files} == files  # the first member too
+    # a member that already has this very entry (an interrupted run) is left as it is
+    done = add_step(ensemble / "seed-0", STEP)
+    assert done.members == ()
+    first = _files(ensemble / "seed-0")
+    done = add_step(ensemble, STEP, force=True)
+    assert done.members == (ensemble / "seed-1",)
+    assert _files(ensemble / "seed-0") == first
+    assert _view(ensemble / "seed-1") == _view(ensemble / "seed-0")
+    # the same step with other arguments in one member is refused
+    other = "{train.wrappers.VecJumpGate: {max_jump_m: 0.7}}"
+    with pytest.raises(ValueError, match="already in the agent's view"):
+        add_step(ensemble, other)
+
+
+def test_a_step_that_would_leave_the_members_seeing_the_env_apart_is_refused(
+    ensemble: Path,
+) -> None:
+    add_step(ensemble / "seed-0", STEP)  # innermost in one member
+    files = {m: _files(ensemble / m) for m in ("seed-0", "seed-1")}
+    # before the age in the other: the same steps in another order
+    with pytest.raises(ValueError, match="the edited ensemble would not load: ") as error:
+        add_step(ensemble, STEP, AGE)
+    assert f"member {ensemble / 'seed-1'} does not see the env as {ensemble / 'seed-0'}" in str(
+        error.value
+    )
+    assert ".add-step-" not in str(error.value)  # no temporary folder named
+    assert {m: _files(ensemble / m) for m in files} == files
