@@ -22,6 +22,8 @@ the recorded step count (a different episode is a change of behaviour, not of th
 learned agent's alternate records its own (:data:`LEARNED`)::
 
     .venv/bin/python tests/golden/rollouts.py --alternates
+
+Every shipped agent is also pinned open loop, on any CPU, by ``actions.py`` beside this file.
 """
 
 from __future__ import annotations
