@@ -92,19 +92,25 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--no-progress", dest="progress", action="store_false", default=None)
     edit = p.add_argument_group(
-        "a step added to a trained agent's view, without training (train.edit)"
+        "a step added to a trained agent's view, or one changed, without training (train.edit)"
     )
     edit.add_argument(
         "--add-step",
         type=Path,
         metavar="DIR",
-        help="the agent's folder (a run or an export); with --step, and --force for files "
-        "changed since its export",
+        help="the agent's folder (a run, an export or an ensemble); with --step, and --force "
+        "for files changed since its export",
+    )
+    edit.add_argument(
+        "--change-step",
+        type=Path,
+        metavar="DIR",
+        help="as --add-step, for a step already in the view: --step's arguments replace its",
     )
     edit.add_argument(
         "--step",
-        help="YAML: '{train.wrappers.VecJumpGate: {max_jump_m: 0.5}}' (in_training: false is "
-        "added)",
+        help="YAML: '{train.wrappers.VecJumpGate: {max_jump_m: 0.5}}' (--add-step adds "
+        "in_training: false)",
     )
     edit.add_argument("--before", metavar="NAME", help="the entry it goes before (default: first)")
     study = p.add_argument_group(
@@ -137,7 +143,7 @@ _RESUME_OPTIONS = {"resume", "algo", "n_timesteps", "threads", "progress", "expo
 # Options of a study (--seeds), not of one run.
 _STUDY_OPTIONS = ("seeds", "backend", "workers", "address")
 # Options of --add-step (train.edit), which trains nothing.
-_EDIT_OPTIONS = ("add_step", "step", "before")
+_EDIT_OPTIONS = ("add_step", "change_step", "step", "before")
 
 
 def parse_study(argv: Sequence[str] | None = None) -> tuple[Args, tuple[int, ...], Backend] | None:
@@ -185,26 +191,35 @@ def parse_args(argv: Sequence[str] | None = None) -> Args:
     return _args(build_parser().parse_args(argv))
 
 
-def _edit(ns: argparse.Namespace) -> tuple[Path, str, str | None, bool] | None:
-    """``(folder, step, before, force)`` of an ``--add-step`` command line, or None.
+def _edit(ns: argparse.Namespace) -> tuple[str, Path, str, str | None, bool] | None:
+    """``(option, folder, step, before, force)`` of an ``--add-step`` or ``--change-step``
+    command line (``option`` is ``add_step`` or ``change_step``), or None.
 
-    :raises UsageError: for --step or --before without --add-step, --add-step without --step,
-        or a training option beside it.
+    :raises UsageError: for --step or --before alone, both options, one without --step,
+        --before with --change-step, or a training option beside either.
     """
     given = {k for k, v in vars(ns).items() if v is not None}
-    if "add_step" not in given:
+    options = sorted(given & {"add_step", "change_step"})
+    if not options:
         if given & {"step", "before"}:
-            raise UsageError("--step and --before apply to --add-step only")
+            raise UsageError("--step and --before apply to --add-step or --change-step only")
         return None
+    if len(options) == 2:
+        raise UsageError("--add-step and --change-step: give one of them")
+    (option,) = options
+    flag = "--" + option.replace("_", "-")
     if "step" not in given:
-        raise UsageError("--add-step needs --step (the step's YAML)")
+        raise UsageError(f"{flag} needs --step (the step's YAML)")
+    if option == "change_step" and "before" in given:
+        raise UsageError("--before: --change-step changes a step where it is")
     extra = sorted(given - {*_EDIT_OPTIONS, "force"})
     if extra:
+        takes = "--step, --before and --force" if option == "add_step" else "--step and --force"
         raise UsageError(
             ", ".join("--" + k.replace("_", "-") for k in extra)
-            + ": --add-step trains nothing; it takes --step, --before and --force only"
+            + f": {flag} trains nothing; it takes {takes} only"
         )
-    return ns.add_step, ns.step, ns.before, bool(ns.force)
+    return option, getattr(ns, option), ns.step, ns.before, bool(ns.force)
 
 
 def _args(ns: argparse.Namespace) -> Args:
@@ -280,24 +295,33 @@ def main(argv: Sequence[str] | None = None) -> int:
     return 0
 
 
-def _main_edit(folder: Path, step: str, before: str | None, force: bool, command: str) -> int:
-    """``follow-train --add-step``: see :mod:`train.edit`."""
-    from train.edit import add_step
+def _main_edit(
+    option: str, folder: Path, step: str, before: str | None, force: bool, command: str
+) -> int:
+    """``follow-train --add-step`` or ``--change-step``: see :mod:`train.edit`."""
+    from train.edit import add_step, change_step
     from train.export import MANIFEST
 
-    done = add_step(folder, step, before, force=force, command=command)
-    ((name, kwargs),) = done.entry.items()
-    where = f"before {before}" if before else "first"
-    if done.members:  # an ensemble: every member that lacked it
-        listed = ", ".join(f"{m}/" for m in done.members)
+    if option == "change_step":
+        changed = change_step(folder, step, force=force, command=command)
+        what = f"Changed {changed.name} to {changed.new} in"
+        members = changed.members
+    else:
+        added = add_step(folder, step, before, force=force, command=command)
+        ((name, kwargs),) = added.entry.items()
+        where = f"before {before}" if before else "first"
+        what = f"Added {name} {kwargs} to"
+        members = added.members
+    if members:  # an ensemble: every member that lacked it
+        listed = ", ".join(f"{m}/" for m in members)
         print(
-            f"Added {name} {kwargs} to the view of the ensemble in {folder}/ ({where}; left "
-            f"out of training): config.yaml and MODEL_CARD.md of {listed}"
+            f"{what} the view of the ensemble in {folder}/ (its weights unchanged): "
+            f"config.yaml and MODEL_CARD.md of {listed}"
         )
         return 0
+    place = "" if option == "change_step" else f" ({where}; left out of training)"
     print(
-        f"Added {name} {kwargs} to the view of the agent in {folder}/ ({where}; "
-        "left out of training): config.yaml, MODEL_CARD.md"
+        f"{what} the view of the agent in {folder}/{place}: config.yaml, MODEL_CARD.md"
         + (f", {MANIFEST}" if (folder / MANIFEST).exists() else "")
     )
     return 0

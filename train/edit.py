@@ -26,6 +26,12 @@ the scores above were measured without it), and ``config.yaml`` the entry; each 
 replaced atomically. In a folder an export wrote, the manifest (:mod:`train.export`) lists the
 new contents beside the exported ones, so a later export over the folder still recognises it
 as its own; files changed since that export by anything else are refused unless ``force``.
+
+``follow-train --change-step DIR --step STEP`` changes arguments of a step already in the view
+instead (the turn kept behind an occluder, ``held_keep`` with ``ahead_index``, put into a
+shipped agent's command steps): STEP's arguments replace the entry's, the others stay, the
+step keeps its place, the shapes it gives and whether it acts in training. It is checked and
+written as above, and the card's line gives the old values beside the new ones.
 """
 
 from __future__ import annotations
@@ -52,7 +58,7 @@ from train import run as runs
 from train.config import wrapper_specs
 from train.export import MANIFEST, read_manifest, sha256
 
-__all__ = ["EDITED", "AddedStep", "add_step", "parse_step"]
+__all__ = ["EDITED", "AddedStep", "ChangedStep", "add_step", "change_step", "parse_step"]
 
 #: The model card's section that lists the edits made after training.
 EDITED = "## Edited after training"
@@ -71,6 +77,23 @@ class AddedStep:
     entry: dict[str, dict[str, Any]]
     index: int
     before: str | None
+    members: tuple[Path, ...] = ()
+
+
+@dataclass(frozen=True)
+class ChangedStep:
+    """What :func:`change_step` did.
+
+    :param folder: the agent folder. :param name: the step changed. :param old: its arguments
+    before, :param new: after (in the first folder edited). :param index: its place in the
+    list. :param members: for an ensemble, the member folders edited.
+    """
+
+    folder: Path
+    name: str
+    old: dict[str, Any]
+    new: dict[str, Any]
+    index: int
     members: tuple[Path, ...] = ()
 
 
@@ -100,10 +123,10 @@ def parse_step(text: str) -> tuple[str, dict[str, Any]]:
     )
 
 
-def _check_shapes(
+def _shapes(
     config: dict[str, Any], where: Path, inner: list[tuple[str, dict]], name: str, kwargs: dict
-) -> None:
-    """The step keeps the observation and action shapes the steps inside it give."""
+) -> tuple[tuple[tuple[int, ...], tuple[int, ...]], tuple[tuple[int, ...], tuple[int, ...]]]:
+    """``((obs, action) shapes the steps inside give, (obs, action) shapes the step gives)``."""
     spaces = config.get("env_spaces") or {}
     try:
         obs = Box(spaces["observation"]["low"], spaces["observation"]["high"])
@@ -117,11 +140,20 @@ def _check_shapes(
     step = FEATURES[short](**own)
     step.owner = name
     out_obs, out_act = step.bind(view.observation_box, view.action_box, 1)
-    if (out_obs.shape, out_act.shape) != (view.observation_box.shape, view.action_box.shape):
+    inside = (view.observation_box.shape, view.action_box.shape)
+    return inside, (out_obs.shape, out_act.shape)
+
+
+def _check_shapes(
+    config: dict[str, Any], where: Path, inner: list[tuple[str, dict]], name: str, kwargs: dict
+) -> None:
+    """The step keeps the observation and action shapes the steps inside it give."""
+    (obs, act), (out_obs, out_act) = _shapes(config, where, inner, name, kwargs)
+    if (out_obs, out_act) != (obs, act):
         raise ValueError(
-            f"--step {name}: turns observations {view.observation_box.shape} into "
-            f"{out_obs.shape} and actions {view.action_box.shape} into {out_act.shape} there; "
-            "a step added after training must keep both shapes (the network reads them)"
+            f"--step {name}: turns observations {obs} into {out_obs} and actions {act} into "
+            f"{out_act} there; a step added after training must keep both shapes (the network "
+            "reads them)"
         )
 
 
@@ -150,6 +182,21 @@ def _card_line(command: str, entry: dict[str, dict[str, Any]], before: str | Non
     )
 
 
+def _changed_line(command: str, name: str, old: dict[str, Any], given: dict[str, Any]) -> str:
+    def flow(value: dict[str, Any]) -> str:
+        text = yaml.safe_dump(value, default_flow_style=True, sort_keys=False, width=1000)
+        return text.strip()
+
+    was = {k: old.get(k, "default") for k in given}
+    when = datetime.now(UTC).isoformat(timespec="seconds")
+    return (
+        f"- {when}: `{command}` changed `{name}` in the agent's view to `{flow(given)}` (it "
+        f"was `{flow(was)}`). The weights and the normalisation statistics are the ones trained "
+        "with the old arguments, and the held-out return and the scores above were measured "
+        "with them."
+    )
+
+
 def add_step(
     folder: str | Path,
     step: str,
@@ -175,11 +222,7 @@ def add_step(
     if not folder.is_dir():
         raise ValueError(f"--add-step {folder}: no such folder (give an agent's folder)")
     name, kwargs = parse_step(step)
-    wrapper_specs([{name: kwargs}], where="--step")  # the class imports and takes these
-    short = name.rsplit(".", 1)[-1].removeprefix("Vec")
-    if short not in FEATURES:
-        known = ", ".join(f"train.wrappers.Vec{k}" for k in FEATURES)
-        raise ValueError(f"--step {name}: not a step of an agent's view; the steps: {known}")
+    _check_step(name, kwargs)
     flag = kwargs.get(IN_TRAINING, False)
     if flag is not False:
         raise ValueError(
@@ -187,28 +230,91 @@ def add_step(
             f"so it is added with {IN_TRAINING}: false (leave the argument out)"
         )
     entry = {name: {**kwargs, IN_TRAINING: False}}
-    line = _card_line(command, entry, before)
+    edits, members = _apply(folder, name, entry[name], before, force, command, change=False)
+    return AddedStep(folder, entry, edits[0].index, before, members)
+
+
+def change_step(
+    folder: str | Path,
+    step: str,
+    *,
+    force: bool = False,
+    command: str = "follow-train --change-step",
+) -> ChangedStep:
+    """Change arguments of a step already in the view of the agent in ``folder``
+    (``--change-step DIR --step YAML``): the arguments given replace the entry's, the others
+    stay. The agent's weights were trained with the old ones, so the model card says so.
+
+    Checked as :func:`add_step` checks (the arguments, the agent loading, an ensemble's
+    members alike); the step must give the shapes it gave before, and whether it acts in
+    training (``in_training``) is not changed here.
+
+    :raises ValueError: naming the folder, file, step or argument, before anything is written.
+    """
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise ValueError(f"--change-step {folder}: no such folder (give an agent's folder)")
+    name, kwargs = parse_step(step)
+    if not kwargs:
+        raise ValueError(f"--step {name}: give the arguments to change ({{name: {{arg: value}}}})")
+    if IN_TRAINING in kwargs:
+        raise ValueError(
+            f"--step {name}: {IN_TRAINING} is not changed after training (the weights were "
+            "trained with the step acting or not); leave it out"
+        )
+    _check_step(name, kwargs)
+    edits, members = _apply(folder, name, kwargs, None, force, command, change=True)
+    return ChangedStep(folder, name, edits[0].old, edits[0].new, edits[0].index, members)
+
+
+def _check_step(name: str, kwargs: dict[str, Any]) -> None:
+    """The step's class imports and takes ``kwargs``, and is a step of an agent's view."""
+    wrapper_specs([{name: kwargs}], where="--step")
+    short = name.rsplit(".", 1)[-1].removeprefix("Vec")
+    if short not in FEATURES:
+        known = ", ".join(f"train.wrappers.Vec{k}" for k in FEATURES)
+        raise ValueError(f"--step {name}: not a step of an agent's view; the steps: {known}")
+
+
+def _apply(
+    folder: Path,
+    name: str,
+    kwargs: dict[str, Any],
+    before: str | None,
+    force: bool,
+    command: str,
+    *,
+    change: bool,
+) -> tuple[list[_Edit], tuple[Path, ...]]:
+    """Plan the edit of the agent in ``folder`` (or of every member of the ensemble there),
+    check it whole, write it; returns the edits written and, for an ensemble, their folders."""
     if not (folder / ENSEMBLE).is_file():
-        edit = _plan(folder, entry, before, force, line, member=False)
-        assert edit is not None  # a lone agent that has the step is refused in _plan
+        edit = _plan(folder, name, kwargs, before, force, command, change=change, member=False)
+        assert edit is not None  # a lone agent with nothing to do is refused in _plan
         _write(edit)
-        return AddedStep(folder, entry, edit.index, before)
+        return [edit], ()
     try:
         members = member_folders(folder / ENSEMBLE)
     except AgentLoadError as e:
-        raise ValueError(f"--add-step {folder}: {e}") from None
-    edits = [_plan(m, entry, before, force, line, member=True) for m in members]
+        raise ValueError(f"{_option(change)} {folder}: {e}") from None
+    edits = [
+        _plan(m, name, kwargs, before, force, command, change=change, member=True) for m in members
+    ]
     todo = [e for e in edits if e is not None]
     if not todo:
+        done = "has these arguments in" if change else "is already in"
         raise ValueError(
-            f"--step {name}: already in the view of every member of the ensemble {folder}; a "
-            "step is added once"
+            f"--step {name}: {done} the view of every member of the ensemble {folder}; "
+            "nothing to do"
         )
-    _check_ensemble_loads(folder, members, edits)
+    _check_ensemble_loads(folder, members, edits, change)
     for edit in todo:
         _write(edit)
-    first = next(e for e in edits if e is not None)
-    return AddedStep(folder, entry, first.index, before, tuple(e.folder for e in todo))
+    return todo, tuple(e.folder for e in todo)
+
+
+def _option(change: bool) -> str:
+    return "--change-step" if change else "--add-step"
 
 
 @dataclass(frozen=True)
@@ -220,23 +326,28 @@ class _Edit:
     card: str
     index: int
     exported: bool
+    old: dict[str, Any] | None = None  # a changed step's arguments before and after
+    new: dict[str, Any] | None = None
 
 
 def _plan(
     folder: Path,
-    entry: dict[str, dict[str, Any]],
+    name: str,
+    kwargs: dict[str, Any],
     before: str | None,
     force: bool,
-    line: str,
+    command: str,
     *,
+    change: bool,
     member: bool,
 ) -> _Edit | None:
-    """The edit that puts ``entry`` into the view of the agent in ``folder``, checked; for an
-    ensemble's ``member``, None if it has this very entry already."""
-    ((name, kwargs),) = entry.items()
+    """The edit that adds the step ``name`` with ``kwargs`` to the view of the agent in
+    ``folder`` (``change``: that changes those arguments of the step there), checked; for an
+    ensemble's ``member``, None if it has the entry as the edit would leave it already."""
+    option = _option(change)
     if not (folder / runs.MODEL).is_file():
         raise ValueError(
-            f"--add-step {folder}: no {runs.MODEL} in it; give an agent's folder (a run or an "
+            f"{option} {folder}: no {runs.MODEL} in it; give an agent's folder (a run or an "
             "export) or an ensemble's"
         )
     config = runs.read_config(folder)
@@ -244,23 +355,52 @@ def _plan(
     entries = wrapper_entries(config["hyperparams"].get("vec_env_wrapper"))  # to write back
     specs = wrapper_specs(entries, where=str(where))
     names = [n for n, _ in specs]
-    if name in names:
-        if member and specs[names.index(name)][1] == kwargs:
-            return None  # written by an earlier run of the same command
-        raise ValueError(
-            f"--step {name}: already in the agent's view (entry {names.index(name) + 1} of "
-            f"{where}); a step is added once"
+    listed = ", ".join(names) or "none"
+    old = new = None
+    if change:
+        if name not in names:
+            raise ValueError(
+                f"--step {name}: not in the agent's view ({where}); its vec_env_wrapper "
+                f"entries: {listed}"
+            )
+        index = names.index(name)
+        old = dict(specs[index][1])
+        new = {**old, **kwargs}
+        if new == old:
+            if member:
+                return None  # written by an earlier run of the same command
+            raise ValueError(f"--step {name}: changes nothing; {where} has these arguments")
+        (_, was), (_, now) = (
+            _shapes(config, where, specs[:index], name, args) for args in (old, new)
         )
-    if before is None:
-        index = 0
-    elif before in names:
-        index = names.index(before)
+        if now != was:
+            raise ValueError(
+                f"--step {name}: would turn the observations and actions into {now} where they "
+                f"were {was}; a step changed after training must keep its shapes (the network "
+                "reads them)"
+            )
+        view = [*entries[:index], {name: new}, *entries[index + 1 :]]
+        line = _changed_line(command, name, old, kwargs)
     else:
-        raise ValueError(
-            f"--before {before}: not in the agent's view ({where}); its vec_env_wrapper "
-            "entries: " + (", ".join(names) or "none")
-        )
-    _check_shapes(config, where, specs[:index], name, kwargs)
+        if name in names:
+            if member and specs[names.index(name)][1] == kwargs:
+                return None  # written by an earlier run of the same command
+            raise ValueError(
+                f"--step {name}: already in the agent's view (entry {names.index(name) + 1} of "
+                f"{where}); a step is added once"
+            )
+        if before is None:
+            index = 0
+        elif before in names:
+            index = names.index(before)
+        else:
+            raise ValueError(
+                f"--before {before}: not in the agent's view ({where}); its vec_env_wrapper "
+                f"entries: {listed}"
+            )
+        _check_shapes(config, where, specs[:index], name, kwargs)
+        view = [*entries[:index], {name: kwargs}, *entries[index:]]
+        line = _card_line(command, {name: kwargs}, before)
     manifest = read_manifest(folder)
     if manifest is not None and not force:
         changed = [
@@ -270,20 +410,22 @@ def _plan(
         ]
         if changed:
             raise ValueError(
-                f"--add-step {folder}: {', '.join(changed)} changed since the export that wrote "
+                f"{option} {folder}: {', '.join(changed)} changed since the export that wrote "
                 "the folder; give --force to edit it all the same"
             )
     edited = copy.deepcopy(config)
-    edited["hyperparams"]["vec_env_wrapper"] = [*entries[:index], entry, *entries[index:]]
+    edited["hyperparams"]["vec_env_wrapper"] = view
     _check_loads(folder, edited)  # the dearest check last: it loads the model
     card_path = folder / runs.CARD
     card = card_path.read_text(encoding="utf-8") if card_path.is_file() else ""
     card = card.rstrip("\n") + ("\n" if card else "")
     card += ("" if EDITED in card else f"\n{EDITED}\n\n") + line + "\n"  # one list
-    return _Edit(folder, edited, card, index, manifest is not None)
+    return _Edit(folder, edited, card, index, manifest is not None, old, new)
 
 
-def _check_ensemble_loads(folder: Path, members: list[Path], edits: list[_Edit | None]) -> None:
+def _check_ensemble_loads(
+    folder: Path, members: list[Path], edits: list[_Edit | None], change: bool
+) -> None:
     """The ensemble loads with its members' new views (they must stay alike), as make_policy
     would load it: from a copy of the ensemble file and of each member's agent files."""
     from policies.learned.ensemble import EnsemblePolicy
@@ -310,7 +452,7 @@ def _check_ensemble_loads(folder: Path, members: list[Path], edits: list[_Edit |
             for temporary in sorted(places, key=len, reverse=True):
                 message = message.replace(temporary, places[temporary])
             raise ValueError(
-                f"--add-step {folder}: the edited ensemble would not load: {message}"
+                f"{_option(change)} {folder}: the edited ensemble would not load: {message}"
             ) from None
 
 

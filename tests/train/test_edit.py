@@ -12,7 +12,7 @@ import yaml
 
 from policies.learned.ppo import AGENTS, PPOPolicy
 from train.cli import main
-from train.edit import EDITED, add_step, parse_step
+from train.edit import EDITED, add_step, change_step, parse_step
 from train.export import MANIFEST, check_export, export_agent, sha256
 
 GATE = "train.wrappers.VecJumpGate"
@@ -195,7 +195,7 @@ def test_the_command_line_adds_the_step_or_says_in_one_line_why_not(
     )
     for argv, error in [
         (["--add-step", str(agent)], "--add-step needs --step"),
-        (["--step", GATE], "--step and --before apply to --add-step only"),
+        (["--step", GATE], "--step and --before apply to --add-step or --change-step only"),
         (["--add-step", str(agent), "--step", GATE, "--seed", "3"], "--seed: --add-step trains"),
         (["--add-step", str(agent), "--step", GATE], "already in the agent's view"),
     ]:
@@ -234,7 +234,7 @@ def test_a_step_goes_into_every_member_of_an_ensemble(
         check_export(ensemble / member)  # each member's manifest knows its new files
     EnsemblePolicy(ensemble)  # the members still see the env alike
     # run again: every member has it
-    with pytest.raises(ValueError, match="already in the view of every member"):
+    with pytest.raises(ValueError, match="is already in the view of every member"):
         add_step(ensemble, STEP, AGE)
 
 
@@ -272,3 +272,116 @@ def test_a_step_that_would_leave_the_members_seeing_the_env_apart_is_refused(
     )
     assert ".add-step-" not in str(error.value)  # no temporary folder named
     assert {m: _files(ensemble / m) for m in files} == files
+
+
+INCREMENTAL = "train.wrappers.VecIncrementalAction"
+# ppo_ahead's turn kept behind an occluder (README, "Keeping the turn through a gap, tried"):
+# the age is observation entry 3, the reading ahead entry 2
+KEEP = f"{{{INCREMENTAL}: {{held_index: 3, held_keep: [false, true], ahead_index: 2}}}}"
+
+
+@pytest.fixture
+def ahead(tmp_path: Path) -> Path:
+    folder = tmp_path / "ahead"
+    shutil.copytree(AGENTS / "ppo_ahead", folder)
+    return folder
+
+
+def test_a_step_in_the_view_gets_new_arguments_and_the_card_says_which(
+    ahead: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    recorded = json.loads((ahead / MANIFEST).read_text())
+    before = _view(ahead)
+    assert main(["--change-step", str(ahead), "--step", KEEP]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith(f"Changed {INCREMENTAL} to {{'max_change': [0.2, 0.15], ")
+    assert "in the view of the agent in" in out
+    view = _view(ahead)
+    index = [next(iter(e)) for e in before].index(INCREMENTAL)
+    assert view[:index] == before[:index]
+    assert view[index + 1 :] == before[index + 1 :]
+    assert view[index] == {
+        INCREMENTAL: {
+            "max_change": [0.2, 0.15],
+            "reading_index": 0,
+            "held_index": 3,
+            "held_keep": [False, True],
+            "ahead_index": 2,
+        }
+    }
+    card = (ahead / "MODEL_CARD.md").read_text()
+    assert (
+        f"changed `{INCREMENTAL}` in the agent's view to `{{held_index: 3, held_keep: [false, "
+        "true], ahead_index: 2}` (it was `{held_index: default, held_keep: default, "
+        "ahead_index: default}`)" in card
+    )
+    assert "measured with them" in card
+    manifest = json.loads((ahead / MANIFEST).read_text())
+    assert manifest["files"]["config.yaml"] == [
+        *recorded["files"]["config.yaml"],
+        sha256(ahead / "config.yaml"),
+    ]
+    check_export(ahead)
+    # the changed agent loads and keeps its turn through a gap behind the column
+    policy = PPOPolicy(ahead)
+    policy.reset()
+    assert np.all(np.isfinite(policy.act(np.array([1.0, 0.0, 1.0], dtype=np.float32))))
+    with pytest.raises(ValueError, match="changes nothing"):
+        change_step(ahead, KEEP)
+
+
+@pytest.mark.parametrize(
+    ("step", "error"),
+    [
+        (GATE, "give the arguments to change"),
+        (f"{{{GATE}: {{in_training: true}}}}", "in_training is not changed after training"),
+        ("{train.wrappers.VecStackFrames: {n_stack: 2}}", r"must keep its shapes"),
+        (
+            f"{{{INCREMENTAL}: {{held_index: 3, held_keep: [true]}}}}",
+            r"held_keep=\[True\] is out of range",
+        ),
+        (f"{{{INCREMENTAL}: {{held_index: 3}}}}", "serves nothing"),
+        (f"{{{INCREMENTAL}: {{jump: 1}}}}", "'jump' is not one of its arguments"),
+        ("{train.wrappers.VecRescaleObservation: {a: 1}}", "does not import"),
+        ("{train.wrappers.VecShapedReward: {alive_bonus: 2.0}}", "not a step of an agent's"),
+    ],
+)
+def test_a_bad_change_is_refused_and_nothing_is_written(ahead: Path, step: str, error: str) -> None:
+    files = _files(ahead)
+    with pytest.raises(ValueError, match=error):
+        change_step(ahead, step)
+    assert _files(ahead) == files
+
+
+def test_a_step_not_in_the_view_is_named_with_the_view(agent: Path) -> None:
+    files = _files(agent)
+    with pytest.raises(ValueError, match=f"--step {GATE}: not in the agent's view .*entries: "):
+        change_step(agent, STEP)
+    assert _files(agent) == files
+
+
+def test_a_change_goes_into_every_member_of_an_ensemble(ensemble: Path) -> None:
+    step = f"{{{INCREMENTAL}: {{max_change: [0.2, 0.1]}}}}"
+    done = change_step(ensemble, step)
+    assert done.members == (ensemble / "seed-0", ensemble / "seed-1")
+    assert done.old["max_change"] == [0.2, 0.15]
+    assert done.new["max_change"] == [0.2, 0.1]
+    assert _view(ensemble / "seed-0") == _view(ensemble / "seed-1")
+    with pytest.raises(ValueError, match="has these arguments in the view of every member"):
+        change_step(ensemble, step)
+
+
+def test_the_command_line_refuses_mixed_edit_options_in_one_line(
+    ahead: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    for argv, error in [
+        (["--change-step", str(ahead)], "--change-step needs --step"),
+        (["--change-step", str(ahead), "--step", KEEP, "--before", AGE], "--before: --change"),
+        (["--change-step", str(ahead), "--add-step", str(ahead), "--step", KEEP], "give one"),
+        (["--change-step", str(ahead), "--step", KEEP, "--seed", "3"], "it takes --step and"),
+    ]:
+        assert main(argv) == 2
+        err = capsys.readouterr().err
+        assert err.startswith("follow-train: error: "), err
+        assert error in err, err
+        assert err.count("\n") == 1
