@@ -84,6 +84,9 @@ def test_the_edited_agent_acts_as_before_until_the_detection_jumps(agent: Path) 
 def test_a_second_step_adds_a_line_to_the_same_section(tmp_path: Path) -> None:
     agent = tmp_path / "line"
     shutil.copytree(AGENTS / "ppo_line", agent)  # its view has room for two steps
+    card = (agent / "MODEL_CARD.md").read_text()
+    earlier = card.split(EDITED)[1].strip().splitlines() if EDITED in card else []
+    configs = len(json.loads((agent / MANIFEST).read_text())["files"]["config.yaml"])
     add_step(agent, f"{{train.wrappers.VecScaleObservation: {{scale: {[1.0] * 25}}}}}")
     add_step(agent, "{train.wrappers.VecJumpGate: {max_jump_m: null}}")
     assert [next(iter(e)) for e in _view(agent)[:2]] == [GATE, "train.wrappers.VecScaleObservation"]
@@ -92,9 +95,10 @@ def test_a_second_step_adds_a_line_to_the_same_section(tmp_path: Path) -> None:
     assert card.count(EDITED) == 1
     assert card.count("to the agent's view") == 2
     section = card.split(EDITED)[1].strip().splitlines()
-    assert len(section) == 2  # one bullet a step, no blank line between
+    assert len(section) == len(earlier) + 2  # one bullet an edit, no blank line between
+    assert section[: len(earlier)] == earlier
     assert all(line.startswith("- ") for line in section)
-    assert len(json.loads((agent / MANIFEST).read_text())["files"]["config.yaml"]) == 3
+    assert len(json.loads((agent / MANIFEST).read_text())["files"]["config.yaml"]) == configs + 2
 
 
 @pytest.mark.parametrize(
