@@ -230,7 +230,8 @@ def add_step(
             f"so it is added with {IN_TRAINING}: false (leave the argument out)"
         )
     entry = {name: {**kwargs, IN_TRAINING: False}}
-    edits, members = _apply(folder, name, entry[name], before, force, command, change=False)
+    request = _Request(name, entry[name], before, force, command, change=False)
+    edits, members = _apply(folder, request)
     return AddedStep(folder, entry, edits[0].index, before, members)
 
 
@@ -263,7 +264,7 @@ def change_step(
             "trained with the step acting or not); leave it out"
         )
     _check_step(name, kwargs)
-    edits, members = _apply(folder, name, kwargs, None, force, command, change=True)
+    edits, members = _apply(folder, _Request(name, kwargs, None, force, command, change=True))
     return ChangedStep(folder, name, edits[0].old, edits[0].new, edits[0].index, members)
 
 
@@ -276,20 +277,25 @@ def _check_step(name: str, kwargs: dict[str, Any]) -> None:
         raise ValueError(f"--step {name}: not a step of an agent's view; the steps: {known}")
 
 
-def _apply(
-    folder: Path,
-    name: str,
-    kwargs: dict[str, Any],
-    before: str | None,
-    force: bool,
-    command: str,
-    *,
-    change: bool,
-) -> tuple[list[_Edit], tuple[Path, ...]]:
+@dataclass(frozen=True)
+class _Request:
+    """An edit asked for: add the step ``name`` with ``kwargs`` (``before`` an entry), or
+    (``change``) give the step there those arguments; ``force`` and ``command`` as given."""
+
+    name: str
+    kwargs: dict[str, Any]
+    before: str | None
+    force: bool
+    command: str
+    change: bool
+
+
+def _apply(folder: Path, request: _Request) -> tuple[list[_Edit], tuple[Path, ...]]:
     """Plan the edit of the agent in ``folder`` (or of every member of the ensemble there),
     check it whole, write it; returns the edits written and, for an ensemble, their folders."""
+    name, change = request.name, request.change
     if not (folder / ENSEMBLE).is_file():
-        edit = _plan(folder, name, kwargs, before, force, command, change=change, member=False)
+        edit = _plan(folder, request, member=False)
         assert edit is not None  # a lone agent with nothing to do is refused in _plan
         _write(edit)
         return [edit], ()
@@ -297,9 +303,7 @@ def _apply(
         members = member_folders(folder / ENSEMBLE)
     except AgentLoadError as e:
         raise ValueError(f"{_option(change)} {folder}: {e}") from None
-    edits = [
-        _plan(m, name, kwargs, before, force, command, change=change, member=True) for m in members
-    ]
+    edits = [_plan(m, request, member=True) for m in members]
     todo = [e for e in edits if e is not None]
     if not todo:
         done = "has these arguments in" if change else "is already in"
@@ -330,20 +334,11 @@ class _Edit:
     new: dict[str, Any] | None = None
 
 
-def _plan(
-    folder: Path,
-    name: str,
-    kwargs: dict[str, Any],
-    before: str | None,
-    force: bool,
-    command: str,
-    *,
-    change: bool,
-    member: bool,
-) -> _Edit | None:
-    """The edit that adds the step ``name`` with ``kwargs`` to the view of the agent in
-    ``folder`` (``change``: that changes those arguments of the step there), checked; for an
-    ensemble's ``member``, None if it has the entry as the edit would leave it already."""
+def _plan(folder: Path, request: _Request, *, member: bool) -> _Edit | None:
+    """The edit ``request`` asks of the agent in ``folder``, checked; for an ensemble's
+    ``member``, None if it has the entry as the edit would leave it already."""
+    name, kwargs, before, change = request.name, request.kwargs, request.before, request.change
+    force, command = request.force, request.command
     option = _option(change)
     if not (folder / runs.MODEL).is_file():
         raise ValueError(
