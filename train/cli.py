@@ -142,7 +142,7 @@ _RESUME_OPTIONS = {"resume", "algo", "n_timesteps", "threads", "progress", "expo
 
 # Options of a study (--seeds), not of one run.
 _STUDY_OPTIONS = ("seeds", "backend", "workers", "address")
-# Options of --add-step (train.edit), which trains nothing.
+# Options of --add-step and --change-step (train.edit), which train nothing.
 _EDIT_OPTIONS = ("add_step", "change_step", "step", "before")
 
 

@@ -50,7 +50,7 @@ import yaml
 
 from eval.atomic import atomic_write_text
 from policies.learned.boxes import Box
-from policies.learned.ensemble import ENSEMBLE, member_folders
+from policies.learned.ensemble import ENSEMBLE, EnsemblePolicy, member_folders
 from policies.learned.feature import IN_TRAINING, split_in_training, wrapper_entries
 from policies.learned.features import FEATURES, Pipeline
 from policies.learned.ppo import AgentLoadError
@@ -423,8 +423,6 @@ def _check_ensemble_loads(
 ) -> None:
     """The ensemble loads with its members' new views (they must stay alike), as make_policy
     would load it: from a copy of the ensemble file and of each member's agent files."""
-    from policies.learned.ensemble import EnsemblePolicy
-
     with tempfile.TemporaryDirectory(prefix=".add-step-") as tmp:
         listed = []
         for k, (member, edit) in enumerate(zip(members, edits, strict=True)):
