@@ -157,41 +157,50 @@ def _check_shapes(
         )
 
 
+def _linked_copy(folder: Path, config: dict[str, Any], dest: Path) -> None:
+    """``dest`` made the agent of ``folder`` with ``config``: its model and statistics linked,
+    the configuration written, for a load check that writes nothing in ``folder``."""
+    for name in (runs.MODEL, runs.NORMALIZATION):
+        if (folder / name).exists():
+            os.symlink((folder / name).resolve(), dest / name)
+    runs.write_config(dest, config)
+
+
 def _check_loads(folder: Path, config: dict[str, Any]) -> None:
     """The agent loads with ``config`` as make_policy would load it (model and statistics)."""
     from policies.learned.ppo import PPOPolicy
 
     with tempfile.TemporaryDirectory(prefix=".add-step-") as tmp:
-        for name in (runs.MODEL, runs.NORMALIZATION):
-            if (folder / name).exists():
-                os.symlink((folder / name).resolve(), Path(tmp) / name)
-        runs.write_config(Path(tmp), config)
+        _linked_copy(folder, config, Path(tmp))
         PPOPolicy(tmp, name=str(folder))
+
+
+def _flow(value: dict[str, Any]) -> str:
+    """``value`` as one line of flow-style YAML, for a card's line."""
+    return yaml.safe_dump(value, default_flow_style=True, sort_keys=False, width=1000).strip()
+
+
+def _now() -> str:
+    """The UTC time to the second, ISO 8601: when an edit was made."""
+    return datetime.now(UTC).isoformat(timespec="seconds")
 
 
 def _card_line(command: str, entry: dict[str, dict[str, Any]], before: str | None) -> str:
     ((name, kwargs),) = entry.items()
-    args = yaml.safe_dump(kwargs, default_flow_style=True, sort_keys=False, width=1000)
-    args = args.strip()
     where = f"before `{before}`" if before else "first (innermost)"
-    when = datetime.now(UTC).isoformat(timespec="seconds")
     return (
-        f"- {when}: `{command}` added `{name}: {args}` to the agent's view, {where}. It was not "
-        "trained with it (`in_training: false`): the weights and the normalisation statistics "
-        "are unchanged, and the held-out return and the scores above were measured without it."
+        f"- {_now()}: `{command}` added `{name}: {_flow(kwargs)}` to the agent's view, {where}. "
+        "It was not trained with it (`in_training: false`): the weights and the normalisation "
+        "statistics are unchanged, and the held-out return and the scores above were measured "
+        "without it."
     )
 
 
 def _changed_line(command: str, name: str, old: dict[str, Any], given: dict[str, Any]) -> str:
-    def flow(value: dict[str, Any]) -> str:
-        text = yaml.safe_dump(value, default_flow_style=True, sort_keys=False, width=1000)
-        return text.strip()
-
     was = {k: old.get(k, "default") for k in given}
-    when = datetime.now(UTC).isoformat(timespec="seconds")
     return (
-        f"- {when}: `{command}` changed `{name}` in the agent's view to `{flow(given)}` (it "
-        f"was `{flow(was)}`). The weights and the normalisation statistics are the ones trained "
+        f"- {_now()}: `{command}` changed `{name}` in the agent's view to `{_flow(given)}` (it "
+        f"was `{_flow(was)}`). The weights and the normalisation statistics are the ones trained "
         "with the old arguments, and the held-out return and the scores above were measured "
         "with them."
     )
@@ -428,11 +437,7 @@ def _check_ensemble_loads(
         for k, (member, edit) in enumerate(zip(members, edits, strict=True)):
             copy_ = Path(tmp) / f"member-{k}"
             copy_.mkdir()
-            for name in (runs.MODEL, runs.NORMALIZATION):
-                if (member / name).exists():
-                    os.symlink((member / name).resolve(), copy_ / name)
-            config = runs.read_config(member) if edit is None else edit.config
-            runs.write_config(copy_, config)
+            _linked_copy(member, runs.read_config(member) if edit is None else edit.config, copy_)
             listed.append(copy_.name)
         (Path(tmp) / ENSEMBLE).write_text(yaml.safe_dump({"members": listed}), encoding="utf-8")
         try:
@@ -467,5 +472,5 @@ def _record(folder: Path, texts: dict[str, str]) -> None:
         hashes = document["files"].setdefault(name, [])
         if digest not in hashes:
             hashes.append(digest)
-    document.setdefault("edited_utc", []).append(datetime.now(UTC).isoformat(timespec="seconds"))
+    document.setdefault("edited_utc", []).append(_now())
     atomic_write_text(folder / MANIFEST, json.dumps(document, indent=2) + "\n")
