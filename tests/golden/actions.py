@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -67,11 +68,15 @@ def record_case(folder: str, task: str, scenario: str) -> tuple[np.ndarray, np.n
     return obs, log[actions].to_numpy(dtype=np.float32)[:-1]  # the policies act in float32
 
 
-def replay(folder: str, task: str, obs: np.ndarray) -> np.ndarray:
-    """The actions of the agent built afresh (``make_policy``) on the observations ``obs``."""
-    policy = make_policy(SHIPPED[folder][0], task)
+def actions_of(policy: Any, obs: np.ndarray) -> np.ndarray:
+    """What ``policy``, reset, does on the observations ``obs``, one row a step."""
     policy.reset()
     return np.array([np.asarray(policy.act(row), dtype=np.float64) for row in obs])
+
+
+def replay(folder: str, task: str, obs: np.ndarray) -> np.ndarray:
+    """The actions of the agent built afresh (``make_policy``) on the observations ``obs``."""
+    return actions_of(make_policy(SHIPPED[folder][0], task), obs)
 
 
 def key(folder: str, scenario: str) -> str:
