@@ -229,6 +229,18 @@ class LaneMemory:
         self.reset()
         self._lanes = [self._memory() for _ in range(n)]
 
+    def reset_lanes(self, lanes: np.ndarray) -> None:
+        """Start new episodes in the lanes flagged in ``lanes`` (bool, one per lane): their
+        memory as after :meth:`reset`, the others' kept."""
+        for i in np.flatnonzero(lanes):
+            self.reset()
+            self._lanes[i] = self._memory()
+
+    def peek(self, obs: np.ndarray, lane: int) -> np.ndarray:
+        """The action lane ``lane`` would take on ``obs``, its memory left as it was."""
+        self._set_memory(self._lanes[lane])
+        return np.asarray(self.act(obs), dtype=np.float32)
+
     def _act_lanes(self, rows: np.ndarray) -> np.ndarray:
         """Actions ``(n, m)`` float32 for validated observation rows ``(n, k)``."""
         lanes = getattr(self, "_lanes", None)

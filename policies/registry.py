@@ -49,7 +49,7 @@ from typing import Any, Generic, TypeVar
 
 from policies import coordinate, gsmpn, holonomic, mpn, pid_line, pn
 from policies.base import Policy
-from policies.learned import ensemble, ppo
+from policies.learned import ensemble, hint, ppo
 from policies.space import SearchSpace, check_space
 
 PolicyFactory = Callable[[], Policy]
@@ -292,3 +292,5 @@ for _folder, (_name, _task) in ppo.SHIPPED.items():
 # A folder with an ensemble.yaml (a seed study's) is the mean of its members' actions.
 register_resolver(ensemble.resolve_path)
 register_resolver(ppo.resolve_path)
+# A learned agent's view may hold a law's command (policies.learned.hint), built by name here.
+hint.use_laws(make_policy)

@@ -56,6 +56,7 @@ from policies.learned.features import (
     FrameStack,
     IncrementalAction,
     JumpGate,
+    LawHint,
     ObservationAge,
     RescaleAction,
     ScaleObservation,
@@ -68,6 +69,7 @@ __all__ = [
     "ConcatVecEnv",
     "VecIncrementalAction",
     "VecJumpGate",
+    "VecLawHint",
     "VecObservationAge",
     "VecRescaleAction",
     "VecScaleObservation",
@@ -103,6 +105,13 @@ class VecJumpGate(FeatureWrapper):
     further in a step than the person can walk (``max_jump_m``, ``max_jump_px``)."""
 
     feature_class = JumpGate
+
+
+class VecLawHint(FeatureWrapper):
+    """:class:`policies.learned.hint.LawHint`: appends a guidance law's command on the
+    observation (``law``), in the agent's action units (``units``)."""
+
+    feature_class = LawHint
 
 
 class VecScaleObservation(FeatureWrapper):

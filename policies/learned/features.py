@@ -47,6 +47,7 @@ from follow_env.sim.checks import check_number, is_integer, out_of_range
 from policies.learned.boxes import LEGACY_ACTION_NAMES, Box, agent_to_si, as_numbers
 from policies.learned.feature import Feature, split_in_training
 from policies.learned.gate import JumpGate
+from policies.learned.hint import LawHint
 from policies.learned.incremental import IncrementalAction
 
 __all__ = [
@@ -57,6 +58,7 @@ __all__ = [
     "FrameStack",
     "IncrementalAction",
     "JumpGate",
+    "LawHint",
     "NormalizeObservation",
     "ObservationAge",
     "Pipeline",
@@ -318,6 +320,7 @@ FEATURES: dict[str, type[Feature]] = {
     "IncrementalAction": IncrementalAction,
     "StackFrames": FrameStack,
     "JumpGate": JumpGate,
+    "LawHint": LawHint,
 }
 """Feature steps by name (an agent's ``vec_env_wrapper`` entry ``train.wrappers.VecX`` names
 step ``X``)."""

@@ -5,7 +5,8 @@ and sees the command in force (:class:`IncrementalAction`, a step of the agent's
 Smooth by construction: the commanded acceleration is bounded, and PPO's exploration noise
 becomes a random walk of the command. While the detection is held (the perception repeats its
 last values) the command can be held to a floor (no backing up blind) and chosen entries kept
-as they were (the turn kept behind an occluder).
+as they were (the turn kept behind an occluder). Given a prior command in the view (a guidance
+law's, :class:`~policies.learned.hint.LawHint`), an action of zero tracks it.
 """
 
 from __future__ import annotations
@@ -61,6 +62,13 @@ class IncrementalAction(Feature):
         leaves the agent free to turn back towards where it last saw them.
     :param behind_margin_m: how much nearer than the held distance the reading ahead must read
         (m, > 0).
+    :param prior_index: the first of the observation entries holding a prior command, one per
+        action entry in this step's units (:class:`~policies.learned.hint.LawHint`'s law), or
+        None. Given, the step is ``max_change * clip(a + prior_gain * (prior - u) /
+        max_change, -1, 1)``: an action of zero tracks the prior command at up to the bound,
+        and the agent learns where to depart from it.
+    :param prior_gain: the share of the distance to the prior command closed a step (in
+        (0, 1], within the bound).
     """
 
     def __init__(
@@ -73,6 +81,8 @@ class IncrementalAction(Feature):
         held_keep: Sequence[bool] | None = None,
         ahead_index: int | None = None,
         behind_margin_m: float = 0.2,
+        prior_index: int | None = None,
+        prior_gain: float = 1.0,
     ) -> None:
         self.given = max_change
         self.reading_index = reading_index
@@ -82,6 +92,8 @@ class IncrementalAction(Feature):
         self.given_keep = held_keep
         self.ahead_index = ahead_index
         self.behind_margin_m = behind_margin_m
+        self.prior_index = prior_index
+        self.prior_gain = prior_gain
 
     def bind(self, obs: Box, act: Box, n: int) -> tuple[Box, Box]:
         change = self._steps("max_change", self.given, act)
@@ -89,7 +101,7 @@ class IncrementalAction(Feature):
             None if self.given_brake is None else self._steps("brake_change", self.given_brake, act)
         )
         n_obs = obs.shape[0]
-        for field in ("reading_index", "held_index", "ahead_index"):
+        for field in ("reading_index", "held_index", "ahead_index", "prior_index"):
             index = getattr(self, field)
             if index is not None and not (is_integer(index) and 0 <= index < n_obs):
                 raise ValueError(
@@ -101,6 +113,17 @@ class IncrementalAction(Feature):
         self._low = act.low.astype(np.float64)
         self._high = act.high.astype(np.float64)
         self._check_held_options()
+        if self.prior_index is not None:
+            last = self.prior_index + act.shape[0] - 1
+            if last >= n_obs:
+                raise ValueError(
+                    f"{self.owner}.prior_index={self.prior_index!r} is out of range: the "
+                    f"{act.shape[0]} prior entries must lie in [0, {n_obs - 1}]"
+                )
+            self.prior_gain = check_number(
+                f"{self.owner}.prior_gain", self.prior_gain, 0.0, 1.0, lo_open=True
+            )
+        self._prior = np.zeros((n, act.shape[0]))
         self._floor = self._held_floor(act)
         self._keep = self._held_keep(act)
         self._behind = np.zeros(n, dtype=bool)
@@ -185,8 +208,10 @@ class IncrementalAction(Feature):
 
     def act(self, action: np.ndarray) -> np.ndarray:
         a = np.clip(np.asarray(action, dtype=np.float64).reshape(self._command.shape), -1, 1)
-        a[~self._reading] = 0.0
         u = self._command
+        if self.prior_index is not None:  # towards the prior command, the agent's on top
+            a = np.clip(a + self.prior_gain * (self._prior - u) / self.max_change, -1.0, 1.0)
+        a[~self._reading] = 0.0
         moved = u + self.max_change * a
         if self.brake_change is not None:  # towards rest: down by up to brake_change, to zero
             slowed = np.sign(u) * np.maximum(np.abs(u) - self.brake_change * np.abs(a), 0.0)
@@ -211,6 +236,9 @@ class IncrementalAction(Feature):
         return self._join(obs, self._command[lane])
 
     def _note_reading(self, obs: np.ndarray) -> None:
+        if self.prior_index is not None:
+            k = self.prior_index
+            self._prior = np.asarray(obs, dtype=np.float64)[:, k : k + self._command.shape[1]]
         if self.reading_index is not None:
             self._reading = np.asarray(obs)[:, self.reading_index] > 0
         if self.held_index is not None:

@@ -1,0 +1,94 @@
+"""A guidance law's command as part of the agent's view, numpy only (:class:`LawHint`).
+
+The agent sees what a law (``pn:thesis``, say) would command on the same observation, in the
+agent's action units; :class:`~policies.learned.incremental.IncrementalAction` with
+``prior_index`` can then track that command, so that an agent whose action is zero drives as a
+rate-limited copy of the law and learns only where to depart from it (residual learning).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import numpy as np
+
+from policies.base import LaneMemory
+from policies.learned.boxes import Box, as_numbers
+from policies.learned.feature import Feature
+
+__all__ = ["LawHint", "use_laws"]
+
+# How a law's name becomes a law: the registry, which imports this module (through the learned
+# agents' loaders), hands in its make_policy when it is imported (policies.registry).
+_make_law: Callable[[str], Any] | None = None
+
+
+def use_laws(make: Callable[[str], Any]) -> None:
+    """Set how :class:`LawHint` builds its law from a name (:func:`policies.make_policy`)."""
+    global _make_law
+    _make_law = make
+
+
+class LawHint(Feature):
+    """Append the command of ``law`` on the observation, divided by ``units``, clipped to
+    [-1, 1].
+
+    The law sees the observation this step is given (list it after the gate on jumps, so the
+    law reads what the agent reads; before :class:`ScaleObservation`, so it reads metres and
+    pixels), one copy of its memory per lane, reset with the lane's episode.
+
+    :param law: a guidance law's name (:func:`policies.make_policy`), e.g. ``"pn:thesis"``.
+    :param units: one value per action entry: the law's command that reads as 1 (SI, in the
+        entry's unit; the agent's ranges of ``RescaleAction``, e.g. ``[1.484375, 2.0]``).
+    """
+
+    def __init__(self, law: str = "pn:thesis", units: Sequence[float] = (1.484375, 2.0)) -> None:
+        self.law_name = law
+        self.given_units = units
+
+    def bind(self, obs: Box, act: Box, n: int) -> tuple[Box, Box]:
+        if _make_law is None:  # importing the package imports the registry, which sets it
+            raise RuntimeError("policies.registry has not handed LawHint its laws")
+        units = as_numbers(self.given_units)
+        if units is None or units.shape != act.shape or not np.all(units > 0):
+            raise ValueError(
+                f"{self.owner}.units={self.given_units!r} is out of range: must be "
+                f"{act.shape[0]} positive numbers, one per action entry "
+                f"[{', '.join(act.entry_names())}]"
+            )
+        try:
+            law = _make_law(self.law_name)
+        except ValueError as err:
+            raise ValueError(f"{self.owner}.law={self.law_name!r}: {err}") from None
+        if not isinstance(law, LaneMemory) or tuple(law.action_names) != act.entry_names():
+            raise ValueError(
+                f"{self.owner}.law={self.law_name!r} is out of range: must be a guidance law "
+                f"commanding [{', '.join(act.entry_names())}]"
+            )
+        self.law, self.units, self.n = law, units, n
+        ones = np.ones(act.shape[0])
+        outer = Box(np.concatenate([obs.low, -ones]), np.concatenate([obs.high, ones]))
+        return outer, act
+
+    def start(self, obs: np.ndarray) -> np.ndarray:
+        self.law.reset_batch(self.n)
+        return self._join(obs, self.law.act_batch(self._law_rows(obs)))
+
+    def observe(self, obs: np.ndarray, done: np.ndarray) -> np.ndarray:
+        if np.any(done):
+            self.law.reset_lanes(np.asarray(done, dtype=bool))
+        return self._join(obs, self.law.act_batch(self._law_rows(obs)))
+
+    def terminal(self, obs: np.ndarray, lane: int) -> np.ndarray:
+        row = np.asarray(obs)[None, :]
+        return self._join(row, self.law.peek(self._law_rows(row)[0], lane)[None, :])[0]
+
+    @staticmethod
+    def _law_rows(obs: np.ndarray) -> np.ndarray:
+        """The entries a law reads: distance and offset."""
+        return np.asarray(obs, dtype=np.float64)[:, :2]
+
+    def _join(self, obs: np.ndarray, command: np.ndarray) -> np.ndarray:
+        hint = np.clip(np.asarray(command, dtype=np.float64) / self.units, -1.0, 1.0)
+        return np.concatenate([np.asarray(obs, dtype=np.float32), hint.astype(np.float32)], axis=-1)
