@@ -20,6 +20,8 @@ Innermost first:
 - :class:`VecObservationAge`: appends how long the observation has been held (the perception
   repeats its last values while the detector sees nothing), so the agent can tell a fresh
   offset from a stale one.
+- :class:`VecLawHint`: appends a guidance law's command on the observation, which
+  ``VecIncrementalAction`` with ``prior_index`` can track (residual learning on a law).
 - :class:`VecScaleObservation`: fixed scaling that keeps signed entries centred on 0 (needed by
   the mirror-symmetric policy, :mod:`train.mirror`).
 - :class:`VecIncrementalAction`: the agent changes the command by at most a set step, and sees

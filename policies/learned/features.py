@@ -9,6 +9,8 @@ agent), actions inwards (agent to env), innermost step first, in the order of th
   platform's 7.4 rad/s, over most of which the agent would spin the person out of view.
 - :class:`ObservationAge`: appends how long the detection has been held (the perception repeats
   its last values while the detector sees nothing): a fresh offset or a stale one.
+- :class:`~policies.learned.hint.LawHint`: appends a guidance law's command on the observation
+  (in the agent's units), which :class:`IncrementalAction` with ``prior_index`` can track.
 - :class:`ScaleObservation`: fixed scaling that keeps signed entries centred on 0 (needed by the
   mirror-symmetric policy, :mod:`policies.learned.mirror`).
 - :class:`IncrementalAction`: the agent changes the command by at most a set step and sees the
