@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import warnings
+from pathlib import Path
 
 import pytest
 from hypothesis import settings
@@ -37,6 +38,32 @@ def local_ray():
     ray.init(address="local", num_cpus=2, include_dashboard=False, logging_level="warning")
     yield ray
     ray.shutdown()
+
+
+@pytest.fixture(scope="session")
+def one_rollout():
+    """Train an agent for one rollout (the view, not the skill): ``one_rollout(config, out,
+    scenarios)`` runs ``follow-train`` on ``train/configs/<config>`` with 64 lanes for 4,096
+    steps into ``out`` and returns it."""
+    from train.cli import main
+
+    root = Path(__file__).resolve().parents[1]
+
+    def train(config: str, out: Path, scenarios: str) -> Path:
+        argv = [
+            "--hyperparams", str(root / "train/configs" / config),
+            "--scenarios", scenarios,
+            "--n-envs", "64",
+            "--n-timesteps", "4096",
+            "--eval-freq", "100000",
+            "--final-episodes", "1",
+            "--no-progress",
+            "--out", str(out),
+        ]  # fmt: skip
+        assert main(argv) == 0
+        return out
+
+    return train
 
 
 @pytest.fixture(scope="session")

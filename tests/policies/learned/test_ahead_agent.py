@@ -16,27 +16,14 @@ from eval.rollout import run_batch, run_episode
 from eval.steplog import read_step_log, write_step_log
 from policies import make_policy
 from policies.learned.ppo import PPOPolicy
-from train.cli import main
 
 ROOT = Path(__file__).resolve().parents[3]
 
 
 @pytest.fixture(scope="module")
-def ahead_agent(tmp_path_factory: pytest.TempPathFactory) -> Path:
+def ahead_agent(tmp_path_factory: pytest.TempPathFactory, one_rollout) -> Path:
     """One rollout of ppo_ahead.yaml on 64 lanes: the view, not the skill."""
-    run = tmp_path_factory.mktemp("ahead") / "run"
-    argv = [
-        "--hyperparams", str(ROOT / "train/configs/ppo_ahead.yaml"),
-        "--scenarios", "straight,crowd",
-        "--n-envs", "64",
-        "--n-timesteps", "4096",
-        "--eval-freq", "100000",
-        "--final-episodes", "1",
-        "--no-progress",
-        "--out", str(run),
-    ]  # fmt: skip
-    assert main(argv) == 0
-    return run
+    return one_rollout("ppo_ahead.yaml", tmp_path_factory.mktemp("ahead") / "run", "straight,crowd")
 
 
 @pytest.mark.slow

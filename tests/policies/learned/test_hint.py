@@ -13,9 +13,6 @@ from policies.learned.boxes import Box
 from policies.learned.features import IncrementalAction, Pipeline
 from policies.learned.hint import LawHint
 from policies.learned.ppo import PPOPolicy
-from train.cli import main
-
-ROOT = Path(__file__).resolve().parents[3]
 
 ACT = Box(np.array([-1.0, -1.0]), np.array([1.0, 1.0]), ("v_mps", "w_radps"))
 OBS = Box(np.array([0.0, -320.0, 0.0]), np.array([10.0, 319.0, 10.0]))
@@ -155,22 +152,11 @@ def test_the_law_and_the_tracking_chain_in_an_agents_pipeline() -> None:
 
 @pytest.mark.slow
 def test_an_agent_trained_with_a_laws_command_loads_with_the_law_in_its_view(
-    tmp_path: Path,
+    tmp_path: Path, one_rollout
 ) -> None:
     """train/configs/ppo_ahead_law.yaml, one rollout on 64 lanes: the exported agent's view
     holds pn:thesis's command, and the agent acts on an observation as the pipeline says."""
-    run = tmp_path / "run"
-    argv = [
-        "--hyperparams", str(ROOT / "train/configs/ppo_ahead_law.yaml"),
-        "--scenarios", "straight",
-        "--n-envs", "64",
-        "--n-timesteps", "4096",
-        "--eval-freq", "100000",
-        "--final-episodes", "1",
-        "--no-progress",
-        "--out", str(run),
-    ]  # fmt: skip
-    assert main(argv) == 0
+    run = one_rollout("ppo_ahead_law.yaml", tmp_path / "run", "straight")
     agent = make_policy(str(run))
     assert isinstance(agent, PPOPolicy)
     pipeline = agent._agent.pipeline(1)  # the view the policy builds for one robot
