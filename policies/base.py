@@ -232,8 +232,8 @@ class LaneMemory:
     def reset_lanes(self, lanes: np.ndarray) -> None:
         """Start new episodes in the lanes flagged in ``lanes`` (bool, one per lane): their
         memory as after :meth:`reset`, the others' kept."""
+        self.reset()
         for i in np.flatnonzero(lanes):
-            self.reset()
             self._lanes[i] = self._memory()
 
     def peek(self, obs: np.ndarray, lane: int) -> np.ndarray:

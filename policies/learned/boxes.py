@@ -75,6 +75,20 @@ def agent_to_si(action: np.ndarray, low: np.ndarray, high: np.ndarray) -> np.nda
     return low + (a + 1.0) * 0.5 * (high - low)
 
 
+def per_entry(where: str, given: Any, act: Box, may: str = "") -> np.ndarray:
+    """``given`` as one positive, finite number per entry of the action ``act``, or a
+    ValueError naming ``where`` (``owner.field``) and the entries; ``may`` prefixes the allowed
+    range (``"None or "`` for an optional one)."""
+    numbers = as_numbers(given)
+    good = numbers is not None and numbers.shape == act.shape
+    if not (good and np.all(np.isfinite(numbers) & (numbers > 0))):
+        raise ValueError(
+            f"{where}={given!r} is out of range: must be {may}{act.shape[0]} positive numbers, "
+            f"one per action entry [{', '.join(act.entry_names())}]"
+        )
+    return numbers
+
+
 def as_numbers(values: Any) -> np.ndarray | None:
     """``values`` as a float64 array of numbers, or None if they are not numbers (a string, a
     bool, a mapping, a ragged list), so that a step can name its argument in the error."""

@@ -9,13 +9,21 @@ import numpy as np
 
 from policies.learned.boxes import Box
 
-__all__ = ["IN_TRAINING", "Feature", "split_in_training", "wrapper_entries"]
+__all__ = ["IN_TRAINING", "Feature", "append_entries", "split_in_training", "wrapper_entries"]
 
 #: The keyword a ``vec_env_wrapper`` entry of a feature step may carry: ``in_training: false``
 #: leaves the step out of the training env (observations pass through there) and keeps it in the
 #: exported agent's view, for a filter measured in front of agents trained without it. Only a
 #: step that keeps the observation and action shapes can be left out of training.
 IN_TRAINING = "in_training"
+
+
+def append_entries(obs: np.ndarray, entries: np.ndarray) -> np.ndarray:
+    """``obs`` (n, k) with ``entries`` (n, m) after its own entries, float32: a step that adds
+    to the observation (the command in force, a law's command)."""
+    return np.concatenate(
+        [np.asarray(obs, dtype=np.float32), np.asarray(entries, dtype=np.float32)], axis=-1
+    )
 
 
 def wrapper_entries(value: Any) -> list[Any]:

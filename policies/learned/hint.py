@@ -14,8 +14,8 @@ from typing import Any
 import numpy as np
 
 from policies.base import LaneMemory
-from policies.learned.boxes import Box, as_numbers
-from policies.learned.feature import Feature
+from policies.learned.boxes import Box, per_entry
+from policies.learned.feature import Feature, append_entries
 
 __all__ = ["LawHint", "use_laws"]
 
@@ -50,13 +50,7 @@ class LawHint(Feature):
     def bind(self, obs: Box, act: Box, n: int) -> tuple[Box, Box]:
         if _make_law is None:  # importing the package imports the registry, which sets it
             raise RuntimeError("policies.registry has not handed LawHint its laws")
-        units = as_numbers(self.given_units)
-        if units is None or units.shape != act.shape or not np.all(units > 0):
-            raise ValueError(
-                f"{self.owner}.units={self.given_units!r} is out of range: must be "
-                f"{act.shape[0]} positive numbers, one per action entry "
-                f"[{', '.join(act.entry_names())}]"
-            )
+        units = per_entry(f"{self.owner}.units", self.given_units, act)
         try:
             law = _make_law(self.law_name)
         except ValueError as err:
@@ -90,5 +84,4 @@ class LawHint(Feature):
         return np.asarray(obs, dtype=np.float64)[:, :2]
 
     def _join(self, obs: np.ndarray, command: np.ndarray) -> np.ndarray:
-        hint = np.clip(np.asarray(command, dtype=np.float64) / self.units, -1.0, 1.0)
-        return np.concatenate([np.asarray(obs, dtype=np.float32), hint.astype(np.float32)], axis=-1)
+        return append_entries(obs, np.clip(np.asarray(command) / self.units, -1.0, 1.0))

@@ -17,8 +17,8 @@ from typing import Any
 import numpy as np
 
 from follow_env.sim.checks import check_number, is_integer
-from policies.learned.boxes import Box, as_numbers
-from policies.learned.feature import Feature
+from policies.learned.boxes import Box, per_entry
+from policies.learned.feature import Feature, append_entries
 
 __all__ = ["IncrementalAction"]
 
@@ -135,15 +135,8 @@ class IncrementalAction(Feature):
 
     def _steps(self, field: str, given: Any, act: Box) -> np.ndarray:
         """``given`` as one positive step per action entry, or a ValueError naming ``field``."""
-        steps = as_numbers(given)
-        good = steps is not None and steps.shape == act.shape
-        if not (good and np.all(np.isfinite(steps) & (steps > 0))):
-            may = "None or " if field == "brake_change" else ""
-            raise ValueError(
-                f"{self.owner}.{field}={given!r} is out of range: must be {may}{act.shape[0]} "
-                f"positive numbers, one per action entry [{', '.join(act.entry_names())}]"
-            )
-        return steps
+        may = "None or " if field == "brake_change" else ""
+        return per_entry(f"{self.owner}.{field}", given, act, may)
 
     def _check_held_options(self) -> None:
         """The options that act while the detection is held go together: ``held_floor`` and
@@ -251,6 +244,4 @@ class IncrementalAction(Feature):
 
     @staticmethod
     def _join(obs: np.ndarray, command: np.ndarray) -> np.ndarray:
-        return np.concatenate(
-            [np.asarray(obs, dtype=np.float32), command.astype(np.float32)], axis=-1
-        )
+        return append_entries(obs, command)
