@@ -145,21 +145,10 @@ def validate_obs_batch(obs: ArrayLike) -> np.ndarray:
     return arr
 
 
-def make_action(
-    v_mps: float, w_radps: float, v_max_mps: float | None, w_max_radps: float | None
-) -> np.ndarray:
-    """Pack ``(v, w)`` into a float32 action, clipping each to ``±limit`` when a limit is set.
-
-    :param v_mps: forward speed [m/s].
-    :param w_radps: yaw rate [rad/s], counter-clockwise positive.
-    :param v_max_mps: symmetric speed limit [m/s], or None for no clip.
-    :param w_max_radps: symmetric yaw-rate limit [rad/s], or None for no clip.
-    """
-    if v_max_mps is not None:
-        v_mps = min(max(v_mps, -v_max_mps), v_max_mps)
-    if w_max_radps is not None:
-        w_radps = min(max(w_radps, -w_max_radps), w_max_radps)
-    return np.array([v_mps, w_radps], dtype=np.float32)
+def clip_to(value: np.ndarray, limit: float | None) -> np.ndarray:
+    """``value`` clipped to ``±limit`` (float64, elementwise), or as it is when ``limit`` is
+    None."""
+    return value if limit is None else np.minimum(np.maximum(value, -limit), limit)
 
 
 def check_range(
@@ -205,13 +194,43 @@ class LawParams:
         check_range(self, "w_max_radps", gt=0, optional=True)
 
 
-class LaneMemory:
+class LaneActing(ABC):
+    """A law that acts for many lanes at once, each lane with its own memory (what
+    :class:`~policies.learned.hint.LawHint` drives): ``act`` for one episode, ``reset_batch``
+    / ``act_batch`` for ``n``, ``reset_lanes`` to start some lanes' episodes again, ``peek``
+    to ask a lane without moving its memory on."""
+
+    action_names: tuple[str, ...]
+
+    @abstractmethod
+    def reset_batch(self, n: int) -> None:
+        """Start ``n`` lanes' episodes: every lane's memory as after :meth:`reset`."""
+
+    @abstractmethod
+    def reset_lanes(self, lanes: np.ndarray) -> None:
+        """Start new episodes in the lanes flagged in ``lanes`` (bool, one per lane): their
+        memory as after :meth:`reset`, the others' kept."""
+
+    @abstractmethod
+    def peek(self, obs: np.ndarray, lane: int) -> np.ndarray:
+        """The action lane ``lane`` would take on ``obs``, its memory left as it was."""
+
+    @abstractmethod
+    def act_batch(self, obs: np.ndarray) -> np.ndarray:
+        """Actions ``(n, m)`` float32 for observations ``(n, k)``, lane by lane as
+        :meth:`act` would give each lane's episode alone."""
+
+    def _check_lanes(self, rows: int, lanes: int | None) -> None:
+        if lanes != rows:
+            raise ValueError(f"act_batch got {rows} observations: call reset_batch({rows}) first")
+
+
+class LaneMemory(LaneActing):
     """Batched acting for a scalar law: :meth:`act` per lane, each lane with its own memory, so
     each lane's actions equal a run of its episode alone (the scalar arithmetic is reused, not
     re-derived in numpy, for bitwise equality). A law with memory overrides :meth:`_memory` and
     :meth:`_set_memory`; its class provides ``act``, ``reset`` and ``action_names``."""
 
-    action_names: tuple[str, ...]
     act: Any  # the law's own: one observation to one action
 
     def reset(self) -> None:
@@ -225,29 +244,22 @@ class LaneMemory:
         """Restore what :meth:`_memory` returned."""
 
     def reset_batch(self, n: int) -> None:
-        """Start ``n`` lanes' episodes: every lane's memory as after :meth:`reset`."""
         self.reset()
         self._lanes = [self._memory() for _ in range(n)]
 
     def reset_lanes(self, lanes: np.ndarray) -> None:
-        """Start new episodes in the lanes flagged in ``lanes`` (bool, one per lane): their
-        memory as after :meth:`reset`, the others' kept."""
         self.reset()
         for i in np.flatnonzero(lanes):
             self._lanes[i] = self._memory()
 
     def peek(self, obs: np.ndarray, lane: int) -> np.ndarray:
-        """The action lane ``lane`` would take on ``obs``, its memory left as it was."""
         self._set_memory(self._lanes[lane])
         return np.asarray(self.act(obs), dtype=np.float32)
 
     def _act_lanes(self, rows: np.ndarray) -> np.ndarray:
         """Actions ``(n, m)`` float32 for validated observation rows ``(n, k)``."""
         lanes = getattr(self, "_lanes", None)
-        if lanes is None or len(lanes) != len(rows):
-            raise ValueError(
-                f"act_batch got {len(rows)} observations: call reset_batch({len(rows)}) first"
-            )
+        self._check_lanes(len(rows), None if lanes is None else len(lanes))
         out = np.empty((len(rows), len(self.action_names)), dtype=np.float32)
         for i, row in enumerate(rows):
             self._set_memory(lanes[i])
@@ -256,16 +268,39 @@ class LaneMemory:
         return out
 
 
-class GuidanceLaw(LaneMemory, ABC):
+class GuidanceLaw(LaneActing):
     """Base of the classical laws: validates the observation, runs the law, clips the output.
 
-    A new law subclasses this, sets ``params`` (a :class:`LawParams` subclass) and ``name``,
-    and implements :meth:`_command`; it overrides :meth:`reset` if it keeps memory.
+    The law's arithmetic runs on arrays of lanes: :meth:`act` is one lane, :meth:`act_batch`
+    all lanes at once through the same numpy code, so a lane's actions are bit-identical
+    either way (elementwise IEEE arithmetic does not depend on the array's length). What the
+    law remembers is an array with one row per lane (:meth:`_fresh_memory`): one row for the
+    episode :meth:`act` runs, ``n`` for the lanes of :meth:`reset_batch`.
+
+    A new law subclasses this, sets ``params`` (a :class:`LawParams` subclass) and ``name``
+    (``super().__init__(params, name)``), and implements :meth:`_command` on arrays; a law
+    with memory implements :meth:`_fresh_memory` and reads and writes ``self._rows`` (the
+    memory of the lanes being computed) in :meth:`_command`.
     """
 
     name: str
     params: LawParams
     action_names: tuple[str, ...] = LAW_ACTION_NAMES
+
+    def __init__(self, params: LawParams, name: str) -> None:
+        self.params = params
+        self.name = name
+        self._lanes: np.ndarray | None = None
+        self._n: int | None = None
+        self.reset()
+
+    def _fresh_memory(self, n: int) -> np.ndarray | None:
+        """The memory of ``n`` lanes after a reset (rows per lane); None: memoryless."""
+        return None
+
+    def reset(self) -> None:
+        """Forget what the episode :meth:`act` runs remembers (a memoryless law: nothing)."""
+        self._episode = self._fresh_memory(1)
 
     def act(self, obs: np.ndarray) -> np.ndarray:
         """Map ``[distance_m, offset_px]`` to ``[v_mps, w_radps]``; offset > 0 gives w < 0.
@@ -277,27 +312,63 @@ class GuidanceLaw(LaneMemory, ABC):
             reading ahead, which the law ignores). A rejected observation leaves the law's
             memory untouched.
         """
-        distance_m, offset_px = validate_obs(obs)
-        if distance_m <= NO_READING_M:
-            return np.zeros(len(self.action_names), dtype=np.float32)
-        command = self._command(distance_m, offset_px)
-        vw = make_action(command[0], command[-1], self.params.v_max_mps, self.params.w_max_radps)
-        if len(command) == 2:
-            return vw
-        # [v, vy, w]: the sideways speed between, unclipped (the env bounds it).
-        return np.array([vw[0], command[1], vw[1]], dtype=np.float32)
+        return self._act_rows(validate_obs_row(obs)[None, :], self._episode)[0]
 
     @abstractmethod
-    def _command(self, distance_m: float, offset_px: float) -> tuple[float, ...]:
-        """Return ``(v [m/s], w [rad/s, counter-clockwise positive])`` before clipping (a law
-        whose ``action_names`` has three entries: ``(v, vy [m/s, left], w)``)."""
+    def _command(self, distance_m: np.ndarray, offset_px: np.ndarray) -> tuple[np.ndarray, ...]:
+        """Return ``(v [m/s], w [rad/s, counter-clockwise positive])`` before clipping, one
+        value per lane of ``distance_m`` (> 0) and ``offset_px`` (float64); a law whose
+        ``action_names`` has three entries: ``(v, vy [m/s, left], w)``."""
 
-    # -- many lanes at once: the same scalar law per lane, each with its own memory ---------
+    def _act_rows(self, rows: np.ndarray, memory: np.ndarray | None) -> np.ndarray:
+        """Actions ``(n, m)`` float32 for validated rows ``(n, k)``, moving ``memory`` (one
+        row per lane, updated in place) on for the lanes with a reading."""
+        distance_m, offset_px = rows[:, 0], rows[:, 1]
+        out = np.zeros((len(rows), len(self.action_names)), dtype=np.float32)
+        seen = distance_m > NO_READING_M
+        count = int(np.count_nonzero(seen))
+        if count == 0:
+            return out
+        every = count == len(rows)
+        # The lanes without a reading keep their memory (module docstring).
+        self._rows = memory if every or memory is None else memory[seen]
+        if not every:
+            distance_m, offset_px = distance_m[seen], offset_px[seen]
+        command = self._command(distance_m, offset_px)
+        if memory is not None and not every:
+            memory[seen] = self._rows
+        # Clipped in float64, rounded once to float32; [v, vy, w]: the sideways speed between,
+        # unclipped (the env bounds it).
+        acts = out if every else np.empty((count, out.shape[1]), dtype=np.float32)
+        acts[:, 0] = clip_to(command[0], self.params.v_max_mps)
+        acts[:, -1] = clip_to(command[-1], self.params.w_max_radps)
+        if len(command) == 3:
+            acts[:, 1] = command[1]
+        if not every:
+            out[seen] = acts
+        return out
+
+    # -- many lanes at once ----------------------------------------------------------------
+
+    def reset_batch(self, n: int) -> None:
+        self._n = n
+        self._lanes = self._fresh_memory(n)
+
+    def reset_lanes(self, lanes: np.ndarray) -> None:
+        flags = np.asarray(lanes, dtype=bool)
+        if self._lanes is not None and flags.any():
+            self._lanes[flags] = self._fresh_memory(int(flags.sum()))
+
+    def peek(self, obs: np.ndarray, lane: int) -> np.ndarray:
+        memory = None if self._lanes is None else self._lanes[lane : lane + 1].copy()
+        return self._act_rows(validate_obs_row(obs)[None, :], memory)[0]
 
     def act_batch(self, obs: np.ndarray) -> np.ndarray:
-        """Actions ``(n, m)`` float32 for observations ``(n, 2)``: :meth:`act` for each lane
-        with that lane's memory (:class:`LaneMemory`)."""
-        return self._act_lanes(validate_obs_batch(obs))
+        """Actions ``(n, m)`` float32 for observations ``(n, 2)`` (or ``(n, 3)``): each lane
+        as :meth:`act` would act on its episode alone, with that lane's memory."""
+        rows = validate_obs_batch(obs)
+        self._check_lanes(len(rows), self._n)
+        return self._act_rows(rows, self._lanes)
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}(name={self.name!r}, params={self.params!r})"
@@ -307,21 +378,12 @@ class OffsetRateLaw(GuidanceLaw):
     """Base of the laws with a derivative term: remembers the previous offset for
     ``rate = (o - o_prev) / dt`` (reference §1.5); the first step after a reset has rate 0."""
 
-    def __init__(self) -> None:
-        self._prev_offset_px: float | None = None
+    def _fresh_memory(self, n: int) -> np.ndarray:
+        # The previous offset [px] per lane; NaN: none yet.
+        return np.full(n, np.nan)
 
-    def reset(self) -> None:
-        """Forget the previous offset, so the next step's rate is 0."""
-        self._prev_offset_px = None
-
-    def _memory(self) -> float | None:
-        return self._prev_offset_px
-
-    def _set_memory(self, memory: float | None) -> None:
-        self._prev_offset_px = memory
-
-    def _offset_rate(self, offset_px: float, dt_s: float) -> float:
-        """The offset's rate (px/s) since the previous step, remembering this offset."""
-        prev = offset_px if self._prev_offset_px is None else self._prev_offset_px
-        self._prev_offset_px = offset_px
+    def _offset_rate(self, offset_px: np.ndarray, dt_s: float) -> np.ndarray:
+        """The offset's rate (px/s) since each lane's previous step, remembering this offset."""
+        prev = np.where(np.isnan(self._rows), offset_px, self._rows)
+        self._rows[:] = offset_px
         return (offset_px - prev) / dt_s

@@ -42,7 +42,10 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from types import MappingProxyType
-from typing import Literal, get_args
+from typing import Any, Literal, get_args
+
+import numpy as np
+from numpy.typing import ArrayLike
 
 from policies.base import LawParams, OffsetRateLaw, check_range
 from policies.mpn import DISTANCE_FLOOR_M
@@ -55,21 +58,25 @@ GSMPN_VARIANTS: tuple[str, ...] = get_args(GSMPNVariant)
 EQUATION_DISTANCE_FLOOR_M = 1.0
 
 
-def scheduled_gain(x: float, lambda_d: float, a: float, *, listing: bool = False) -> float:
-    """The GS-MPN gain kd for scheduling signal ``x`` (reference §1.5).
+def scheduled_gain(x: ArrayLike, lambda_d: float, a: float, *, listing: bool = False) -> Any:
+    """The GS-MPN gain kd for scheduling signal ``x`` (reference §1.5), per entry of ``x``.
 
     kd = lambda_d (1 - e) / (1 + e) with e = exp(-a |x|), i.e. lambda_d tanh(a |x| / 2):
     0 at x = 0, rising towards lambda_d as |x| grows, never above it.
 
     :param x: the scheduling signal: the offset rate [px/s], or the offset [px] for the
-        equation variant.
+        equation variant; a number or an array (a float or an array back).
     :param lambda_d: the largest gain (units of kd).
     :param a: the scheduling steepness (units of 1/x).
     :param listing: divide by (1 + e) a second time, as the thesis's code listing does.
     """
-    e = math.exp(-a * abs(x))
+    z = -a * np.abs(np.asarray(x, dtype=np.float64))
+    # exp by the C library, one entry at a time: numpy's vectorised exp differs from it in the
+    # last bit for a few % of arguments, and the laws' actions (golden rollouts) are libm's.
+    e = np.fromiter(map(math.exp, z.ravel()), dtype=np.float64, count=z.size).reshape(z.shape)
     kd = lambda_d * (1.0 - e) / (1.0 + e)
-    return kd / (1.0 + e) if listing else kd
+    kd = kd / (1.0 + e) if listing else kd
+    return float(kd) if kd.ndim == 0 else kd
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -165,12 +172,12 @@ class GSMPN(OffsetRateLaw):
     :param name: the name shown in tables and logs.
     """
 
-    def __init__(self, params: GSMPNParams = GSMPN_TUNED, name: str = "gsmpn") -> None:
-        super().__init__()
-        self.params: GSMPNParams = params
-        self.name = name
+    params: GSMPNParams
 
-    def _command(self, distance_m: float, offset_px: float) -> tuple[float, float]:
+    def __init__(self, params: GSMPNParams = GSMPN_TUNED, name: str = "gsmpn") -> None:
+        super().__init__(params, name)
+
+    def _command(self, distance_m: np.ndarray, offset_px: np.ndarray) -> tuple[np.ndarray, ...]:
         p = self.params
         rate_px_s = self._offset_rate(offset_px, p.dt_s)  # remembered by every variant
         # reference §1.5 GS-MPN: V = kv (d - 1.0)
@@ -179,7 +186,7 @@ class GSMPN(OffsetRateLaw):
             # reference §1.5, the thesis equation: kd scheduled on |o|; w = kw o / max(d, 1) + kd o
             kd = scheduled_gain(offset_px, p.lambda_d, p.a)
             w_law = (
-                p.kw_rad_per_s_px * offset_px / max(distance_m, EQUATION_DISTANCE_FLOOR_M)
+                p.kw_rad_per_s_px * offset_px / np.maximum(distance_m, EQUATION_DISTANCE_FLOOR_M)
                 + kd * offset_px
             )
         else:
@@ -187,7 +194,7 @@ class GSMPN(OffsetRateLaw):
             # w = N kw o / d + kd rate
             kd = scheduled_gain(rate_px_s, p.lambda_d, p.a, listing=p.variant == "listing")
             w_law = (
-                p.nav_n * p.kw_rad_per_s_px * offset_px / max(distance_m, DISTANCE_FLOOR_M)
+                p.nav_n * p.kw_rad_per_s_px * offset_px / np.maximum(distance_m, DISTANCE_FLOOR_M)
                 + kd * rate_px_s
             )
         # Sign convention: o > 0 (person right of centre) needs a clockwise turn, i.e. w < 0.

@@ -23,6 +23,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from types import MappingProxyType
 
+import numpy as np
+
 from policies.base import GuidanceLaw, LawParams, check_range
 
 __all__ = ["PRESETS", "Holonomic", "HolonomicParams"]
@@ -63,17 +65,18 @@ class Holonomic(GuidanceLaw):
     """
 
     action_names = ("v_mps", "vy_mps", "w_radps")
+    params: HolonomicParams
 
     def __init__(
         self, params: HolonomicParams = PRESETS["default"], name: str = "holonomic"
     ) -> None:
-        self.params: HolonomicParams = params
-        self.name = name
+        super().__init__(params, name)
 
-    def _command(self, distance_m: float, offset_px: float) -> tuple[float, float, float]:
+    def _command(self, distance_m: np.ndarray, offset_px: np.ndarray) -> tuple[np.ndarray, ...]:
         p = self.params
         v_mps = p.kv_per_s * (distance_m - p.d_ref_m)
         # o > 0 (right of centre): strafe right (vy < 0) and turn clockwise (w < 0).
         vy_mps = -p.ks_per_s_px * distance_m * offset_px
-        w_radps = -p.nav_n * p.kw_rad_per_s_px * offset_px / max(distance_m, DISTANCE_FLOOR_M)
+        floored_m = np.maximum(distance_m, DISTANCE_FLOOR_M)
+        w_radps = -p.nav_n * p.kw_rad_per_s_px * offset_px / floored_m
         return v_mps, vy_mps, w_radps

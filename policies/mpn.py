@@ -21,6 +21,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from types import MappingProxyType
 
+import numpy as np
+
 from policies.base import LawParams, OffsetRateLaw, check_range
 from policies.space import ParamRange
 
@@ -92,19 +94,19 @@ class MPN(OffsetRateLaw):
     :param name: the name shown in tables and logs.
     """
 
-    def __init__(self, params: MPNParams = MPN_TUNED, name: str = "mpn") -> None:
-        super().__init__()
-        self.params: MPNParams = params
-        self.name = name
+    params: MPNParams
 
-    def _command(self, distance_m: float, offset_px: float) -> tuple[float, float]:
+    def __init__(self, params: MPNParams = MPN_TUNED, name: str = "mpn") -> None:
+        super().__init__(params, name)
+
+    def _command(self, distance_m: np.ndarray, offset_px: np.ndarray) -> tuple[np.ndarray, ...]:
         p = self.params
         rate_px_s = self._offset_rate(offset_px, p.dt_s)
         # reference §1.5 MPN: rate = (o - o_prev) / dt; V = kv (d - 1.0);
         # w = N kw o / d + lambda rate
         v_mps = p.kv_per_s * (distance_m - p.d_ref_m)
         w_law = (
-            p.nav_n * p.kw_rad_per_s_px * offset_px / max(distance_m, DISTANCE_FLOOR_M)
+            p.nav_n * p.kw_rad_per_s_px * offset_px / np.maximum(distance_m, DISTANCE_FLOOR_M)
             + p.lambda_rad_per_px * rate_px_s
         )
         # Sign convention: o > 0 (person right of centre) needs a clockwise turn, i.e. w < 0.

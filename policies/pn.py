@@ -21,6 +21,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from types import MappingProxyType
 
+import numpy as np
+
 from policies.base import GuidanceLaw, LawParams, check_range
 from policies.space import ParamRange
 
@@ -84,14 +86,16 @@ class PN(GuidanceLaw):
     :param name: the name shown in tables and logs.
     """
 
-    def __init__(self, params: PNParams = PN_TUNED, name: str = "pn") -> None:
-        self.params: PNParams = params
-        self.name = name
+    params: PNParams
 
-    def _command(self, distance_m: float, offset_px: float) -> tuple[float, float]:
+    def __init__(self, params: PNParams = PN_TUNED, name: str = "pn") -> None:
+        super().__init__(params, name)
+
+    def _command(self, distance_m: np.ndarray, offset_px: np.ndarray) -> tuple[np.ndarray, ...]:
         p = self.params
         # reference §1.5 PN: V = kv (d - 1.0); w = N kw o / max(d, 1.0)
         v_mps = p.kv_per_s * (distance_m - p.d_ref_m)
-        w_law = p.nav_n * p.kw_rad_per_s_px * offset_px / max(distance_m, PN_DISTANCE_FLOOR_M)
+        floored_m = np.maximum(distance_m, PN_DISTANCE_FLOOR_M)
+        w_law = p.nav_n * p.kw_rad_per_s_px * offset_px / floored_m
         # Sign convention: o > 0 (person right of centre) needs a clockwise turn, i.e. w < 0.
         return v_mps, -w_law

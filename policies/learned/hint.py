@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from policies.base import LaneMemory
+from policies.base import LaneActing
 from policies.learned.boxes import Box, per_entry
 from policies.learned.feature import Feature, append_entries
 
@@ -55,7 +55,7 @@ class LawHint(Feature):
             law = _make_law(self.law_name)
         except ValueError as err:
             raise ValueError(f"{self.owner}.law={self.law_name!r}: {err}") from None
-        if not isinstance(law, LaneMemory) or tuple(law.action_names) != act.entry_names():
+        if not isinstance(law, LaneActing) or tuple(law.action_names) != act.entry_names():
             raise ValueError(
                 f"{self.owner}.law={self.law_name!r} is out of range: must be a guidance law "
                 f"commanding [{', '.join(act.entry_names())}]"

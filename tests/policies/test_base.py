@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 
 from policies import MPN, MPN_THESIS, PN, PN_THESIS, Policy, available_policies, make_policy
 from policies.adapt import action_names
-from policies.base import make_action, validate_obs
+from policies.base import clip_to, validate_obs
 from policies.pn import PNParams
 
 
@@ -122,13 +122,10 @@ def test_validate_obs_returns_distance_and_offset_as_floats() -> None:
     assert validate_obs(obs(1.5, -20.0)) == (1.5, -20.0)
 
 
-def test_make_action_clips_each_component_to_its_symmetric_limit() -> None:
-    np.testing.assert_array_equal(make_action(3.0, -4.0, 1.5, 2.0), [1.5, -2.0])
-    np.testing.assert_array_equal(make_action(-3.0, 4.0, 1.5, 2.0), [-1.5, 2.0])
-
-
-def test_make_action_without_limits_passes_values_through() -> None:
-    np.testing.assert_array_equal(make_action(30.0, -40.0, None, None), [30.0, -40.0])
+def test_clip_to_clips_to_a_symmetric_limit_or_passes_through() -> None:
+    values = np.array([3.0, -4.0, 0.5])
+    np.testing.assert_array_equal(clip_to(values, 1.5), [1.5, -1.5, 0.5])
+    np.testing.assert_array_equal(clip_to(values, None), values)
 
 
 def test_law_clips_its_output_to_its_limits() -> None:
@@ -150,3 +147,57 @@ def test_non_positive_output_limit_is_rejected_naming_the_field(field: str, valu
 def test_params_are_frozen() -> None:
     with pytest.raises(FrozenInstanceError):
         PN_THESIS.kv_per_s = 1.0  # type: ignore[misc]
+
+
+def _law_obs(steps: int, lanes: int, seed: int) -> np.ndarray:
+    """Observations ``(steps, lanes, 2)`` with readings, misses (d = 0) and clipped extremes."""
+    rng = np.random.default_rng(seed)
+    distance = rng.uniform(0.05, 6.0, (steps, lanes))
+    distance[rng.random((steps, lanes)) < 0.2] = 0.0
+    offset = rng.normal(0.0, 150.0, (steps, lanes)) * rng.choice([1.0, 1.0, 20.0], (steps, lanes))
+    return np.stack([distance, offset], axis=-1).astype(np.float32)
+
+
+@pytest.mark.parametrize("name", LAWS)
+def test_act_batch_equals_each_lanes_episode_alone_bit_for_bit(name: str) -> None:
+    # Lanes run the same arithmetic on arrays that act runs on one row, so a lane's actions are
+    # bit-identical to its episode alone, through misses and restarts of other lanes.
+    steps, lanes = 60, 7
+    rows = _law_obs(steps, lanes, seed=3)
+    restart = np.zeros((steps, lanes), dtype=bool)
+    restart[20, [1, 4]] = restart[41, 4] = True
+    batch = make_policy(name)
+    batch.reset_batch(lanes)
+    got = np.empty((steps, lanes, len(action_names(batch))), dtype=np.float32)
+    for t in range(steps):
+        batch.reset_lanes(restart[t])
+        got[t] = batch.act_batch(rows[t])
+    for lane in range(lanes):
+        alone = make_policy(name)
+        for t in range(steps):
+            if restart[t, lane]:
+                alone.reset()
+            np.testing.assert_array_equal(got[t, lane], alone.act(rows[t, lane]))
+
+
+@pytest.mark.parametrize("name", LAWS)
+def test_peek_leaves_the_lanes_memory_and_act_leaves_the_lanes_alone(name: str) -> None:
+    rows = _law_obs(3, 2, seed=5)
+    rows[:, :, 0] = 2.0  # every step a reading
+    law, twin = make_policy(name), make_policy(name)
+    law.reset_batch(2)
+    twin.reset_batch(2)
+    law.act_batch(rows[0])
+    twin.act_batch(rows[0])
+    law.peek(rows[1, 1], 1)
+    law.act(rows[2, 0])  # the single episode's memory is its own
+    np.testing.assert_array_equal(law.act_batch(rows[1]), twin.act_batch(rows[1]))
+
+
+def test_act_batch_needs_reset_batch_for_its_lane_count() -> None:
+    law = MPN(MPN_THESIS)
+    with pytest.raises(ValueError, match=r"call reset_batch\(2\) first"):
+        law.act_batch(np.ones((2, 2)))
+    law.reset_batch(3)
+    with pytest.raises(ValueError, match=r"call reset_batch\(2\) first"):
+        law.act_batch(np.ones((2, 2)))
