@@ -156,6 +156,13 @@ def bench_line(quick: bool) -> list[tuple[str, float, str]]:
     return bench_line_trace(quick, single_env_steps_per_s, vector_steps_per_s)
 
 
+def bench_guidance_laws(quick: bool) -> list[tuple[str, float, str]]:
+    """The laws acting for many lanes at once against lane by lane (bench.laws)."""
+    from bench.laws import bench_laws
+
+    return bench_laws(quick)
+
+
 def bench_robot(quick: bool) -> list[tuple[str, float, str]]:
     """The runner's loop lateness (idle, busy) and the monitor's latency (bench.robot)."""
     from bench.robot import bench_monitor, bench_runner
@@ -182,6 +189,7 @@ BENCHMARKS: dict[str, Callable[[bool], list[tuple[str, float, str]]]] = {
     "vector env (env-steps/s)": bench_vector_env,
     "line tracing (env-steps/s)": bench_line,
     "memory (bytes)": bench_memory,
+    "guidance laws (lane-steps/s)": bench_guidance_laws,
     "serial link": bench_serial_link,
     "robot: runner and monitor (ms)": bench_robot,
     "scale-out: evaluation (episodes/s)": bench_scale_out,
