@@ -290,8 +290,9 @@ class GuidanceLaw(LaneActing):
     def __init__(self, params: LawParams, name: str) -> None:
         self.params = params
         self.name = name
-        self._lanes: np.ndarray | None = None
-        self._n: int | None = None
+        self._lanes: np.ndarray | None = None  # the memory of reset_batch's lanes
+        self._n: int | None = None  # how many lanes reset_batch started
+        self._rows: np.ndarray | None = None  # the memory of the lanes _command computes
         self.reset()
 
     def _fresh_memory(self, n: int) -> np.ndarray | None:
