@@ -43,6 +43,7 @@ law here applies it with one commented minus sign.
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from collections.abc import Sized
 from dataclasses import dataclass
 from typing import Any, Protocol, runtime_checkable
 
@@ -220,8 +221,9 @@ class LaneActing(ABC):
         """Actions ``(n, m)`` float32 for observations ``(n, k)``, lane by lane as
         :meth:`act` would give each lane's episode alone."""
 
-    def _check_lanes(self, rows: int, lanes: int | None) -> None:
-        if lanes != rows:
+    def _check_lanes(self, rows: int, lanes: Sized | None) -> None:
+        """Refuse ``rows`` observations unless :meth:`reset_batch` started as many ``lanes``."""
+        if lanes is None or len(lanes) != rows:
             raise ValueError(f"act_batch got {rows} observations: call reset_batch({rows}) first")
 
 
@@ -259,7 +261,7 @@ class LaneMemory(LaneActing):
     def _act_lanes(self, rows: np.ndarray) -> np.ndarray:
         """Actions ``(n, m)`` float32 for validated observation rows ``(n, k)``."""
         lanes = getattr(self, "_lanes", None)
-        self._check_lanes(len(rows), None if lanes is None else len(lanes))
+        self._check_lanes(len(rows), lanes)
         out = np.empty((len(rows), len(self.action_names)), dtype=np.float32)
         for i, row in enumerate(rows):
             self._set_memory(lanes[i])
@@ -274,8 +276,9 @@ class GuidanceLaw(LaneActing):
     The law's arithmetic runs on arrays of lanes: :meth:`act` is one lane, :meth:`act_batch`
     all lanes at once through the same numpy code, so a lane's actions are bit-identical
     either way (elementwise IEEE arithmetic does not depend on the array's length). What the
-    law remembers is an array with one row per lane (:meth:`_fresh_memory`): one row for the
-    episode :meth:`act` runs, ``n`` for the lanes of :meth:`reset_batch`.
+    law remembers is an array with one row per lane (:meth:`_fresh_memory`; a memoryless law's
+    rows are empty): one row for the episode :meth:`act` runs, ``n`` for the lanes of
+    :meth:`reset_batch`.
 
     A new law subclasses this, sets ``params`` (a :class:`LawParams` subclass) and ``name``
     (``super().__init__(params, name)``), and implements :meth:`_command` on arrays; a law
@@ -290,14 +293,13 @@ class GuidanceLaw(LaneActing):
     def __init__(self, params: LawParams, name: str) -> None:
         self.params = params
         self.name = name
-        self._lanes: np.ndarray | None = None  # the memory of reset_batch's lanes
-        self._n: int | None = None  # how many lanes reset_batch started
-        self._rows: np.ndarray | None = None  # the memory of the lanes _command computes
+        self._lanes = self._fresh_memory(0)  # the memory of reset_batch's lanes: none yet
+        self._rows = self._lanes  # the memory of the lanes _command computes
         self.reset()
 
-    def _fresh_memory(self, n: int) -> np.ndarray | None:
-        """The memory of ``n`` lanes after a reset (rows per lane); None: memoryless."""
-        return None
+    def _fresh_memory(self, n: int) -> np.ndarray:
+        """The memory of ``n`` lanes after a reset, one row per lane (memoryless: empty rows)."""
+        return np.empty((n, 0))
 
     def reset(self) -> None:
         """Forget what the episode :meth:`act` runs remembers (a memoryless law: nothing)."""
@@ -321,7 +323,7 @@ class GuidanceLaw(LaneActing):
         value per lane of ``distance_m`` (> 0) and ``offset_px`` (float64); a law whose
         ``action_names`` has three entries: ``(v, vy [m/s, left], w)``."""
 
-    def _act_rows(self, rows: np.ndarray, memory: np.ndarray | None) -> np.ndarray:
+    def _act_rows(self, rows: np.ndarray, memory: np.ndarray) -> np.ndarray:
         """Actions ``(n, m)`` float32 for validated rows ``(n, k)``, moving ``memory`` (one
         row per lane, updated in place) on for the lanes with a reading."""
         distance_m, offset_px = rows[:, 0], rows[:, 1]
@@ -332,11 +334,11 @@ class GuidanceLaw(LaneActing):
             return out
         every = count == len(rows)
         # The lanes without a reading keep their memory (module docstring).
-        self._rows = memory if every or memory is None else memory[seen]
+        self._rows = memory if every else memory[seen]
         if not every:
             distance_m, offset_px = distance_m[seen], offset_px[seen]
         command = self._command(distance_m, offset_px)
-        if memory is not None and not every:
+        if not every:
             memory[seen] = self._rows
         # Clipped in float64, rounded once to float32; [v, vy, w]: the sideways speed between,
         # unclipped (the env bounds it).
@@ -352,23 +354,22 @@ class GuidanceLaw(LaneActing):
     # -- many lanes at once ----------------------------------------------------------------
 
     def reset_batch(self, n: int) -> None:
-        self._n = n
         self._lanes = self._fresh_memory(n)
 
     def reset_lanes(self, lanes: np.ndarray) -> None:
         flags = np.asarray(lanes, dtype=bool)
-        if self._lanes is not None and flags.any():
+        if flags.any():
             self._lanes[flags] = self._fresh_memory(int(flags.sum()))
 
     def peek(self, obs: np.ndarray, lane: int) -> np.ndarray:
-        memory = None if self._lanes is None else self._lanes[lane : lane + 1].copy()
-        return self._act_rows(validate_obs_row(obs)[None, :], memory)[0]
+        row = validate_obs_row(obs)[None, :]
+        return self._act_rows(row, self._lanes[lane : lane + 1].copy())[0]
 
     def act_batch(self, obs: np.ndarray) -> np.ndarray:
         """Actions ``(n, m)`` float32 for observations ``(n, 2)`` (or ``(n, 3)``): each lane
         as :meth:`act` would act on its episode alone, with that lane's memory."""
         rows = validate_obs_batch(obs)
-        self._check_lanes(len(rows), self._n)
+        self._check_lanes(len(rows), self._lanes)
         return self._act_rows(rows, self._lanes)
 
     def __repr__(self) -> str:
