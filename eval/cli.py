@@ -277,7 +277,15 @@ def cmd_dominance(args: argparse.Namespace) -> int:
     import pandas as pd
 
     from eval.atomic import atomic_write_text
-    from eval.dominance import calibration, default_laws, dominance, dominance_markdown
+    from eval.dominance import (
+        FINISHED,
+        calibration,
+        default_laws,
+        dominance,
+        dominance_markdown,
+        finished_markdown,
+        finished_view,
+    )
     from eval.report import safe_name
 
     path = args.run / "episodes.csv"
@@ -294,10 +302,16 @@ def cmd_dominance(args: argparse.Namespace) -> int:
     calibrated = calibration(table, laws) if len(laws) > 1 else None
     report = dominance_markdown(frame, args.learner, calibrated)
     stem = args.run / f"dominance-{safe_name(args.learner)}"
+    written = f"{stem}.md|csv"
+    if FINISHED in table:  # episode tables written before the metric existed have none
+        view = finished_view(table, frame, args.learner)
+        report += finished_markdown(view, args.learner)
+        atomic_write_text(f"{stem}-finished.csv", view.to_csv(index=False))
+        written += f", {stem.name}-finished.csv"
     atomic_write_text(f"{stem}.csv", frame.to_csv(index=False))
     atomic_write_text(f"{stem}.md", report)
     print(report, end="")
-    print(f"Wrote {stem}.md|csv")
+    print(f"Wrote {written}")
     return 0
 
 

@@ -28,6 +28,13 @@ scenario, or on ``most`` of them; the learner dominates when every criterion hol
 (:func:`dominates`). The report also counts the (scenario, criterion) lines met, which shows
 progress where the verdict is still no.
 
+An episode that ends early (a collision, a lost person) stops counting frames, distance and
+offset where it ends, so a law that crashes early can keep a better in-frame rate or distance
+error on that episode than a learner that avoids the crash and goes on. :func:`finished_view`
+asks each missed line again over the seeds on which both the learner and that line's law
+finished (``success_pct`` 100: neither lost nor collided); the report prints it after the
+table, as an explanation, and the verdict does not change.
+
 How high that bar is shows in :func:`calibration`: each law put through the same test against
 the other laws (the best of the rest on each line). The report gives those counts beside the
 learner's, so a reader can tell a near miss from a bar no controller clears.
@@ -59,6 +66,8 @@ __all__ = [
     "dominance",
     "dominance_markdown",
     "dominates",
+    "finished_markdown",
+    "finished_view",
 ]
 
 
@@ -261,6 +270,86 @@ def _line(
         meets=meets,
     )
     return row
+
+
+#: The episode-table column that marks a finished episode (100: neither lost nor collided).
+FINISHED = "success_pct"
+
+#: The criteria that end an episode: on finished episodes they are 0 for both, so
+#: :func:`finished_view` does not ask them again.
+ENDINGS = ("lost_rate_pct", "collision_rate_pct")
+
+
+def finished_view(
+    table: pd.DataFrame,
+    frame: pd.DataFrame,
+    learner: str,
+    *,
+    criteria: Sequence[Criterion] = CRITERIA,
+    seed: int = 0,
+) -> pd.DataFrame:
+    """The lines ``frame`` misses, again over the seeds both the learner and the line's law
+    finished (module docstring): the same law, the same test, fewer seeds.
+
+    :param table: the episode table ``frame`` was computed from; it needs :data:`FINISHED`.
+    :param frame: :func:`dominance` output for ``learner``.
+    :param learner: the learner's policy label.
+    :param criteria: the criteria of ``frame`` (default: :data:`CRITERIA`).
+    :param seed: seeds the bootstrap resampling.
+    :returns: one row per missed line whose criterion does not end an episode
+        (:data:`ENDINGS`), with the columns of :func:`dominance`; ``n`` is the number of seeds
+        both finished (a line with none has verdict ``n/a``).
+    :raises ValueError: if the table has no :data:`FINISHED` column.
+    """
+    if FINISHED not in table:
+        raise ValueError(f"the episode table has no {FINISHED!r} column to tell finished episodes")
+    variant = frame.columns[0]
+    by_metric = {c.metric: c for c in criteria}
+    rows = []
+    for line in frame.itertuples(index=False):
+        r = line._asdict()
+        if r["meets"] or r["criterion"] in ENDINGS or not r["best_law"]:
+            continue
+        cell = table[(table[variant] == r[variant]) & (table[FINISHED] >= 100.0)]
+        mine = cell[cell["policy"] == learner].set_index("seed")
+        theirs = cell[cell["policy"] == r["best_law"]].set_index("seed")
+        c = by_metric[r["criterion"]]
+        if mine.index.intersection(theirs.index).empty:  # no seed both finished
+            rows.append(_line(r[variant], c, mine, None, None, seed, variant, learner))
+            rows[-1]["best_law"] = r["best_law"]
+            continue
+        rows.append(_line(r[variant], c, mine, r["best_law"], theirs, seed, variant, learner))
+    return pd.DataFrame(rows, columns=[variant, *COLUMNS])
+
+
+def finished_markdown(view: pd.DataFrame, learner: str) -> str:
+    """:func:`finished_view` in markdown (empty when no line was asked again)."""
+    if view.empty:
+        return ""
+    variant = view.columns[0]
+    lines = [
+        "",
+        f"On the episodes both finished (neither lost nor collided), the lines `{learner}` "
+        "misses above, against the same law (an explanation, not part of the verdict):",
+        "",
+        f"| {variant} | criterion | law | episodes | {learner} | law | "
+        f"{learner} - law [95 % CI] | verdict | meets |",
+        "|---|---|---|---:|---:|---:|---|---|---|",
+    ]
+    for row in view.itertuples(index=False):
+        r = row._asdict()
+        label = metric_label(r["criterion"])
+        if r["verdict"] == "n/a" or not r["n"]:
+            lines.append(f"| {r[variant]} | {label} | {r['best_law']} | 0 | | | | n/a | no |")
+            continue
+        d = metric_digits(r["criterion"])
+        lines.append(
+            f"| {r[variant]} | {label} | {r['best_law']} | {r['n']} | "
+            f"{r['learner_mean']:.{d}f} | {r['law_mean']:.{d}f} | "
+            f"{r['diff']:+.{d}f} [{r['diff_ci_low']:+.{d}f}, {r['diff_ci_high']:+.{d}f}] | "
+            f"{r['verdict']} | {'yes' if r['meets'] else '**no**'} |"
+        )
+    return "\n".join(lines) + "\n"
 
 
 def criterion_summary(frame: pd.DataFrame) -> pd.DataFrame:

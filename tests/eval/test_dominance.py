@@ -18,6 +18,8 @@ from eval.dominance import (
     dominance,
     dominance_markdown,
     dominates,
+    finished_markdown,
+    finished_view,
 )
 
 METRICS = [c.metric for c in CRITERIA]
@@ -250,6 +252,77 @@ def test_the_command_reads_a_run_folder_and_writes_its_tables(tmp_path: Path, ca
     written = pd.read_csv(tmp_path / "dominance-ppo.csv")
     assert list(written["criterion"]) == METRICS
     assert (tmp_path / "dominance-ppo.md").read_text().startswith("`ppo`")
+
+
+def _crash_table() -> pd.DataFrame:
+    """A law that collides early on seeds 0-1 (its short episodes all in frame) and a learner
+    that goes on there (in frame less), both finishing seeds 2-9, where the learner is ahead."""
+    rng = np.random.default_rng(3)
+    on_both = list(rng.normal(96.0, 0.5, 8))
+    table = _table(
+        {
+            "agent": {"in_frame_rate_pct": [70.0, 75.0, *[v + 1.0 for v in on_both]]},
+            "pn": {
+                "in_frame_rate_pct": [100.0, 100.0, *on_both],
+                "collision_rate_pct": [100.0, 100.0, *[0.0] * 8],
+            },
+        }
+    )
+    table["success_pct"] = 100.0 - table["collision_rate_pct"]
+    return table
+
+
+def test_the_finished_view_asks_a_missed_line_again_over_the_episodes_both_finished() -> None:
+    table = _crash_table()
+    frame = dominance(table, "agent")
+    assert not _line(frame, "in_frame_rate_pct")["meets"]  # 95.3 % against the law's 96.7
+    assert _line(frame, "collision_rate_pct")["meets"]
+    view = finished_view(table, frame, "agent")
+    # the missed lines: in frame, and the quality lines (ties at 0 here); endings never
+    assert list(view["criterion"]) == ["in_frame_rate_pct", "mean_offset_px", "std_accel_mm_s2"]
+    [line] = view[view["criterion"] == "in_frame_rate_pct"].itertuples(index=False)
+    assert line.best_law == "pn"
+    assert line.n == 8
+    assert line.diff == pytest.approx(1.0)
+    assert line.verdict == "better"
+    assert line.meets
+    text = finished_markdown(view, "agent")
+    assert "On the episodes both finished" in text
+    assert "| straight | InFrameRate (%) | pn | 8 | " in text
+    # a learner that collides too: the collision line is missed, but not asked again
+    crashes = (table.policy == "agent") & table.seed.isin([5, 6, 7])
+    table.loc[crashes, "collision_rate_pct"] = 100.0
+    table.loc[crashes, "success_pct"] = 0.0
+    frame = dominance(table, "agent")
+    assert not _line(frame, "collision_rate_pct")["meets"]
+    view = finished_view(table, frame, "agent")
+    assert "collision_rate_pct" not in set(view["criterion"])
+    assert view["n"].tolist() == [5, 5, 5]
+    assert finished_markdown(view.iloc[:0], "agent") == ""  # nothing missed: nothing to say
+
+
+def test_the_finished_view_says_when_no_episode_was_finished_by_both() -> None:
+    table = _crash_table()
+    table.loc[table.policy == "agent", "success_pct"] = 0.0
+    view = finished_view(table, dominance(table, "agent"), "agent")
+    assert view["verdict"].tolist() == ["n/a"] * 3
+    assert view["n"].tolist() == [0] * 3
+    assert view["best_law"].tolist() == ["pn"] * 3
+    assert "| straight | InFrameRate (%) | pn | 0 | | | | n/a | no |" in finished_markdown(
+        view, "agent"
+    )
+    with pytest.raises(ValueError, match="no 'success_pct' column"):
+        finished_view(table.drop(columns="success_pct"), dominance(table, "agent"), "agent")
+
+
+def test_the_command_adds_the_finished_view_when_the_table_has_it(tmp_path: Path, capsys) -> None:
+    _crash_table().to_csv(tmp_path / "episodes.csv", index=False)
+    assert main(["dominance", str(tmp_path), "--learner", "agent"]) == 0
+    out = capsys.readouterr().out
+    assert "On the episodes both finished" in out
+    assert "dominance-agent-finished.csv" in out
+    assert "On the episodes both finished" in (tmp_path / "dominance-agent.md").read_text()
+    assert pd.read_csv(tmp_path / "dominance-agent-finished.csv")["n"].tolist() == [8, 8, 8]
 
 
 def test_the_command_refuses_a_folder_without_an_episode_table(tmp_path: Path, capsys) -> None:
