@@ -332,23 +332,12 @@ def finished_markdown(view: pd.DataFrame, learner: str) -> str:
         f"On the episodes both finished (neither lost nor collided), the lines `{learner}` "
         "misses above, against the same law (an explanation, not part of the verdict):",
         "",
-        f"| {variant} | criterion | law | episodes | {learner} | law | "
+        f"| {variant} | criterion | episodes | {learner} | the line's law | law | "
         f"{learner} - law [95 % CI] | verdict | meets |",
-        "|---|---|---|---:|---:|---:|---|---|---|",
+        "|---|---|---:|---:|---|---:|---|---|---|",
     ]
     for row in view.itertuples(index=False):
-        r = row._asdict()
-        label = metric_label(r["criterion"])
-        if r["verdict"] == "n/a" or not r["n"]:
-            lines.append(f"| {r[variant]} | {label} | {r['best_law']} | 0 | | | | n/a | no |")
-            continue
-        d = metric_digits(r["criterion"])
-        lines.append(
-            f"| {r[variant]} | {label} | {r['best_law']} | {r['n']} | "
-            f"{r['learner_mean']:.{d}f} | {r['law_mean']:.{d}f} | "
-            f"{r['diff']:+.{d}f} [{r['diff_ci_low']:+.{d}f}, {r['diff_ci_high']:+.{d}f}] | "
-            f"{r['verdict']} | {'yes' if r['meets'] else '**no**'} |"
-        )
+        lines.append(_markdown_row(row._asdict(), variant, str(row.n)))
     return "\n".join(lines) + "\n"
 
 
@@ -430,16 +419,20 @@ def dominance_markdown(
     )
     lines.append("|---|---|---|---:|---|---:|---|---|---|")
     for row in frame.itertuples(index=False):
-        r = row._asdict()
-        label = metric_label(r["criterion"])
-        if r["verdict"] == "n/a":
-            lines.append(f"| {r[variant]} | {label} | {r['need']} | | | | | n/a | no |")
-            continue
-        d = metric_digits(r["criterion"])
-        lines.append(
-            f"| {r[variant]} | {label} | {r['need']} | "
-            f"{r['learner_mean']:.{d}f} | {r['best_law']} | {r['law_mean']:.{d}f} | "
-            f"{r['diff']:+.{d}f} [{r['diff_ci_low']:+.{d}f}, {r['diff_ci_high']:+.{d}f}] | "
-            f"{r['verdict']} | {'yes' if r['meets'] else '**no**'} |"
-        )
+        lines.append(_markdown_row(row._asdict(), variant, str(row.need)))
     return "\n".join(lines) + "\n"
+
+
+def _markdown_row(r: dict[str, object], variant: str, middle: str) -> str:
+    """One line of a table in markdown; ``middle`` goes after the criterion (the need, or the
+    number of episodes compared)."""
+    label = metric_label(str(r["criterion"]))
+    if r["verdict"] == "n/a" or not r["n"]:
+        return f"| {r[variant]} | {label} | {middle} | | {r['best_law']} | | | n/a | no |"
+    d = metric_digits(str(r["criterion"]))
+    return (
+        f"| {r[variant]} | {label} | {middle} | "
+        f"{r['learner_mean']:.{d}f} | {r['best_law']} | {r['law_mean']:.{d}f} | "
+        f"{r['diff']:+.{d}f} [{r['diff_ci_low']:+.{d}f}, {r['diff_ci_high']:+.{d}f}] | "
+        f"{r['verdict']} | {'yes' if r['meets'] else '**no**'} |"
+    )

@@ -288,7 +288,7 @@ def test_the_finished_view_asks_a_missed_line_again_over_the_episodes_both_finis
     assert line.meets
     text = finished_markdown(view, "agent")
     assert "On the episodes both finished" in text
-    assert "| straight | InFrameRate (%) | pn | 8 | " in text
+    assert "| straight | InFrameRate (%) | 8 | 96.8 | pn | 95.8 | +1.0 [" in text
     # a learner that collides too: the collision line is missed, but not asked again
     crashes = (table.policy == "agent") & table.seed.isin([5, 6, 7])
     table.loc[crashes, "collision_rate_pct"] = 100.0
@@ -308,7 +308,7 @@ def test_the_finished_view_says_when_no_episode_was_finished_by_both() -> None:
     assert view["verdict"].tolist() == ["n/a"] * 3
     assert view["n"].tolist() == [0] * 3
     assert view["best_law"].tolist() == ["pn"] * 3
-    assert "| straight | InFrameRate (%) | pn | 0 | | | | n/a | no |" in finished_markdown(
+    assert "| straight | InFrameRate (%) | 0 | | pn | | | n/a | no |" in finished_markdown(
         view, "agent"
     )
     with pytest.raises(ValueError, match="no 'success_pct' column"):
