@@ -249,20 +249,23 @@ def _line(
     a = mine.loc[seeds, c.metric].to_numpy(dtype=np.float64)
     b = theirs.loc[seeds, c.metric].to_numpy(dtype=np.float64)
     ok = np.isfinite(a) & np.isfinite(b)
+    if not ok.any():  # no seed with a value from both (e.g. none both finished)
+        row.update(best_law=best, n=0, verdict="n/a", meets=False)
+        return row
     diff = a[ok] - b[ok]
     low, high = mean_ci(diff, seed, "dominance", str(scenario), learner, best, c.metric)
     sign = 1.0 if c.higher_is_better else -1.0
-    gain = sign * float(diff.mean()) if diff.size else np.nan  # > 0: the learner is better
-    if diff.size and np.all(diff == 0.0):
+    gain = sign * float(diff.mean())  # > 0: the learner is better
+    if np.all(diff == 0.0):
         low = high = 0.0  # identical on every seed: the interval is the point
     good_low, good_high = (low, high) if c.higher_is_better else (-high, -low)
     verdict = "better" if good_low > 0.0 else "worse" if good_high < 0.0 else "tie"
-    meets = bool(diff.size) and (gain >= 0.0 if c.need == "at_least" else verdict == "better")
+    meets = gain >= 0.0 if c.need == "at_least" else verdict == "better"
     row.update(
-        learner_mean=float(a[ok].mean()) if ok.any() else np.nan,
+        learner_mean=float(a[ok].mean()),
         best_law=best,
-        law_mean=float(b[ok].mean()) if ok.any() else np.nan,
-        diff=float(diff.mean()) if diff.size else np.nan,
+        law_mean=float(b[ok].mean()),
+        diff=float(diff.mean()),
         diff_ci_low=low,
         diff_ci_high=high,
         n=int(ok.sum()),
@@ -298,7 +301,7 @@ def finished_view(
     :param seed: seeds the bootstrap resampling.
     :returns: one row per missed line whose criterion does not end an episode
         (:data:`ENDINGS`), with the columns of :func:`dominance`; ``n`` is the number of seeds
-        both finished (a line with none has verdict ``n/a``).
+        both finished (a line with none has verdict ``n/a``, as in :func:`dominance`).
     :raises ValueError: if the table has no :data:`FINISHED` column.
     """
     if FINISHED not in table:
@@ -314,10 +317,6 @@ def finished_view(
         mine = cell[cell["policy"] == learner].set_index("seed")
         theirs = cell[cell["policy"] == r["best_law"]].set_index("seed")
         c = by_metric[r["criterion"]]
-        if mine.index.intersection(theirs.index).empty:  # no seed both finished
-            rows.append(_line(r[variant], c, mine, None, None, seed, variant, learner))
-            rows[-1]["best_law"] = r["best_law"]
-            continue
         rows.append(_line(r[variant], c, mine, r["best_law"], theirs, seed, variant, learner))
     return pd.DataFrame(rows, columns=[variant, *COLUMNS])
 
@@ -427,7 +426,7 @@ def _markdown_row(r: dict[str, object], variant: str, middle: str) -> str:
     """One line of a table in markdown; ``middle`` goes after the criterion (the need, or the
     number of episodes compared)."""
     label = metric_label(str(r["criterion"]))
-    if r["verdict"] == "n/a" or not r["n"]:
+    if r["verdict"] == "n/a":
         return f"| {r[variant]} | {label} | {middle} | | {r['best_law']} | | | n/a | no |"
     d = metric_digits(str(r["criterion"]))
     return (
