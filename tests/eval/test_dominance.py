@@ -91,6 +91,10 @@ def test_only_the_seeds_both_ran_are_paired() -> None:
         {"agent": {"mean_offset_px": [1.0, 2.0, 3.0]}, "pn": {"mean_offset_px": [5.0] * 5}}
     )
     assert _line(dominance(table, "agent"), "mean_offset_px")["n"] == 3
+    # no seed in common: the line names its law and is n/a, not a tie
+    table.loc[table.policy == "agent", "seed"] += 10
+    line = _line(dominance(table, "agent"), "mean_offset_px")
+    assert (line["best_law"], line["n"], line["verdict"], line["meets"]) == ("pn", 0, "n/a", False)
 
 
 def test_by_default_the_learner_meets_the_laws_under_its_own_sensing() -> None:
