@@ -72,7 +72,7 @@ def test_the_page_streams_draws_and_changes_the_mode(
         assert page.text_content("#mode") == "gsmpn"
         assert "active" in (page.get_attribute("button[data-mode='gsmpn']", "class") or "")
         latency = page.evaluate("window.monitorStats.latencyMs.slice(-5)")
-        assert all(0 <= ms < 1000 for ms in latency)
+        assert all(0 <= ms < 1000 for ms in latency), latency
         # a mode the simulation cannot feed: refused, the robot drives on, the page says why
         page.click("button[data-mode='ppo_ahead']")
         page.wait_for_function("window.monitorStats.notice !== ''", timeout=5000)

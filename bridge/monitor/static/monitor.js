@@ -66,7 +66,10 @@ function onState(s) {
   stats.frames += 1;
   stats.lastSeq = s.seq;
   stats.mode = s.mode;
-  const latency = Date.now() - s.t_wall * 1000;
+  // The page's wall clock to a fraction of a millisecond, as the server's t_wall: Date.now()
+  // counts whole milliseconds, so a state that arrived within the millisecond it was
+  // stamped in read as up to 1 ms in the past.
+  const latency = performance.timeOrigin + performance.now() - s.t_wall * 1000;
   stats.latencyMs.push(latency);
   if (stats.latencyMs.length > 1000) stats.latencyMs.shift();
   if (s.time_s < lastTime) { trail = { robot: [], person: [] }; offsets = []; }  // a new episode
