@@ -22,7 +22,9 @@ Learned agents: ``ppo`` is each task's shipped PPO agent (PersonFollow's
 ``ppo_mecanum`` PersonFollow's on the mecanum base (``policies/agents/ppo_mecanum``),
 ``ppo_ahead`` PersonFollow's that also reads the reading ahead (``policies/agents/ppo_ahead``;
 its observation has ``ahead_m``, ``PerceptionConfig.ahead_rays``; its view gates the detection's
-jumps), and a path
+jumps), ``ppo_law`` PersonFollow's that reads ahead and starts from ``pn:thesis``'s command
+(``policies/agents/ppo_law``; its view holds the law's command, :mod:`policies.learned.hint`),
+and a path
 (a run folder of ``follow-train``, its ``model.zip``, or a checkpoint ``.zip``) loads that
 agent under the path as its name (:mod:`policies.learned.ppo`).
 

@@ -72,7 +72,9 @@ def acts_as_trained():
     (eval mode: frozen statistics), stepped by SB3's own ``load`` and ``predict``, against the
     policy in the single env on the same seed: the same SI actions, step by step.
     ``acts_as_trained(run_dir, policy, steps)``: the first ``steps`` actions (fewer when the
-    episode ends sooner)."""
+    episode ends sooner); ``env_kwargs`` are ``gym.make``'s for the training stack's env (an
+    agent that reads ahead needs ``{"perception": policy.reads_ahead}``, as evaluation gives
+    it)."""
     import numpy as np
     from stable_baselines3 import PPO
     from stable_baselines3.common.vec_env import VecEnvWrapper
@@ -96,10 +98,14 @@ def acts_as_trained():
         def step_wait(self):
             return self.venv.step_wait()
 
-    def check(run, policy, steps: int, scenario: str = "curve", seed: int = 7) -> None:
+    def check(
+        run, policy, steps: int, scenario: str = "curve", seed: int = 7, env_kwargs=None
+    ) -> None:
         config = read_config(run)
         model = PPO.load(run / "model.zip", device="cpu")
-        recorder = RecordActions(base_env([scenario], 1, config["args"]["env_config"]))
+        # env_kwargs: what evaluation gives the policy beyond the preset (the reading ahead)
+        env = base_env([scenario], 1, config["args"]["env_config"], env_kwargs=env_kwargs)
+        recorder = RecordActions(env)
         stats = run / "vecnormalize.pkl"
         venv = agent_env(recorder, config["hyperparams"], "eval", normalization=stats)
         venv.seed(seed)
