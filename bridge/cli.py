@@ -198,8 +198,8 @@ def _policy_factory(built: dict[str, Any] | None = None) -> Any:
 
 def _shipped_agents() -> tuple[dict[str, Any], list[str]]:
     """The shipped PersonFollow agents a monitor may offer beyond its fixed modes (``ppo_ahead``,
-    ``ppo_mecanum``), built (whether a robot can run one is read from the agent itself), and
-    why any of them could not be loaded."""
+    ``ppo_law``, ``ppo_mecanum``), built (whether a robot can run one is read from the agent
+    itself), and why any of them could not be loaded."""
     from bridge.monitor.hub import MODES
     from policies import make_policy
     from policies.learned.ppo import SHIPPED

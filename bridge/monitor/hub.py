@@ -26,6 +26,7 @@ LABELS: dict[str, str] = {
     "gsmpn": "GS-MPN",
     "ppo": "PPO",
     "ppo_ahead": "PPO (ahead)",
+    "ppo_law": "PPO (law)",
     "stop": "STOP",
     "manual": "manual",
 }
