@@ -72,9 +72,8 @@ def acts_as_trained():
     (eval mode: frozen statistics), stepped by SB3's own ``load`` and ``predict``, against the
     policy in the single env on the same seed: the same SI actions, step by step.
     ``acts_as_trained(run_dir, policy, steps)``: the first ``steps`` actions (fewer when the
-    episode ends sooner); ``env_kwargs`` are ``gym.make``'s for the training stack's env (an
-    agent that reads ahead needs ``{"perception": policy.reads_ahead}``, as evaluation gives
-    it)."""
+    episode ends sooner). The training stack's env gets what evaluation gives the policy on top
+    of the run's configuration (its ``env_overrides``: an agent's reading ahead)."""
     import numpy as np
     from stable_baselines3 import PPO
     from stable_baselines3.common.vec_env import VecEnvWrapper
@@ -98,13 +97,11 @@ def acts_as_trained():
         def step_wait(self):
             return self.venv.step_wait()
 
-    def check(
-        run, policy, steps: int, scenario: str = "curve", seed: int = 7, env_kwargs=None
-    ) -> None:
+    def check(run, policy, steps: int, scenario: str = "curve", seed: int = 7) -> None:
         config = read_config(run)
         model = PPO.load(run / "model.zip", device="cpu")
-        # env_kwargs: what evaluation gives the policy beyond the preset (the reading ahead)
-        env = base_env([scenario], 1, config["args"]["env_config"], env_kwargs=env_kwargs)
+        overrides = getattr(policy, "env_overrides", None) or None  # as eval.rollout applies
+        env = base_env([scenario], 1, config["args"]["env_config"], env_kwargs=overrides)
         recorder = RecordActions(env)
         stats = run / "vecnormalize.pkl"
         venv = agent_env(recorder, config["hyperparams"], "eval", normalization=stats)

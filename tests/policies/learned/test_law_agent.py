@@ -9,6 +9,7 @@ import pandas as pd
 import pytest
 
 from eval.rollout import run_batch, run_episode
+from eval.thesis import LAWS
 from policies import make_policy
 from policies.learned.hint import LawHint
 from policies.learned.incremental import IncrementalAction
@@ -46,9 +47,7 @@ def test_it_is_built_by_name_with_the_law_and_the_gate_in_its_view() -> None:
 def test_it_acts_as_its_training_stack_did(acts_as_trained) -> None:
     # A walk with no jump of the detection, so the gate (absent from the training stack)
     # passes every reading: the law, the age, the command steps and the frames as trained.
-    agent = make_policy("ppo_law")
-    reading = {"perception": agent.reads_ahead}  # as evaluation gives it
-    acts_as_trained(AGENTS / "ppo_law", agent, 60, scenario="curve", seed=7, env_kwargs=reading)
+    acts_as_trained(AGENTS / "ppo_law", make_policy("ppo_law"), 60, scenario="curve", seed=7)
 
 
 @pytest.mark.slow
@@ -56,8 +55,8 @@ def test_it_keeps_the_person_round_the_corner_where_every_law_loses_them() -> No
     """corridor_turn, seed 30057 (README, "The agent that starts from a law ships as
     ppo_law"): all six laws lose the person at the corner; the agent follows them to the
     end, batched as alone."""
-    for law in ("pn:thesis", "gsmpn:tuned"):
-        assert run_episode(law, "corridor_turn", 30057).termination == "lost"
+    for law in (f"{name}:{preset}" for name in LAWS for preset in ("thesis", "tuned")):
+        assert run_episode(law, "corridor_turn", 30057).termination == "lost", law
     (batched,) = run_batch("ppo_law", "corridor_turn", [30057])
     alone = run_episode("ppo_law", "corridor_turn", 30057)
     pd.testing.assert_frame_equal(batched.log, alone.log, check_exact=True)
