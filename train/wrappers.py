@@ -222,6 +222,13 @@ class VecShapedReward(VecEnvWrapper):
       max(target_distance_m - d, 0)``. An agent charged alike on both sides overshoots when the
       person stops (it came to 0.76 m and backed off); a charge that is steeper on the near
       side makes closing in dearer than lagging. (Measured: at 2 and 4 the overshoot stayed.)
+    - ``headway_s``: a following distance that grows with the robot's speed, ``target_distance_m
+      + headway_s * max(v, 0)`` for ``far_weight`` and ``near_weight``, ``v`` the robot's own
+      forward speed (the env's info ``robot_v_mps``, included as for the truth; a real robot
+      has it from its wheels): the time gap of adaptive cruise control. A person walking
+      beside a robot at 1 m leaves its image with one sideways step (``zigzag``), and agents
+      trained to follow 1.1 m behind lost fewer; a robot standing near a person who walks
+      round it (``occlusion``) or stops (``stop_and_go``) then pays for the extra 0.1 m.
 
     Put a ``VecMonitor`` below this wrapper to log the env's own episode returns.
 
@@ -254,6 +261,8 @@ class VecShapedReward(VecEnvWrapper):
     :param bystander_m: the bystander clearance below which that charge starts [m], > 0.
     :param near_weight: weight on the distance's shortfall below ``target_distance_m``, on top
         of ``far_weight``'s charge [reward per m per step], >= 0; 0: none.
+    :param headway_s: the following distance's growth with the robot's forward speed [s]
+        (m per m/s), >= 0; 0: a fixed ``target_distance_m``.
     """
 
     #: Changes rewards only: the agent's pipeline leaves it out at inference
@@ -272,6 +281,7 @@ class VecShapedReward(VecEnvWrapper):
         "blind_reverse_weight": "detected",
         "clearance_weight": "wall_clearance_m",
         "bystander_weight": "bystander_clearance_m",
+        "headway_s": "robot_v_mps",
     }
 
     def __init__(
@@ -296,6 +306,7 @@ class VecShapedReward(VecEnvWrapper):
         near_weight: float = 0.0,
         bystander_weight: float = 0.0,
         bystander_m: float = 0.5,
+        headway_s: float = 0.0,
     ) -> None:
         for name, value in (
             ("alive_bonus", alive_bonus),
@@ -311,8 +322,9 @@ class VecShapedReward(VecEnvWrapper):
             ("clearance_weight", clearance_weight),
             ("near_weight", near_weight),
             ("bystander_weight", bystander_weight),
+            ("headway_s", headway_s),
         ):
-            lo = 0.0 if name.endswith(("weight", "_m")) else None
+            lo = 0.0 if name.endswith(("weight", "_m", "_s")) else None
             check_number(f"VecShapedReward.{name}", value, lo, optional=name == "reward_floor")
         for name, value in (("clearance_m", clearance_m), ("bystander_m", bystander_m)):
             check_number(f"VecShapedReward.{name}", value, 0.0, lo_open=True)
@@ -332,6 +344,7 @@ class VecShapedReward(VecEnvWrapper):
             "blind_reverse_weight": blind_reverse_weight,
             "clearance_weight": clearance_weight,
             "bystander_weight": bystander_weight,
+            "headway_s": headway_s,
         }
         for name, key in self.WEIGHT_KEYS.items():
             if weights[name]:
@@ -371,6 +384,7 @@ class VecShapedReward(VecEnvWrapper):
         self.near_weight = float(near_weight)
         self.bystander_weight = float(bystander_weight)
         self.bystander_m = float(bystander_m)
+        self.headway_s = float(headway_s)
         self._v_entry = names.index("v_mps") if "v_mps" in names else None
         for name in ("blind_speed_weight", "blind_reverse_weight"):
             if getattr(self, name) and self._v_entry is None:
@@ -445,8 +459,12 @@ class VecShapedReward(VecEnvWrapper):
             for i in np.flatnonzero(dones):  # the episode's own last observation, not the reset's
                 if "terminal_observation" in infos[i]:
                     d[i] = float(np.asarray(infos[i]["terminal_observation"])[0])
-        excess = np.maximum(np.abs(d - self.target_distance_m) - self.far_from_m, 0.0)
-        near = np.maximum(self.target_distance_m - d, 0.0)
+        target = self.target_distance_m
+        if self.headway_s:
+            v = self._info(self.WEIGHT_KEYS["headway_s"], infos)
+            target = target + self.headway_s * np.maximum(v, 0.0)
+        excess = np.maximum(np.abs(d - target) - self.far_from_m, 0.0)
+        near = np.maximum(target - d, 0.0)
         charge = self.far_weight * excess**self.far_power + self.near_weight * near
         return np.where(d > 0.0, charge, 0.0)
 

@@ -586,6 +586,38 @@ def test_a_clearance_weight_charges_the_shortfall_up_to_the_collision(
     assert collided >= 1  # and hit
 
 
+def test_headway_moves_the_following_distance_with_the_robots_speed() -> None:
+    """headway_s: far_weight and near_weight charge the distance from ``target_distance_m +
+    headway_s * max(v, 0)``, ``v`` the robot's true forward speed of the state each step
+    reached; a twin env with every info key and the same actions gives the expected charge."""
+    kwargs: dict[str, Any] = {"scenario": "straight", "episode": {"max_steps": 60}}
+    weights = {"far_weight": 2.0, "far_from_m": 0.0, "near_weight": 1.0, "headway_s": 0.5}
+    ahead = VecShapedReward(follow_env.make_sb3_vec_env(2, **kwargs), **weights)
+    plain = VecShapedReward(follow_env.make_sb3_vec_env(2, full_info=True, **kwargs))
+    for env in (ahead, plain):
+        env.seed(3)
+        env.reset()
+    fast, ended = 0, 0
+    for t in range(70):  # lane 0 drives on, lane 1 backs away: its target stays 1 m
+        act = np.array([[min(0.05 * t, 1.2), 0.0], [-0.3, 0.0]], dtype=np.float32)
+        obs, shaped, dones, _ = ahead.step(act)
+        _, base, _, infos = plain.step(act)
+        ended += int(dones.sum())  # an ended episode is charged from its terminal observation
+        d = np.array([i.get("terminal_observation", o)[0] for i, o in zip(infos, obs, strict=True)])
+        v = np.array([info["robot_v_mps"] for info in infos])
+        target = 1.0 + 0.5 * np.maximum(v, 0.0)
+        charge = 2.0 * np.abs(d - target) + np.maximum(target - d, 0.0)
+        np.testing.assert_allclose(shaped, base - np.where(d > 0, charge, 0.0), atol=1e-5)
+        fast += int(v[0] > 0.5)
+        assert target[1] == 1.0
+    assert fast >= 10  # the target moved: 1.25 m and more at 0.5 m/s
+    assert ended >= 2
+    with pytest.raises(ValueError, match=r"headway_s=-0\.1 is out of range"):
+        VecShapedReward(ScriptedVecEnv(constant_obs(1)), headway_s=-0.1)
+    with pytest.raises(ValueError, match=r"headway_s needs an env whose infos can carry"):
+        VecShapedReward(ScriptedVecEnv(constant_obs(1)), far_weight=1.0, headway_s=0.1)
+
+
 def test_blind_speed_and_clearance_weights_need_their_info_keys() -> None:
     with pytest.raises(ValueError, match=r"blind_speed_weight needs an env whose infos can carry"):
         VecShapedReward(ScriptedVecEnv(constant_obs(1)), blind_speed_weight=1.0)
