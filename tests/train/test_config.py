@@ -410,3 +410,24 @@ def test_the_gated_file_is_ppo_ahead_yaml_with_the_gate_left_out_of_training() -
         "train.wrappers.VecObservationAge"
     )
     assert [kw.get("in_training", True) for _, kw in wrapper_specs(entries)].count(False) == 1
+
+
+def test_the_headway_file_is_the_far_file_with_a_distance_that_grows_with_speed() -> None:
+    """ppo_ahead_law_headway.yaml trains as ppo_ahead_law_far.yaml does but for the following
+    distance: the env's reward keeps the reference's 1 m, and the shaped reward's distance is
+    1 m + 0.1 s x the robot's speed (1.1 m at a walk) where the far file's is 1.1 m always."""
+    configs = DEFAULT_HYPERPARAMS.parent
+    moving = load_hyperparams(configs / "ppo_ahead_law_headway.yaml", ENV_ID)
+    far = load_hyperparams(configs / "ppo_ahead_law_far.yaml", ENV_ID)
+    assert {k for k in moving if moving[k] != far[k]} == {"env_kwargs", "vec_env_wrapper"}
+    assert moving["env_kwargs"] == {k: v for k, v in far["env_kwargs"].items() if k != "reward"}
+    assert far["env_kwargs"]["reward"] == {"target_distance_m": 1.1}
+    changed = [
+        (a, b)
+        for a, b in zip(moving["vec_env_wrapper"], far["vec_env_wrapper"], strict=True)
+        if a != b
+    ]
+    ((mine, theirs),) = changed
+    name, kwargs = next(iter(mine.items()))
+    assert name == "train.wrappers.VecShapedReward"
+    assert kwargs == {**theirs[name], "target_distance_m": 1.0, "headway_s": 0.1}
