@@ -228,7 +228,8 @@ class VecShapedReward(VecEnvWrapper):
       has it from its wheels): the time gap of adaptive cruise control. A person walking
       beside a robot at 1 m leaves its image with one sideways step (``zigzag``), and agents
       trained to follow 1.1 m behind lost fewer; a robot standing near a person who walks
-      round it (``occlusion``) or stops (``stop_and_go``) then pays for the extra 0.1 m.
+      round it (``occlusion``) or stops (``stop_and_go``) then pays for the extra 0.1 m. The
+      env's own distance term keeps its ``reward.target_distance_m``.
 
     Put a ``VecMonitor`` below this wrapper to log the env's own episode returns.
 
@@ -328,6 +329,11 @@ class VecShapedReward(VecEnvWrapper):
             check_number(f"VecShapedReward.{name}", value, lo, optional=name == "reward_floor")
         for name, value in (("clearance_m", clearance_m), ("bystander_m", bystander_m)):
             check_number(f"VecShapedReward.{name}", value, 0.0, lo_open=True)
+        if headway_s and not (far_weight or near_weight):
+            raise ValueError(
+                f"VecShapedReward.headway_s={headway_s!r} moves the distance far_weight and "
+                "near_weight charge: give one of them"
+            )
         check_number("VecShapedReward.far_power", far_power, 1.0, 3.0)
         sources = {"far_source": far_source, "offset_source": offset_source}
         for name, value in sources.items():

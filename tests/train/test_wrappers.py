@@ -616,6 +616,8 @@ def test_headway_moves_the_following_distance_with_the_robots_speed() -> None:
         VecShapedReward(ScriptedVecEnv(constant_obs(1)), headway_s=-0.1)
     with pytest.raises(ValueError, match=r"headway_s needs an env whose infos can carry"):
         VecShapedReward(ScriptedVecEnv(constant_obs(1)), far_weight=1.0, headway_s=0.1)
+    with pytest.raises(ValueError, match=r"headway_s=0\.1 moves the distance .* give one"):
+        VecShapedReward(ScriptedVecEnv(constant_obs(1)), headway_s=0.1)
 
 
 def test_blind_speed_and_clearance_weights_need_their_info_keys() -> None:
