@@ -276,7 +276,8 @@ class VecShapedReward(VecEnvWrapper):
         "far_source": "true_distance_m",
         "offset_source": "true_offset_px",
     }
-    #: The info key each weighted term reads (the wrapper asks the env to include it).
+    #: The info key each weighted term, and ``headway_s``, reads (the wrapper asks the env to
+    #: include it).
     WEIGHT_KEYS: ClassVar[dict[str, str]] = {
         "blind_speed_weight": "detected",
         "blind_reverse_weight": "detected",

@@ -83,7 +83,8 @@ SHIPPED: dict[str, tuple[str, str]] = {
     "ppo_ahead": ("ppo_ahead", "person_follow"),
     # reads ahead and starts from pn:thesis's command, following 1.1 m behind in training
     # (train/configs/ppo_ahead_law_far.yaml, the gate added after training): the agent that
-    # meets the most of the dominance table; its perception must publish the reading ahead
+    # of the shipped agents meets the most of the dominance table; its perception must publish
+    # the reading ahead
     "ppo_law": ("ppo_law", "person_follow"),
     "ppo_line": ("ppo", "line_trace"),  # LineTrace-v0's agent
 }
