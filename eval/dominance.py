@@ -26,7 +26,9 @@ is reproducible. Each line carries two judgements:
 Each criterion is then held to its scope (:func:`criterion_summary`): met on ``every``
 scenario, or on ``most`` of them; the learner dominates when every criterion holds
 (:func:`dominates`). The report also counts the (scenario, criterion) lines met, which shows
-progress where the verdict is still no.
+progress where the verdict is still no, and the lines on which the learner is significantly
+better or significantly worse than the best law (:func:`tally`): the strict reading counts a
+one-episode difference as a miss, the tally only what the paired CIs can tell apart.
 
 An episode that ends early (a collision, a lost person) stops counting frames, distance and
 offset where it ends, so a law that crashes early can keep a better in-frame rate or distance
@@ -48,7 +50,7 @@ learner's, so a reader can tell a near miss from a bar no controller clears.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -68,6 +70,7 @@ __all__ = [
     "dominates",
     "finished_markdown",
     "finished_view",
+    "tally",
 ]
 
 
@@ -197,25 +200,40 @@ def calibration(
     *,
     criteria: Sequence[Criterion] = CRITERIA,
     seed: int = 0,
-) -> dict[str, int]:
-    """How many requirements each law meets against the others (the bar :func:`dominance`
-    sets, applied to the laws themselves).
+) -> dict[str, dict[str, int]]:
+    """How each law fares against the others (the bar :func:`dominance` sets, applied to the
+    laws themselves).
 
     :param table: the episode table :func:`dominance` reads.
     :param laws: the laws' labels, at least two.
-    :returns: ``{law: requirements met}`` (of ``scenarios x criteria``), in ``laws`` order.
+    :returns: ``{law: tally}`` in ``laws`` order, each law's :func:`tally` against the best of
+        the others on each line (``met`` of ``scenarios x criteria``, ``better``, ``worse``).
     :raises ValueError: with fewer than two laws, or as :func:`dominance` does.
     """
     laws = list(laws)
     if len(laws) < 2:
         raise ValueError(f"calibration needs at least two laws, got {laws}")
     return {
-        law: int(
+        law: tally(
             dominance(
                 table, law, [other for other in laws if other != law], criteria=criteria, seed=seed
-            )["meets"].sum()
+            )
         )
         for law in laws
+    }
+
+
+def tally(frame: pd.DataFrame) -> dict[str, int]:
+    """The lines of :func:`dominance`'s table counted three ways.
+
+    :param frame: :func:`dominance` output.
+    :returns: ``met`` (requirements met), ``better`` and ``worse`` (lines whose paired CI of
+        ``learner - best law`` excludes zero in the learner's favour / against it).
+    """
+    return {
+        "met": int(frame["meets"].astype(bool).sum()),
+        "better": int((frame["verdict"] == "better").sum()),
+        "worse": int((frame["verdict"] == "worse").sum()),
     }
 
 
@@ -378,7 +396,7 @@ def dominates(frame: pd.DataFrame) -> bool:
 
 
 def dominance_markdown(
-    frame: pd.DataFrame, learner: str, calibrated: dict[str, int] | None = None
+    frame: pd.DataFrame, learner: str, calibrated: dict[str, dict[str, int]] | None = None
 ) -> str:
     """The table in markdown, after one line per criterion saying where it is met.
 
@@ -390,16 +408,27 @@ def dominance_markdown(
     summary = criterion_summary(frame)
     lines = []
     held = int(summary["holds"].sum())
+    counts = tally(frame)
     lines.append(
         f"`{learner}` {'dominates' if dominates(frame) else 'does not dominate'} the laws: "
         f"{held} of {len(summary)} criteria hold on their scope; "
-        f"{int(frame['meets'].sum())} of {len(frame)} (scenario, criterion) requirements met."
+        f"{counts['met']} of {len(frame)} (scenario, criterion) requirements met."
+    )
+    worse = frame[frame["verdict"] == "worse"]
+    named = ", ".join(f"{w[variant]} {metric_label(w['criterion'])}" for _, w in worse.iterrows())
+    lines.append(
+        f"Significantly better than the best law on {counts['better']} of {len(frame)} lines, "
+        f"significantly worse on {counts['worse']} (paired 95 % CIs that exclude zero)"
+        f"{f': {named}' if named else ''}."
     )
     if calibrated:
-        each = ", ".join(f"{law} {met}" for law, met in calibrated.items())
+        met = {law: t["met"] for law, t in calibrated.items()}
+        each = ", ".join(f"{law} {m}" for law, m in met.items())
         lines.append(
             f"For scale, each law against the other {len(calibrated) - 1} (the same test): "
-            f"{min(calibrated.values())}-{max(calibrated.values())} of {len(frame)} ({each})."
+            f"{_span(met.values())} of {len(frame)} ({each}); significantly better on "
+            f"{_span(t['better'] for t in calibrated.values())} lines and worse on "
+            f"{_span(t['worse'] for t in calibrated.values())}."
         )
     lines.append("")
     for s in summary.itertuples(index=False):
@@ -420,6 +449,13 @@ def dominance_markdown(
     for row in frame.itertuples(index=False):
         lines.append(_markdown_row(row._asdict(), variant, str(row.need)))
     return "\n".join(lines) + "\n"
+
+
+def _span(values: Iterable[int]) -> str:
+    """``"lo-hi"`` of some counts, or the one count when they are all equal."""
+    got = list(values)
+    lo, hi = min(got), max(got)
+    return str(lo) if lo == hi else f"{lo}-{hi}"
 
 
 def _markdown_row(r: dict[str, object], variant: str, middle: str) -> str:

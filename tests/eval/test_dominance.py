@@ -20,6 +20,7 @@ from eval.dominance import (
     dominates,
     finished_markdown,
     finished_view,
+    tally,
 )
 
 METRICS = [c.metric for c in CRITERIA]
@@ -117,6 +118,10 @@ def test_the_report_names_where_each_requirement_is_missed() -> None:
     frame = dominance(table, "agent")
     text = dominance_markdown(frame, "agent")
     assert text.startswith("`agent` does not dominate the laws")
+    assert text.splitlines()[1] == (
+        "Significantly better than the best law on 1 of 12 lines, significantly worse on 1 "
+        "(paired 95 % CIs that exclude zero): curve MeanOffset (px)."
+    )
     assert (
         "- MeanOffset (px): significantly better than the best law in 1 of 2 scenarios "
         "(needed: most: 2; **does not hold**); not in curve" in text
@@ -169,8 +174,13 @@ def test_outcomes_must_hold_on_every_scenario_and_quality_on_most(
     assert summary.loc["lost_rate_pct", "holds"] == (lost_once is None)
     assert summary.loc["lost_rate_pct", "missed"] == ("" if lost_once is None else "s1")
     assert dominates(frame) is expected
-    headline = dominance_markdown(frame, "agent").splitlines()[0]
+    headline, counts = dominance_markdown(frame, "agent").splitlines()[:2]
     assert headline.startswith(f"`agent` {'dominates' if expected else 'does not dominate'}")
+    # smoother on all 4, centring better on offset_better; one lost episode in 10 is a tie
+    assert counts == (
+        f"Significantly better than the best law on {4 + offset_better} of 24 lines, "
+        "significantly worse on 0 (paired 95 % CIs that exclude zero)."
+    )
     held = int(summary["holds"].sum())
     assert f": {held} of 6 criteria hold on their scope; " in headline
 
@@ -199,17 +209,29 @@ def test_calibration_puts_each_law_through_the_test_against_the_others() -> None
                       "lost_rate_pct": [100.0] + [0.0] * 11},
         }
     )  # fmt: skip
-    met = calibration(table, ["pn", "mpn", "gsmpn"])
-    assert list(met) == ["pn", "mpn", "gsmpn"]
+    tallies = calibration(table, ["pn", "mpn", "gsmpn"])
+    assert list(tallies) == ["pn", "mpn", "gsmpn"]
+    met = {law: t["met"] for law, t in tallies.items()}
     # pn: in frame, lost, collision, distance (ties at 0) and MeanOffset; not StdAccel.
     # mpn: the four ties and StdAccel; gsmpn: three ties (lost once: not at least as good).
     assert met == {"pn": 5, "mpn": 5, "gsmpn": 3}
-    for law, count in met.items():
-        others = [p for p in met if p != law]
-        assert int(dominance(table, law, others)["meets"].sum()) == count
-    text = dominance_markdown(dominance(table, "pn", ["mpn", "gsmpn"]), "pn", met)
+    # pn centres 5 px better and is rougher than mpn (600 against ~530 mm/s²); mpn the
+    # reverse; gsmpn as rough as pn and centring no better than mpn. One lost episode in 12
+    # is no significant difference.
+    assert tallies["pn"] == {"met": 5, "better": 1, "worse": 1}
+    assert tallies["mpn"] == {"met": 5, "better": 1, "worse": 1}
+    assert tallies["gsmpn"] == {"met": 3, "better": 0, "worse": 2}
+    for law, t in tallies.items():
+        others = [p for p in tallies if p != law]
+        assert tally(dominance(table, law, others)) == t
+    text = dominance_markdown(dominance(table, "pn", ["mpn", "gsmpn"]), "pn", tallies)
     assert (
-        "For scale, each law against the other 2 (the same test): 3-5 of 6 (pn 5, mpn 5, " in text
+        "For scale, each law against the other 2 (the same test): 3-5 of 6 (pn 5, mpn 5, "
+        "gsmpn 3); significantly better on 0-1 lines and worse on 1-2." in text
+    )
+    assert (
+        "Significantly better than the best law on 1 of 6 lines, significantly worse on 1 "
+        "(paired 95 % CIs that exclude zero): straight StdAccel (mm/s²)." in text
     )
     with pytest.raises(ValueError, match=r"at least two laws, got \['pn'\]"):
         calibration(table, ["pn"])
