@@ -183,7 +183,8 @@ class VecShapedReward(VecEnvWrapper):
       charge on the observed distance pays the agent to chase them (in ``crowd`` it did, and
       drove into the person it followed, who stood 1 m in front of it). The truth is known in
       simulation only, and only the reward reads it: the agent still sees the observation.
-      (Measured, it did not stop those collisions: README, "Tried on top of ppo_fast.yaml".)
+      (Measured, it did not stop those collisions: docs/learned/study.md, "Tried on top of
+      ppo_fast.yaml".)
     - ``blind_speed_weight``: charges the forward speed command (``max(v, 0)`` in the units of
       the wrapped action: above :class:`VecRescaleAction`, 1 at full speed) on each step whose
       frame has no detection (the env's info ``detected``, which the wrapper asks the env to
@@ -191,8 +192,8 @@ class VecShapedReward(VecEnvWrapper):
       agent that drives on towards where they were runs into the wall they walked behind
       (``occlusion``). The charge is meant to teach it to slow down while it sees nothing; it
       comes after the floor, so a large weight makes standing still the cheapest course.
-      (Measured, README "Tried on top of ppo_fast.yaml": at 1 the agent backed away while
-      blind and cut the corner when the person reappeared; at 3 it never set off.)
+      (Measured, docs/learned/study.md, "Tried on top of ppo_fast.yaml": at 1 the agent backed
+      away while blind and cut the corner when the person reappeared; at 3 it never set off.)
     - ``blind_reverse_weight``: the same charge on the backward speed command (``max(-v, 0)``)
       on steps without a detection. An agent that reads the depth ahead learnt to back away
       fast when something near comes between it and the person (the column of ``occlusion``, a
@@ -216,7 +217,7 @@ class VecShapedReward(VecEnvWrapper):
       of 20 episodes), the law that falls furthest back none. The agent sees only the person
       it follows: it can learn that a stranger is near from how that observation jumps, not
       see where. (Measured: at 2 within 0.5 m and at 4 within 1 m, bystander collisions did
-      not fall: README, "Tried on top of ppo_fast.yaml".)
+      not fall: docs/learned/study.md, "Tried on top of ppo_fast.yaml".)
     - ``near_weight``: charges being nearer than the following distance once more, on top of
       ``far_weight`` (the same distance, the same source, before the floor): ``near_weight *
       max(target_distance_m - d, 0)``. An agent charged alike on both sides overshoots when the

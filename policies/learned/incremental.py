@@ -40,8 +40,9 @@ class IncrementalAction(Feature):
         it first measures the person, as the reference robot and every guidance law do.
     :param brake_change: the largest change per step towards rest, one per entry (inner
         units), or None: ``max_change`` both ways. Given, an action against the command's sign
-        takes ``|u|`` down by up to ``brake_change * |a|``, stopping at rest (README, "Tried
-        on top of ppo_fast.yaml": it did not stop the overshoot at stops).
+        takes ``|u|`` down by up to ``brake_change * |a|``, stopping at rest
+        (docs/learned/study.md, "Tried on top of ppo_fast.yaml": it did not stop the overshoot
+        at stops).
     :param held_index: the observation entry that is > 0 while the detection is held (not
         fresh), :class:`ObservationAge`'s age; or None. Needs ``held_floor``.
     :param held_floor: while the detection is held, the lowest command of each entry (inner

@@ -279,8 +279,8 @@ def test_a_step_that_would_leave_the_members_seeing_the_env_apart_is_refused(
 
 
 INCREMENTAL = "train.wrappers.VecIncrementalAction"
-# ppo_ahead's turn kept behind an occluder (README, "Keeping the turn through a gap, tried"):
-# the age is observation entry 3, the reading ahead entry 2
+# ppo_ahead's turn kept behind an occluder (docs/learned/study.md, "Keeping the turn through a
+# gap, tried"): the age is observation entry 3, the reading ahead entry 2
 KEEP = f"{{{INCREMENTAL}: {{held_index: 3, held_keep: [false, true], ahead_index: 2}}}}"
 
 
