@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import gymnasium as gym
 import numpy as np
 import pytest
 
@@ -431,3 +432,22 @@ def test_the_headway_file_is_the_far_file_with_a_distance_that_grows_with_speed(
     name, kwargs = next(iter(mine.items()))
     assert name == "train.wrappers.VecShapedReward"
     assert kwargs == {**theirs[name], "target_distance_m": 1.0, "headway_s": 0.1}
+
+
+def test_the_tracker_file_is_the_headway_file_on_the_tracker() -> None:
+    """ppo_ahead_law_tracker.yaml trains as ppo_ahead_law_headway.yaml does, on a perception that
+    tracks the person (association "tracker") instead of taking the first detection; nothing
+    else changes, so the two studies differ by the perception alone."""
+    configs = DEFAULT_HYPERPARAMS.parent
+    tracked = load_hyperparams(configs / "ppo_ahead_law_tracker.yaml", ENV_ID)
+    headway = load_hyperparams(configs / "ppo_ahead_law_headway.yaml", ENV_ID)
+    assert {k for k in tracked if tracked[k] != headway[k]} == {"env_kwargs"}
+    perception = tracked["env_kwargs"]["perception"]
+    assert perception == {**headway["env_kwargs"]["perception"], "association": "tracker"}
+    assert {k: v for k, v in tracked["env_kwargs"].items() if k != "perception"} == {
+        k: v for k, v in headway["env_kwargs"].items() if k != "perception"
+    }
+    # the env takes the setting as given (an unknown association would raise here)
+    env = gym.make(ENV_ID, **tracked["env_kwargs"])
+    assert env.unwrapped.config.perception.association == "tracker"
+    env.close()
