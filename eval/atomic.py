@@ -14,7 +14,14 @@ import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
-__all__ = ["atomic_folder", "atomic_path", "atomic_write_text", "check_new_folder", "file_on_path"]
+__all__ = [
+    "atomic_folder",
+    "atomic_path",
+    "atomic_write_text",
+    "check_new_folder",
+    "check_writable",
+    "file_on_path",
+]
 
 
 def _umask() -> int:
@@ -74,10 +81,11 @@ def file_on_path(path: str | Path) -> Path | None:
 
 def check_new_folder(path: str | Path) -> None:
     """Check that ``path`` can become a new folder: it does not exist or is an empty folder,
-    and no parent of it is a regular file.
+    no parent of it is a regular file, and its nearest existing parent takes a new file.
 
     :raises FileExistsError: if ``path`` exists and is not an empty folder.
     :raises NotADirectoryError: if a parent of ``path`` is a regular file (the message names it).
+    :raises OSError: if the folder it would be made in takes no file (the message names it).
     """
     path = Path(path)
     blocker = file_on_path(path)
@@ -87,6 +95,30 @@ def check_new_folder(path: str | Path) -> None:
         raise FileExistsError(
             f"{path} already exists and is not an empty folder; choose another output folder"
         )
+    check_writable(path)
+
+
+def check_writable(path: str | Path) -> None:
+    """Check that ``path`` could be written: the nearest existing folder on it takes a new file.
+
+    Tried with a real file (made and removed at once), not ``os.access``: a root shell passes
+    every permission check, and file systems such as ``/proc`` refuse new files to anyone.
+    Called before long work starts, so that a run is not lost to a folder it cannot write.
+
+    :raises NotADirectoryError: if a parent of ``path`` is a regular file (the message names it).
+    :raises OSError: if the folder takes no new file (the message names it and says why).
+    """
+    path = Path(path).absolute()
+    blocker = file_on_path(path.parent)
+    if blocker is not None:
+        raise NotADirectoryError(f"cannot write to {path}: {blocker} is a file, not a folder")
+    folder = next(p for p in path.parents if p.exists())
+    try:
+        fd, name = tempfile.mkstemp(prefix=".write-check.", dir=folder)
+    except OSError as e:
+        raise OSError(f"cannot write to {folder}: {e.strerror or e}") from None
+    os.close(fd)
+    os.unlink(name)
 
 
 @contextlib.contextmanager

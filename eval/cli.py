@@ -55,6 +55,7 @@ from eval.cli_base import (  # noqa: F401  (MAX_EPISODES, MAX_SEED: the limits, 
     USAGE_ERROR,
     UsageError,
     _config,
+    _integer,
     _names,
     _non_negative,
     _Parser,
@@ -199,8 +200,11 @@ def build_parser() -> argparse.ArgumentParser:
         description="Every law x both walks x --episodes seeds under the as-built chain and the "
         "corrected one, against the thesis's Table 4.1 (eval.thesis).",
     )
-    thesis.add_argument(
-        "--episodes", type=_positive, default=20, help="seeds per cell (default: %(default)s)"
+    thesis.add_argument(  # the report's spreads and run counts need two episodes a cell
+        "--episodes",
+        type=lambda text: _integer(text, 2),
+        default=20,
+        help="seeds per cell, at least 2 (default: %(default)s)",
     )
     thesis.add_argument("--seed", type=_non_negative, default=0, help="first seed (default: 0)")
     thesis.add_argument(
@@ -254,6 +258,18 @@ def cmd_aggregate(args: argparse.Namespace) -> int:
     from eval.atomic import atomic_folder
 
     learners = [agg.learner_runs(path) for path in args.runs]
+    # Each learner is named by its folder, and its tables are keyed by that name.
+    seen: dict[str, Path] = {}
+    for path, learner in zip(args.runs, learners, strict=True):
+        if learner.name in seen:
+            same = Path(path).resolve() == seen[learner.name].resolve()
+            raise UsageError(
+                f"{path}: names the learner {learner.name!r} twice; give each folder once"
+                if same
+                else f"{seen[learner.name]} and {path} are both named {learner.name!r} (a "
+                "learner is named by its folder): rename one"
+            )
+        seen[learner.name] = Path(path)
     laws = _names(args.laws, "laws")
     refuse_aliases([(law, policy_label(law, "laws")) for law in laws], "laws")
     scenarios = _names(args.scenarios, "scenarios")
@@ -274,10 +290,11 @@ def cmd_aggregate(args: argparse.Namespace) -> int:
 
 def cmd_dominance(args: argparse.Namespace) -> int:
     """``follow-eval dominance``: see :mod:`eval.dominance`."""
-    import pandas as pd
 
     from eval.atomic import atomic_write_text
     from eval.dominance import (
+        CRITERIA,
+        ENDINGS,
         FINISHED,
         calibration,
         default_laws,
@@ -288,16 +305,9 @@ def cmd_dominance(args: argparse.Namespace) -> int:
     )
     from eval.report import safe_name
 
-    path = args.run / "episodes.csv"
-    if not path.is_file():
-        raise UsageError(f"{path}: no such file (give a follow-eval run output folder)")
-    try:
-        table = pd.read_csv(path)
-    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as e:
-        raise UsageError(f"{path}: not an episode table ({e})") from None
-    if not {"policy", "seed"} <= set(table.columns):
-        raise UsageError(f"{path}: not an episode table (no policy and seed columns)")
-    laws = _names(args.laws, "laws") if args.laws else default_laws(table, args.learner)
+    metrics = [*(c.metric for c in CRITERIA), *ENDINGS, FINISHED]
+    table = _episode_table(args.run / "episodes.csv", metrics)
+    laws = _names(args.laws, "laws") if args.laws is not None else default_laws(table, args.learner)
     frame = dominance(table, args.learner, laws)
     calibrated = calibration(table, laws) if len(laws) > 1 else None
     report = dominance_markdown(frame, args.learner, calibrated)
@@ -313,6 +323,40 @@ def cmd_dominance(args: argparse.Namespace) -> int:
     print(report, end="")
     print(f"Wrote {written}")
     return 0
+
+
+def _episode_table(path: Path, metrics: list[str]) -> Any:
+    """``follow-eval run``'s ``episodes.csv`` at ``path``, checked: episodes in it, integer
+    seeds, and a number (or nothing) in each cell of ``metrics``' columns.
+
+    :raises UsageError: naming the file, and the line and column of a bad cell.
+    """
+    import pandas as pd
+
+    if not path.is_file():
+        raise UsageError(f"{path}: no such file (give a follow-eval run output folder)")
+    try:
+        table = pd.read_csv(path)
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as e:
+        raise UsageError(f"{path}: not an episode table ({e})") from None
+    if not {"policy", "seed"} <= set(table.columns):
+        raise UsageError(f"{path}: not an episode table (no policy and seed columns)")
+    if table.empty:
+        raise UsageError(f"{path}: holds no episodes (a header only)")
+    for column in ["seed", *(m for m in metrics if m in table.columns)]:
+        values = pd.to_numeric(table[column], errors="coerce")
+        bad = values.isna() & table[column].notna()
+        if column == "seed":  # a seed pairs the episodes: it must be there, and whole
+            bad |= values.isna() | (values % 1 != 0)
+        if bad.any():
+            row = int(bad.to_numpy().argmax())  # line 1 is the header
+            what = "an integer seed" if column == "seed" else "a number"
+            raise UsageError(
+                f"{path}: line {row + 2}, column {column}: {str(table[column].iloc[row])!r} is not "
+                + what
+            )
+        table[column] = values.astype(int) if column == "seed" else values
+    return table
 
 
 def cmd_thesis(args: argparse.Namespace) -> int:

@@ -66,7 +66,9 @@ def _check_run_args(args: argparse.Namespace) -> tuple[list[str], list[str]]:
         )
     except argparse.ArgumentTypeError as e:
         raise UsageError(f"argument --config: {e}") from None
-    policies = _names(args.policies or task.default_policies, "policies")
+    # An empty --policies '' is a mistake to name, not a request for the defaults.
+    default = task.default_policies
+    policies = _names(default if args.policies is None else args.policies, "policies")
     if args.platforms is not None:
         platforms = _names(args.platforms, "platforms")
         for name in platforms:
@@ -78,7 +80,7 @@ def _check_run_args(args: argparse.Namespace) -> tuple[list[str], list[str]]:
             raise UsageError("--policies names a platform (policy@platform): leave out --platforms")
         policies = [f"{p}@{m}" for p in policies for m in platforms]
     given = getattr(args, task.variants_option)
-    scenarios = _names(given or task.default_variants, task.variants_option)
+    scenarios = _names(task.default_variants if given is None else given, task.variants_option)
     # Size first: it needs only the counts, and loading a policy is already work.
     runs = 2 if getattr(args, "ideal_baseline", False) else 1  # the grid again, perfect sensing
     _check_grid(len(policies) * runs, len(scenarios), args.episodes, args.seed)
@@ -93,6 +95,7 @@ def _check_run_args(args: argparse.Namespace) -> tuple[list[str], list[str]]:
                     + ", ".join(sorted(for_task))
                 )
             law = make_policy(spec, task.name)  # type: ignore[arg-type]
+            _check_trained_for(law, task.name)
             if platform is not None:
                 for_platform(law, tuple(a.name for a in get_platform(platform).actions))
         except (ValueError, TypeError) as e:
@@ -116,6 +119,22 @@ def _check_run_args(args: argparse.Namespace) -> tuple[list[str], list[str]]:
             f"{seeds.start}..{seeds.stop - 1}"
         )
     return policies, scenarios
+
+
+def _check_trained_for(policy: Any, task_name: str) -> None:
+    """An agent trained on another task's env is refused with the --task that runs it (its
+    platform and observation would otherwise be blamed)."""
+    from follow_env.tasks import task_for_env
+
+    env_id = getattr(policy, "env_id", None)
+    if env_id is None:
+        return
+    trained_for = task_for_env(env_id).name
+    if trained_for != task_name:
+        raise ValueError(
+            f"{policy.name!r} was trained on {env_id}, not on the {task_name} task: run it with "
+            f"--task {trained_for}"
+        )
 
 
 def _versions() -> dict[str, str]:

@@ -57,6 +57,7 @@ from typing import Any
 
 import yaml
 
+from follow_env.sim.checks import yaml_problem
 from policies.learned.feature import wrapper_entries
 from train.algos import DEFAULT_ALGO, PPO_RULES, Algo, algo
 from train.rules import (
@@ -130,7 +131,7 @@ def _document(path: Path) -> Any:
     except OSError as e:
         raise ConfigError(f"{path}: cannot read hyperparameters: {e.strerror or e}") from None
     except yaml.YAMLError as e:
-        raise ConfigError(f"{path}: not valid YAML: {' '.join(str(e).split())}") from None
+        raise ConfigError(f"{path}: not valid YAML: {yaml_problem(e)}") from None
 
 
 def sole_section(path: str | Path) -> str:
@@ -140,8 +141,14 @@ def sole_section(path: str | Path) -> str:
     """
     path = Path(path)
     document = _document(path)
-    if not isinstance(document, dict) or len(document) != 1:
-        found = ", ".join(map(str, document)) if isinstance(document, dict) else "nothing"
+    if not isinstance(document, dict):
+        kind = "nothing" if document is None else f"a {type(document).__name__}"
+        raise ConfigError(
+            f"{path}: holds {kind}, not rl-zoo3 hyperparameters (a mapping of env ids, e.g. "
+            "PersonFollow-v0: {...})"
+        )
+    if len(document) != 1:
+        found = ", ".join(map(str, document)) or "nothing"
         raise ConfigError(f"{path}: one section expected (found: {found}); give --env-id")
     return str(next(iter(document)))
 

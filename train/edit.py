@@ -229,7 +229,8 @@ def add_step(
     """
     folder = Path(folder)
     if not folder.is_dir():
-        raise ValueError(f"--add-step {folder}: no such folder (give an agent's folder)")
+        what = "is a file, not a folder" if folder.exists() else "no such folder"
+        raise ValueError(f"--add-step {folder}: {what} (give an agent's folder)")
     name, kwargs = parse_step(step)
     _check_step(name, kwargs)
     flag = kwargs.get(IN_TRAINING, False)
@@ -263,7 +264,8 @@ def change_step(
     """
     folder = Path(folder)
     if not folder.is_dir():
-        raise ValueError(f"--change-step {folder}: no such folder (give an agent's folder)")
+        what = "is a file, not a folder" if folder.exists() else "no such folder"
+        raise ValueError(f"--change-step {folder}: {what} (give an agent's folder)")
     name, kwargs = parse_step(step)
     if not kwargs:
         raise ValueError(f"--step {name}: give the arguments to change ({{name: {{arg: value}}}})")

@@ -26,14 +26,13 @@ from __future__ import annotations
 
 import hashlib
 import json
-import os
 import shutil
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from eval.atomic import atomic_folder, atomic_path, atomic_write_text, file_on_path
+from eval.atomic import atomic_folder, atomic_path, atomic_write_text, check_writable, file_on_path
 
 __all__ = [
     "AGENT_FILES",
@@ -143,9 +142,10 @@ def check_export(dest: str | Path, *, force: bool = False, run: Path | None = No
         fresh = not dest.exists() or (dest.is_dir() and not any(dest.iterdir()))
         if fresh and target in run_folder.parents:
             raise ExportError(f"{option}: would contain the run folder {run}; give another folder")
-    existing = next(p for p in (dest.absolute(), *dest.absolute().parents) if p.exists())
-    if not os.access(existing, os.W_OK | os.X_OK):
-        raise ExportError(f"{option}: cannot write to {existing}: permission denied")
+    try:  # a folder that takes no file (read-only, /proc) stops the run before it trains
+        check_writable(dest / EXPORT_NAMES[0] if dest.is_dir() else dest)
+    except OSError as e:
+        raise ExportError(f"{option}: {e}") from None
     if not dest.exists():
         return ExportPlan(dest, create=True, exported={})
     folders = [name for name in EXPORT_NAMES if (dest / name).is_dir()]

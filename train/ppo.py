@@ -38,7 +38,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from eval.atomic import atomic_write_text, file_on_path
+from eval.atomic import atomic_write_text, check_writable, file_on_path
 from follow_env.tasks import task_for_env
 from train.algos import ALGOS, DEFAULT_ALGO, algo, load_model, new_model
 from train.config import (
@@ -413,6 +413,10 @@ def _check_run_folder(args: Args) -> None:
         if blocker is not None:
             where = "is a file" if blocker == path else f"runs through the file {blocker}"
             raise ValueError(f"{option} {path}: {where}, not a folder")
+        try:  # before training: a folder that takes no file would lose the run at the end
+            check_writable(path / "config.yaml")
+        except OSError as e:
+            raise ValueError(f"{option} {path}: {e}") from None
     if args.out is not None and args.out.exists() and any(args.out.iterdir()):
         raise ValueError(
             f"--out {args.out} already exists and is not empty; use --resume to continue it"

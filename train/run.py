@@ -44,6 +44,7 @@ from stable_baselines3.common.callbacks import CheckpointCallback, EvalCallback
 from stable_baselines3.common.vec_env import VecNormalize
 
 from eval.atomic import atomic_path, atomic_write_text
+from follow_env.sim.checks import yaml_problem
 
 __all__ = [
     "CHECKPOINT_PREFIX",
@@ -125,7 +126,9 @@ def read_config(path: str | Path) -> dict[str, Any]:
     except OSError as e:
         raise ValueError(f"{path}: cannot read the run configuration: {e.strerror or e}") from None
     except yaml.YAMLError as e:
-        raise ValueError(f"{path}: the run configuration is not valid YAML: {e}") from None
+        raise ValueError(
+            f"{path}: the run configuration is not valid YAML: {yaml_problem(e)}"
+        ) from None
     if not isinstance(config, dict) or "hyperparams" not in config:
         raise ValueError(f"{path}: not a follow-train run configuration (no 'hyperparams')")
     return config

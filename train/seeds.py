@@ -67,6 +67,7 @@ def parse_seeds(text: str) -> tuple[int, ...]:
 
     :raises ValueError: for anything else, a seed beyond :data:`MAX_SEEDS` or a repeat.
     """
+    out_of_range = f"--seeds {text!r} is out of range: training seeds are 0..{MAX_SEEDS}"
     seeds: list[int] = []
     for part in str(text).split(","):
         part = part.strip()
@@ -74,6 +75,8 @@ def parse_seeds(text: str) -> tuple[int, ...]:
             low, high = int(m[1]), int(m[2])
             if high < low:
                 raise ValueError(f"--seeds {text!r}: the range {part} counts down")
+            if high > MAX_SEEDS:  # before the range is built: 0-1000000000 is 8 GB of ints
+                raise ValueError(out_of_range)
             seeds += range(low, high + 1)
         elif part.isdigit():
             seeds.append(int(part))
@@ -82,7 +85,7 @@ def parse_seeds(text: str) -> tuple[int, ...]:
     if len(set(seeds)) != len(seeds):
         raise ValueError(f"--seeds {text!r} names a seed twice")
     if max(seeds) > MAX_SEEDS:
-        raise ValueError(f"--seeds {text!r} is out of range: training seeds are 0..{MAX_SEEDS}")
+        raise ValueError(out_of_range)
     return tuple(seeds)
 
 

@@ -8,6 +8,9 @@ what is allowed::
 
 numpy integer and floating scalars are accepted wherever Python numbers are (sweeps build values
 with ``np.linspace``); :func:`as_number` turns them into Python numbers.
+
+A file that does not parse is reported in one line too: :func:`yaml_problem` gives a YAML
+error's place and problem without PyYAML's multi-line quotation of the file.
 """
 
 from __future__ import annotations
@@ -15,7 +18,15 @@ from __future__ import annotations
 import math
 from numbers import Integral, Real
 
-__all__ = ["as_number", "check_number", "is_integer", "is_real", "out_of_range", "range_text"]
+__all__ = [
+    "as_number",
+    "check_number",
+    "is_integer",
+    "is_real",
+    "out_of_range",
+    "range_text",
+    "yaml_problem",
+]
 
 
 def out_of_range(where: str, value: object, rule: str) -> ValueError:
@@ -111,3 +122,20 @@ def check_number(
     if not ok:
         raise out_of_range(where, value, rule)
     return as_number(value)  # type: ignore[return-value]
+
+
+def yaml_problem(exc: Exception) -> str:
+    """A YAML parse error in one line: where (line and column, counted from 1) and what.
+
+    PyYAML's own message quotes the offending lines with markers under them, over several
+    lines; a command line's error is one.
+    """
+    mark = getattr(exc, "problem_mark", None)
+    problem = " ".join(str(getattr(exc, "problem", None) or exc).split())
+    if mark is None:
+        return problem
+    out = f"line {mark.line + 1}, column {mark.column + 1}: {problem}"
+    context, start = getattr(exc, "context", None), getattr(exc, "context_mark", None)
+    if context and start is not None:  # e.g. "while parsing a flow sequence" and where it began
+        out += f" ({context} from line {start.line + 1}, column {start.column + 1})"
+    return out

@@ -23,7 +23,7 @@ from gymnasium import spaces
 
 from follow_env.platforms import get_platform
 from follow_env.platforms.base import Platform, PlatformConfig
-from follow_env.sim.checks import out_of_range
+from follow_env.sim.checks import out_of_range, yaml_problem
 from follow_env.sim.config import Sections
 from follow_env.tasks.spec import TaskSpec
 
@@ -177,15 +177,20 @@ def config_from_text(
         except OSError as exc:
             raise ValueError(f"cannot read {path}: {exc.strerror}") from None
         except yaml.YAMLError as exc:
-            raise ValueError(f"{path} is not valid YAML/JSON: {exc}") from None
+            raise ValueError(f"{path} is not valid YAML/JSON: {yaml_problem(exc)}") from None
         where = str(path)
     else:
         try:
             overrides = json.loads(text)
-        except json.JSONDecodeError:
+        except json.JSONDecodeError as exc:
+            if text.lstrip().startswith("{"):  # meant as JSON: say what is wrong with it
+                raise ValueError(
+                    f"{text!r} is not a valid JSON object: {exc.msg} at character {exc.pos + 1}"
+                ) from None
+            kind = "a folder" if path.is_dir() else "not a preset"
             raise ValueError(
-                f"{text!r} is not a preset ({', '.join(sorted(presets))}), a JSON object, or a "
-                ".json/.yaml file"
+                f"{text!r} is {kind}: give a preset ({', '.join(sorted(presets))}), a JSON "
+                "object, or a .json/.yaml file"
             ) from None
         where = "the JSON object"
     if not isinstance(overrides, dict):

@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 import yaml
 
+from follow_env.sim.checks import yaml_problem
 from policies.learned.features import Pipeline
 from policies.learned.networks import Memory
 from policies.learned.ppo import AgentLoadError, PPOPolicy, _Loaded
@@ -47,8 +48,10 @@ def member_folders(path: Path) -> list[Path]:
     """The member folders listed in ``path`` (an ``ensemble.yaml``), checked."""
     try:
         data = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except (OSError, yaml.YAMLError) as e:
+    except OSError as e:
         raise AgentLoadError(f"{path}: not a readable ensemble file: {e}") from None
+    except yaml.YAMLError as e:
+        raise AgentLoadError(f"{path}: not valid YAML: {yaml_problem(e)}") from None
     members = data.get("members") if isinstance(data, dict) else None
     if not isinstance(members, list) or len(members) < 2:
         raise AgentLoadError(

@@ -136,6 +136,16 @@ def load_network(path: Path, algo: str, policy: Any, error: type[Exception]) -> 
         custom["policy_class"] = MirrorMlpPolicy
     try:
         data, params, _ = load_from_zip_file(path, device="cpu", custom_objects=custom)
+    except Exception as e:  # zipfile, pickle, torch and SB3 each raise their own
+        raise error(
+            f"{path}: not a readable {_LIBRARY[algo]} model ({type(e).__name__}: {e})"
+        ) from None
+    if data is None or not params or "policy" not in params:
+        # SB3 returns None for members a zip lacks rather than raising
+        raise error(
+            f"{path}: not a {_LIBRARY[algo]} model: the zip lacks its 'data' or 'policy.pth' member"
+        )
+    try:
         kwargs = dict(data.get("policy_kwargs") or {})
         # Inference needs no optimizer (and building torch's Adam imports its compiler,
         # about a second).

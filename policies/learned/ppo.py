@@ -47,6 +47,7 @@ from typing import Any, NamedTuple
 import numpy as np
 import yaml
 
+from follow_env.sim.checks import yaml_problem
 from follow_env.tasks.person_follow.spec import AHEAD, AHEAD_SETTINGS, SPEC
 from policies.base import OBS_SIZES, validate_obs_batch, validate_obs_row
 from policies.learned.feature import wrapper_entries
@@ -180,8 +181,10 @@ class _Loaded:
         where = files.config
         try:
             config = yaml.safe_load(files.config.read_text(encoding="utf-8"))
-        except (OSError, yaml.YAMLError) as e:
+        except OSError as e:
             raise AgentLoadError(f"{where}: not a readable configuration: {e}") from None
+        except yaml.YAMLError as e:
+            raise AgentLoadError(f"{where}: not valid YAML: {yaml_problem(e)}") from None
         if not isinstance(config, dict) or not isinstance(config.get("hyperparams"), dict):
             raise AgentLoadError(f"{where}: not a usable agent configuration (no 'hyperparams')")
         hp = config["hyperparams"]
@@ -298,6 +301,8 @@ class PPOPolicy:
         #: The platform the agent was trained on, and its action's entries (what it commands).
         self.platform: str = self._agent.platform
         self.action_names: tuple[str, ...] = self._agent.action_names
+        #: The Gymnasium id of the task the agent was trained on (``"PersonFollow-v0"``, ...).
+        self.env_id: str = self._agent.env_id
         files = self._agent.files
         view = self._agent.pipeline(1)
         try:

@@ -109,6 +109,21 @@ def test_bad_arguments_give_one_line(tmp_path: Path, capsys: pytest.CaptureFixtu
     assert not (tmp_path / "z").exists()
 
 
+def test_a_learner_named_twice_is_refused_before_any_episode(
+    tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
+    out = ["--scenarios", "straight", "--laws", "pn", "--out", str(tmp_path / "x")]
+    assert main(["aggregate", str(AGENT), str(AGENT), *out]) == 2
+    err = capsys.readouterr().err
+    assert "names the learner 'ppo' twice; give each folder once" in err
+    assert err.count("\n") == 1
+    other = tmp_path / "elsewhere" / "ppo"  # another folder of the same name
+    shutil.copytree(AGENT, other)
+    assert main(["aggregate", str(AGENT), str(other), *out]) == 2
+    assert "are both named 'ppo' (a learner is named by its folder)" in capsys.readouterr().err
+    assert not (tmp_path / "x").exists()
+
+
 def test_scenarios_fall_into_the_splits_they_declare() -> None:
     assert {s: scenario_split(s) for s in ("straight", "occlusion", "crossing", "crowd")} == {
         "straight": "single_target",

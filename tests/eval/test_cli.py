@@ -146,6 +146,11 @@ def test_metrics_on_malformed_row_names_file_and_line(
         (["run", "--episodes", "many"], "--episodes: 'many' is not an integer"),
         (["run", "--workers", "0"], "--workers: 0 is out of range"),
         (["run", "--policies", ","], "--policies is empty"),
+        # empty, not left out: a mistake to name rather than a request for the defaults
+        (["run", "--policies", ""], "--policies is empty"),
+        (["run", "--scenarios", ""], "--scenarios is empty"),
+        (["thesis", "--episodes", "1"], "--episodes: 1 is out of range: must be >= 2"),
+        (["run", "--config", '{"perception": '], "is not a valid JSON object: Expecting value"),
         (
             ["run", "--policies", "pn,gsmpn,pn:tuned"],
             "--policies: 'pn' and 'pn:tuned' are the same controller (pn:tuned); give it once",
@@ -179,6 +184,44 @@ def test_config_takes_section_overrides_as_json_or_a_file(
     conf.write_text("perception:\n  association: tracker\n")
     assert main([*args, "--config", str(conf), "--out", str(tmp_path / "yaml")]) == 0
     capsys.readouterr()
+
+
+def test_a_config_file_that_is_not_yaml_is_one_line_with_its_place(
+    tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("perception: [1,2\n")  # PyYAML's own message takes 8 lines
+    assert main(["run", "--config", str(bad), "--out", str(tmp_path / "run")]) == 2
+    err = one_line_error(capsys)
+    assert f"{bad} is not valid YAML/JSON: line 2, column 1: expected ',' or ']'" in err
+    assert "(while parsing a flow sequence from line 1, column 13)" in err
+    assert main(["run", "--config", str(tmp_path), "--out", str(tmp_path / "run")]) == 2
+    assert f"'{tmp_path}' is a folder: give a preset" in one_line_error(capsys)
+    assert not (tmp_path / "run").exists()
+
+
+def test_an_agent_of_another_task_is_sent_to_its_task(
+    tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
+    agents = Path(__file__).parents[2] / "policies" / "agents"
+    line = str(agents / "ppo_line")
+    for policies in (line, f"{line}@mecanum"):  # not the platform: the task is what differs
+        assert main(["run", "--policies", policies, "--out", str(tmp_path / "run")]) == 2
+        err = one_line_error(capsys)
+        assert "was trained on LineTrace-v0, not on the person_follow task" in err
+        assert err.rstrip().endswith("run it with --task line_trace")
+    follow = ["--policies", str(agents / "ppo"), "--out", str(tmp_path / "run")]
+    assert main(["run", "--task", "line_trace", *follow]) == 2
+    assert "run it with --task person_follow" in one_line_error(capsys)
+
+
+@pytest.mark.skipif(not Path("/proc/self").is_dir(), reason="needs Linux's /proc")
+def test_a_folder_that_takes_no_file_is_refused_before_the_run(
+    capsys: pytest.CaptureFixture,
+) -> None:
+    # /proc refuses new files even to root, for whom a read-only folder is writable
+    assert main(["run", "--episodes", "1", "--out", "/proc/personfollow-test/run"]) == 2
+    assert "cannot write to /proc" in one_line_error(capsys)
 
 
 def test_existing_run_folder_is_never_overwritten(

@@ -360,3 +360,36 @@ def test_the_command_refuses_a_folder_without_an_episode_table(tmp_path: Path, c
     assert main(["dominance", str(tmp_path), "--learner", "ppo"]) == 2
     assert "not an episode table" in capsys.readouterr().err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["episodes.csv"]
+
+
+@pytest.mark.parametrize(
+    ("row", "column", "value", "message"),
+    [
+        (1, "seed", "zz", "line 3, column seed: 'zz' is not an integer seed"),
+        (0, "seed", "1.5", "line 2, column seed: '1.5' is not an integer seed"),
+        (2, "in_frame_rate_pct", "abc", "line 4, column in_frame_rate_pct: 'abc' is not a number"),
+    ],
+)
+def test_a_bad_cell_of_the_table_is_named_by_file_line_and_column(
+    row: int, column: str, value: str, message: str, tmp_path: Path, capsys
+) -> None:
+    table = _table({p: {"mean_offset_px": [1.0] * 4} for p in ("ppo", "pn:tuned")})
+    table = table.astype({column: object})
+    table.loc[row, column] = value  # a seed that pairs nothing, a metric that is not a number
+    table.to_csv(tmp_path / "episodes.csv", index=False)
+    assert main(["dominance", str(tmp_path), "--learner", "ppo"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1
+    assert f"{tmp_path / 'episodes.csv'}: {message}" in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["episodes.csv"]
+
+
+def test_a_table_without_episodes_and_an_empty_law_list_are_refused(tmp_path: Path, capsys) -> None:
+    table = _table({p: {"mean_offset_px": [1.0] * 4} for p in ("ppo", "pn:tuned")})
+    table.iloc[:0].to_csv(tmp_path / "episodes.csv", index=False)
+    assert main(["dominance", str(tmp_path), "--learner", "ppo"]) == 2
+    assert "holds no episodes (a header only)" in capsys.readouterr().err
+    table.to_csv(tmp_path / "episodes.csv", index=False)
+    assert main(["dominance", str(tmp_path), "--learner", "ppo", "--laws", ""]) == 2
+    assert "--laws is empty" in capsys.readouterr().err  # not "every other policy"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["episodes.csv"]

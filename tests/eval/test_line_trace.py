@@ -127,7 +127,10 @@ def one_line_error(capsys: pytest.CaptureFixture) -> str:
         (["--policies", "pn"], "policy 'pn' is not for the line_trace task; its policies:"),
         (["--policies", "coordinate@diff_drive"], "--policies: "),
         (["--scenarios", "curve"], "--scenarios is not an option of the line_trace task"),
-        (["--config", "thesis"], "--config: 'thesis' is not a preset (ideal, noisy, paper)"),
+        (
+            ["--config", "thesis"],
+            "--config: 'thesis' is not a preset: give a preset (ideal, noisy, paper)",
+        ),
         (["--config", '{"sensor": {"pitch": 1}}'], "unknown field sensor.pitch"),
         (["--episodes", "0"], "--episodes: 0 is out of range"),
     ],

@@ -153,6 +153,9 @@ def test_a_configuration_without_the_env_spaces_is_named(agent: Path) -> None:
 def test_a_folder_that_is_no_agent_is_refused(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match="no such folder"):
         add_step(tmp_path / "missing", STEP)
+    (tmp_path / "afile").write_text("x")
+    with pytest.raises(ValueError, match="afile: is a file, not a folder"):
+        add_step(tmp_path / "afile", STEP)
     with pytest.raises(ValueError, match=r"no model\.zip in it"):
         add_step(tmp_path, STEP)
 

@@ -147,6 +147,9 @@ BAD_ARGUMENTS = [
     (["--hyperparams", "nope.yaml"], "nope.yaml: cannot read"),
     (["--resume", "runs/x", "--seed", "3"], "--seed: a resumed run keeps its own settings"),
     (["--resume", "no/such/run"], "--resume no/such/run: no such run folder"),
+    # /proc takes no new file, even from root: refused before training, not after it
+    (["--export", "/proc/personfollow-test"], "--export /proc/personfollow-test: cannot write"),
+    (["--out", "/proc/personfollow-test"], "--out /proc/personfollow-test: cannot write"),
 ]
 
 
@@ -203,6 +206,20 @@ def test_yaml_that_does_not_parse_gives_one_line(
     path.write_text("PersonFollow-v0:\n  n_envs: [4\n  gamma: 0.9\n")
     assert main(["--hyperparams", str(path), "--runs", str(tmp_path / "runs")]) == 2
     assert_one_line(capsys, "hp.yaml: not valid YAML")
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [("- a\n- b\n", "holds a list, not rl-zoo3 hyperparameters"), ("", "holds nothing, not")],
+)
+def test_a_file_that_is_not_a_mapping_of_env_ids_says_so(
+    text: str, message: str, capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    path = tmp_path / "hp.yaml"
+    path.write_text(text)
+    assert main(["--hyperparams", str(path), "--runs", str(tmp_path / "runs")]) == 2
+    assert_one_line(capsys, f"hp.yaml: {message}")
+    assert not (tmp_path / "runs").exists()
 
 
 @pytest.mark.parametrize(

@@ -156,7 +156,7 @@ def test_members_may_differ_in_reward_shaping(pair: Path) -> None:
         ("other: 1\n", "at least two run folders"),
         ("members: [seed-0, seed-0]\n", "listed twice"),
         ("members: [seed-0, 3]\n", "run folder's path"),
-        ("members: [seed-0\n", "not a readable ensemble file"),
+        ("members: [seed-0\n", r"not valid YAML: line 2, column 1: expected ',' or '\]'"),
     ],
 )
 def test_malformed_ensemble_files_are_named(pair: Path, text: str, message: str) -> None:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import pickle
 import shutil
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -56,6 +57,19 @@ def test_missing_model_file_is_named(tmp_path: Path) -> None:
 def test_corrupt_model_file_fails_clearly_naming_it(agent_copy: Path) -> None:
     (agent_copy / "model.zip").write_bytes(b"not a zip file at all")
     with pytest.raises(AgentLoadError, match=r"model\.zip: not a readable stable-baselines3"):
+        make_policy(str(agent_copy))
+
+
+def test_a_zip_without_the_models_members_is_named(agent_copy: Path) -> None:
+    with zipfile.ZipFile(agent_copy / "model.zip", "w") as z:  # a zip, but not SB3's save
+        z.writestr("notes.txt", "hello")
+    with pytest.raises(AgentLoadError, match=r"model\.zip: not a stable-baselines3 PPO model: "):
+        make_policy(str(agent_copy))
+
+
+def test_a_configuration_that_is_not_yaml_is_named_in_one_line(agent_copy: Path) -> None:
+    (agent_copy / "config.yaml").write_text("hyperparams: {n_envs: [4\n")
+    with pytest.raises(AgentLoadError, match=r"config\.yaml: not valid YAML: line 2, column 1"):
         make_policy(str(agent_copy))
 
 
