@@ -5,13 +5,16 @@
     follow-tune gsmpn --storage postgresql://user@db/tune --backend ray --address auto
 
 Bad arguments give one line on stderr (``follow-tune: error: ...``) and exit status 2 before
-any episode runs or any file is written.
+any episode runs or any file is written. A file or folder follow-tune did not write is never
+changed: ``--storage`` must be a new or empty file or an Optuna journal, ``--out`` a new or
+empty folder or one that holds only a follow-tune study (:data:`OWN_FILES`), to resume it.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import re
 import shlex
 import sys
 import time
@@ -21,7 +24,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from eval.atomic import atomic_write_text, file_on_path
+from eval.atomic import atomic_write_text, check_writable, file_on_path
 from eval.cli_base import UsageError, _names, _Parser, _positive
 from execution import BACKENDS, BackendUnavailableError, backend_from_args
 
@@ -30,6 +33,34 @@ __all__ = ["PROG", "build_parser", "main"]
 PROG = "follow-tune"
 #: Most tuning or held-out seeds: 1000 + k and 2000 + k must never meet.
 MAX_SEEDS = 1000
+#: The largest ``--seed``: the TPE sampler's (:data:`eval.tuning.driver.MAX_SAMPLER_SEED`,
+#: repeated here so that parsing the command line does not import Optuna).
+MAX_SAMPLER_SEED = 2**32 - 1
+#: What follow-tune writes into ``--out``: the default journal, the results, Optuna's lock
+#: beside the journal. A folder holding only these (and the temporary files of an interrupted
+#: atomic write, :data:`_OWN_TEMPORARY`) is a follow-tune study's, and may be resumed into.
+OWN_FILES = ("study.journal", "study.journal.lock", "result.json", "preset.txt")
+_OWN_TEMPORARY = re.compile(r"\.(preset|result)\..+\.tmp\.(txt|json)")
+
+
+def _sampler_seed(text: str) -> int:
+    """``--seed``: an integer the TPE sampler takes, 0..2**32-1."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+    if not 0 <= value <= MAX_SAMPLER_SEED:
+        raise argparse.ArgumentTypeError(
+            f"{value} is out of range: 0..2**32-1 (the TPE sampler's seeds)"
+        )
+    return value
+
+
+def _path(text: str) -> Path:
+    """A path option's value; an empty one would silently mean the current folder."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError("the path is empty")
+    return Path(text)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -62,7 +93,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--batch", type=_positive, default=None, help="trials evaluated together (default: slots)"
     )
-    p.add_argument("--seed", type=int, default=0, help="the TPE sampler's seed (default 0)")
+    p.add_argument(
+        "--seed", type=_sampler_seed, default=0, help="the TPE sampler's seed (default 0)"
+    )
     p.add_argument(
         "--holdout-seeds", type=_positive, default=20, help="held-out seeds 2000.. (default 20)"
     )
@@ -73,8 +106,8 @@ def build_parser() -> argparse.ArgumentParser:
         "mixed courses, to check that a trial generalises beyond the tracks it was tuned on",
     )
     p.add_argument("--top", type=_positive, default=3, help="trials re-evaluated (default 3)")
-    p.add_argument("--write-preset", type=Path, default=None, help="also write the preset here")
-    p.add_argument("--out", type=Path, default=None, help="output folder (default runs/tune-LAW)")
+    p.add_argument("--write-preset", type=_path, default=None, help="also write the preset here")
+    p.add_argument("--out", type=_path, default=None, help="output folder (default runs/tune-LAW)")
     return p
 
 
@@ -88,12 +121,21 @@ def _check(args: argparse.Namespace) -> dict[str, Any]:
         law = tunable_law(args.law)
     except ValueError as e:
         raise UsageError(str(e)) from None
+    # An empty value must not fall back to the default: `--scenarios ''` once ran a full tune.
+    # (The list options are refused by `_names`, which they now reach when given.)
+    for option in ("task", "config", "storage", "study", "address"):
+        value = getattr(args, option)
+        if value is not None and not value.strip():
+            raise UsageError(f"--{option} is empty")
     task = args.task or law.task
     if task != law.task:
         raise UsageError(f"--task {task}: {args.law!r} is a law of the {law.task} task")
-    variants = _names(args.scenarios, "scenarios") if args.scenarios else DEFAULT_VARIANTS[task]
+    given = args.scenarios
+    variants = _names(given, "scenarios") if given is not None else DEFAULT_VARIANTS[task]
     given = args.holdout_scenarios
-    args.holdout_variants = _names(given, "holdout-scenarios") if given else list(variants)
+    args.holdout_variants = (
+        _names(given, "holdout-scenarios") if given is not None else list(variants)
+    )
     known = get_task(task).variants()
     for option, names in (("scenarios", variants), ("holdout-scenarios", args.holdout_variants)):
         for name in names:
@@ -120,9 +162,7 @@ def _check(args: argparse.Namespace) -> dict[str, Any]:
         except argparse.ArgumentTypeError as e:
             raise UsageError(f"argument --config: {e}") from None
     args.out = args.out or Path("runs") / f"tune-{args.law}"
-    blocker = file_on_path(args.out)
-    if blocker is not None:
-        raise UsageError(f"--out {args.out}: {blocker} is a file, not a folder")
+    _check_out(args.out)
     if args.storage is None:
         args.storage = str(args.out / "study.journal")
     else:
@@ -149,19 +189,99 @@ def _check(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def _check_journal_path(path: Path) -> None:
+    """A journal path: in an existing folder, and new, empty or an Optuna journal (Optuna
+    appends to whatever file it is given before it reads it)."""
+    from eval.tuning.driver import journal_problem
+
     if path.is_dir():
         raise UsageError(f"--storage {path}: a folder; give a journal file's path or an RDB URL")
     blocker = file_on_path(path.parent)
     if blocker is not None or not path.parent.is_dir():
         raise UsageError(f"--storage {path}: its folder {path.parent} does not exist")
+    problem = journal_problem(path)
+    if problem is not None:
+        raise UsageError(
+            f"--storage {path} {problem}; give a new or empty file, or a follow-tune journal"
+        )
+
+
+def _check_out(out: Path) -> None:
+    """``--out``: a folder that can be made, an empty one, or a follow-tune study's (to resume
+    it); never a folder of other files, which the results would be written among."""
+    blocker = file_on_path(out)
+    if blocker is not None:
+        raise UsageError(f"--out {out}: {blocker} is a file, not a folder")
+    try:  # a real file made and removed: root passes os.access, /proc takes no file
+        check_writable(out / "result.json")
+    except OSError as e:
+        raise UsageError(f"--out {out}: {e}") from None
+    existing = next(p for p in (out, *out.parents) if p.exists())  # "." at worst
+    if existing != out:
+        return
+    foreign = sorted(
+        e.name
+        for e in out.iterdir()
+        if not (e.name in OWN_FILES and not e.is_dir()) and not _OWN_TEMPORARY.fullmatch(e.name)
+    )
+    if foreign:
+        more = f" and {len(foreign) - 1} more" if len(foreign) > 1 else ""
+        raise UsageError(
+            f"--out {out}: the folder holds {foreign[0]}{more}, which follow-tune did not write; "
+            "give a new or empty folder, or a follow-tune study's folder to resume it"
+        )
+    _check_own_files(out)
+
+
+def _check_own_files(out: Path) -> None:
+    """The follow-tune names in ``out`` hold what follow-tune writes there, so a folder of
+    another tool that happens to use the same names (``result.json``) is not taken for one."""
+    from eval.tuning.driver import journal_problem
+
+    for name, ours in (
+        ("study.journal", None),
+        ("result.json", _is_own_result),
+        ("preset.txt", lambda text: text.startswith(f"# {PROG} ")),
+    ):
+        path = out / name
+        if not path.exists():
+            continue
+        if ours is None:
+            problem = journal_problem(path)
+        else:
+            try:
+                problem = None if ours(path.read_text(encoding="utf-8")) else "is not follow-tune's"
+            except (OSError, UnicodeDecodeError) as e:
+                problem = f"cannot be read: {getattr(e, 'strerror', None) or e}"
+        if problem is not None:
+            raise UsageError(
+                f"--out {out}: its {name} {problem}; give a new or empty folder, or a "
+                "follow-tune study's folder to resume it"
+            )
+
+
+def _is_own_result(text: str) -> bool:
+    """Whether ``text`` is a ``result.json`` as :func:`run` writes it."""
+    try:
+        summary = json.loads(text)
+    except ValueError:
+        return False
+    return isinstance(summary, dict) and {"search", "holdout", "verdict"} <= summary.keys()
 
 
 def _open(args: argparse.Namespace, identity: dict[str, Any]) -> Any:
     """The study (created, or loaded to resume); removes an output folder it made on failure."""
     from eval.tuning.driver import SearchConfig, open_study
 
-    made = not args.out.exists()
-    args.out.mkdir(parents=True, exist_ok=True)
+    # The folders this call makes (``out`` and any missing parents), deepest first.
+    made = [p for p in (args.out, *args.out.parents) if not p.exists()]
+    try:
+        args.out.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        _remove_empty(made)
+        raise UsageError(
+            f"--out {args.out}: cannot make the folder ({e.strerror or e}); give a folder in a "
+            "writable place"
+        ) from None
     try:
         config = SearchConfig(args.trials, _tune_seeds(args.seeds), 1, args.seed)
         study = open_study(args.storage, args.study, config)
@@ -175,9 +295,16 @@ def _open(args: argparse.Namespace, identity: dict[str, Any]) -> Any:
             )
         return study
     except BaseException:
-        if made and args.out.is_dir() and not any(args.out.iterdir()):
-            args.out.rmdir()
+        _remove_empty(made)
         raise
+
+
+def _remove_empty(folders: Sequence[Path]) -> None:
+    """Remove the folders this run made, deepest first, while they are empty."""
+    for folder in folders:
+        if not folder.is_dir() or any(folder.iterdir()):
+            return
+        folder.rmdir()
 
 
 def _tune_seeds(n: int) -> tuple[int, ...]:

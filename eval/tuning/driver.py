@@ -16,11 +16,17 @@ Reproducibility: the sampler is a seeded :class:`~optuna.samplers.TPESampler`, t
 batch are asked, evaluated and told in trial order, and the evaluation is exact (identical
 rollouts), so the same seed, batch size and budget give the same trials on any backend. A
 resumed study seeds its sampler with ``seed + trials already in the study``, so it never
-replays the first trials' random draws.
+replays the first trials' random draws (modulo 2**32, the seeds the sampler takes).
+
+Storage: a journal file is checked before Optuna opens it (:func:`check_journal`), because
+Optuna appends its first record to any file it is given before it reads the file back, so an
+unrelated file named by mistake would be changed; a journal this module created is removed
+again if opening the study fails.
 """
 
 from __future__ import annotations
 
+import json
 import math
 import os
 import socket
@@ -38,14 +44,20 @@ from policies.space import SearchSpace
 
 __all__ = [
     "FINISHED",
+    "MAX_SAMPLER_SEED",
     "Evaluate",
     "SearchConfig",
+    "check_journal",
     "distributions",
     "is_url",
+    "journal_problem",
     "open_study",
     "run_search",
     "rungs",
 ]
+
+#: The largest seed the TPE sampler takes (numpy's legacy ``RandomState``: 0..2**32 - 1).
+MAX_SAMPLER_SEED = 2**32 - 1
 
 #: Trial states that count towards the budget once reached.
 FINISHED = (TrialState.COMPLETE, TrialState.PRUNED)
@@ -63,7 +75,7 @@ class SearchConfig:
     :param trials: the study's budget of finished (complete or pruned) trials, >= 1.
     :param seeds: the tuning seeds, in the order the rungs take them.
     :param batch: trials asked and evaluated together (the backend's slots), >= 1.
-    :param sampler_seed: the TPE sampler's seed.
+    :param sampler_seed: the TPE sampler's seed, 0..:data:`MAX_SAMPLER_SEED`.
     :param startup_trials: finished trials before the pruner prunes anything, >= 0.
     """
 
@@ -78,6 +90,11 @@ class SearchConfig:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < low:
                 raise ValueError(f"{name}={value!r} is out of range: must be an integer >= {low}")
+        seed = self.sampler_seed
+        if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed <= MAX_SAMPLER_SEED:
+            raise ValueError(
+                f"sampler_seed={seed!r} is out of range: must be an integer 0..2**32-1"
+            )
         if not self.seeds:
             raise ValueError("seeds is empty: give at least one tuning seed")
         if len(set(self.seeds)) != len(self.seeds):
@@ -105,6 +122,63 @@ def is_url(storage: str) -> bool:
     return "://" in storage
 
 
+#: The ``op_code`` of a journal record that creates a study (Optuna's private
+#: ``optuna.storages.journal._storage.JournalOperation.CREATE_STUDY``; a test pins it).
+_CREATE_STUDY = 0
+
+
+def _is_record(line: bytes) -> bool:
+    """Whether ``line`` is one whole record as Optuna's ``JournalFileBackend`` writes them: a
+    JSON object on one line ending in a newline, with an integer ``op_code`` and a string
+    ``worker_id`` (``JournalStorage._write_log``)."""
+    if not line.endswith(b"\n"):
+        return False
+    try:
+        record = json.loads(line)
+    except (ValueError, UnicodeDecodeError):
+        return False
+    return (
+        isinstance(record, dict)
+        and type(record.get("op_code")) is int
+        and isinstance(record.get("worker_id"), str)
+    )
+
+
+def journal_problem(path: str | Path) -> str | None:
+    """Why ``path`` cannot be opened as a journal without harm, or None when it can: it does
+    not exist, is empty, or is an Optuna journal (every line a whole record, the first one
+    creating a study). The reason follows the path in a sentence: ``f"{path} {reason}"``.
+
+    Optuna's ``JournalFileBackend`` appends to any file and only then fails to read it back,
+    so this runs before it touches the file. It reads the whole file, as Optuna does on opening.
+    """
+    path = Path(path)
+    if path.is_dir():
+        return "is a folder, not a journal file"
+    try:
+        with path.open("rb") as f:
+            for number, line in enumerate(f, start=1):
+                if not _is_record(line):
+                    return f"is not an Optuna journal: its line {number} is not a journal record"
+                if number == 1 and json.loads(line)["op_code"] != _CREATE_STUDY:
+                    return "is not an Optuna journal: its first record does not create a study"
+    except FileNotFoundError:
+        return None
+    except OSError as e:
+        return f"cannot be read: {e.strerror or e}"
+    return None
+
+
+def check_journal(path: str | Path) -> None:
+    """Refuse a file :func:`journal_problem` finds a problem with.
+
+    :raises ValueError: naming the file and what is wrong.
+    """
+    problem = journal_problem(path)
+    if problem is not None:
+        raise ValueError(f"{path} {problem}")
+
+
 def _storage(storage: str | Path) -> Any:
     if isinstance(storage, str) and is_url(storage):
         return optuna.storages.RDBStorage(storage)
@@ -118,9 +192,24 @@ def open_study(storage: str | Path, name: str, config: SearchConfig) -> optuna.S
     it to resume: maximising, a seeded TPE sampler (:data:`SearchConfig.sampler_seed` plus the
     trials already there), a median pruner after ``startup_trials`` trials.
 
-    :raises ValueError: if the storage cannot be opened (the message says why).
+    :raises ValueError: if the storage cannot be opened (the message says why); a journal file
+        that is not one (:func:`check_journal`) is left as it was.
     """
     optuna.logging.set_verbosity(optuna.logging.WARNING)
+    journal = None if isinstance(storage, str) and is_url(storage) else Path(storage)
+    if journal is not None:
+        check_journal(journal)
+    created = journal is not None and not journal.exists()
+    try:
+        return _open_study(storage, name, config)
+    except BaseException:
+        if created and journal is not None:  # nothing half-written: the journal made here goes
+            journal.unlink(missing_ok=True)
+        raise
+
+
+def _open_study(storage: str | Path, name: str, config: SearchConfig) -> optuna.Study:
+    """:func:`open_study` once the storage is known to be safe to open."""
     try:
         backend = _storage(storage)
         existing = optuna.get_all_study_names(backend)
@@ -134,7 +223,11 @@ def open_study(storage: str | Path, name: str, config: SearchConfig) -> optuna.S
             study_name=name,
             direction="maximize",
             load_if_exists=True,
-            sampler=optuna.samplers.TPESampler(seed=config.sampler_seed + n),
+            # Wrapped into the sampler's range, so a resumed study with a seed near the top
+            # still opens (each trial count still gives its own seed).
+            sampler=optuna.samplers.TPESampler(
+                seed=(config.sampler_seed + n) % (MAX_SAMPLER_SEED + 1)
+            ),
             pruner=optuna.pruners.MedianPruner(
                 n_startup_trials=config.startup_trials, n_warmup_steps=0
             ),
