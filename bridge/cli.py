@@ -3,11 +3,12 @@
 ::
 
     follow-robot emulate --listen socket://127.0.0.1:5760 [--framing reference|robust]
-        [--firmware reference|fixed] [--scenario straight] [--seed 0] [--config thesis]
+        [--firmware reference|fixed] [--scenario S] [--seed 0] [--config thesis]
     follow-robot run --port URL --policy NAME [--framing reference|robust]
         [--perception sim|sim:HOST:PORT|replay:LOG.csv|realsense:MODEL.pt] [--duration S]
         [--log OUT.csv] [--command auto|duty|speed] [--seed N] [--monitor] [--http HOST:PORT]
-    follow-robot monitor --sim [--policy NAME] [--scenario S] [--seed N] [--http HOST:PORT]
+    follow-robot monitor --sim [--policy NAME] [--scenario S] [--seed N] [--config C]
+        [--http HOST:PORT]                       (the robot's options are refused: no robot)
     follow-robot monitor --port URL [--perception ...] [--http HOST:PORT]   (a robot, from stop)
 
 (also ``python -m bridge ...``). ``URL`` is anything pyserial opens: ``/dev/ttyUSB0``,
@@ -38,6 +39,11 @@ PROG = "follow-robot"
 USAGE_ERROR = 2
 FIRMWARES = ("reference", "fixed")  # bridge.mcu.FIRMWARES, without importing the simulator
 LOOPBACK_HOSTS = frozenset({"127.0.0.1", "localhost", "::1"})  # bridge.monitor.app's
+COMMANDS = ("auto", "duty", "speed")  # bridge.runner.COMMAND_MODES, without numpy
+# The robot's options (None when not given): their values on a robot, and those monitor --sim
+# has no use for (refused there); --seed, --config, --http and --token serve both.
+ROBOT_DEFAULTS = {"framing": "reference", "perception": "sim", "command": "auto"}
+SIM_UNUSED = ("port", "framing", "perception", "command", "duration", "log")
 
 
 class UsageError(Exception):
@@ -94,15 +100,17 @@ def _parser() -> _Parser:
     emulate.add_argument("--listen", default="socket://127.0.0.1:5760", help="socket://HOST:PORT")
     emulate.add_argument("--framing", choices=FRAMINGS, default="reference")
     emulate.add_argument("--firmware", choices=FIRMWARES, default="reference")
-    emulate.add_argument("--scenario", default="straight", help="the world's scenario")
+    emulate.add_argument("--scenario", default=None, help="the world's scenario (--config's)")
     emulate.add_argument("--seed", type=_seed, default=0, help="the world's episode seed")
     emulate.add_argument("--config", type=_config, default="thesis", help="env preset or JSON")
 
     def robot_options(p: _Parser) -> None:
+        # The robot's options default to None, so that `monitor --sim`, which has no robot, can
+        # refuse one given rather than ignore it (the robot's defaults are ROBOT_DEFAULTS).
         p.add_argument("--port", help="the serial URL (a port, socket://HOST:PORT, loop://)")
-        p.add_argument("--framing", choices=FRAMINGS, default="reference")
-        p.add_argument("--perception", default="sim", help="sim | replay:LOG.csv | realsense:M")
-        p.add_argument("--command", choices=("auto", "duty", "speed"), default="auto")
+        p.add_argument("--framing", choices=FRAMINGS, help="reference (default) | robust")
+        p.add_argument("--perception", help="sim (default) | replay:LOG.csv | realsense:M")
+        p.add_argument("--command", choices=COMMANDS, help="auto (default) | duty | speed")
         p.add_argument("--duration", type=_positive, default=None, help="stop after S seconds")
         p.add_argument("--log", default=None, help="write the step log here (CSV)")
         p.add_argument("--seed", type=_seed, default=None, help="reset the sim world to it")
@@ -118,8 +126,8 @@ def _parser() -> _Parser:
     monitor = sub.add_parser("monitor", help="the live web monitor")
     robot_options(monitor)
     monitor.add_argument("--sim", action="store_true", help="watch the simulator, no hardware")
-    monitor.add_argument("--policy", default="stop", help="the starting mode")
-    monitor.add_argument("--scenario", default="straight", help="--sim: the scenario")
+    monitor.add_argument("--policy", default=None, help="--sim: the starting mode (stop)")
+    monitor.add_argument("--scenario", default=None, help="--sim: the scenario (--config's)")
     return parser
 
 
@@ -149,26 +157,53 @@ def _dispatch(args: argparse.Namespace) -> int:
         return _monitor_sim(args)
     if not args.port:
         raise UsageError(f"{args.subcommand} needs --port URL (or, for monitor, --sim)")
+    if args.subcommand == "monitor":
+        # a robot's monitor starts it stopped, on purpose: the page chooses what drives it
+        for option, value in (("--scenario", args.scenario), ("--policy", args.policy)):
+            if value not in (None, "stop"):
+                raise UsageError(
+                    f"{option} {value}: monitor --port starts the robot stopped and the page "
+                    "chooses the mode (--scenario and --policy are for monitor --sim; or use "
+                    "run --policy NAME --monitor)"
+                )
+    for name, value in ROBOT_DEFAULTS.items():
+        if getattr(args, name) is None:
+            setattr(args, name, value)
     return _run(args, monitor=args.subcommand == "monitor" or args.monitor)
 
 
-def _env_config(args: argparse.Namespace, scenario: str | None = None) -> Any:
+def _env_config(args: argparse.Namespace, scenario: str | None = None, check: bool = False) -> Any:
+    """The environment's configuration from ``--config`` (and ``--scenario``); ``check``: also
+    refuse what its scenario cannot use, as building the world would, but before it is built."""
     from follow_env.tasks.person_follow.task import TASK
 
     try:
-        return TASK.resolve_config(args.config, scenario=scenario)
+        config = TASK.resolve_config(args.config, scenario=scenario)
+        if check:
+            TASK.check(config)  # the scenario's name, what it can use, how many people
     except ValueError as exc:
         raise UsageError(str(exc)) from None
+    return config
+
+
+def _check_listen(url: str) -> None:
+    """Refuse an ``emulate --listen`` the emulator could not listen on, naming the option."""
+    from bridge.perception import parse_socket_url
+
+    try:
+        _, port = parse_socket_url(url)
+    except ValueError as exc:
+        raise UsageError(f"--listen {exc}") from None  # the message starts with the URL
+    if port == 65535:  # the camera listens on PORT + 1
+        raise UsageError(f"--listen {url!r}: port 65535 leaves no PORT + 1 for the camera")
 
 
 def _emulate(args: argparse.Namespace) -> int:
+    _check_listen(args.listen)  # before the simulator is imported and its world built
     from bridge.emulator import Emulator
 
-    config = _env_config(args, args.scenario)
-    from follow_env.tasks.person_follow.task import TASK
-
+    config = _env_config(args, args.scenario, check=True)
     try:
-        TASK.check(config)  # the scenario name is checked here
         emulator = Emulator(args.listen, args.framing, args.firmware, config, args.seed)
     except (ValueError, OSError) as exc:
         raise UsageError(str(exc)) from None
@@ -260,11 +295,20 @@ def _start_monitor(args: argparse.Namespace, hub: Any) -> Any:
 
 
 def _monitor_sim(args: argparse.Namespace) -> int:
+    given = [f"--{n} {getattr(args, n)}" for n in SIM_UNUSED if getattr(args, n) is not None]
+    if given:  # refused rather than ignored: the user meant something by it
+        it, is_ = ("it", "it is") if len(given) == 1 else ("them", "they are")
+        raise UsageError(
+            f"{', '.join(given)}: monitor --sim has no robot and does not use {it} "
+            f"({is_} for run and monitor --port)"
+        )
+    start = args.policy or "stop"
+    # checked before the simulator is imported, the agents load and the server starts
+    config = _env_config(args, args.scenario, check=True)
     from bridge.monitor.hub import MonitorHub
     from bridge.monitor.sim import SimDriver
     from follow_env.tasks.person_follow.spec import ahead_settings
 
-    config = _env_config(args, args.scenario)
     agents, broken = _shipped_agents()
     ahead = _ahead_of(agents)
     if ahead and ahead_settings(config.perception) is None:
@@ -273,14 +317,17 @@ def _monitor_sim(args: argparse.Namespace) -> int:
         config = dataclasses.replace(
             config, perception=dataclasses.replace(config.perception, **ahead)
         )
-    hub = MonitorHub(args.policy)
+    hub = MonitorHub(start)
     try:
-        driver = SimDriver(hub, _policy_factory(), config=config, seed=args.seed or 0)
-        driver.check(args.policy)  # a bad name fails here, not in the driver's thread
+        # the scenario is the configuration's (--scenario is in it), not the driver's default
+        driver = SimDriver(
+            hub, _policy_factory(), config.scenario.name, seed=args.seed or 0, config=config
+        )
+        driver.check(start)  # a bad name fails here, not in the driver's thread
     except ValueError as exc:
         raise UsageError(str(exc)) from None
     offered, skipped = _offer(agents, driver.runnable)
-    hub.modes = _modes(args.policy, offered, [*skipped, *broken])
+    hub.modes = _modes(start, offered, [*skipped, *broken])
     server = _start_monitor(args, driver.hub)
     driver.start()
     try:
@@ -296,8 +343,14 @@ def _monitor_sim(args: argparse.Namespace) -> int:
 
 def _run(args: argparse.Namespace, monitor: bool) -> int:
     from bridge.fit import check_command
+    from bridge.runlog import check_log_path
     from bridge.runner import Runner, RunnerConfig
 
+    if args.log is not None:
+        try:  # now, not at the end of a session whose data it would lose
+            check_log_path(args.log)
+        except ValueError as exc:
+            raise UsageError(str(exc)) from None
     config = _env_config(args)
     # with the monitor, the shipped agents that command [v, w] are modes too; the perception
     # is checked when one is chosen (Runner._runnable), as it is known once started
@@ -347,6 +400,9 @@ def _run(args: argparse.Namespace, monitor: bool) -> int:
         if server is not None:
             server.stop()
     print(f"{PROG}: {result.summary()}", flush=True)
+    if result.log_error:  # the folder went away or filled up during the session
+        print(f"{PROG}: error: {result.log_error}", file=sys.stderr)
+        return 1
     return 0 if not result.reason.startswith(("no feedback", "link error")) else 1
 
 

@@ -45,9 +45,15 @@ __all__ = [
 def parse_socket_url(url: str) -> tuple[str, int]:
     """``socket://HOST:PORT`` as ``(host, port)``; ``ValueError`` naming the URL otherwise."""
     parts = urlsplit(url)
-    if parts.scheme != "socket" or not parts.hostname or parts.port is None:
+    try:
+        port = parts.port
+    except ValueError:  # urllib's own words name neither the URL nor the range's reason
+        text = parts.netloc.rpartition(":")[2]
+        what = "is out of range" if text.lstrip("+-").isdigit() else "is not a number"
+        raise ValueError(f"{url!r}: port {text!r} {what}: must be in 0-65535") from None
+    if parts.scheme != "socket" or not parts.hostname or port is None:
         raise ValueError(f"{url!r} is not a socket://HOST:PORT address")
-    return parts.hostname, parts.port
+    return parts.hostname, port
 
 
 def perception_address(url: str) -> tuple[str, int]:
@@ -230,30 +236,60 @@ class Replay:
 
 
 def _read_replay(path: Path) -> list[tuple[float, float, float, bool, float | None]]:
+    """The replay's rows ``(time_s, distance_m, offset_px, detected, ahead_m)``, checked as
+    ``follow-eval metrics`` checks a step log (every row as wide as the header: a log cut off
+    mid-row is refused, not replayed short), each problem named by file, line and column."""
     try:
         with path.open(newline="", encoding="utf-8") as f:
-            rows = list(csv.DictReader(f))
+            reader = csv.reader(f)
+            # line_num: the line a row ends on, right even when a quoted cell spans lines
+            table = [(reader.line_num, row) for row in reader]
     except FileNotFoundError:
         raise PerceptionError(f"{path}: no such step log") from None
     except (OSError, UnicodeDecodeError, csv.Error) as exc:
         raise PerceptionError(f"{path}: cannot read it as a CSV step log: {exc}") from None
-    if not rows:
+    header = [cell.strip() for cell in table[0][1]] if table else []
+    # blank lines (a hand-written file's trailing newline) are skipped, as the evaluation does
+    numbered = [(line, row) for line, row in table[1:] if any(cell.strip() for cell in row)]
+    if not numbered:
         raise PerceptionError(f"{path}: no rows; a replay needs a step log with data")
-    missing = [c for c in ("time_s", "obs_distance_m", "obs_offset_px") if c not in rows[0]]
+    missing = [c for c in ("time_s", "obs_distance_m", "obs_offset_px") if c not in header]
     if missing:
         raise PerceptionError(f"{path}: missing column(s) {', '.join(missing)}")
+    column = {name: k for k, name in enumerate(header)}
+    optional = [c for c in ("detected", AHEAD_COLUMN) if c in column]
     out: list[tuple[float, float, float, bool, float | None]] = []
-    has_ahead = AHEAD_COLUMN in rows[0]
-    for line, row in enumerate(rows, start=2):
-        try:
-            t, d, o = (float(row[c]) for c in ("time_s", "obs_distance_m", "obs_offset_px"))
-            detected = float(row.get("detected") or 1.0) > 0.5
-            ahead = float(row[AHEAD_COLUMN]) if has_ahead else None
-        except (TypeError, ValueError):
-            raise PerceptionError(f"{path}: line {line}: a value is not a number") from None
-        if not all(math.isfinite(x) for x in (t, d, o, 0.0 if ahead is None else ahead)):
-            raise PerceptionError(f"{path}: line {line}: a value is not finite")
+    for line, row in numbered:
+        if len(row) != len(header):
+            raise PerceptionError(
+                f"{path}: line {line}: expected {len(header)} fields as in the header, "
+                f"found {len(row)}"
+            )
+        values: dict[str, float] = {}
+        for name in ("time_s", "obs_distance_m", "obs_offset_px", *optional):
+            cell = row[column[name]].strip()
+            if name == "detected" and not cell:
+                cell = "1"  # not recorded: a detection, as a log without the column reads
+            try:
+                values[name] = float(cell)
+            except ValueError:
+                raise PerceptionError(
+                    f"{path}: line {line}, column {name}: {cell!r} is not a number"
+                ) from None
+            if not math.isfinite(values[name]):
+                raise PerceptionError(
+                    f"{path}: line {line}, column {name}: {cell!r} is not a finite number"
+                )
+        t = values["time_s"]
         if out and t <= out[-1][0]:
             raise PerceptionError(f"{path}: line {line}: time_s={t} does not increase")
-        out.append((t, d, o, detected, ahead))
+        out.append(
+            (
+                t,
+                values["obs_distance_m"],
+                values["obs_offset_px"],
+                values.get("detected", 1.0) > 0.5,
+                values.get(AHEAD_COLUMN),
+            )
+        )
     return out

@@ -23,10 +23,7 @@ file and renamed into place, so ``follow-eval metrics`` scores a real run like a
 from __future__ import annotations
 
 import contextlib
-import csv
 import math
-import os
-import tempfile
 import threading
 import time
 from collections.abc import Callable
@@ -41,6 +38,7 @@ from bridge.link import LinkError, SerialLink
 from bridge.loader import PolicyLoader
 from bridge.perception import Frame, PerceptionError, PerceptionSource
 from bridge.protocol import Capability, CommandKind, Feedback, Hello, PeerRole, WheelCommand
+from bridge.runlog import check_log_path, save_rows, write_rows
 from follow_env.platforms.diff_drive import DiffDriveConfig, diff_drive_ik
 from follow_env.platforms.wheels import pid_step
 from follow_env.sim.checks import out_of_range
@@ -49,7 +47,7 @@ from follow_env.tasks.person_follow.steplog import AHEAD_COLUMN, log_columns
 __all__ = ["COMMAND_MODES", "RunResult", "Runner", "RunnerConfig", "write_rows"]
 
 COMMAND_MODES = ("auto", "duty", "speed")
-_COLUMNS = log_columns(ahead=True)  # the step log's, with the reading ahead's place
+_COLUMNS = log_columns(ahead=True)  # the step log's, with the reading ahead's place (truth)
 _ZERO_REPEATS = 3  # stop commands sent at the end (one may be lost on a noisy line)
 _FIRST_FEEDBACK_S = 1.0  # longest wait for the MCU's first feedback, s
 
@@ -115,7 +113,8 @@ class RunResult:
     wheel_lateness_ms: list[float] = field(default_factory=list)  # the wheel loop's, ms
     overruns: int = 0
     feedback_frames: int = 0
-    log: Path | None = None
+    log: Path | None = None  # where the step log was written (a spare file if --log failed)
+    log_error: str = ""  # why the step log is not at --log, in one line ("" if it is)
 
     def lateness_percentile(self, q: float) -> float:
         """Percentile ``q`` (0-100) of how late the control loop woke, ms."""
@@ -153,7 +152,10 @@ class Runner:
     :param perception: the observation source.
     :param platform: the differential drive's configuration (geometry, PID gains, bounds).
     :param config: periods, timeout, duration and command mode.
-    :param log: where to write the step log (``None``: no log).
+    :param log: where to write the step log (``None``: no log); a path it cannot be written
+        to is refused here (:func:`bridge.runlog.check_log_path`, ``ValueError``). Should the
+        writing still fail at the end, the log goes to a spare file and ``RunResult.log_error``
+        says where.
     :param meta: the step log's ``policy``, ``scenario`` and ``seed`` values.
     :param monitor: a :class:`bridge.monitor.hub.MonitorHub` to publish to and take modes from;
         its starting mode, unless ``stop`` or ``manual``, is taken to name ``policy``.
@@ -196,8 +198,8 @@ class Runner:
             # its full name ("gsmpn:tuned"): the same policy, not a second one built for it
             self._mode = monitor.mode
             self._policies[self._mode] = policy
-        if self.log is not None and not self.log.parent.is_dir():
-            raise ValueError(f"--log {self.log}: the folder {self.log.parent} does not exist")
+        if self.log is not None:  # refused now, not after the session it would have kept
+            self.log = check_log_path(self.log)
 
     # ---- command mode -------------------------------------------------------------------
 
@@ -398,7 +400,7 @@ class Runner:
             result.feedback_frames = self._wheels.frames
             result.wheel_lateness_ms = self._wheels.lateness_ms
             if self.log is not None:
-                result.log = write_rows(self._rows, self.log)
+                result.log, result.log_error = save_rows(self._rows, self.log)
         return result
 
     def _act(self, frame: Frame) -> tuple[float, float]:
@@ -516,28 +518,3 @@ def _pose(truth: dict[str, Any], who: str) -> list[float] | None:
     if not all(truth.get(k) is not None for k in keys):
         return None
     return [float(truth[k]) for k in keys]
-
-
-def write_rows(rows: list[dict[str, Any]], path: Path) -> Path:
-    """Write step-log rows (the columns they use, in the layout's order) atomically."""
-    used = {k for row in rows for k, v in row.items() if v is not None}
-    header = [c for c in _COLUMNS if c in used]
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".tmp.csv", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", newline="", encoding="utf-8") as f:
-            writer = csv.writer(f, lineterminator="\n")
-            writer.writerow(header)
-            for row in rows:
-                writer.writerow(["" if row.get(c) is None else _cell(row[c]) for c in header])
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return path
-
-
-def _cell(value: Any) -> str:
-    if isinstance(value, float):
-        return f"{value:.9g}"
-    return str(value)

@@ -1,0 +1,97 @@
+"""The runner's step log on disk: where it may go (checked before a session starts) and how it
+is written (a temporary file renamed into place, or, if that fails at the end, a copy saved
+elsewhere, so that a session's data is never lost to a bad path).
+"""
+
+from __future__ import annotations
+
+import csv
+import os
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+from follow_env.tasks.person_follow.steplog import log_columns
+
+__all__ = ["check_log_path", "save_rows", "write_rows"]
+
+_COLUMNS = log_columns(ahead=True)  # the step log's, with the reading ahead's place
+
+
+def check_log_path(path: str | Path) -> Path:
+    """``path`` as a :class:`~pathlib.Path` if a step log can be written there: not a folder,
+    in an existing folder where this process can create a file.
+
+    :raises ValueError: ``--log PATH: ...`` saying what is wrong, in one line.
+    """
+    if not str(path).strip():
+        raise ValueError("--log '': empty; give a file name, such as run.csv")
+    path = Path(path)
+    parent = path.parent
+    if path.is_dir():
+        raise ValueError(f"--log {path}: is a folder; give a file name, such as {path / 'run.csv'}")
+    if not parent.exists():
+        raise ValueError(f"--log {path}: the folder {parent} does not exist")
+    if not parent.is_dir():
+        raise ValueError(f"--log {path}: {parent} is not a folder")
+    # Only creating a file tells (permissions, read-only mounts, /proc, ACLs): the log is written
+    # exactly so, a temporary file beside it renamed into place.
+    try:
+        fd, probe = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".probe", dir=parent)
+    except OSError as exc:
+        raise ValueError(
+            f"--log {path}: cannot create a file in the folder {parent} ({exc.strerror or exc})"
+        ) from None
+    os.close(fd)
+    os.unlink(probe)
+    return path
+
+
+def write_rows(rows: list[dict[str, Any]], path: Path) -> Path:
+    """Write step-log rows (the columns they use, in the layout's order) atomically."""
+    used = {k for row in rows for k, v in row.items() if v is not None}
+    header = [c for c in _COLUMNS if c in used]
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".tmp.csv", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w", newline="", encoding="utf-8") as f:
+            writer = csv.writer(f, lineterminator="\n")
+            writer.writerow(header)
+            for row in rows:
+                writer.writerow(["" if row.get(c) is None else _cell(row[c]) for c in header])
+        os.chmod(tmp, 0o644)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return path
+
+
+def save_rows(rows: list[dict[str, Any]], path: Path) -> tuple[Path | None, str]:
+    """Write the rows to ``path``; if that fails (the folder went away during the session, the
+    disk filled up), to a file of its own in the system's temporary folder instead.
+
+    :returns: ``(where the log is, "")``, or ``(the fallback file, why path failed)``, or
+        ``(None, why both failed)``: the reason is one line naming ``--log`` and the path.
+    """
+    try:
+        return write_rows(rows, path), ""
+    except OSError as exc:
+        why = f"--log {path}: the step log could not be written ({exc.strerror or exc})"
+    stamp = time.strftime("%Y%m%d-%H%M%S")
+    spare: Path | None = None
+    try:
+        fd, name = tempfile.mkstemp(prefix=f"follow-robot-{stamp}-", suffix=".csv")
+        os.close(fd)  # a name of our own; write_rows renames its own temporary file onto it
+        spare = Path(name)
+        return write_rows(rows, spare), f"{why}; saved to {spare} instead"
+    except OSError as exc:
+        if spare is not None:
+            spare.unlink(missing_ok=True)  # no empty file left for a log that is not there
+        return None, f"{why}, nor in {tempfile.gettempdir()} ({exc.strerror or exc}): lost"
+
+
+def _cell(value: Any) -> str:
+    if isinstance(value, float):
+        return f"{value:.9g}"
+    return str(value)

@@ -1,0 +1,240 @@
+"""follow-robot's command line: a bad value gives one line naming the option, the value and what
+is wrong, exit status 2, before any long work starts, and leaves no file behind."""
+
+from __future__ import annotations
+
+import shutil
+import sys
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from bridge.cli import main
+from bridge.runner import Runner
+
+DATA = Path(__file__).with_name("data")
+RUN = ["run", "--policy", "pn", "--port", "loop://", "--duration", "1"]
+REPLAY = ["--perception", "replay:" + str(DATA / "replay_obs.csv")]
+
+
+def _one_line(capsys: pytest.CaptureFixture[str], *parts: str) -> str:
+    """The error line on stderr, checked: one line, no traceback, naming every one of ``parts``."""
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1, err
+    assert err.startswith("follow-robot: error: "), err
+    assert "Traceback" not in err
+    for part in parts:
+        assert part in err, (part, err)
+    return err.strip()
+
+
+def _files(folder: Path) -> list[str]:
+    return sorted(str(p.relative_to(folder)) for p in folder.rglob("*"))
+
+
+@pytest.fixture
+def no_session(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Fail a test whose bad argument lets a robot session start."""
+
+    def started(self: Runner) -> Any:
+        raise AssertionError("the session started before the arguments were checked")
+
+    monkeypatch.setattr(Runner, "run", started)
+
+
+# ---- run --log ----------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("log", "why"),
+    [
+        ("nodir/x.csv", "the folder nodir does not exist"),
+        ("afile/x.csv", "afile is not a folder"),
+        ("adir", "is a folder; give a file name"),
+        ("", "empty; give a file name"),
+        pytest.param(
+            "/proc/audit.csv",
+            "cannot create a file in the folder /proc",
+            marks=pytest.mark.skipif(sys.platform != "linux", reason="/proc is Linux's"),
+        ),
+    ],
+)
+def test_a_log_that_cannot_be_written_is_refused_before_the_session(
+    log: str,
+    why: str,
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+    no_session: None,
+) -> None:
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "afile").write_text("")
+    (tmp_path / "adir").mkdir()
+    before = _files(tmp_path)
+    assert main([*RUN, *REPLAY, "--log", log]) == 2
+    _one_line(capsys, f"--log {log or repr(log)}", why)
+    assert _files(tmp_path) == before  # no log, no temporary or probe file
+
+
+def test_a_log_that_fails_at_the_end_is_kept_elsewhere_and_said_in_one_line(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from eval.steplog import read_step_log
+
+    folder, spare = tmp_path / "usb", tmp_path / "spare"
+    folder.mkdir()
+    spare.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(spare))
+    session = Runner.run
+
+    def unplugged(self: Runner) -> Any:  # the stick is pulled out during the session
+        shutil.rmtree(folder)
+        return session(self)
+
+    monkeypatch.setattr(Runner, "run", unplugged)
+    log = folder / "run.csv"
+    assert main([*RUN, *REPLAY, "--log", str(log)]) == 1
+    line = _one_line(capsys, f"--log {log}", "could not be written", f"saved to {spare}")
+    (kept,) = spare.iterdir()  # the session's rows, and no temporary file beside them
+    assert str(kept) in line
+    assert len(read_step_log(kept)) >= 2
+    assert not folder.exists()
+
+
+# ---- run --perception replay: -------------------------------------------------------------
+
+_LOG = "time_s,obs_distance_m,obs_offset_px,detected\n" + "".join(
+    f"{k / 10:g},{1.0 + k / 100:g},{k},1\n" for k in range(12)
+)
+
+
+@pytest.mark.parametrize(
+    ("text", "why"),
+    [
+        (_LOG[: _LOG.index("0.9,") + 6], "line 11: expected 4 fields as in the header, found 2"),
+        (_LOG.replace("\n0.3,1.03,3,", "\n0.3,1.03,abc,"), "line 5, column obs_offset_px: 'abc'"),
+        (_LOG.replace("\n0.3,1.03,", "\n0.3,inf,"), "line 5, column obs_distance_m: 'inf' is not"),
+    ],
+)
+def test_a_damaged_replay_is_refused_naming_the_file_line_and_column(
+    text: str, why: str, tmp_path: Path, capsys: pytest.CaptureFixture[str], no_session: None
+) -> None:
+    replay = tmp_path / "cut.csv"
+    replay.write_text(text)
+    log = tmp_path / "out.csv"
+    assert main([*RUN, "--perception", f"replay:{replay}", "--log", str(log)]) == 2
+    _one_line(capsys, f"{replay}: {why}")
+    assert _files(tmp_path) == ["cut.csv"]
+
+
+# ---- monitor ------------------------------------------------------------------------------
+
+
+@pytest.fixture
+def no_server(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Fail (rather than serve for ever) a test whose bad argument lets the monitor start."""
+
+    def started(args: Any, hub: Any) -> Any:
+        raise AssertionError("the monitor started before the arguments were checked")
+
+    monkeypatch.setattr("bridge.cli._start_monitor", started)
+
+
+@pytest.mark.parametrize(
+    ("argv", "parts"),
+    [
+        (["--sim", "--scenario", "bogus"], ["ScenarioConfig.name='bogus' is out of range"]),
+        (
+            ["--sim", "--config", '{"scenario": {"name": "bogus"}}'],
+            ["ScenarioConfig.name='bogus' is out of range"],
+        ),
+        (["--sim", "--duration", "1"], ["--duration 1.0: monitor --sim", "does not use it"]),
+        (["--sim", "--log", "x.csv"], ["--log x.csv: monitor --sim"]),
+        (["--sim", "--perception", "sim"], ["--perception sim: monitor --sim"]),
+        (["--sim", "--port", "loop://"], ["--port loop://: monitor --sim"]),
+        (["--sim", "--framing", "robust", "--command", "duty"], ["--framing robust, --command"]),
+        (["--port", "loop://", "--scenario", "curve"], ["--scenario curve: monitor --port"]),
+        (["--port", "loop://", "--policy", "pn"], ["--policy pn: monitor --port"]),
+    ],
+)
+def test_the_monitor_refuses_what_it_would_ignore_before_it_starts(
+    argv: list[str],
+    parts: list[str],
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+    no_server: None,
+) -> None:
+    monkeypatch.chdir(tmp_path)
+    assert main(["monitor", *argv, "--http", "127.0.0.1:0"]) == 2
+    _one_line(capsys, *parts)
+    assert _files(tmp_path) == []
+
+
+@pytest.mark.parametrize(
+    "argv", [["--scenario", "curve"], ["--config", '{"scenario": {"name": "curve"}}']]
+)
+def test_the_sim_monitor_runs_the_scenario_it_is_given(
+    argv: list[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from bridge.monitor.sim import SimDriver
+
+    seen: list[str] = []
+
+    def started(args: Any, hub: Any) -> Any:  # the driver is built by now: stop before serving
+        raise _ServedError
+
+    built = SimDriver.__init__
+
+    def init(self: SimDriver, *args: Any, **kwargs: Any) -> None:
+        built(self, *args, **kwargs)
+        seen.append(self.env.config.scenario.name)
+
+    monkeypatch.setattr(SimDriver, "__init__", init)
+    monkeypatch.setattr("bridge.cli._start_monitor", started)
+    with pytest.raises(_ServedError):
+        main(["monitor", "--sim", *argv, "--http", "127.0.0.1:0"])
+    assert seen == ["curve"]
+
+
+@pytest.mark.parametrize(
+    "argv", [["--scenario", "curve"], ["--config", '{"scenario": {"name": "curve"}}']]
+)
+def test_the_emulator_builds_the_scenario_it_is_given(
+    argv: list[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    seen: list[str] = []
+
+    class Built:  # stands in for the emulator once the command has chosen its world
+        def __init__(self, url: str, framing: str, firmware: str, config: Any, seed: int) -> None:
+            seen.append(config.scenario.name)
+            raise _ServedError
+
+    monkeypatch.setattr("bridge.emulator.Emulator", Built)
+    with pytest.raises(_ServedError):
+        main(["emulate", "--listen", "socket://127.0.0.1:0", *argv])
+    assert seen == ["curve"]  # --config's scenario is not overridden by a default
+
+
+class _ServedError(Exception):
+    """The monitor got as far as serving."""
+
+
+# ---- emulate --listen ---------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("url", "why"),
+    [
+        ("socket://localhost:99999", "port '99999' is out of range: must be in 0-65535"),
+        ("socket://localhost:abc", "port 'abc' is not a number"),
+        ("socket://localhost:65535", "no PORT + 1 for the camera"),
+    ],
+)
+def test_a_bad_listen_address_names_the_option(
+    url: str, why: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main(["emulate", "--listen", url]) == 2
+    _one_line(capsys, f"--listen {url!r}", why)
