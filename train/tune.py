@@ -34,7 +34,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from eval.atomic import atomic_write_text
+from eval.atomic import atomic_write_text, check_writable
 from eval.cli_base import UsageError, _names, _Parser, _positive
 from eval.rollout import rollout
 from eval.tuning.driver import SearchConfig, open_study, run_search
@@ -178,8 +178,10 @@ def run(args: argparse.Namespace) -> int:
     """Search, then write ``OUT/result.json`` and print the best trial's hyperparameters."""
     from follow_env.tasks import get_task
 
+    # an empty --scenarios '' is a mistake to name, not a request for the defaults
+    given = args.scenarios
     variants = (
-        _names(args.scenarios, "scenarios") if args.scenarios else DEFAULT_VARIANTS["person_follow"]
+        _names(given, "scenarios") if given is not None else DEFAULT_VARIANTS["person_follow"]
     )
     for name in variants:
         if name not in get_task("person_follow").variants():
@@ -200,10 +202,11 @@ def run(args: argparse.Namespace) -> int:
         checkpoint_freq=max(args.n_timesteps, 1),
         progress=False,
     )
+    seeds = tuple(range(TUNE_SEED0, TUNE_SEED0 + args.seeds))
+    config = SearchConfig(args.trials, seeds, backend.slots(), args.seed)  # checks --seed too
+    check_writable(args.out / "result.json")  # before the folder is made, not after a trial
     args.out.mkdir(parents=True, exist_ok=True)
     storage = args.storage or str(args.out / "study.journal")
-    seeds = tuple(range(TUNE_SEED0, TUNE_SEED0 + args.seeds))
-    config = SearchConfig(args.trials, seeds, backend.slots(), args.seed)
     study = open_study(storage, args.study, config)
     objective = PPOObjective(base, args.out / "trials", tuple(variants), backend)
     n_envs = objective.n_envs()

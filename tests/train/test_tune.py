@@ -29,6 +29,15 @@ def test_bad_arguments_give_one_line_and_exit_2(
     err = capsys.readouterr().err
     assert err.startswith("python -m train.tune: error: --scenarios")
     assert not (tmp_path / "out").exists()
+    for argv, message in (
+        (["--scenarios", ""], "--scenarios is empty"),  # not the default scenarios
+        (["--seed", "-1"], "sampler_seed=-1 is out of range"),
+    ):
+        assert main([*argv, "--out", str(tmp_path / "out")]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1
+        assert message in err
+        assert not (tmp_path / "out").exists()  # refused before the folder is made
 
 
 @pytest.mark.slow
