@@ -290,7 +290,6 @@ def cmd_aggregate(args: argparse.Namespace) -> int:
 
 def cmd_dominance(args: argparse.Namespace) -> int:
     """``follow-eval dominance``: see :mod:`eval.dominance`."""
-
     from eval.atomic import atomic_write_text
     from eval.dominance import (
         CRITERIA,
