@@ -325,7 +325,7 @@ class Emulator:
 
     def _camera_client(self, conn: socket.socket) -> None:
         conn.settimeout(0.2)
-        buffer = b""
+        lines = _RequestLines()
         with conn:
             while not self._stop.is_set():
                 try:
@@ -336,19 +336,18 @@ class Emulator:
                     return
                 if not chunk:
                     return
-                buffer += chunk
-                while b"\n" in buffer:
-                    line, buffer = buffer.split(b"\n", 1)
-                    reply = self._answer(line)
+                for line in lines.feed(chunk):
+                    if line is None:  # one reply per request, an overlong one's too
+                        self.stats.perception_errors += 1
+                        reply: dict[str, Any] = {
+                            "error": f"request longer than {_MAX_REQUEST} bytes"
+                        }
+                    else:
+                        reply = self._answer(line)
                     try:
                         conn.sendall(json.dumps(reply).encode() + b"\n")
                     except OSError:
                         return
-                if len(buffer) > _MAX_REQUEST:
-                    buffer = b""
-                    self.stats.perception_errors += 1
-                    with contextlib.suppress(OSError):
-                        conn.sendall(b'{"error": "request longer than 4096 bytes"}\n')
 
     def _answer(self, line: bytes) -> dict[str, Any]:
         self.stats.perception_requests += 1
@@ -363,6 +362,8 @@ class Emulator:
                 seed = request.get("seed")
                 if seed is not None and (isinstance(seed, bool) or not isinstance(seed, int)):
                     raise ValueError(f"seed={seed!r} must be an integer")
+                if seed is not None and not 0 <= seed < 2**256:  # the env's seeds
+                    raise ValueError(f"seed={seed} is out of range: must be in [0, 2**256 - 1]")
                 self._arm_world()
                 frame = self.world.reset(seed)
                 self.mcu.gains = self.world.motor_gains()
@@ -380,9 +381,12 @@ class Emulator:
             raise ValueError(
                 f"op={op!r} is out of range: must be 'frame', 'reset', 'info' or 'cut'"
             )
-        except (ValueError, TypeError) as exc:  # json.JSONDecodeError is a ValueError
-            self.stats.perception_errors += 1
+        except (ValueError, TypeError, RecursionError) as exc:  # JSONDecodeError: a ValueError
+            self.stats.perception_errors += 1  # RecursionError: JSON nested thousands deep
             return {"error": str(exc)}
+        except Exception as exc:  # a bug here must not take the camera down with a traceback
+            self.stats.perception_errors += 1
+            return {"error": f"the emulator could not answer: {type(exc).__name__}: {exc}"}
 
     def _info(self) -> dict[str, Any]:
         with self._mcu_lock:
@@ -405,6 +409,36 @@ class Emulator:
             "mcu": dataclasses.asdict(mcu.stats),
             "serial": dataclasses.asdict(self.stats),
         }
+
+
+class _RequestLines:
+    """Splits the camera's byte stream into request lines of at most :data:`_MAX_REQUEST`
+    bytes. An overlong line is given as ``None`` once, and the rest of it, up to its newline,
+    is dropped, so that every request gets exactly one reply and the client stays in step."""
+
+    def __init__(self) -> None:
+        self._buffer = b""
+        self._dropping = False  # inside an overlong line: skip to its newline
+
+    def feed(self, chunk: bytes) -> list[bytes | None]:
+        """The complete lines in ``chunk`` with what came before it (``None``: overlong)."""
+        out: list[bytes | None] = []
+        self._buffer += chunk
+        while True:
+            end = self._buffer.find(b"\n")
+            if self._dropping:
+                if end < 0:
+                    self._buffer = b""
+                    return out
+                self._buffer, self._dropping = self._buffer[end + 1 :], False
+                continue
+            if end < 0:
+                if len(self._buffer) > _MAX_REQUEST:  # answered now, not at its newline
+                    out.append(None)
+                    self._buffer, self._dropping = b"", True
+                return out
+            line, self._buffer = self._buffer[:end], self._buffer[end + 1 :]
+            out.append(None if len(line) > _MAX_REQUEST else line)
 
 
 class _HalReceive(ReferenceCodec):

@@ -158,15 +158,20 @@ class SimCamera:
     def read(self) -> Frame:
         reply = self._ask({"op": "frame"})
         truth = {k: v for k, v in reply.items() if k not in _FRAME_KEYS}
-        return Frame(
-            float(reply["distance_m"]),
-            float(reply["offset_px"]),
-            bool(reply["detected"]),
-            bool(reply["done"]),
-            str(reply["termination"]),
-            truth,
-            None if reply.get("ahead_m") is None else float(reply["ahead_m"]),
-        )
+        try:
+            return Frame(
+                float(reply["distance_m"]),
+                float(reply["offset_px"]),
+                bool(reply["detected"]),
+                bool(reply["done"]),
+                str(reply["termination"]),
+                truth,
+                None if reply.get("ahead_m") is None else float(reply["ahead_m"]),
+            )
+        except KeyError as exc:
+            raise PerceptionError(f"the emulator camera's frame has no {exc.args[0]!r}") from None
+        except (TypeError, ValueError) as exc:
+            raise PerceptionError(f"the emulator camera's frame is malformed: {exc}") from None
 
     def _ask(self, request: dict[str, Any]) -> dict[str, Any]:
         if self._file is None:
@@ -179,7 +184,15 @@ class SimCamera:
             raise PerceptionError(f"the emulator camera failed: {exc}") from exc
         if not line:
             raise PerceptionError("the emulator closed its camera connection")
-        reply = json.loads(line)
+        try:
+            reply = json.loads(line)
+        except (ValueError, RecursionError):  # JSONDecodeError and bad UTF-8 are ValueErrors
+            reply = None
+        if not isinstance(reply, dict):
+            raise PerceptionError(
+                f"the emulator camera sent a malformed reply to {request}: {_excerpt(line)} "
+                "(a JSON object was due)"
+            )
         if "error" in reply:
             raise PerceptionError(f"the emulator camera refused {request}: {reply['error']}")
         return reply
@@ -190,6 +203,12 @@ class SimCamera:
                 with contextlib.suppress(OSError):
                     part.close()
         self._file = self._sock = None
+
+
+def _excerpt(line: bytes, limit: int = 80) -> str:
+    """The start of a reply, for a message (``repr`` of its text, cut at ``limit`` chars)."""
+    text = line.decode("utf-8", "replace").rstrip("\n")
+    return repr(text if len(text) <= limit else text[:limit] + "...")
 
 
 # Not ground truth: the observation itself, and the world's own clock (the log keeps the runner's).

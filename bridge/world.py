@@ -98,9 +98,10 @@ class EmulatedWorld:
     def reset(self, seed: int | None = None) -> dict[str, Any]:
         """Start the episode again (with ``seed``, or the same seed); returns the first frame."""
         with self.lock:
-            if seed is not None:
-                self.seed = int(seed)
-            obs, info = self.env.reset(seed=self.seed)
+            # kept only once the env took it: a seed it refuses leaves the world as it was
+            chosen = self.seed if seed is None else int(seed)
+            obs, info = self.env.reset(seed=chosen)
+            self.seed = chosen
             self.episodes += 1
             self.done = False
             self.frame = self._frame(obs, info, False, "")

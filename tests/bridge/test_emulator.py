@@ -116,6 +116,32 @@ def test_the_camera_follows_the_world_and_refuses_bad_requests(emulator: Emulato
     camera.close()
 
 
+def test_the_camera_answers_hostile_requests_once_each_and_keeps_its_world(
+    emulator: Emulator,
+) -> None:
+    camera = Camera(emulator)
+    assert camera.ask(op="reset", seed=3)["step"] == 0
+    # a seed the env refuses: an error, and the world keeps its seed for the next reset
+    assert "seed=-1 is out of range" in camera.ask(op="reset", seed=-1)["error"]
+    assert "out of range" in camera.ask(op="reset", seed=2**256)["error"]
+    assert camera.ask(op="info")["seed"] == 3
+    assert camera.ask(op="reset")["step"] == 0
+    assert "error" in camera.raw(b"[" * 3000)  # nested past Python's recursion limit
+    # Overlong lines, in one write or spread over several reads: exactly one reply each, so
+    # the next request's reply is its own.
+    for size in (6_000, 9_000, 20_000):
+        padded = json.dumps({"op": "info", "pad": "a" * size}).encode()
+        assert "longer than 4096 bytes" in camera.raw(padded)["error"]
+        assert camera.ask(op="info")["seed"] == 3
+    camera.sock.sendall(b'{"op": "info", "pad": "' + b"a" * 5000)  # no newline yet
+    time.sleep(0.05)
+    camera.sock.sendall(b'"}\n{"op": "info"}\n')
+    assert "longer than 4096 bytes" in json.loads(camera.file.readline())["error"]
+    assert json.loads(camera.file.readline())["seed"] == 3
+    assert emulator.stats.perception_errors == 7
+    camera.close()
+
+
 @pytest.mark.parametrize("emulator", [("robust", "fixed")], indirect=True)
 def test_a_cut_silences_the_mcu_for_its_duration(emulator: Emulator) -> None:
     camera = Camera(emulator)

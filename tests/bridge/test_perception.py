@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import socket
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -85,6 +87,53 @@ def test_open_source_parses_the_perception_argument(tmp_path: Path) -> None:
     ):
         with pytest.raises(ValueError, match=error):
             open_source(bad, "/dev/ttyUSB0")
+
+
+def _camera_answering(reply: bytes) -> tuple[socket.socket, threading.Thread]:
+    """A camera server that answers every request line with ``reply`` (one client)."""
+    server = socket.create_server(("127.0.0.1", 0))
+
+    def serve() -> None:
+        conn, _ = server.accept()
+        with conn, conn.makefile("rwb") as f:
+            info = b'{"ahead": null, "seed": 0}\n'
+            for k, _line in enumerate(iter(f.readline, b"")):
+                f.write(info if k == 0 else reply)  # the info first, then the reply tested
+                f.flush()
+
+    thread = threading.Thread(target=serve, daemon=True)
+    thread.start()
+    return server, thread
+
+
+@pytest.mark.parametrize(
+    ("reply", "error"),
+    [
+        (b"not json\n", "sent a malformed reply to {'op': 'reset'}: 'not json' (a JSON object"),
+        (b"[1]\n", "sent a malformed reply to {'op': 'reset'}: '[1]'"),
+        (b'{"ok": 1}\n', "the emulator camera's frame has no 'distance_m'"),
+        (
+            b'{"distance_m": "far", "offset_px": 0, "detected": 1, "done": 0, "termination": ""}\n',
+            "the emulator camera's frame is malformed: could not convert string to float",
+        ),
+    ],
+)
+def test_a_malformed_camera_reply_is_a_perception_error(reply: bytes, error: str) -> None:
+    server, thread = _camera_answering(reply)
+    camera = SimCamera(*server.getsockname()[:2], timeout_s=2.0)
+    try:
+        with pytest.raises(PerceptionError) as raised:
+            _start_and_read(camera)  # the reset's reply, or the frame's, is the bad one
+        assert error in str(raised.value)
+    finally:
+        camera.close()
+        server.close()
+        thread.join(timeout=2.0)
+
+
+def _start_and_read(camera: SimCamera) -> None:
+    camera.start()
+    camera.read()
 
 
 def test_an_absent_emulator_is_named() -> None:
