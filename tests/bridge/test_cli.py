@@ -238,3 +238,15 @@ def test_a_bad_listen_address_names_the_option(
 ) -> None:
     assert main(["emulate", "--listen", url]) == 2
     _one_line(capsys, f"--listen {url!r}", why)
+
+
+def test_an_interrupt_while_starting_is_one_line(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    def killed(*args: Any, **kwargs: Any) -> Any:  # SIGTERM (raised as Ctrl-C) mid start-up
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr("bridge.cli._env_config", killed)
+    assert main(["monitor", "--sim", "--http", "127.0.0.1:0"]) == 130
+    err = capsys.readouterr().err
+    assert err == "follow-robot: interrupted\n"  # no traceback
