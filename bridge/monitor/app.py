@@ -10,12 +10,16 @@ offline, beside the robot). ``/ws`` is the WebSocket:
 * client to server, JSON validated with pydantic: ``{"type": "mode", "mode": "gsmpn"}``
   (one of the hub's modes: ``pn, mpn, gsmpn, ppo, manual, stop``, and any policy the robot's
   command line added, such as ``ppo_ahead``), ``{"type": "manual", "v_mps": 0.3,
-  "w_radps": 0.0}`` and ``{"type": "ping", "t": ...}``. A malformed message gets an error
-  reply; the connection and the server go on.
+  "w_radps": 0.0}`` and ``{"type": "ping", "t": ...}`` (``t`` a finite number or absent),
+  each a text message. A malformed message (a binary one, one that is not JSON or not one of
+  these, one over :data:`MAX_MESSAGE_BYTES`) gets an error reply saying what is wrong; the
+  connection and the server go on. The server never buffers a message over
+  :data:`WS_MAX_BYTES`: one that long closes the connection with 1009 (message too big).
 
-With a ``token`` the WebSocket handshake must carry it (``/ws?token=...``); a wrong or missing
-token is refused before the connection opens (HTTP 403). The command line requires a token
-for any host other than loopback.
+With a ``token`` the WebSocket handshake must carry it (``/ws?token=...``, any text, compared
+as UTF-8); a wrong or missing token is refused before the connection opens: HTTP 403 with the
+body ``wrong or missing token``. The command line requires a token for any host other than
+loopback.
 """
 
 from __future__ import annotations
@@ -32,17 +36,21 @@ from typing import Annotated, Any, Literal
 
 import uvicorn
 from fastapi import FastAPI, WebSocket, WebSocketDisconnect
-from fastapi.responses import FileResponse
+from fastapi.responses import FileResponse, PlainTextResponse
 from fastapi.staticfiles import StaticFiles
 from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, ValidationError
 
 from bridge.monitor.hub import MANUAL_LIMITS, MonitorHub
 
-__all__ = ["LOOPBACK_HOSTS", "MAX_MESSAGE_BYTES", "Server", "create_app", "serve"]
+__all__ = ["LOOPBACK_HOSTS", "MAX_MESSAGE_BYTES", "WS_MAX_BYTES", "Server", "create_app", "serve"]
 
 STATIC = Path(__file__).with_name("static")
 MAX_MESSAGE_BYTES = 4096
 """Longest client message accepted."""
+WS_MAX_BYTES = 4 * MAX_MESSAGE_BYTES
+"""Longest message the server reads (uvicorn's ``ws_max_size``; its default is 16 MiB): one a
+little over :data:`MAX_MESSAGE_BYTES` still gets an error reply, and one far over it is
+refused before it is buffered (close code 1009)."""
 LOOPBACK_HOSTS = frozenset({"127.0.0.1", "localhost", "::1"})
 _POLL_S = 0.005  # how often a client's sender looks for a new state, s
 
@@ -70,7 +78,8 @@ class PingMessage(_Message):
     """Echoed back (clients measure the round trip)."""
 
     type: Literal["ping"]
-    t: float | None = None
+    # finite: the reply echoes it, and JavaScript's JSON.parse refuses NaN and Infinity
+    t: float | None = Field(default=None, allow_inf_nan=False)
 
 
 ClientMessage = TypeAdapter(
@@ -90,11 +99,13 @@ def create_app(hub: MonitorHub, token: str | None = None, rate_hz: float = 10.0)
     """The monitor app over ``hub``.
 
     :param hub: the state and mode store the robot's driver shares.
-    :param token: required at the WebSocket handshake when given.
+    :param token: required at the WebSocket handshake when given (any text: it is compared
+        as UTF-8 bytes).
     :param rate_hz: state messages per second at most.
     """
     if not 0.1 <= rate_hz <= 100.0:
         raise ValueError(f"rate_hz={rate_hz} is out of range: must be in [0.1, 100] Hz")
+    expected = None if token is None else _token_bytes(token)
     app = FastAPI(title="PersonFollow monitor", docs_url=None, redoc_url=None)
     app.state.hub = hub
     app.state.clients = 0
@@ -111,10 +122,11 @@ def create_app(hub: MonitorHub, token: str | None = None, rate_hz: float = 10.0)
 
     @app.websocket("/ws")
     async def websocket(ws: WebSocket) -> None:
-        if token is not None and not secrets.compare_digest(
-            ws.query_params.get("token", ""), token
-        ):
-            await ws.close(code=1008, reason="wrong or missing token")
+        # compare_digest takes str only when it is ASCII; UTF-8 bytes take any token. The query
+        # string was decoded with errors replaced (``%ff``), so encoding it cannot fail.
+        given = ws.query_params.get("token", "").encode("utf-8")
+        if expected is not None and not secrets.compare_digest(given, expected):
+            await _refuse(ws, "wrong or missing token")
             return
         await ws.accept()
         app.state.clients += 1
@@ -130,6 +142,25 @@ def create_app(hub: MonitorHub, token: str | None = None, rate_hz: float = 10.0)
             app.state.clients -= 1
 
     return app
+
+
+def _token_bytes(token: str) -> bytes:
+    """``token`` as UTF-8; ``ValueError`` for one that is not text (a command-line argument
+    whose bytes are not UTF-8 arrives with lone surrogates) and so could never be matched."""
+    try:
+        return token.encode("utf-8")
+    except UnicodeEncodeError:
+        raise ValueError("token is out of range: must be text (its bytes are not UTF-8)") from None
+
+
+async def _refuse(ws: WebSocket, reason: str) -> None:
+    """Refuse a handshake with HTTP 403 and ``reason`` as its body, where the server can send
+    a body (uvicorn and the TestClient can); else by closing, which a server turns into a bare
+    403 (a close reason before the connection opens never reaches the client)."""
+    if "websocket.http.response" in ws.scope.get("extensions", {}):
+        await ws.send_denial_response(PlainTextResponse(reason, status_code=403))
+    else:
+        await ws.close(code=1008, reason=reason)
 
 
 async def _send_states(ws: WebSocket, hub: MonitorHub, period_s: float) -> None:
@@ -162,37 +193,54 @@ def _clean(value: Any) -> Any:
 
 
 async def _receive(ws: WebSocket, hub: MonitorHub) -> None:
+    """Answer the client's messages until it leaves (``WebSocketDisconnect``)."""
     while True:
-        text = await ws.receive_text()
-        if len(text.encode()) > MAX_MESSAGE_BYTES:
+        # not receive_text(): it fails with KeyError on a binary message, ending the connection
+        message = await ws.receive()
+        if message["type"] == "websocket.disconnect":
+            raise WebSocketDisconnect(message.get("code", 1000), message.get("reason"))
+        text = message.get("text")
+        if text is None:
             await ws.send_json(
-                {"type": "error", "error": f"message over {MAX_MESSAGE_BYTES} bytes"}
+                {"type": "error", "error": "binary messages are not accepted: send JSON as text"}
             )
             continue
+        await _answer(ws, hub, text)
+
+
+async def _answer(ws: WebSocket, hub: MonitorHub, text: str) -> None:
+    """Validate one text message, act on it and reply (an error reply for a malformed one)."""
+    if len(text.encode()) > MAX_MESSAGE_BYTES:
+        await ws.send_json({"type": "error", "error": f"message over {MAX_MESSAGE_BYTES} bytes"})
+        return
+    try:
+        message = ClientMessage.validate_json(text)
+    except ValidationError as exc:
+        await ws.send_json({"type": "error", "error": _error_text(exc)})
+        return
+    if isinstance(message, ModeMessage):
         try:
-            message = ClientMessage.validate_json(text)
-        except ValidationError as exc:
-            await ws.send_json({"type": "error", "error": _error_text(exc)})
-            continue
-        if isinstance(message, ModeMessage):
-            try:
-                hub.set_mode(message.mode)
-            except ValueError as exc:  # not a mode of this robot: the mode stays as it was
-                await ws.send_json({"type": "error", "error": str(exc)})
-                continue
-            await ws.send_json({"type": "ack", "mode": message.mode})
-        elif isinstance(message, ManualMessage):
-            hub.set_manual(message.v_mps, message.w_radps)
-            await ws.send_json({"type": "ack", "manual": [message.v_mps, message.w_radps]})
-        else:
-            await ws.send_json({"type": "pong", "t": message.t})
+            hub.set_mode(message.mode)
+        except ValueError as exc:  # not a mode of this robot: the mode stays as it was
+            await ws.send_json({"type": "error", "error": str(exc)})
+            return
+        await ws.send_json({"type": "ack", "mode": message.mode})
+    elif isinstance(message, ManualMessage):
+        hub.set_manual(message.v_mps, message.w_radps)
+        await ws.send_json({"type": "ack", "manual": [message.v_mps, message.w_radps]})
+    else:
+        await ws.send_json({"type": "pong", "t": message.t})
 
 
 class Server:
     """uvicorn serving an app in a background thread; :meth:`stop` ends it."""
 
     def __init__(self, app: FastAPI, host: str = "127.0.0.1", port: int = 8000) -> None:
-        config = uvicorn.Config(app, host=host, port=port, log_level="warning", lifespan="off")
+        # ws_max_size: the server reads no message far longer than the app accepts (the
+        # default, 16 MiB, would buffer one in full only for the app to refuse it)
+        config = uvicorn.Config(
+            app, host=host, port=port, log_level="warning", lifespan="off", ws_max_size=WS_MAX_BYTES
+        )
         self._server = uvicorn.Server(config)
         self._thread = threading.Thread(target=self._server.run, name="monitor", daemon=True)
         self.host = host

@@ -4,12 +4,13 @@ from __future__ import annotations
 
 import json
 import time
+from urllib.parse import quote
 
 import pytest
 from fastapi.testclient import TestClient
-from starlette.websockets import WebSocketDisconnect
+from starlette.testclient import WebSocketDenialResponse
 
-from bridge.monitor.app import create_app, serve
+from bridge.monitor.app import MAX_MESSAGE_BYTES, WS_MAX_BYTES, create_app, serve
 from bridge.monitor.hub import MODES, MonitorHub, monitor_modes
 from bridge.monitor.sim import SimDriver
 from policies import make_policy
@@ -28,10 +29,23 @@ def _state(hub: MonitorHub, t: float = 0.0) -> None:
 
 
 def _next(ws, kind: str) -> dict:  # type: ignore[no-untyped-def]
+    """The next message of ``kind``, passing over the streamed scene and states: any other
+    reply first fails the test (waiting for one that never comes would hang it)."""
     for _ in range(50):
         message = ws.receive_json()
         if message["type"] == kind:
             return message
+        assert message["type"] in ("scene", "state"), f"{message} while waiting for {kind}"
+    raise AssertionError(f"no {kind} message")
+
+
+def _next_raw(ws, kind: str) -> dict:  # type: ignore[no-untyped-def]
+    """``_next`` for a ``websockets`` client of a real server (which times out)."""
+    for _ in range(50):
+        message = json.loads(ws.recv(timeout=5))
+        if message["type"] == kind:
+            return message
+        assert message["type"] in ("scene", "state"), f"{message} while waiting for {kind}"
     raise AssertionError(f"no {kind} message")
 
 
@@ -93,6 +107,8 @@ def test_states_stream_and_modes_change(hub: MonitorHub) -> None:
         ('{"type": "manual", "v_mps": "fast", "w_radps": 0}', "v_mps"),
         ('{"type": "manual", "v_mps": 0, "w_radps": 0, "x": 1}', "x"),
         ("[1, 2]", "object"),
+        ('{"type": "ping", "t": NaN}', "ping.t: input should be a finite number"),
+        ('{"type": "ping", "t": -Infinity}', "ping.t: input should be a finite number"),
         ('{"type": "ping", "t": "' + "x" * 5000 + '"}', "4096 bytes"),
     ],
 )
@@ -109,14 +125,60 @@ def test_a_malformed_message_gets_an_error_and_the_connection_goes_on(
     assert hub.mode == "pn"
 
 
-def test_a_wrong_token_is_refused_at_the_handshake(hub: MonitorHub) -> None:
-    client = TestClient(create_app(hub, token="s3cret"))
-    for url in ("/ws", "/ws?token=guess"):
-        with pytest.raises(WebSocketDisconnect) as refused, client.websocket_connect(url) as ws:
-            ws.receive_json()
-        assert refused.value.code == 1008
-    with client.websocket_connect("/ws?token=s3cret") as ws:
+def test_a_binary_message_gets_an_error_and_the_connection_goes_on(hub: MonitorHub) -> None:
+    client = TestClient(create_app(hub))
+    with client.websocket_connect("/ws") as ws:
+        ws.send_bytes(b'{"type": "ping", "t": 1}')
+        assert "binary messages are not accepted" in _next(ws, "error")["error"]
+        ws.send_json({"type": "ping", "t": 2})
+        assert _next(ws, "pong") == {"type": "pong", "t": 2.0}
+
+
+@pytest.mark.parametrize("token", ["s3cret", "clé"])
+def test_a_wrong_token_is_refused_at_the_handshake(hub: MonitorHub, token: str) -> None:
+    client = TestClient(create_app(hub, token=token))
+    for url in ("/ws", "/ws?token=guess", "/ws?token=%C3%A9", "/ws?token=%ff", "/ws?token=cl"):
+        with pytest.raises(WebSocketDenialResponse) as refused, client.websocket_connect(url):
+            pass
+        assert refused.value.status_code == 403
+        assert refused.value.text == "wrong or missing token"
+    with client.websocket_connect(f"/ws?token={quote(token)}") as ws:
         assert ws.receive_json()["type"] == "scene"
+
+
+def test_a_token_that_is_not_text_is_refused_at_once(hub: MonitorHub) -> None:
+    with pytest.raises(ValueError, match="token is out of range: must be text"):
+        create_app(hub, token="\udcff")  # a byte that is not UTF-8 on the command line
+
+
+def test_the_server_refuses_a_token_says_why_and_bounds_a_message(hub: MonitorHub) -> None:
+    from websockets.exceptions import ConnectionClosedError, InvalidStatus
+    from websockets.sync.client import connect
+
+    server = serve(hub, "127.0.0.1", 0, token="clé")
+    url = f"ws://127.0.0.1:{server.port}/ws?token="
+    try:
+        with pytest.raises(InvalidStatus) as refused:
+            connect(url + "guess", open_timeout=5).close()
+        assert refused.value.response.status_code == 403
+        assert refused.value.response.body == b"wrong or missing token"
+        with connect(url + quote("clé"), open_timeout=5) as ws:
+            ws.send("x" * (2 * MAX_MESSAGE_BYTES))  # too long for the app: an error reply
+            assert _next_raw(ws, "error")["error"] == f"message over {MAX_MESSAGE_BYTES} bytes"
+            ws.send(b'{"type": "ping", "t": 3}')
+            assert "binary" in _next_raw(ws, "error")["error"]
+            ws.send('{"type": "ping", "t": 4}')
+            assert _next_raw(ws, "pong")["t"] == 4.0
+            # far beyond it: never buffered, the connection closes with 1009 (message too big)
+            ws.send("x" * (WS_MAX_BYTES + 1))
+            with pytest.raises(ConnectionClosedError) as closed:
+                _next_raw(ws, "pong")
+            assert closed.value.rcvd.code == 1009
+        with connect(url + quote("clé"), open_timeout=5) as ws:  # the server goes on
+            ws.send('{"type": "ping", "t": 5}')
+            assert _next_raw(ws, "pong")["t"] == 5.0
+    finally:
+        server.stop()
 
 
 def test_a_client_that_leaves_mid_stream_does_not_stop_the_server(hub: MonitorHub) -> None:
