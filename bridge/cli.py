@@ -25,6 +25,7 @@ import dataclasses
 import signal
 import sys
 import time
+import urllib.parse
 from collections.abc import Sequence
 from typing import Any, NoReturn
 
@@ -292,7 +293,8 @@ def _start_monitor(args: argparse.Namespace, hub: Any) -> Any:
         server = serve(hub, host, port, args.token)
     except (ValueError, RuntimeError) as exc:
         raise UsageError(str(exc)) from None
-    query = f"?token={args.token}" if args.token else ""
+    # quoted: a token with +, &, # or % would otherwise not survive the page's URL
+    query = f"?token={urllib.parse.quote(args.token, safe='')}" if args.token else ""
     print(f"{PROG}: monitor on {server.url}{query}", flush=True)
     return server
 

@@ -250,3 +250,22 @@ def test_an_interrupt_while_starting_is_one_line(
     assert main(["monitor", "--sim", "--http", "127.0.0.1:0"]) == 130
     err = capsys.readouterr().err
     assert err == "follow-robot: interrupted\n"  # no traceback
+
+
+def test_the_printed_monitor_url_carries_any_token_intact(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import argparse
+    from urllib.parse import parse_qs, urlsplit
+
+    from bridge.cli import _start_monitor
+
+    class Served:
+        url = "http://127.0.0.1:8000/"
+
+    monkeypatch.setattr("bridge.monitor.app.serve", lambda *args: Served())
+    token = "a+b&c#d%e é"  # what a URL would otherwise mangle (+ reads as a space)
+    args = argparse.Namespace(http=("127.0.0.1", 8000), token=token)
+    _start_monitor(args, hub=None)
+    url = capsys.readouterr().out.strip().rsplit(" ", 1)[1]
+    assert parse_qs(urlsplit(url).query)["token"] == [token]
