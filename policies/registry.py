@@ -174,8 +174,17 @@ class PolicyRegistry:
         """Build a fresh policy by name: ``task``'s when the name is registered for several
         tasks (``ppo``), else PersonFollow's; a name of one task only is that task's.
 
-        :raises ValueError: for an unknown name; the message lists the known names.
+        :raises ValueError: for an unknown or empty name (the message lists the known names),
+            or a task no policy is registered for.
+        :raises TypeError: if ``name`` is not text.
         """
+        if not isinstance(name, str):
+            raise TypeError(f"a policy name is text, such as 'pn:thesis'; got {name!r}")
+        if not name.strip():  # else a path resolver would look for a model in the current folder
+            raise ValueError(f"the policy name is empty; known names: {', '.join(self.names())}")
+        tasks = sorted({DEFAULT_TASK, *(t for by in self._factories.values() for t in by)})
+        if task is not None and task not in tasks:
+            raise ValueError(f"task={task!r} is out of range: must be one of {tasks}")
         by_task = self._factories.get(name, {})
         factory = by_task.get(task or DEFAULT_TASK) or (
             next(iter(by_task.values())) if len(by_task) == 1 else None

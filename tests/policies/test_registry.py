@@ -108,6 +108,15 @@ def test_unknown_name_error_lists_the_known_names() -> None:
         assert name in str(error.value)
 
 
+def test_an_empty_or_non_text_name_and_an_unknown_task_are_refused() -> None:
+    with pytest.raises(ValueError, match=r"the policy name is empty; known names: .*pn:thesis"):
+        make_policy("")  # not a model path in the current folder
+    with pytest.raises(TypeError, match="a policy name is text"):
+        make_policy(None)  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match=r"task='nope' is out of range: must be one of \["):
+        make_policy("pn", "nope")
+
+
 def test_registered_factory_is_built_by_name() -> None:
     registry = PolicyRegistry()
     registry.register("straight", lambda: PN(PN_THESIS, name="straight"))
