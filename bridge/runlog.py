@@ -12,6 +12,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from follow_env.sim.atomic import atomic_path, try_new_file
 from follow_env.tasks.person_follow.steplog import log_columns
 
 __all__ = ["check_log_path", "save_rows", "write_rows"]
@@ -35,16 +36,14 @@ def check_log_path(path: str | Path) -> Path:
         raise ValueError(f"--log {path}: the folder {parent} does not exist")
     if not parent.is_dir():
         raise ValueError(f"--log {path}: {parent} is not a folder")
-    # Only creating a file tells (permissions, read-only mounts, /proc, ACLs): the log is written
-    # exactly so, a temporary file beside it renamed into place.
+    # Only creating a file tells: the log is written exactly so, a temporary file beside it
+    # renamed into place.
     try:
-        fd, probe = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".probe", dir=parent)
+        try_new_file(parent)
     except OSError as exc:
         raise ValueError(
             f"--log {path}: cannot create a file in the folder {parent} ({exc.strerror or exc})"
         ) from None
-    os.close(fd)
-    os.unlink(probe)
     return path
 
 
@@ -52,18 +51,11 @@ def write_rows(rows: list[dict[str, Any]], path: Path) -> Path:
     """Write step-log rows (the columns they use, in the layout's order) atomically."""
     used = {k for row in rows for k, v in row.items() if v is not None}
     header = [c for c in _COLUMNS if c in used]
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".tmp.csv", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", newline="", encoding="utf-8") as f:
-            writer = csv.writer(f, lineterminator="\n")
-            writer.writerow(header)
-            for row in rows:
-                writer.writerow(["" if row.get(c) is None else _cell(row[c]) for c in header])
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    with atomic_path(path) as tmp, tmp.open("w", newline="", encoding="utf-8") as f:
+        writer = csv.writer(f, lineterminator="\n")
+        writer.writerow(header)
+        for row in rows:
+            writer.writerow(["" if row.get(c) is None else _cell(row[c]) for c in header])
     return path
 
 

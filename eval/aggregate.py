@@ -276,7 +276,7 @@ def _by_split(
 def write(tables: dict[str, pd.DataFrame], folder: Path) -> str:
     """Write the tables and plots into ``folder`` (atomically, file by file); returns the
     Markdown report."""
-    from eval.atomic import atomic_write_text
+    from follow_env.sim.atomic import atomic_write_text
 
     for name in ("scores", "aggregate", "improvement", "splits", "profiles"):
         atomic_write_text(folder / f"{name}.csv", tables[name].to_csv(index=False))

@@ -47,7 +47,6 @@ from pathlib import Path
 from typing import Any
 
 import follow_env
-from eval.atomic import atomic_folder, check_new_folder
 from eval.cli_base import (  # noqa: F401  (MAX_EPISODES, MAX_SEED: the limits, read here)
     MAX_EPISODES,
     MAX_SEED,
@@ -65,6 +64,7 @@ from eval.cli_base import (  # noqa: F401  (MAX_EPISODES, MAX_SEED: the limits, 
 from eval.cli_run import _check_grid, cmd_run, policy_label, refuse_aliases
 from eval.steplog import StepLogError, read_step_log, step_log_files
 from execution import BACKENDS, BackendUnavailableError
+from follow_env.sim.atomic import atomic_folder, check_new_folder
 
 __all__ = ["MAX_EPISODES", "MAX_SEED", "main"]
 
@@ -255,7 +255,7 @@ def build_parser() -> argparse.ArgumentParser:
 def cmd_aggregate(args: argparse.Namespace) -> int:
     """``follow-eval aggregate``: see :mod:`eval.aggregate`."""
     from eval import aggregate as agg
-    from eval.atomic import atomic_folder
+    from follow_env.sim.atomic import atomic_folder
 
     learners = [agg.learner_runs(path) for path in args.runs]
     # Each learner is named by its folder, and its tables are keyed by that name.
@@ -290,7 +290,6 @@ def cmd_aggregate(args: argparse.Namespace) -> int:
 
 def cmd_dominance(args: argparse.Namespace) -> int:
     """``follow-eval dominance``: see :mod:`eval.dominance`."""
-    from eval.atomic import atomic_write_text
     from eval.dominance import (
         CRITERIA,
         ENDINGS,
@@ -303,6 +302,7 @@ def cmd_dominance(args: argparse.Namespace) -> int:
         finished_view,
     )
     from eval.report import safe_name
+    from follow_env.sim.atomic import atomic_write_text
 
     metrics = [*(c.metric for c in CRITERIA), *ENDINGS, FINISHED]
     table = _episode_table(args.run / "episodes.csv", metrics)

@@ -13,10 +13,10 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from eval.atomic import atomic_folder, atomic_write_text, check_new_folder
 from eval.cli_base import MAX_EPISODES, MAX_SEED, PROG, UsageError, _config, _names
 from eval.steplog import write_step_log
 from execution import Backend, backend_from_args
+from follow_env.sim.atomic import atomic_folder, atomic_write_text, check_new_folder
 
 __all__ = ["cmd_run", "policy_label", "refuse_aliases"]
 

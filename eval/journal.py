@@ -17,7 +17,7 @@ import shutil
 from pathlib import Path
 from typing import Any
 
-from eval.atomic import atomic_path, atomic_write_text
+from follow_env.sim.atomic import atomic_path, atomic_write_text
 
 __all__ = ["UnitJournal", "journal_folder"]
 

@@ -1,7 +1,7 @@
 """Reports: the summary table as CSV, Markdown, JSON and LaTeX; plots; videos.
 
-Every file is written atomically (:mod:`eval.atomic`). The thesis's metrics appear in the
-thesis's units (px, mm/s², %); everything else is SI, as its column name says.
+Every file is written atomically (:mod:`follow_env.sim.atomic`). The thesis's metrics appear
+in the thesis's units (px, mm/s², %); everything else is SI, as its column name says.
 
 The tables are PersonFollow's unless ``tables=`` says otherwise: a :class:`Tables` names a
 task's metrics, its headline ones and the headline table's title (LineTrace's is
@@ -21,7 +21,6 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from eval.atomic import atomic_path, atomic_write_text
 from eval.metrics import (
     HEADLINE_METRICS,
     METRICS,
@@ -32,6 +31,7 @@ from eval.metrics import (
 )
 from eval.rollout import Episode
 from eval.stats import variant_column
+from follow_env.sim.atomic import atomic_path, atomic_write_text
 
 __all__ = [
     "PERSON_FOLLOW_TABLES",

@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from eval.atomic import atomic_path
+from follow_env.sim.atomic import atomic_path
 from follow_env.tasks.line_trace import steplog as line_steplog
 from follow_env.tasks.person_follow.steplog import (
     ACCEL_SOURCES,

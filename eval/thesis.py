@@ -33,9 +33,9 @@ import numpy as np
 import pandas as pd
 from scipy import stats as scipy_stats
 
-from eval.atomic import atomic_path, atomic_write_text
 from eval.rollout import rollout
 from eval.stats import episode_table, summarize
+from follow_env.sim.atomic import atomic_path, atomic_write_text
 
 __all__ = [
     "CHAINS",

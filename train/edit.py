@@ -48,7 +48,7 @@ from typing import Any
 
 import yaml
 
-from eval.atomic import atomic_write_text
+from follow_env.sim.atomic import atomic_write_text
 from policies.learned.boxes import Box
 from policies.learned.ensemble import ENSEMBLE, EnsemblePolicy, member_folders
 from policies.learned.feature import IN_TRAINING, split_in_training, wrapper_entries

@@ -32,7 +32,13 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from eval.atomic import atomic_folder, atomic_path, atomic_write_text, check_writable, file_on_path
+from follow_env.sim.atomic import (
+    atomic_folder,
+    atomic_path,
+    atomic_write_text,
+    check_writable,
+    file_on_path,
+)
 
 __all__ = [
     "AGENT_FILES",

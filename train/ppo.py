@@ -38,7 +38,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from eval.atomic import atomic_write_text, check_writable, file_on_path
+from follow_env.sim.atomic import atomic_write_text, check_writable, file_on_path
 from follow_env.tasks import task_for_env
 from train.algos import ALGOS, DEFAULT_ALGO, algo, load_model, new_model
 from train.config import (

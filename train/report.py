@@ -19,8 +19,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from eval.atomic import atomic_path
 from eval.metrics import OUTCOME_METRICS, metric_digits, metric_label
+from follow_env.sim.atomic import atomic_path
 from policies.learned.feature import IN_TRAINING
 from policies.learned.ppo import shipped_name
 from policies.registry import DEFAULT_TASK

@@ -43,7 +43,7 @@ from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.callbacks import CheckpointCallback, EvalCallback
 from stable_baselines3.common.vec_env import VecNormalize
 
-from eval.atomic import atomic_path, atomic_write_text
+from follow_env.sim.atomic import atomic_path, atomic_write_text
 from follow_env.sim.checks import yaml_problem
 
 __all__ = [

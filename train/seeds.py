@@ -42,8 +42,8 @@ import numpy as np
 import pandas as pd
 import yaml
 
-from eval.atomic import atomic_write_text
 from execution import Backend, execute
+from follow_env.sim.atomic import atomic_write_text
 from policies.learned.ensemble import ENSEMBLE
 from train import run as runs
 from train.algos import DEFAULT_ALGO, algo

@@ -34,12 +34,12 @@ from typing import Any
 import numpy as np
 import yaml
 
-from eval.atomic import atomic_write_text, check_writable
 from eval.cli_base import UsageError, _names, _Parser, _positive
 from eval.rollout import rollout
 from eval.tuning.driver import SearchConfig, open_study, run_search
 from eval.tuning.objective import DEFAULT_VARIANTS, SCORE_KEYS, TUNE_SEED0, episode_score
 from execution import Backend, BackendUnavailableError, backend_from_args, execute
+from follow_env.sim.atomic import atomic_write_text, check_writable
 from policies.space import ParamRange
 from train.ppo import DEFAULT_HYPERPARAMS, Args
 

@@ -24,9 +24,9 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from eval.atomic import atomic_write_text, check_writable, file_on_path
 from eval.cli_base import UsageError, _names, _Parser, _positive
 from execution import BACKENDS, BackendUnavailableError, backend_from_args
+from follow_env.sim.atomic import atomic_write_text, check_writable, file_on_path
 
 __all__ = ["PROG", "build_parser", "main"]
 

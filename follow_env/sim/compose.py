@@ -12,10 +12,10 @@ there: numba then caches them like any other module's functions (:mod:`follow_en
 from __future__ import annotations
 
 import importlib.util
-import os
 import sys
 from types import ModuleType
 
+from follow_env.sim.atomic import atomic_write_text
 from follow_env.sim.jit import CACHE_ROOT
 
 __all__ = ["kernels"]
@@ -74,9 +74,7 @@ def kernels(task: str, task_module: str, platform: str, platform_module: str) ->
     folder.mkdir(parents=True, exist_ok=True)
     path = folder / f"{task}__{platform}.py"
     if not path.exists() or path.read_text() != source:
-        tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-        tmp.write_text(source)
-        os.replace(tmp, path)  # another process may write the same text at the same time
+        atomic_write_text(path, source)  # another process may write the same text at once
     name = f"follow_env._composed.{task}__{platform}"
     spec = importlib.util.spec_from_file_location(name, path)
     if spec is None or spec.loader is None:  # pragma: no cover - a path importlib refuses

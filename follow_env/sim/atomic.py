@@ -1,8 +1,11 @@
 """Atomic writes: a file or a folder appears whole, or not at all.
 
-Every file the evaluation writes goes to a temporary name beside its target and is renamed into
-place when complete (``os.replace`` is atomic on one file system), so an interrupted run never
-leaves a half-written CSV, plot or video that a later reader would trust.
+Every file the project writes (the evaluation's tables, plots and videos, training's runs and
+exports, the robot's step log, the composed kernels) goes to a temporary name beside its target
+and is renamed into place when complete (``os.replace`` is atomic on one file system), so an
+interrupted run never leaves a half-written file that a later reader would trust. It sits at
+the bottom layer, with no import of its own, so that every layer and leaf can use the one
+implementation (the robot's side may not import the evaluation).
 """
 
 from __future__ import annotations
@@ -21,6 +24,7 @@ __all__ = [
     "check_new_folder",
     "check_writable",
     "file_on_path",
+    "try_new_file",
 ]
 
 
@@ -114,9 +118,19 @@ def check_writable(path: str | Path) -> None:
         raise NotADirectoryError(f"cannot write to {path}: {blocker} is a file, not a folder")
     folder = next(p for p in path.parents if p.exists())
     try:
-        fd, name = tempfile.mkstemp(prefix=".write-check.", dir=folder)
+        try_new_file(folder)
     except OSError as e:
         raise OSError(f"cannot write to {folder}: {e.strerror or e}") from None
+
+
+def try_new_file(folder: str | Path) -> None:
+    """Make a file in ``folder`` and remove it at once: the one test of whether a folder takes
+    new files (permissions, read-only mounts, ``/proc``, ACLs), since ``os.access`` passes for
+    root. Callers put the failure in their own words.
+
+    :raises OSError: as the file system refused the file (``strerror`` says why).
+    """
+    fd, name = tempfile.mkstemp(prefix=".write-check.", dir=folder)
     os.close(fd)
     os.unlink(name)
 

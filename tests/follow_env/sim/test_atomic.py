@@ -1,11 +1,11 @@
-"""eval/atomic.py: files and folders appear whole or not at all."""
+"""follow_env/sim/atomic.py: files and folders appear whole or not at all."""
 
 import re
 from pathlib import Path
 
 import pytest
 
-from eval.atomic import atomic_folder, atomic_path, atomic_write_text, file_on_path
+from follow_env.sim.atomic import atomic_folder, atomic_path, atomic_write_text, file_on_path
 
 
 def test_atomic_path_renames_into_place(tmp_path: Path) -> None:
