@@ -173,9 +173,11 @@ def test_the_monitor_refuses_what_it_would_ignore_before_it_starts(
     assert _files(tmp_path) == []
 
 
-@pytest.mark.parametrize(
-    "argv", [["--scenario", "curve"], ["--config", '{"scenario": {"name": "curve"}}']]
-)
+# Two ways to name a scenario: the option, and the configuration's (no default may override it).
+CURVE = [["--scenario", "curve"], ["--config", '{"scenario": {"name": "curve"}}']]
+
+
+@pytest.mark.parametrize("argv", CURVE)
 def test_the_sim_monitor_runs_the_scenario_it_is_given(
     argv: list[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -199,9 +201,7 @@ def test_the_sim_monitor_runs_the_scenario_it_is_given(
     assert seen == ["curve"]
 
 
-@pytest.mark.parametrize(
-    "argv", [["--scenario", "curve"], ["--config", '{"scenario": {"name": "curve"}}']]
-)
+@pytest.mark.parametrize("argv", CURVE)
 def test_the_emulator_builds_the_scenario_it_is_given(
     argv: list[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:
