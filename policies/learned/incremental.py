@@ -62,14 +62,14 @@ class IncrementalAction(Feature):
         taken to walk on as they did. A gap with nothing nearer (the detector missed the person)
         leaves the agent free to turn back towards where it last saw them.
     :param behind_margin_m: how much nearer than the held distance the reading ahead must read
-        (m, > 0).
+        (m, > 0; None: 0.2). Needs ``ahead_index``.
     :param prior_index: the first of the observation entries holding a prior command, one per
         action entry in this step's units (:class:`~policies.learned.hint.LawHint`'s law), or
         None. Given, the step is ``max_change * clip(a + prior_gain * (prior - u) /
         max_change, -1, 1)``: an action of zero tracks the prior command at up to the bound,
         and the agent learns where to depart from it.
     :param prior_gain: the share of the distance to the prior command closed a step (in
-        (0, 1], within the bound).
+        (0, 1], within the bound; None: 1). Needs ``prior_index``.
     """
 
     def __init__(
@@ -81,9 +81,9 @@ class IncrementalAction(Feature):
         held_floor: Sequence[float | None] | None = None,
         held_keep: Sequence[bool] | None = None,
         ahead_index: int | None = None,
-        behind_margin_m: float = 0.2,
+        behind_margin_m: float | None = None,
         prior_index: int | None = None,
-        prior_gain: float = 1.0,
+        prior_gain: float | None = None,
     ) -> None:
         self.given = max_change
         self.reading_index = reading_index
@@ -121,8 +121,12 @@ class IncrementalAction(Feature):
                     f"{self.owner}.prior_index={self.prior_index!r} is out of range: the "
                     f"{act.shape[0]} prior entries must lie in [0, {n_obs - 1}]"
                 )
-            self.prior_gain = check_number(
-                f"{self.owner}.prior_gain", self.prior_gain, 0.0, 1.0, lo_open=True
+            gain = 1.0 if self.prior_gain is None else self.prior_gain
+            self.prior_gain = check_number(f"{self.owner}.prior_gain", gain, 0.0, 1.0, lo_open=True)
+        elif self.prior_gain is not None:
+            raise ValueError(
+                f"{self.owner}.prior_gain={self.prior_gain!r}: needs prior_index (the prior "
+                "command it tracks)"
             )
         self._prior = np.zeros((n, act.shape[0]))
         self._floor = self._held_floor(act)
@@ -159,8 +163,14 @@ class IncrementalAction(Feature):
                     f"{self.owner}.ahead_index={self.ahead_index!r}: needs held_keep and "
                     "reading_index"
                 )
+            margin = 0.2 if self.behind_margin_m is None else self.behind_margin_m
             self.behind_margin_m = check_number(
-                f"{self.owner}.behind_margin_m", self.behind_margin_m, 0.0, None, lo_open=True
+                f"{self.owner}.behind_margin_m", margin, 0.0, None, lo_open=True
+            )
+        elif self.behind_margin_m is not None:
+            raise ValueError(
+                f"{self.owner}.behind_margin_m={self.behind_margin_m!r}: needs ahead_index "
+                "(the reading it compares)"
             )
 
     def _held_keep(self, act: Box) -> np.ndarray | None:

@@ -754,6 +754,12 @@ def test_concat_vec_env_lane_j_replays_its_scenario_seeded_s_plus_j() -> None:
             r"VecIncrementalAction\.behind_margin_m=0\.0 is out of range",
         ),
         (
+            lambda e: VecIncrementalAction(
+                e, held_index=1, held_keep=[False, True], behind_margin_m=0.3
+            ),
+            r"VecIncrementalAction\.behind_margin_m=0\.3: needs ahead_index",
+        ),
+        (
             lambda e: VecIncrementalAction(e, held_index=1, held_keep=[0, 1]),
             r"VecIncrementalAction\.held_keep=\[0, 1\] is out of range: must be 2 booleans",
         ),

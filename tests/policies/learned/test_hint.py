@@ -120,6 +120,8 @@ def test_with_prior_gain_the_pull_closes_that_share_of_the_distance() -> None:
         ({"prior_index": 2}, "IncrementalAction.prior_index=2 is out of range: the 2 prior"),
         ({"prior_index": 0, "prior_gain": 0.0}, "IncrementalAction.prior_gain=0.0 is out of"),
         ({"prior_index": 0, "prior_gain": 1.5}, "IncrementalAction.prior_gain=1.5 is out of"),
+        # A gain with nothing to track would be dropped without a word.
+        ({"prior_gain": 0.3}, "IncrementalAction.prior_gain=0.3: needs prior_index"),
     ],
 )
 def test_bad_prior_options_name_the_field(kwargs: dict, message: str) -> None:
