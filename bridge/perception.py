@@ -19,9 +19,7 @@ needs it), and, where the source knows it, ground truth for the step log.
 from __future__ import annotations
 
 import contextlib
-import csv
 import json
-import math
 import socket
 import time
 from dataclasses import dataclass, field
@@ -29,7 +27,10 @@ from pathlib import Path
 from typing import Any, Protocol
 from urllib.parse import urlsplit
 
-from follow_env.tasks.person_follow.steplog import AHEAD_COLUMN
+import numpy as np
+
+from follow_env.sim.steplog import LogLayout, StepLogError, read_columns
+from follow_env.tasks.person_follow.steplog import AHEAD_COLUMN, REQUIRED_COLUMNS, TEXT_COLUMNS
 
 __all__ = [
     "Frame",
@@ -254,61 +255,43 @@ class Replay:
         pass
 
 
+# A replay needs what the controller reads (time, distance, offset), not the acceleration the
+# evaluation's metrics need.
+_REPLAY_LAYOUT = LogLayout(REQUIRED_COLUMNS, TEXT_COLUMNS)
+
+
 def _read_replay(path: Path) -> list[tuple[float, float, float, bool, float | None]]:
-    """The replay's rows ``(time_s, distance_m, offset_px, detected, ahead_m)``, checked as
-    ``follow-eval metrics`` checks a step log (every row as wide as the header: a log cut off
-    mid-row is refused, not replayed short), each problem named by file, line and column."""
+    """The replay's rows ``(time_s, distance_m, offset_px, detected, ahead_m)``, read and
+    checked by the reader ``follow-eval metrics`` uses (every row as wide as the header: a log
+    cut off mid-row is refused, not replayed short), each problem named by file, line and
+    column. A blank ``detected`` cell reads as a detection, as a log without the column does;
+    a log with the reading ahead needs it in every row."""
     try:
-        with path.open(newline="", encoding="utf-8") as f:
-            reader = csv.reader(f)
-            # line_num: the line a row ends on, right even when a quoted cell spans lines
-            table = [(reader.line_num, row) for row in reader]
-    except FileNotFoundError:
-        raise PerceptionError(f"{path}: no such step log") from None
-    except (OSError, UnicodeDecodeError, csv.Error) as exc:
-        raise PerceptionError(f"{path}: cannot read it as a CSV step log: {exc}") from None
-    header = [cell.strip() for cell in table[0][1]] if table else []
-    # blank lines (a hand-written file's trailing newline) are skipped, as the evaluation does
-    numbered = [(line, row) for line, row in table[1:] if any(cell.strip() for cell in row)]
-    if not numbered:
-        raise PerceptionError(f"{path}: no rows; a replay needs a step log with data")
-    missing = [c for c in ("time_s", "obs_distance_m", "obs_offset_px") if c not in header]
-    if missing:
-        raise PerceptionError(f"{path}: missing column(s) {', '.join(missing)}")
-    column = {name: k for k, name in enumerate(header)}
-    optional = [c for c in ("detected", AHEAD_COLUMN) if c in column]
-    out: list[tuple[float, float, float, bool, float | None]] = []
-    for line, row in numbered:
-        if len(row) != len(header):
-            raise PerceptionError(
-                f"{path}: line {line}: expected {len(header)} fields as in the header, "
-                f"found {len(row)}"
-            )
-        values: dict[str, float] = {}
-        for name in ("time_s", "obs_distance_m", "obs_offset_px", *optional):
-            cell = row[column[name]].strip()
-            if name == "detected" and not cell:
-                cell = "1"  # not recorded: a detection, as a log without the column reads
-            try:
-                values[name] = float(cell)
-            except ValueError:
-                raise PerceptionError(
-                    f"{path}: line {line}, column {name}: {cell!r} is not a number"
-                ) from None
-            if not math.isfinite(values[name]):
-                raise PerceptionError(
-                    f"{path}: line {line}, column {name}: {cell!r} is not a finite number"
-                )
-        t = values["time_s"]
-        if out and t <= out[-1][0]:
-            raise PerceptionError(f"{path}: line {line}: time_s={t} does not increase")
-        out.append(
-            (
-                t,
-                values["obs_distance_m"],
-                values["obs_offset_px"],
-                values.get("detected", 1.0) > 0.5,
-                values.get(AHEAD_COLUMN),
-            )
+        columns, lines = read_columns(path, _REPLAY_LAYOUT)
+    except StepLogError as exc:
+        raise PerceptionError(str(exc)) from None
+    n = len(columns["time_s"])
+    detected = np.asarray(columns.get("detected", np.ones(n)))
+    ahead = np.asarray(columns.get(AHEAD_COLUMN, np.full(n, np.nan)))
+    blank = np.flatnonzero(np.isnan(ahead))
+    if AHEAD_COLUMN in columns and blank.size:
+        # an agent that reads ahead needs the reading on every frame, as on the robot
+        line = lines[blank[0]]
+        raise PerceptionError(f"{path}: line {line}, column {AHEAD_COLUMN}: value is missing")
+    return [
+        (
+            float(t),
+            float(d),
+            float(o),
+            bool(np.isnan(seen) or seen > 0.5),
+            None if np.isnan(a) else float(a),
         )
-    return out
+        for t, d, o, seen, a in zip(
+            columns["time_s"],
+            columns["obs_distance_m"],
+            columns["obs_offset_px"],
+            detected,
+            ahead,
+            strict=True,
+        )
+    ]

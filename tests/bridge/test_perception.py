@@ -12,6 +12,7 @@ import pytest
 from bridge.perception import PerceptionError, Replay, SimCamera, perception_address
 from bridge.realsense import PERSON_CLASS, RealSensePerception
 from bridge.sources import open_source
+from eval.steplog import StepLogError, read_step_log
 
 
 class Clock:
@@ -49,14 +50,18 @@ def test_replay_gives_the_row_of_the_moment(tmp_path: Path) -> None:
 @pytest.mark.parametrize(
     ("text", "error"),
     [
-        ("", "no rows"),
+        ("", "empty file"),
+        ("time_s,obs_distance_m,obs_offset_px\n\n", "no data rows"),
         ("time_s,obs_distance_m\n0,1\n", "missing column(s) obs_offset_px"),
         (
             "time_s,obs_distance_m,obs_offset_px\n0,1,x\n",
             "line 2, column obs_offset_px: 'x' is not a number",
         ),
         ("time_s,obs_distance_m,obs_offset_px\n0,1,inf\n", "line 2, column obs_offset_px: 'inf'"),
-        ("time_s,obs_distance_m,obs_offset_px\n0,1,0\n0,1,0\n", "line 3: time_s=0.0 does not"),
+        (
+            "time_s,obs_distance_m,obs_offset_px\n0,1,0\n0,1,0\n",
+            "line 3, column time_s: 0 s is not after",
+        ),
         # cut off mid-row: refused as `follow-eval metrics` refuses it, not replayed short
         ("time_s,obs_distance_m,obs_offset_px\n0,1,0\n0.1,1", "line 3: expected 3 fields"),
         ("time_s,obs_distance_m,obs_offset_px\n0,1,0,7\n", "line 2: expected 3 fields"),
@@ -68,6 +73,30 @@ def test_a_bad_replay_names_the_file_and_the_line(tmp_path: Path, text: str, err
     with pytest.raises(PerceptionError, match=r"bad\.csv") as info:
         Replay(log)
     assert error in str(info.value)
+
+
+@pytest.mark.parametrize(
+    "rows",
+    [
+        "0,1,0,0\n0.1,1,x,0\n",
+        "0,1,0,0\n0,1,0,0\n",
+        "0,1,0,0\n0.1,,0,0\n",
+        "0,1,0,0\n0.1,1,nan,0\n",
+        "0,1,0,0\n0.1,1\n",
+    ],
+)
+def test_a_replay_refuses_what_the_evaluation_refuses_in_the_same_words(
+    tmp_path: Path, rows: str
+) -> None:
+    """One reader for both: ``follow-eval metrics`` and the replay source name the same
+    problem with the same message."""
+    log = tmp_path / "bad.csv"
+    log.write_text("time_s,obs_distance_m,obs_offset_px,accel_mps2\n" + rows)
+    with pytest.raises(StepLogError) as scored:
+        read_step_log(log)
+    with pytest.raises(PerceptionError) as replayed:
+        Replay(log)
+    assert str(replayed.value) == str(scored.value)
 
 
 def test_open_source_parses_the_perception_argument(tmp_path: Path) -> None:
@@ -219,7 +248,8 @@ def test_a_replay_carries_the_reading_ahead_when_its_log_has_it(tmp_path: Path) 
     assert without.ahead is None
     bad = tmp_path / "bad.csv"
     bad.write_text("time_s,obs_distance_m,obs_offset_px,obs_ahead_m\n0,1.0,0,\n")
-    with pytest.raises(PerceptionError, match=r"bad\.csv: line 2, column obs_ahead_m: '' is not"):
+    missing = r"bad\.csv: line 2, column obs_ahead_m: value is missing"
+    with pytest.raises(PerceptionError, match=missing):
         Replay(bad)
 
 

@@ -349,7 +349,7 @@ REPLAY = "replay:" + str(Path(__file__).with_name("data") / "replay_obs.csv")
         (["run", "--port", "loop://", "--policy", "nope"], "nope"),
         ([*RUN, "--perception", "sim"], "socket://HOST:PORT"),
         ([*RUN, "--perception", "webcam"], "out of range"),
-        ([*RUN, "--perception", "replay:/no/such.csv"], "no such step log"),
+        ([*RUN, "--perception", "replay:/no/such.csv"], "such.csv: no such file"),
         ([*RUN, "--perception", "realsense:/no/m.pt"], "is not a file"),
         ([*RUN, "--perception", "replay:" + __file__], "missing column"),
         ([*RUN, "--duration", "0"], "out of range"),
