@@ -146,6 +146,15 @@ def test_a_seed_the_sampler_does_not_take_is_an_argument_error(
     assert not out.exists()
 
 
+def test_the_command_line_and_the_sampler_take_the_same_seeds() -> None:
+    # The bound is written twice (parsing the command line does not import Optuna): one range.
+    from eval.tuning import cli
+
+    assert cli.MAX_SAMPLER_SEED == MAX_SAMPLER_SEED
+    assert cli._sampler_seed(str(MAX_SAMPLER_SEED)) == MAX_SAMPLER_SEED
+    SearchConfig(1, (TUNE_SEED0,), sampler_seed=cli.MAX_SAMPLER_SEED)
+
+
 def test_the_top_seed_still_opens_a_resumed_study(tmp_path: Path) -> None:
     # A resumed study seeds its sampler with seed + trials so far: that wraps, never overflows.
     config = SearchConfig(2, (TUNE_SEED0,), sampler_seed=MAX_SAMPLER_SEED)
