@@ -8,7 +8,9 @@ optional and the metrics that need it give NaN without it.
 
 The columns, their units and their order are the task's
 (:mod:`follow_env.tasks.person_follow.steplog`, :mod:`follow_env.tasks.line_trace.steplog`);
-this module reads, validates and writes them (:data:`LAYOUTS`: what each task's log needs).
+this module reads them into a DataFrame and writes them (:data:`LAYOUTS`: what each task's log
+needs). The checks are :mod:`follow_env.sim.steplog`'s, which the robot's replay source reads
+with too, so a log one refuses the other refuses in the same words.
 """
 
 from __future__ import annotations
@@ -54,7 +56,6 @@ __all__ = [
 # Enough digits that float32 observations and float64 ground truth survive the round trip to
 # 1e-9 relative, at a third of the size of full repr precision.
 FLOAT_FORMAT = "%.9g"
-
 
 LAYOUTS: dict[str, LogLayout] = {
     "person_follow": LogLayout(REQUIRED_COLUMNS, TEXT_COLUMNS, ACCEL_SOURCES),
