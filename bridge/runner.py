@@ -38,13 +38,13 @@ from bridge.link import LinkError, SerialLink
 from bridge.loader import PolicyLoader
 from bridge.perception import Frame, PerceptionError, PerceptionSource
 from bridge.protocol import Capability, CommandKind, Feedback, Hello, PeerRole, WheelCommand
-from bridge.runlog import check_log_path, save_rows, write_rows
+from bridge.runlog import check_log_path, save_rows
 from follow_env.platforms.diff_drive import DiffDriveConfig, diff_drive_ik
 from follow_env.platforms.wheels import pid_step
 from follow_env.sim.checks import out_of_range
 from follow_env.tasks.person_follow.steplog import AHEAD_COLUMN, log_columns
 
-__all__ = ["COMMAND_MODES", "RunResult", "Runner", "RunnerConfig", "write_rows"]
+__all__ = ["COMMAND_MODES", "RunResult", "Runner", "RunnerConfig"]
 
 COMMAND_MODES = ("auto", "duty", "speed")
 _COLUMNS = log_columns(ahead=True)  # the step log's, with the reading ahead's place (truth)
