@@ -15,9 +15,10 @@ from typing import Any
 from follow_env.sim.atomic import atomic_path, try_new_file
 from follow_env.tasks.person_follow.steplog import log_columns
 
-__all__ = ["check_log_path", "save_rows", "write_rows"]
+__all__ = ["LOG_COLUMNS", "check_log_path", "save_rows", "write_rows"]
 
-_COLUMNS = log_columns(ahead=True)  # the step log's, with the reading ahead's place
+LOG_COLUMNS = log_columns(ahead=True)
+"""The robot's step log: the simulator's columns and the reading ahead's place, in order."""
 
 
 def check_log_path(path: str | Path) -> Path:
@@ -50,7 +51,7 @@ def check_log_path(path: str | Path) -> Path:
 def write_rows(rows: list[dict[str, Any]], path: Path) -> Path:
     """Write step-log rows (the columns they use, in the layout's order) atomically."""
     used = {k for row in rows for k, v in row.items() if v is not None}
-    header = [c for c in _COLUMNS if c in used]
+    header = [c for c in LOG_COLUMNS if c in used]
     with atomic_path(path) as tmp, tmp.open("w", newline="", encoding="utf-8") as f:
         writer = csv.writer(f, lineterminator="\n")
         writer.writerow(header)

@@ -38,16 +38,15 @@ from bridge.link import LinkError, SerialLink
 from bridge.loader import PolicyLoader
 from bridge.perception import Frame, PerceptionError, PerceptionSource
 from bridge.protocol import Capability, CommandKind, Feedback, Hello, PeerRole, WheelCommand
-from bridge.runlog import check_log_path, save_rows
+from bridge.runlog import LOG_COLUMNS, check_log_path, save_rows
 from follow_env.platforms.diff_drive import DiffDriveConfig, diff_drive_ik
 from follow_env.platforms.wheels import pid_step
 from follow_env.sim.checks import out_of_range
-from follow_env.tasks.person_follow.steplog import AHEAD_COLUMN, log_columns
+from follow_env.tasks.person_follow.steplog import AHEAD_COLUMN
 
 __all__ = ["COMMAND_MODES", "RunResult", "Runner", "RunnerConfig"]
 
 COMMAND_MODES = ("auto", "duty", "speed")
-_COLUMNS = log_columns(ahead=True)  # the step log's, with the reading ahead's place (truth)
 _ZERO_REPEATS = 3  # stop commands sent at the end (one may be lost on a noisy line)
 _FIRST_FEEDBACK_S = 1.0  # longest wait for the MCU's first feedback, s
 
@@ -491,7 +490,7 @@ class Runner:
             "termination": frame.termination if v is None else "",
         }
         for key, value in frame.truth.items():
-            if key in _COLUMNS:
+            if key in LOG_COLUMNS:  # the truth the log has a column for
                 row[key] = value
         self._rows.append(row)
         if self.monitor is not None:
