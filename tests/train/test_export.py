@@ -189,6 +189,13 @@ def test_an_unwritable_parent_is_refused(tmp_path: Path) -> None:
         check_export(locked / "agent")
 
 
+@pytest.mark.skipif(not Path("/proc/self").is_dir(), reason="needs Linux's /proc")
+def test_a_folder_that_takes_no_file_is_refused() -> None:
+    # /proc refuses new files even to root, for whom a read-only folder is writable
+    with pytest.raises(ExportError, match="cannot write to /proc"):
+        check_export(Path("/proc/personfollow-test/agent"))
+
+
 def test_a_missing_agent_file_in_the_run_writes_nothing(tmp_path: Path) -> None:
     run = fake_run(tmp_path)
     (run / "MODEL_CARD.md").unlink()
