@@ -63,6 +63,7 @@ class Network:
         self._low, self._high = self.action_space.low, self.action_space.high
         self._shape = self.action_space.shape
         self._squashed = bool(getattr(policy, "squash_output", False))
+        self._gaussian = _gaussian_mean(policy)
 
     def memory(self, n: int) -> Memory | None:
         """A fresh memory for ``n`` lanes (a feed-forward network has none)."""
@@ -80,10 +81,14 @@ class Network:
         import torch
 
         out = np.empty((len(obs), *self._shape), dtype=np.float32)
-        with torch.no_grad():
+        rows = torch.from_numpy(np.ascontiguousarray(obs, dtype=np.float32))
+        with torch.inference_mode():
+            if self._gaussian is not None:  # PPO: the mean, without building a distribution
+                for i in range(len(obs)):
+                    out[i] = self._gaussian(rows[i : i + 1]).numpy()[0]
+                return np.clip(out, self._low, self._high)
             for i in range(len(obs)):
-                tensor = torch.as_tensor(obs[i : i + 1]).float()
-                out[i] = self._output(self.policy._predict(tensor, deterministic=True))
+                out[i] = self._output(self.policy._predict(rows[i : i + 1], deterministic=True))
         return out
 
 
@@ -116,6 +121,27 @@ class RecurrentNetwork(Network):
                 out[i] = self._output(action)
         memory.starts[:] = False
         return out
+
+
+def _gaussian_mean(policy: Any) -> Any:
+    """For an actor-critic policy with a Gaussian over its actions (PPO's), a function of one
+    observation row giving the Gaussian's mean: the library's deterministic action, computed by
+    the same modules in the same order as its ``get_distribution`` (so bitwise the same, tested)
+    without the distribution object it builds only to return that mean, which took a third of
+    each call. None for any other policy, which acts through the library's ``_predict``."""
+    from stable_baselines3.common.distributions import DiagGaussianDistribution
+    from stable_baselines3.common.policies import ActorCriticPolicy, BaseModel
+
+    if not isinstance(policy, ActorCriticPolicy) or type(policy.action_dist) is not (
+        DiagGaussianDistribution
+    ):
+        return None
+
+    def mean(row: Any) -> Any:
+        features = BaseModel.extract_features(policy, row, policy.pi_features_extractor)
+        return policy.action_net(policy.mlp_extractor.forward_actor(features))
+
+    return mean
 
 
 def load_network(path: Path, algo: str, policy: Any, error: type[Exception]) -> Network:
