@@ -163,6 +163,13 @@ def bench_guidance_laws(quick: bool) -> list[tuple[str, float, str]]:
     return bench_laws(quick)
 
 
+def bench_agent(quick: bool) -> list[tuple[str, float, str]]:
+    """The shipped agent's network against SB3's predict path (bench.agents)."""
+    from bench.agents import bench_agents
+
+    return bench_agents(quick)
+
+
 def bench_robot(quick: bool) -> list[tuple[str, float, str]]:
     """The runner's loop lateness (idle, busy) and the monitor's latency (bench.robot)."""
     from bench.robot import bench_monitor, bench_runner
@@ -190,6 +197,7 @@ BENCHMARKS: dict[str, Callable[[bool], list[tuple[str, float, str]]]] = {
     "line tracing (env-steps/s)": bench_line,
     "memory (bytes)": bench_memory,
     "guidance laws (lane-steps/s)": bench_guidance_laws,
+    "learned agent (lane-steps/s)": bench_agent,
     "serial link": bench_serial_link,
     "robot: runner and monitor (ms)": bench_robot,
     "scale-out: evaluation (episodes/s)": bench_scale_out,
