@@ -15,10 +15,13 @@ with too, so a log one refuses the other refuses in the same words.
 
 from __future__ import annotations
 
+import csv
+import io
 import re
 from collections.abc import Iterable
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 
 from follow_env.sim.atomic import atomic_path
@@ -74,8 +77,57 @@ def write_step_log(log: pd.DataFrame, path: str | Path) -> Path:
     """
     path = Path(path)
     with atomic_path(path) as tmp:
-        log.to_csv(tmp, index=False, float_format=FLOAT_FORMAT, lineterminator="\n")
+        tmp.write_text(_csv_text(log), encoding="utf-8", newline="")
     return path
+
+
+def _csv_text(log: pd.DataFrame) -> str:
+    """``log.to_csv(index=False, float_format=FLOAT_FORMAT, lineterminator="\n")``, the same
+    text (tested), 2-3 times faster: each row is formatted by one ``%`` on a template of the
+    columns' formats, where pandas formats every cell through layers of its own. The
+    columns that need more (a missing float, a text cell the CSV format must quote) are turned
+    into their cells first; a log of one column, whose empty cells the csv module quotes, goes
+    to pandas."""
+    if len(log.columns) < 2:
+        return log.to_csv(index=False, float_format=FLOAT_FORMAT, lineterminator="\n")
+    formats, columns = [], []
+    for name in log.columns:
+        values = log[name].to_numpy()
+        if values.dtype.kind == "f" and not np.isnan(values).any():
+            formats.append(FLOAT_FORMAT)
+            columns.append(values.tolist())
+        elif values.dtype.kind in "iu":
+            formats.append("%d")
+            columns.append(values.tolist())
+        else:
+            formats.append("%s")
+            columns.append(_cells(values))
+    header = io.StringIO()
+    csv.writer(header, lineterminator="\n").writerow([str(name) for name in log.columns])
+    template = ",".join(formats)
+    rows = [template % row for row in zip(*columns, strict=True)]
+    return header.getvalue() + "".join(row + "\n" for row in rows)
+
+
+def _cells(values: np.ndarray) -> list[str]:
+    """A column's cells as text the way ``to_csv`` writes them: floats by
+    :data:`FLOAT_FORMAT`, missing values blank, the rest as ``str``, quoted where the CSV format
+    needs it (a comma, a quote or a line break in the cell)."""
+    if values.dtype.kind == "f":
+        return ["" if v != v else FLOAT_FORMAT % v for v in values.tolist()]
+    missing = pd.isna(values).tolist()
+    cells = ["" if gone else str(v) for v, gone in zip(values.tolist(), missing, strict=True)]
+    return [_quoted(c) if _MAY_NEED_QUOTES.search(c) else c for c in cells]
+
+
+_MAY_NEED_QUOTES = re.compile(r'[,"\r\n]')
+
+
+def _quoted(cell: str) -> str:
+    """``cell`` as the csv module writes it, quoted or not, in a log of several columns."""
+    out = io.StringIO()
+    csv.writer(out, lineterminator="\n").writerow([cell])
+    return out.getvalue()[:-1]
 
 
 def read_step_log(path: str | Path, task: str = "person_follow") -> pd.DataFrame:

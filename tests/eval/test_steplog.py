@@ -6,7 +6,14 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from eval.steplog import COLUMNS, StepLogError, read_step_log, step_log_files, write_step_log
+from eval.steplog import (
+    COLUMNS,
+    FLOAT_FORMAT,
+    StepLogError,
+    read_step_log,
+    step_log_files,
+    write_step_log,
+)
 
 HEADER = "time_s,obs_distance_m,obs_offset_px,accel_mps2"
 
@@ -22,6 +29,52 @@ def test_minimal_robot_log_is_read_as_floats(tmp_path: Path) -> None:
     assert list(log.columns) == HEADER.split(",")
     np.testing.assert_allclose(log["obs_offset_px"], [5.0, -3.0])
     assert all(log.dtypes == np.float64)
+
+
+def pandas_csv(log: pd.DataFrame) -> str:
+    """What ``write_step_log`` wrote before it formatted rows itself: pandas' CSV."""
+    return log.to_csv(index=False, float_format=FLOAT_FORMAT, lineterminator="\n")
+
+
+@pytest.mark.parametrize(
+    ("policy", "scenario", "task"),
+    [
+        ("pn", "straight", "person_follow"),
+        ("ppo_law", "crowd", "person_follow"),
+        ("gsmpn", "random_world", "person_follow"),
+        ("pid", "gaps", "line_trace"),
+    ],
+)
+def test_a_written_log_is_pandas_csv_to_the_byte(
+    tmp_path: Path, policy: str, scenario: str, task: str
+) -> None:
+    from eval.rollout import run_episode
+
+    log = run_episode(policy, scenario, 3, task=task).log
+    assert log.isna().any().any()  # the final row's action: missing floats are written too
+    written = write_step_log(log, tmp_path / "ep.csv").read_bytes().decode("utf-8")
+    assert written == pandas_csv(log)
+
+
+def test_cells_the_csv_format_quotes_or_blanks_are_written_as_pandas_writes_them(
+    tmp_path: Path,
+) -> None:
+    odd = pd.DataFrame(
+        {
+            "time_s": [1.5, np.nan, np.inf, -0.0, 1e-20],
+            "step": np.array([1, 2, 3, 4, 5], dtype=np.uint8),
+            "termination": ["x,y", 'q"t', "", None, "new\nline"],
+            "detected": [True, False, True, True, False],
+            "obs_offset_px": np.array([1.1, 2.2, np.nan, 4, 5], dtype=np.float32),
+            "mixed": [0.1, "s", None, 3, np.nan],
+            "accel_mps2": [np.inf, -np.inf, 1.0, 2.0, 1e300],
+            "percent": ["%s", "%d", "a\rb", "", ""],
+        }
+    )
+    frames = [odd, odd[["termination"]], odd[["time_s"]], odd[["termination", "percent"]]]
+    for k, frame in enumerate([*frames, odd.iloc[:0]]):
+        written = write_step_log(frame, tmp_path / f"{k}.csv").read_bytes().decode("utf-8")
+        assert written == pandas_csv(frame), frame.columns.tolist()
 
 
 def test_simulated_log_round_trips(tmp_path: Path) -> None:
