@@ -170,6 +170,13 @@ def bench_agent(quick: bool) -> list[tuple[str, float, str]]:
     return bench_agents(quick)
 
 
+def bench_step_logs(quick: bool) -> list[tuple[str, float, str]]:
+    """write_step_log against pandas' to_csv (bench.steplogs)."""
+    from bench.steplogs import bench_steplogs
+
+    return bench_steplogs(quick)
+
+
 def bench_robot(quick: bool) -> list[tuple[str, float, str]]:
     """The runner's loop lateness (idle, busy) and the monitor's latency (bench.robot)."""
     from bench.robot import bench_monitor, bench_runner
@@ -198,6 +205,7 @@ BENCHMARKS: dict[str, Callable[[bool], list[tuple[str, float, str]]]] = {
     "memory (bytes)": bench_memory,
     "guidance laws (lane-steps/s)": bench_guidance_laws,
     "learned agent (lane-steps/s)": bench_agent,
+    "step logs (logs/s)": bench_step_logs,
     "serial link": bench_serial_link,
     "robot: runner and monitor (ms)": bench_robot,
     "scale-out: evaluation (episodes/s)": bench_scale_out,

@@ -1,0 +1,62 @@
+"""The step logs' row in ``make bench``: ``write_step_log`` against pandas' ``to_csv`` writing
+the same bytes, in this process.
+
+``follow-eval run`` writes one log per episode after the episodes, in the command's own process,
+so the writer's speed is part of every evaluation's tail. The logs are simulated episodes of
+every scenario, one law and the shipped agent.
+"""
+
+from __future__ import annotations
+
+import tempfile
+import time
+from pathlib import Path
+
+import pandas as pd
+
+from eval.rollout import run_episode
+from eval.steplog import FLOAT_FORMAT, write_step_log
+from follow_env.tasks import get_task
+
+__all__ = ["bench_steplogs"]
+
+POLICIES = ("pn", "ppo_law")
+
+
+def _logs(seeds: int) -> list[pd.DataFrame]:
+    scenarios = get_task("person_follow").variants()
+    return [
+        run_episode(policy, scenario, seed).log
+        for policy in POLICIES
+        for scenario in scenarios
+        for seed in range(seeds)
+    ]
+
+
+def bench_steplogs(quick: bool) -> list[tuple[str, float, str]]:
+    """Rows ``(what, logs/s, ratio to pandas)``; the two writers must give the same bytes."""
+    logs = _logs(1 if quick else 4)
+    rates = {}
+    with tempfile.TemporaryDirectory() as folder:
+        ours, theirs = Path(folder) / "ours.csv", Path(folder) / "pandas.csv"
+        for name in ("pandas", "ours"):
+            start = time.perf_counter()
+            for log in logs:
+                if name == "ours":
+                    write_step_log(log, ours)
+                else:
+                    log.to_csv(theirs, index=False, float_format=FLOAT_FORMAT, lineterminator="\n")
+            rates[name] = len(logs) / (time.perf_counter() - start)
+        for log in logs:  # outside the timing: every log, the same bytes from both
+            write_step_log(log, ours)
+            log.to_csv(theirs, index=False, float_format=FLOAT_FORMAT, lineterminator="\n")
+            if ours.read_bytes() != theirs.read_bytes():
+                raise AssertionError("write_step_log and to_csv wrote different bytes")
+    return [
+        (
+            f"write_step_log, {len(logs)} logs",
+            rates["ours"],
+            f"{rates['ours'] / rates['pandas']:.1f}x",
+        ),
+        ("  pandas to_csv, the same bytes", rates["pandas"], "1x (baseline)"),
+    ]
