@@ -248,3 +248,21 @@ def test_the_mecanum_agent_is_ppo_mecanum_and_follows_on_its_base_only() -> None
     assert episode.log["in_frame"].all()
     with pytest.raises(ValueError, match="mecanum"):
         rollout(["ppo_mecanum"], ["curve"], [0])  # the differential drive's [v, w]
+
+
+@pytest.mark.parametrize("name", ["ppo", "ppo_law", "ppo_mecanum"])
+def test_a_shipped_agent_acts_on_the_gaussians_mean_as_sb3s_predict(name: str) -> None:
+    """The network's fast path (the mean, no distribution object) is the one taken, and gives
+    SB3's ``predict`` to the bit, on rows alone and on a batch."""
+    import torch
+
+    network = make_policy(name)._agent.model
+    assert network._gaussian is not None
+    rng = np.random.default_rng(5)
+    obs = rng.uniform(-3, 3, (64, *network.observation_space.shape)).astype(np.float32)
+    with torch.no_grad():
+        theirs = np.concatenate(
+            [network.policy.predict(row[None], deterministic=True)[0] for row in obs]
+        )
+    np.testing.assert_array_equal(network.act(obs), theirs)
+    np.testing.assert_array_equal(np.concatenate([network.act(row[None]) for row in obs]), theirs)
