@@ -30,7 +30,7 @@ mirrors as ``[1, -1]``, the mecanum base's ``[v_mps, vy_mps, w_radps]`` as ``[1,
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
@@ -40,6 +40,11 @@ from stable_baselines3.common.torch_layers import MlpExtractor
 from torch import nn
 
 __all__ = ["ACTION_MIRROR_SIGNS", "MirrorMlpPolicy", "check_mirror_action"]
+
+Layer = Callable[[torch.Tensor], torch.Tensor]
+"""A layer as a function of its input."""
+Compiler = Callable[[nn.Module], Layer]
+"""Gives a module (or an extractor's actor) as a :data:`Layer`."""
 
 #: How each known action entry behaves in a left-right reflection (REP 103 axes: x forward, y
 #: left, z up): x-components keep their sign, y-components and yaw rates change it.
@@ -83,11 +88,14 @@ class _MirrorExtractor(nn.Module):
         return self.forward_actor(features), self.forward_critic(features)
 
     def forward_actor(self, features: torch.Tensor) -> torch.Tensor:
-        # an actor's row may be its own view alone (inference): the signs of its entries
-        mirrored = features * self.obs_sign[: features.shape[-1]]
-        return torch.cat(
-            [self.inner.forward_actor(features), self.inner.forward_actor(mirrored)], dim=-1
-        )
+        return _both_sides(self.inner.forward_actor, features, self.obs_sign)
+
+    def functional_actor(self, actor_of: Compiler, function_of: Compiler) -> Layer:
+        """``forward_actor`` with the inner extractor's actor as ``actor_of`` gives it: the
+        same operations in the same order, fewer module calls (:mod:`policies.learned.networks`
+        acts with it)."""
+        inner, sign = actor_of(self.inner), self.obs_sign
+        return lambda features: _both_sides(inner, features, sign)
 
     def forward_critic(self, features: torch.Tensor) -> torch.Tensor:
         mirrored = features * self.obs_sign
@@ -104,9 +112,26 @@ class _MirrorActionNet(nn.Module):
         self.register_buffer("action_sign", action_sign)
 
     def forward(self, latent: torch.Tensor) -> torch.Tensor:
-        direct = self.inner(latent[..., : self.half])
-        mirrored = self.inner(latent[..., self.half :])
-        return 0.5 * (direct + self.action_sign * mirrored)
+        return _average(self.inner, latent, self.half, self.action_sign)
+
+    def functional(self, function_of: Compiler) -> Layer:
+        """``forward`` with the inner layer as ``function_of`` gives it (as above)."""
+        inner, half, sign = function_of(self.inner), self.half, self.action_sign
+        return lambda latent: _average(inner, latent, half, sign)
+
+
+def _both_sides(actor: Layer, features: torch.Tensor, obs_sign: torch.Tensor) -> torch.Tensor:
+    """Both actor latents, of ``x`` and ``M x``, side by side."""
+    # an actor's row may be its own view alone (inference): the signs of its entries
+    mirrored = features * obs_sign[: features.shape[-1]]
+    return torch.cat([actor(features), actor(mirrored)], dim=-1)
+
+
+def _average(head: Layer, latent: torch.Tensor, half: int, sign: torch.Tensor) -> torch.Tensor:
+    """``(A z1 + b + S (A z2 + b)) / 2`` for the two halves of the actor latent."""
+    direct = head(latent[..., :half])
+    mirrored = head(latent[..., half:])
+    return 0.5 * (direct + sign * mirrored)
 
 
 class _SplitExtractor(nn.Module):
@@ -126,6 +151,11 @@ class _SplitExtractor(nn.Module):
 
     def forward_actor(self, features: torch.Tensor) -> torch.Tensor:
         return self.policy_net(features[..., : self.actor_entries])
+
+    def functional_actor(self, actor_of: Compiler, function_of: Compiler) -> Layer:
+        """``forward_actor`` with the actor's layers as ``function_of`` gives them (as above)."""
+        net, entries = function_of(self.policy_net), self.actor_entries
+        return lambda features: net(features[..., :entries])
 
     def forward_critic(self, features: torch.Tensor) -> torch.Tensor:
         return self.value_net(features)

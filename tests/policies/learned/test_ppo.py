@@ -266,3 +266,34 @@ def test_a_shipped_agent_acts_on_the_gaussians_mean_as_sb3s_predict(name: str) -
         )
     np.testing.assert_array_equal(network.act(obs), theirs)
     np.testing.assert_array_equal(np.concatenate([network.act(row[None]) for row in obs]), theirs)
+
+
+@pytest.mark.parametrize(
+    "kwargs",
+    [
+        {},  # SB3's own MlpPolicy
+        {"mirror_obs": [1, -1, 1], "mirror_action": [1, -1]},
+        {"mirror_obs": [1, -1], "mirror_action": [1, -1], "privileged_signs": [1, -1]},
+        {"mirror_obs": [1, -1, 1], "mirror_action": [1, -1], "activation_fn": "relu"},
+    ],
+    ids=["mlp", "mirror", "mirror-privileged", "mirror-relu"],
+)
+def test_each_policy_kind_takes_the_mean_path_to_sb3s_predict_bit_for_bit(kwargs: dict) -> None:
+    import torch
+    from gymnasium import spaces
+    from stable_baselines3.common.policies import ActorCriticPolicy
+
+    from policies.learned.mirror import MirrorMlpPolicy
+    from policies.learned.networks import Network
+
+    kwargs = dict(kwargs)
+    if kwargs.pop("activation_fn", None) == "relu":
+        kwargs["activation_fn"] = torch.nn.ReLU
+    kind = MirrorMlpPolicy if "mirror_obs" in kwargs else ActorCriticPolicy
+    torch.manual_seed(3)
+    policy = kind(spaces.Box(-5, 5, (6,)), spaces.Box(-1, 1, (2,)), lambda _: 3e-4, **kwargs)
+    network = Network(policy)
+    assert network._gaussian is not None
+    rows = np.random.default_rng(7).uniform(-5, 5, (40, 6)).astype(np.float32)
+    theirs = np.concatenate([policy.predict(row[None], deterministic=True)[0] for row in rows])
+    np.testing.assert_array_equal(network.act(rows), theirs)
