@@ -91,8 +91,8 @@ def _csv_text(log: pd.DataFrame) -> str:
     if len(log.columns) < 2:
         return log.to_csv(index=False, float_format=FLOAT_FORMAT, lineterminator="\n")
     formats, columns = [], []
-    for name in log.columns:
-        values = log[name].to_numpy()
+    for k in range(log.shape[1]):  # by position: a name may stand twice
+        values = log.iloc[:, k].to_numpy()
         if values.dtype.kind == "f" and not np.isnan(values).any():
             formats.append(FLOAT_FORMAT)
             columns.append(values.tolist())
