@@ -86,9 +86,9 @@ def _csv_text(log: pd.DataFrame) -> str:
     text (tested), 2-3 times faster: each row is formatted by one ``%`` on a template of the
     columns' formats, where pandas formats every cell through layers of its own. The
     columns that need more (a missing float, a text cell the CSV format must quote) are turned
-    into their cells first; a log of one column, whose empty cells the csv module quotes, goes
-    to pandas."""
-    if len(log.columns) < 2:
+    into their cells first; a log of one column, whose empty cells the csv module quotes, or
+    with a header of several rows goes to pandas."""
+    if len(log.columns) < 2 or isinstance(log.columns, pd.MultiIndex):
         return log.to_csv(index=False, float_format=FLOAT_FORMAT, lineterminator="\n")
     formats, columns = [], []
     for k in range(log.shape[1]):  # by position: a name may stand twice

@@ -72,7 +72,11 @@ def test_cells_the_csv_format_quotes_or_blanks_are_written_as_pandas_writes_them
         }
     )
     twice = pd.concat([odd[["time_s"]], odd[["time_s", "termination"]]], axis=1)
-    frames = [odd, odd[["termination"]], odd[["time_s"]], odd[["termination", "percent"]], twice]
+    rows_of_names = odd[["time_s", "step"]].set_axis(
+        pd.MultiIndex.from_tuples([("t", "s"), ("t", "step")]), axis=1
+    )
+    frames = [odd, odd[["termination"]], odd[["time_s"]], odd[["termination", "percent"]]]
+    frames += [twice, rows_of_names]
     for k, frame in enumerate([*frames, odd.iloc[:0]]):
         written = write_step_log(frame, tmp_path / f"{k}.csv").read_bytes().decode("utf-8")
         assert written == pandas_csv(frame), frame.columns.tolist()
