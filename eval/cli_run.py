@@ -42,10 +42,11 @@ def _check_grid(n_policies: int, n_scenarios: int, episodes: int, seed: int) -> 
         )
 
 
-def _check_run_args(args: argparse.Namespace) -> tuple[list[str], list[str]]:
-    """The run's policies and variants (scenarios, tracks), checked; sets ``args.config`` to
-    the task's configuration read from its text and ``args.eval_task`` to the task."""
-    from eval.rollout import policy_spec
+def _check_run_args(args: argparse.Namespace) -> tuple[list[str], list[str], int]:
+    """The run's policies and variants (scenarios, tracks), checked, and how many of the
+    policies are learned agents; sets ``args.config`` to the task's configuration read from its
+    text and ``args.eval_task`` to the task."""
+    from eval.rollout import is_learned, policy_spec
     from eval.tasks import eval_task
     from follow_env.platforms import get_platform
     from policies import available_policies, for_platform, make_policy
@@ -86,6 +87,7 @@ def _check_run_args(args: argparse.Namespace) -> tuple[list[str], list[str]]:
     _check_grid(len(policies) * runs, len(scenarios), args.episodes, args.seed)
     registered, for_task = set(available_policies()), set(available_policies(task.name))
     labels: list[tuple[str, str]] = []
+    learned = 0
     for name in policies:
         try:
             spec, platform = policy_spec(name)
@@ -101,6 +103,7 @@ def _check_run_args(args: argparse.Namespace) -> tuple[list[str], list[str]]:
         except (ValueError, TypeError) as e:
             raise UsageError(f"--policies: {e}") from None
         labels.append((name, _episode_label(law, platform)))
+        learned += is_learned(law)
     refuse_aliases(labels, "policies")
     from follow_env.tasks import get_task
 
@@ -118,7 +121,7 @@ def _check_run_args(args: argparse.Namespace) -> tuple[list[str], list[str]]:
             f"--plot-seed {args.plot_seed} is out of range: must be one of the run's seeds "
             f"{seeds.start}..{seeds.stop - 1}"
         )
-    return policies, scenarios
+    return policies, scenarios, learned
 
 
 def _check_trained_for(policy: Any, task_name: str) -> None:
@@ -149,7 +152,7 @@ def _versions() -> dict[str, str]:
     return out
 
 
-def _backend(args: argparse.Namespace, n_episodes: int) -> Backend:
+def _backend(args: argparse.Namespace, n_episodes: int, learned_episodes: int) -> Backend:
     """The run's execution backend from --backend, --workers and --address."""
     from eval.rollout import auto_workers
 
@@ -157,7 +160,7 @@ def _backend(args: argparse.Namespace, n_episodes: int) -> Backend:
         raise UsageError("--address is for --backend ray")
     workers = args.workers
     if args.backend == "local" and workers is None:
-        workers = auto_workers(n_episodes)
+        workers = auto_workers(n_episodes, learned_episodes)
     return backend_from_args(args.backend, workers=workers, address=args.address)
 
 
@@ -168,14 +171,15 @@ def cmd_run(args: argparse.Namespace) -> int:
     from eval.rollout import chunk_size, rollout
     from eval.stats import compare, episode_table, summarize
 
-    policies, scenarios = _check_run_args(args)
+    policies, scenarios, learned = _check_run_args(args)
     task = args.eval_task
     seeds = list(range(args.seed, args.seed + args.episodes))
     plot_seed = args.seed if args.plot_seed is None else args.plot_seed
     out: Path = args.out or Path("runs") / f"eval-{datetime.now():%Y%m%d-%H%M%S}"
     n_episodes = len(policies) * len(scenarios) * len(seeds) * (2 if args.ideal_baseline else 1)
+    learned_episodes = n_episodes // len(policies) * learned
     check_new_folder(out)
-    backend = _backend(args, n_episodes)
+    backend = _backend(args, n_episodes, learned_episodes)
     started = time.perf_counter()
     run = {"task": task.name, "policies": policies, task.variants_option: scenarios}
     run |= {"seeds": [seeds[0], seeds[-1]], "config": args.config}
