@@ -46,10 +46,11 @@ def _check_run_args(args: argparse.Namespace) -> tuple[list[str], list[str], int
     """The run's policies and variants (scenarios, tracks), checked, and how many of the
     policies are learned agents; sets ``args.config`` to the task's configuration read from its
     text and ``args.eval_task`` to the task."""
-    from eval.rollout import is_learned, policy_spec
+    from eval.rollout import policy_spec
     from eval.tasks import eval_task
     from follow_env.platforms import get_platform
     from policies import available_policies, for_platform, make_policy
+    from policies.learned.ppo import PPOPolicy
 
     try:
         task = eval_task(args.task)
@@ -103,7 +104,7 @@ def _check_run_args(args: argparse.Namespace) -> tuple[list[str], list[str], int
         except (ValueError, TypeError) as e:
             raise UsageError(f"--policies: {e}") from None
         labels.append((name, _episode_label(law, platform)))
-        learned += is_learned(law)
+        learned += isinstance(law, PPOPolicy)
     refuse_aliases(labels, "policies")
     from follow_env.tasks import get_task
 

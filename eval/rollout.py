@@ -42,6 +42,7 @@ from follow_env.sim.runner import BatchedSim
 from follow_env.tasks import get_task
 from policies import Policy, available_policies, for_platform, make_policy
 from policies.lanes import Lanes
+from policies.learned.ppo import PPOPolicy
 
 __all__ = [
     "BATCH_LANES",
@@ -49,7 +50,6 @@ __all__ = [
     "Episode",
     "auto_workers",
     "chunk_size",
-    "is_learned",
     "policy_spec",
     "rollout",
     "run_batch",
@@ -403,13 +403,6 @@ def auto_workers(episodes: int, learned: int = 0) -> int:
     return max(1, min(cores, int(cost // _EPISODES_PER_WORKER_START)))
 
 
-def is_learned(policy: Any) -> bool:
-    """Whether ``policy`` (a built policy) is a learned agent rather than a law."""
-    from policies.learned.ppo import PPOPolicy
-
-    return isinstance(policy, PPOPolicy)
-
-
 _Work = tuple[PolicySpec, str, tuple[int, ...], EnvConfigSpec, Reducer | None, str]
 
 
@@ -521,7 +514,7 @@ def _check_grid(
             law = spec
         if platform is not None:  # a law the platform cannot run raises
             for_platform(law, tuple(a.name for a in get_platform(platform).actions))
-        learned += is_learned(law)
+        learned += isinstance(law, PPOPolicy)
     known, what = t.model.variants(), t.model.variant_key
     for scenario in scenarios:
         if scenario not in known:

@@ -4,7 +4,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from eval.rollout import Episode, auto_workers, is_learned, rollout, run_episode
+from eval.rollout import Episode, auto_workers, rollout, run_episode
 from policies import PN, PN_THESIS
 
 PERSON = ["time_s", "person_x_m", "person_y_m", "person_theta_rad", "person_v_mps"]
@@ -144,14 +144,17 @@ def test_auto_workers_runs_small_grids_in_process() -> None:
 def test_auto_workers_counts_a_learned_agents_episodes_as_dearer(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    from policies import make_policy
-
     monkeypatch.setattr("os.cpu_count", lambda: 2)
     assert auto_workers(1200) == 1  # a law on 100 seeds of every scenario: here
     assert auto_workers(1200, learned=1200) == 2  # an agent on them: a pool pays off
     assert auto_workers(160, learned=40) == 1  # make eval
-    assert is_learned(make_policy("ppo_law"))
-    assert not is_learned(make_policy("pn"))
+
+
+def test_the_grid_check_counts_the_learned_agents() -> None:
+    from eval.rollout import _check_grid
+
+    assert _check_grid(["ppo_law", "pn", "ppo_mecanum@mecanum"], ["straight"], [0]) == 2
+    assert _check_grid(["pn", "gsmpn:tuned"], ["straight"], range(3)) == 0
 
 
 def test_a_policy_runs_on_another_platform_by_name_with_its_own_columns() -> None:
