@@ -69,9 +69,9 @@ DEFAULT_TASK = "person_follow"
 # loading the compiled kernels): a pool pays off only above this many episodes per worker.
 _EPISODES_PER_WORKER_START = 1000
 # A learned agent's episode costs this many of a law's in one process (its network acts lane by
-# lane, step by step): 1,200 episodes of every scenario took ppo_law 28.6 s and pn 12.5 s on
+# lane, step by step): 1,200 episodes of every scenario took ppo_law 25.7 s and pn 12.5 s on
 # the 2-core machine, and two processes ran ppo_law's 1.24x faster, pn's 0.93x.
-_LEARNED_EPISODE_COST = 2.3
+_LEARNED_EPISODE_COST = 2.1
 
 
 @dataclass(frozen=True)
