@@ -85,7 +85,7 @@ class Network:
         with torch.inference_mode():
             if self._gaussian is not None:  # PPO: the mean, without building a distribution
                 for i in range(len(obs)):
-                    out[i] = self._gaussian(rows[i : i + 1]).numpy()[0]
+                    out[i] = self._gaussian(rows[i : i + 1]).numpy().reshape(self._shape)
                 return np.clip(out, self._low, self._high)
             for i in range(len(obs)):
                 out[i] = self._output(self.policy._predict(rows[i : i + 1], deterministic=True))
