@@ -273,10 +273,9 @@ def _read_replay(path: Path) -> list[tuple[float, float, float, bool, float | No
     n = len(columns["time_s"])
     detected = np.asarray(columns.get("detected", np.ones(n)))
     ahead = np.asarray(columns.get(AHEAD_COLUMN, np.full(n, np.nan)))
-    blank = np.flatnonzero(np.isnan(ahead))
-    if AHEAD_COLUMN in columns and blank.size:
+    if AHEAD_COLUMN in columns and np.isnan(ahead).any():
         # an agent that reads ahead needs the reading on every frame, as on the robot
-        line = lines[blank[0]]
+        line = lines[int(np.flatnonzero(np.isnan(ahead))[0])]
         raise PerceptionError(f"{path}: line {line}, column {AHEAD_COLUMN}: value is missing")
     return [
         (
