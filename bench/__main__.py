@@ -177,6 +177,13 @@ def bench_step_logs(quick: bool) -> list[tuple[str, float, str]]:
     return bench_steplogs(quick)
 
 
+def bench_run_scoring(quick: bool) -> list[tuple[str, float, str]]:
+    """A run's logs and tables on a pool against this process (bench.scoring)."""
+    from bench.scoring import bench_scoring
+
+    return bench_scoring(quick)
+
+
 def bench_robot(quick: bool) -> list[tuple[str, float, str]]:
     """The runner's loop lateness (idle, busy) and the monitor's latency (bench.robot)."""
     from bench.robot import bench_monitor, bench_runner
@@ -206,6 +213,7 @@ BENCHMARKS: dict[str, Callable[[bool], list[tuple[str, float, str]]]] = {
     "guidance laws (lane-steps/s)": bench_guidance_laws,
     "learned agent (lane-steps/s)": bench_agent,
     "step logs (logs/s)": bench_step_logs,
+    "a run's scoring (episodes/s)": bench_run_scoring,
     "serial link": bench_serial_link,
     "robot: runner and monitor (ms)": bench_robot,
     "scale-out: evaluation (episodes/s)": bench_scale_out,

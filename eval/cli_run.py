@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import functools
 import json
 import platform
 import sys
@@ -14,7 +15,6 @@ from pathlib import Path
 from typing import Any
 
 from eval.cli_base import MAX_EPISODES, MAX_SEED, PROG, UsageError, _config, _names
-from eval.steplog import write_step_log
 from execution import Backend, backend_from_args
 from follow_env.sim.atomic import atomic_folder, atomic_write_text, check_new_folder
 
@@ -170,7 +170,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     from eval.journal import UnitJournal, journal_folder
     from eval.report import markdown_report, safe_name, write_tables, write_video
     from eval.rollout import chunk_size, rollout
-    from eval.stats import compare, episode_table, summarize
+    from eval.scoring import score
 
     policies, scenarios, learned = _check_run_args(args)
     task = args.eval_task
@@ -237,14 +237,18 @@ def cmd_run(args: argparse.Namespace) -> int:
         return 130
     with atomic_folder(out) as tmp:
         for ep in episodes:
-            folder = tmp / "logs" / safe_name(ep.policy) / safe_name(ep.scenario)
-            folder.mkdir(parents=True, exist_ok=True)
-            write_step_log(ep.log, folder / f"seed_{ep.seed}.csv")
-        table = episode_table(episodes, metrics=task.metrics, variant=task.variant)
-        # The bootstrap's default seed, as in `follow-eval metrics`: the same episodes give the
-        # same intervals whichever command scores them.
-        summary = summarize(table, metrics=list(task.metrics))
-        comparisons = compare(table, metrics=list(task.metrics))
+            _log_path(tmp, ep).parent.mkdir(parents=True, exist_ok=True)
+        # By scenario on the run's backend, with the bootstrap's default seed, as in
+        # `follow-eval metrics`: the same episodes give the same intervals whichever command
+        # scores them.
+        scored = score(
+            episodes,
+            metrics=task.metrics,
+            variant=task.variant,
+            log_path=functools.partial(_log_path, tmp),
+            backend=backend,
+        )
+        table, summary, comparisons = scored.table, scored.summary, scored.comparisons
         (tmp / "plots").mkdir()
         task.plots(summary, episodes, plot_seed, tmp / "plots", args.config)
         if args.video:
@@ -294,6 +298,14 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 #: What ``--ideal-baseline`` appends to a policy's label: the policy under perfect sensing.
 IDEAL_SUFFIX = "+ideal"
+
+
+def _log_path(folder: Path, episode: Any) -> Path:
+    """Where a run written to ``folder`` keeps ``episode``'s step log."""
+    from eval.report import safe_name
+
+    logs = folder / "logs" / safe_name(episode.policy) / safe_name(episode.scenario)
+    return logs / f"seed_{episode.seed}.csv"
 
 
 def _labelled(episode: Any, suffix: str) -> Any:

@@ -179,20 +179,27 @@ def summarize(
 
 
 def compare(
-    table: pd.DataFrame, *, metrics: Sequence[str] | None = None, seed: int = 0
+    table: pd.DataFrame,
+    *,
+    metrics: Sequence[str] | None = None,
+    seed: int = 0,
+    policies: Sequence[str] | None = None,
 ) -> pd.DataFrame:
     """Paired comparison of every pair of policies per scenario, on the seeds both ran.
 
     :param table: an :func:`episode_table`.
     :param metrics: the metrics to compare (default: all in :func:`metric_columns` order).
     :param seed: seeds the bootstrap resampling.
+    :param policies: the policies' order, which names each pair's A and B (default: the order
+        they first appear in ``table``); policies of ``table`` missing here are not compared.
     :returns: one row per (scenario, policy_a, policy_b, metric) with ``n`` (paired seeds with
         both values finite), ``mean_a``, ``mean_b``, ``mean_diff`` (A - B), ``diff_ci_low``,
         ``diff_ci_high`` and ``wilcoxon_p`` (NaN when every difference is 0 or n < 2).
     """
     metrics = [m for m in (metrics or metric_columns()) if m in table]
     variant = variant_column(table)
-    policies = list(dict.fromkeys(table["policy"]))
+    if policies is None:
+        policies = list(dict.fromkeys(table["policy"]))
     rows = []
     for scenario in dict.fromkeys(table[variant]):
         in_scenario = table[table[variant] == scenario]

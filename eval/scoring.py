@@ -1,0 +1,122 @@
+"""A run's scoring, scenario by scenario on the run's backend: step logs, episodes, statistics.
+
+After its episodes, ``follow-eval run`` writes a step log per episode and computes the episode
+table, the bootstrap intervals of every cell (:func:`eval.stats.summarize`) and the paired
+comparisons (:func:`eval.stats.compare`). On a grid of thousands of episodes that costs about as
+much as the episodes themselves, and every piece of it is independent between scenarios: a
+cell's interval is drawn from a stream keyed by its names, and a comparison pairs two policies on
+one scenario. So :func:`score` runs one work unit per scenario on the backend the episodes ran
+on, and puts the pieces together in the order the serial functions give: the tables are equal,
+frame for frame, to ``episode_table``, ``summarize`` and ``compare`` on all the episodes at once,
+and each log's text to what :func:`eval.steplog.write_step_log` writes (tested).
+
+The units return the logs' text, and this process writes the files, so that Ray workers on other
+machines need not share the run's folder.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import pandas as pd
+
+from eval.metrics import Metric
+from eval.rollout import Episode
+from eval.stats import compare, episode_table, summarize
+from eval.steplog import step_log_text
+from execution.backend import Backend, execute
+
+__all__ = ["Scored", "score"]
+
+
+@dataclass(frozen=True)
+class Scored:
+    """What :func:`score` gives: the three tables of ``follow-eval run``.
+
+    :param table: :func:`eval.stats.episode_table` of the episodes.
+    :param summary: :func:`eval.stats.summarize` of it.
+    :param comparisons: :func:`eval.stats.compare` of it.
+    """
+
+    table: pd.DataFrame
+    summary: pd.DataFrame
+    comparisons: pd.DataFrame
+
+
+@dataclass(frozen=True)
+class _Scenario:
+    """One work unit: a scenario's episodes, and what to score them by."""
+
+    episodes: list[Episode]
+    metrics: Mapping[str, Metric]
+    variant: str
+    policies: tuple[str, ...]  # the run's policies in table order: the comparisons' pairs
+    logs: bool
+
+
+def _score_scenario(unit: _Scenario) -> tuple[list[str], pd.DataFrame, pd.DataFrame, pd.DataFrame]:
+    """A scenario's log texts (``[]`` without logs), episode table, summary and comparisons."""
+    texts = [step_log_text(ep.log) for ep in unit.episodes] if unit.logs else []
+    table = episode_table(unit.episodes, metrics=unit.metrics, variant=unit.variant)
+    names = list(unit.metrics)
+    summary = summarize(table, metrics=names)
+    comparisons = compare(table, metrics=names, policies=unit.policies)
+    return texts, table, summary, comparisons
+
+
+def score(
+    episodes: Sequence[Episode],
+    *,
+    metrics: Mapping[str, Metric],
+    variant: str = "scenario",
+    log_path: Callable[[Episode], Path] | None = None,
+    backend: Backend | None = None,
+) -> Scored:
+    """Score ``episodes`` and write their step logs, one work unit per scenario on ``backend``.
+
+    :param metrics: the metrics by name, in table order (the task's).
+    :param variant: the name of the tables' ``scenario`` column (``"track"`` for LineTrace).
+    :param log_path: where each episode's step log goes (its folder must exist); None writes no
+        logs.
+    :param backend: where the units run (default: this process).
+    :returns: the tables, as :func:`eval.stats.episode_table`, :func:`eval.stats.summarize` and
+        :func:`eval.stats.compare` give them for all of ``episodes`` at once (the bootstrap's
+        default seed).
+    """
+    names = list(metrics)
+    if not episodes:
+        table = episode_table([], metrics=metrics, variant=variant)
+        return Scored(table, summarize(table, metrics=names), compare(table, metrics=names))
+    policies = tuple(dict.fromkeys(ep.policy for ep in episodes))
+    rows: dict[str, list[int]] = {}  # scenario -> its episodes' positions, in first-seen order
+    for k, ep in enumerate(episodes):
+        rows.setdefault(ep.scenario, []).append(k)
+    units = [
+        _Scenario([episodes[k] for k in ks], dict(metrics), variant, policies, log_path is not None)
+        for ks in rows.values()
+    ]
+    positions = list(rows.values())
+
+    def write_logs(i: int, part: tuple[list[str], ...]) -> None:
+        # As each unit finishes, into the run's temporary folder (renamed whole when the run is
+        # written); the texts are then let go, so the logs are not all held at once.
+        texts = part[0]
+        for k, text in zip(positions[i], texts, strict=True):
+            log_path(episodes[k]).write_text(text, encoding="utf-8", newline="")  # type: ignore[misc]
+        texts.clear()
+
+    parts = execute(
+        _score_scenario, units, backend, on_result=write_logs if log_path is not None else None
+    )
+    order = [k for ks in positions for k in ks]
+    table = pd.concat([part[1] for part in parts], ignore_index=True)
+    table.index = order  # each row at its episode's position
+    table = table.sort_index().reset_index(drop=True)
+    # The summary's cells in the order they first appear in the table, as summarize gives them.
+    summary = pd.concat([part[2] for part in parts], ignore_index=True)
+    cells = table[["policy", variant]].drop_duplicates()
+    summary = cells.merge(summary, on=["policy", variant], how="left", validate="one_to_one")
+    comparisons = pd.concat([part[3] for part in parts], ignore_index=True)
+    return Scored(table, summary, comparisons)

@@ -1,0 +1,95 @@
+"""eval/scoring.py: a run's logs and tables, scenario by scenario, equal to the serial ones."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from eval.line_metrics import LINE_METRICS
+from eval.metrics import METRICS
+from eval.rollout import Episode, rollout
+from eval.scoring import score
+from eval.stats import compare, episode_table, summarize
+from eval.steplog import write_step_log
+from execution.backend import Backend
+
+
+@pytest.fixture(scope="module")
+def episodes() -> list[Episode]:
+    # Policy-major, as rollout gives them: the per-scenario units see them in another order.
+    return rollout(["pn:thesis", "mpn:tuned", "gsmpn:thesis"], ["curve", "crossing"], [0, 1, 2])
+
+
+def _serial(episodes: list[Episode], metrics: dict, variant: str = "scenario") -> tuple:
+    table = episode_table(episodes, metrics=metrics, variant=variant)
+    names = list(metrics)
+    return table, summarize(table, metrics=names), compare(table, metrics=names)
+
+
+def _check_equal(got: object, want: tuple) -> None:
+    pd.testing.assert_frame_equal(got.table, want[0])
+    pd.testing.assert_frame_equal(got.summary, want[1])
+    pd.testing.assert_frame_equal(got.comparisons, want[2])
+
+
+def _paths(folder: Path, episodes: list[Episode]) -> dict[int, Path]:
+    return {id(ep): folder / f"{ep.policy}-{ep.scenario}-{ep.seed}.csv" for ep in episodes}
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_scored_by_scenario_equals_the_serial_tables_and_logs(
+    episodes: list[Episode], workers: int, tmp_path: Path
+) -> None:
+    want = _serial(episodes, METRICS)
+    paths = _paths(tmp_path / "scored", episodes)
+    (tmp_path / "scored").mkdir()
+    got = score(
+        episodes,
+        metrics=METRICS,
+        log_path=lambda ep: paths[id(ep)],
+        backend=Backend(workers=workers),
+    )
+    _check_equal(got, want)
+    assert len(got.comparisons) == 2 * 3 * len(METRICS)  # 2 scenarios x 3 pairs x metrics
+    (tmp_path / "serial").mkdir()
+    for ep in episodes:
+        written = write_step_log(ep.log, tmp_path / "serial" / paths[id(ep)].name)
+        assert paths[id(ep)].read_bytes() == written.read_bytes()
+    assert len(list((tmp_path / "scored").iterdir())) == len(episodes)
+
+
+def test_the_order_of_the_episodes_is_kept(episodes: list[Episode]) -> None:
+    # Scenario-major and reversed: the table's rows, the summary's cells and the comparisons'
+    # pairs follow the episodes as given, as the serial functions do.
+    shuffled = sorted(episodes, key=lambda ep: (ep.scenario, ep.seed), reverse=True)
+    got = score(shuffled, metrics=METRICS)
+    _check_equal(got, _serial(shuffled, METRICS))
+    assert list(got.summary["scenario"][:2]) == ["curve", "curve"]
+    assert got.comparisons["policy_a"].iloc[0] == shuffled[0].policy
+
+
+def test_a_scenario_a_policy_did_not_run_is_left_out_of_its_pairs(episodes: list[Episode]) -> None:
+    some = [ep for ep in episodes if not (ep.policy == "mpn:tuned" and ep.scenario == "curve")]
+    got = score(some, metrics=METRICS)
+    _check_equal(got, _serial(some, METRICS))
+    curve = got.comparisons[got.comparisons["scenario"] == "curve"]
+    assert set(zip(curve["policy_a"], curve["policy_b"], strict=True)) == {
+        ("pn:thesis", "gsmpn:thesis")
+    }
+
+
+def test_line_trace_episodes_are_scored_by_track(tmp_path: Path) -> None:
+    eps = rollout(["pid", "coordinate"], ["gaps", "curves"], [1, 2], task="line_trace")
+    got = score(eps, metrics=LINE_METRICS, variant="track")
+    _check_equal(got, _serial(eps, LINE_METRICS, "track"))
+    assert list(got.summary["track"]) == ["gaps", "curves", "gaps", "curves"]
+
+
+def test_no_episodes_give_empty_tables_with_the_columns(tmp_path: Path) -> None:
+    got = score([], metrics=METRICS, log_path=lambda ep: tmp_path / "never.csv")
+    _check_equal(got, _serial([], METRICS))
+    assert got.table.empty
+    assert "mean_offset_px" in got.table
+    assert list(tmp_path.iterdir()) == []
