@@ -46,10 +46,9 @@ def _check_run_args(args: argparse.Namespace) -> tuple[list[str], list[str], int
     """The run's policies and variants (scenarios, tracks), checked, and how many of the
     policies are learned agents; sets ``args.config`` to the task's configuration read from its
     text and ``args.eval_task`` to the task."""
-    from eval.rollout import policy_spec
+    from eval.grid import checked_policy
     from eval.tasks import eval_task
     from follow_env.platforms import get_platform
-    from policies import available_policies, for_platform, make_policy
     from policies.learned.ppo import PPOPolicy
 
     try:
@@ -86,25 +85,15 @@ def _check_run_args(args: argparse.Namespace) -> tuple[list[str], list[str], int
     # Size first: it needs only the counts, and loading a policy is already work.
     runs = 2 if getattr(args, "ideal_baseline", False) else 1  # the grid again, perfect sensing
     _check_grid(len(policies) * runs, len(scenarios), args.episodes, args.seed)
-    registered, for_task = set(available_policies()), set(available_policies(task.name))
     labels: list[tuple[str, str]] = []
     learned = 0
     for name in policies:
         try:
-            spec, platform = policy_spec(name)
-            if spec in registered and spec not in for_task:
-                raise ValueError(
-                    f"policy {spec!r} is not for the {task.name} task; its policies: "
-                    + ", ".join(sorted(for_task))
-                )
-            law = make_policy(spec, task.name)  # type: ignore[arg-type]
-            _check_trained_for(law, task.name)
-            if platform is not None:
-                for_platform(law, tuple(a.name for a in get_platform(platform).actions))
+            policy, platform = checked_policy(name, task.name)
         except (ValueError, TypeError) as e:
             raise UsageError(f"--policies: {e}") from None
-        labels.append((name, _episode_label(law, platform)))
-        learned += isinstance(law, PPOPolicy)
+        labels.append((name, _episode_label(policy, platform)))
+        learned += isinstance(policy, PPOPolicy)
     refuse_aliases(labels, "policies")
     from follow_env.tasks import get_task
 
@@ -123,22 +112,6 @@ def _check_run_args(args: argparse.Namespace) -> tuple[list[str], list[str], int
             f"{seeds.start}..{seeds.stop - 1}"
         )
     return policies, scenarios, learned
-
-
-def _check_trained_for(policy: Any, task_name: str) -> None:
-    """An agent trained on another task's env is refused with the --task that runs it (its
-    platform and observation would otherwise be blamed)."""
-    from follow_env.tasks import task_for_env
-
-    env_id = getattr(policy, "env_id", None)
-    if env_id is None:
-        return
-    trained_for = task_for_env(env_id).name
-    if trained_for != task_name:
-        raise ValueError(
-            f"{policy.name!r} was trained on {env_id}, not on the {task_name} task: run it with "
-            f"--task {trained_for}"
-        )
 
 
 def _versions() -> dict[str, str]:
@@ -332,7 +305,7 @@ def _where(backend: Backend) -> str:
 
 def _built(policies: list[str], task: str) -> list[tuple[str, Any]]:
     """``(episode label, policy)`` of every policy spec (``pn@mecanum`` included)."""
-    from eval.rollout import policy_spec
+    from eval.grid import policy_spec
     from policies import make_policy
 
     out = []
@@ -353,7 +326,7 @@ def policy_label(name: str, option: str) -> str:
 
     :raises UsageError: naming ``--option``, if no policy has that name.
     """
-    from eval.rollout import policy_spec
+    from eval.grid import policy_spec
     from policies import make_policy
 
     try:

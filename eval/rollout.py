@@ -35,12 +35,12 @@ import gymnasium as gym
 import numpy as np
 import pandas as pd
 
+from eval.grid import PolicySpec, checked_policy, policy_spec
 from execution import Backend, execute
-from follow_env.platforms import get_platform
 from follow_env.platforms.base import Platform
 from follow_env.sim.runner import BatchedSim
 from follow_env.tasks import get_task
-from policies import Policy, available_policies, for_platform, make_policy
+from policies import Policy, for_platform, make_policy
 from policies.lanes import Lanes
 from policies.learned.ppo import PPOPolicy
 
@@ -57,7 +57,6 @@ __all__ = [
     "work_units",
 ]
 
-PolicySpec = str | Policy
 EnvConfigSpec = str | Mapping[str, Any] | Any
 Reducer = Callable[["Episode"], Any]
 
@@ -156,20 +155,6 @@ def _layout(platform: Platform, task: _Task, n_obs: int | None = None) -> _Layou
     keys = task.model.info_keys(platform)
     info = tuple(c for c in columns if c in keys and c != "termination")
     return _Layout(columns, info, actions, obs, tuple(log.FLAG_COLUMNS), log.META_COLUMNS[1])
-
-
-def policy_spec(spec: PolicySpec) -> tuple[PolicySpec, str | None]:
-    """``(policy, platform)`` of a spec: ``"pn@mecanum"`` runs ``pn`` on the ``mecanum``
-    platform (its episodes labelled ``pn:tuned@mecanum``); a name without ``@``, or a policy
-    object, runs on the configuration's platform.
-
-    :raises ValueError: for an unknown platform (naming the known ones).
-    """
-    if isinstance(spec, str) and "@" in spec:
-        name, _, platform = spec.rpartition("@")
-        get_platform(platform)
-        return name, platform
-    return spec, None
 
 
 _ENV_CACHE: dict[tuple[str, str, str, str], gym.Env] = {}
@@ -497,24 +482,10 @@ def _check_grid(
             f"scenarios x {len(seeds)} seeds): at most {MAX_EPISODES:,} are run at once"
         )
     t = _task(task)  # an unknown task raises
-    registered, for_task = set(available_policies()), set(available_policies(task))
     learned = 0
     for given in policies:
-        spec, platform = policy_spec(given)  # an unknown platform raises
-        if isinstance(spec, str):
-            if spec in registered and spec not in for_task:
-                raise ValueError(
-                    f"policy {spec!r} is not for the {task} task; its policies: "
-                    + ", ".join(sorted(for_task))
-                )
-            law = make_policy(spec, task)  # raises ValueError listing the known names
-        elif not isinstance(spec, Policy):
-            raise ValueError(f"policy {spec!r} is neither a policy name nor a Policy")
-        else:
-            law = spec
-        if platform is not None:  # a law the platform cannot run raises
-            for_platform(law, tuple(a.name for a in get_platform(platform).actions))
-        learned += isinstance(law, PPOPolicy)
+        policy, _ = checked_policy(given, task)
+        learned += isinstance(policy, PPOPolicy)
     known, what = t.model.variants(), t.model.variant_key
     for scenario in scenarios:
         if scenario not in known:

@@ -209,10 +209,10 @@ def test_an_agent_of_another_task_is_sent_to_its_task(
         assert main(["run", "--policies", policies, "--out", str(tmp_path / "run")]) == 2
         err = one_line_error(capsys)
         assert "was trained on LineTrace-v0, not on the person_follow task" in err
-        assert err.rstrip().endswith("run it with --task line_trace")
+        assert err.rstrip().endswith("run it on the line_trace task (--task line_trace)")
     follow = ["--policies", str(agents / "ppo"), "--out", str(tmp_path / "run")]
     assert main(["run", "--task", "line_trace", *follow]) == 2
-    assert "run it with --task person_follow" in one_line_error(capsys)
+    assert "run it on the person_follow task (--task person_follow)" in one_line_error(capsys)
 
 
 @pytest.mark.skipif(not Path("/proc/self").is_dir(), reason="needs Linux's /proc")
