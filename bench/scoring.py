@@ -17,7 +17,7 @@ import pandas as pd
 from eval.metrics import METRICS
 from eval.rollout import Episode, rollout
 from eval.scoring import Scored, score
-from execution.backend import Backend
+from execution.backend import Backend, shutdown_pools
 from follow_env.tasks import get_task
 
 __all__ = ["bench_scoring"]
@@ -44,7 +44,8 @@ def bench_scoring(quick: bool) -> list[tuple[str, float, str]]:
     scenarios = get_task("person_follow").variants()
     episodes = rollout(list(POLICIES), scenarios, list(range(5 if quick else 50)))
     alone, serial = _scored(episodes, 1)
-    pooled, parallel = _scored(episodes, 2)  # the pool's start is part of the cost
+    shutdown_pools()  # a new pool: its start is part of the cost
+    pooled, parallel = _scored(episodes, 2)
     for name in ("table", "summary", "comparisons"):
         pd.testing.assert_frame_equal(getattr(parallel, name), getattr(serial, name))
     n = len(episodes)

@@ -13,7 +13,9 @@ config, seed) for a training run. :func:`execute` runs ``fn(unit)`` for every un
 Every task pins its numba, torch and OpenMP threads to the CPUs it was given
 (:func:`pin_threads`), so two tasks on one machine never oversubscribe it. A worker that dies
 mid-task is retried (Ray's task retries; a rebuilt pool locally); units are pure functions of
-their arguments, so a retried unit returns exactly what the first attempt would have.
+their arguments, so a retried unit returns exactly what the first attempt would have. A local
+pool is kept for the next call with the same workers (a spawned process takes about 2 s to
+start) until the process exits or :func:`shutdown_pools`; one that failed is not kept.
 
 This package imports nothing else of the project: every layer above may use it.
 """
@@ -25,6 +27,7 @@ from execution.backend import (
     backend_from_args,
     execute,
     pin_threads,
+    shutdown_pools,
 )
 
 __all__ = [
@@ -34,4 +37,5 @@ __all__ = [
     "backend_from_args",
     "execute",
     "pin_threads",
+    "shutdown_pools",
 ]

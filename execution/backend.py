@@ -6,6 +6,7 @@ run. See the package docstring for what a unit is.
 
 from __future__ import annotations
 
+import atexit
 import logging
 import os
 import socket
@@ -25,6 +26,7 @@ __all__ = [
     "backend_from_args",
     "execute",
     "pin_threads",
+    "shutdown_pools",
 ]
 
 U = TypeVar("U")
@@ -198,7 +200,7 @@ def _run_local(
     deaths = 0
     while pending:
         try:
-            yield from _pool_pass(fn, pending, workers, backend.cpus_per_task)
+            yield from _pool_pass(fn, pending, backend.workers or 1, backend.cpus_per_task)
         except BrokenProcessPool as e:
             # A worker died (killed, out of memory): the pool is gone with every unit it held.
             # Units are pure, so running the unfinished ones again in a new pool is a retry.
@@ -210,18 +212,44 @@ def _run_local(
                 ) from e
 
 
+#: The pools kept between calls of :func:`execute`, by (workers, CPUs per worker).
+_POOLS: dict[tuple[int, int], ProcessPoolExecutor] = {}
+
+
+def _pool(workers: int, cpus: int) -> ProcessPoolExecutor:
+    """The kept pool of ``workers`` processes pinned to ``cpus`` CPUs each, started if need be.
+
+    Kept, because a caller may run many small batches (a tuning search asks for a few
+    episodes at a time; a run scores its episodes after running them), and a spawned pool
+    costs about 2 s to start. Its processes start as units arrive, not all at once.
+    """
+    key = (workers, cpus)
+    if key not in _POOLS:
+        # spawn, not fork: a forked child of a process with live threads (tqdm's monitor, BLAS
+        # pools) can deadlock; spawned workers load the cached kernels in about 2 s.
+        _POOLS[key] = ProcessPoolExecutor(
+            workers, mp_context=get_context("spawn"), initializer=pin_threads, initargs=(cpus,)
+        )
+    return _POOLS[key]
+
+
+def shutdown_pools() -> None:
+    """Stop the worker processes kept between calls of :func:`execute` (at exit, or to free
+    their memory; the next call with a pool starts a new one)."""
+    while _POOLS:
+        _, pool = _POOLS.popitem()
+        pool.shutdown(wait=True, cancel_futures=True)
+
+
+atexit.register(shutdown_pools)
+
+
 def _pool_pass(
     fn: Callable[[Any], Any], pending: dict[int, Any], workers: int, cpus: int
 ) -> Iterator[tuple[int, Any]]:
-    """One pool over the pending units; removes each from ``pending`` as it is yielded."""
-    # spawn, not fork: a forked child of a process with live threads (tqdm's monitor, BLAS
-    # pools) can deadlock; spawned workers load the cached kernels in about 2 s.
-    pool = ProcessPoolExecutor(
-        min(workers, len(pending)),
-        mp_context=get_context("spawn"),
-        initializer=pin_threads,
-        initargs=(cpus,),
-    )
+    """One pass over the pending units on the kept pool; removes each from ``pending`` as it
+    is yielded."""
+    pool = _pool(workers, cpus)
     queue = iter(list(pending.items()))
     in_flight: dict[Future[Any], int] = {}
 
@@ -230,6 +258,7 @@ def _pool_pass(
             in_flight[pool.submit(fn, unit)] = i
             return
 
+    finished_all = False
     try:
         for _ in range(_IN_FLIGHT_PER_SLOT * workers):
             submit()
@@ -241,10 +270,14 @@ def _pool_pass(
                 del pending[i]
                 submit()
                 yield i, result
-        pool.shutdown(wait=True)
+        finished_all = True
     finally:
-        # An error, Ctrl-C or a caller that stopped reading: drop what has not started.
-        pool.shutdown(wait=False, cancel_futures=True)
+        if not finished_all:
+            # An error, a dead worker, Ctrl-C or a caller that stopped reading: this pool may
+            # be broken or still busy with units nobody waits for, so it is not kept.
+            if _POOLS.get((workers, cpus)) is pool:
+                del _POOLS[(workers, cpus)]
+            pool.shutdown(wait=False, cancel_futures=True)
 
 
 # -- ray --------------------------------------------------------------------------------------

@@ -12,7 +12,14 @@ from pathlib import Path
 
 import pytest
 
-from execution import Backend, BackendUnavailableError, backend_from_args, execute, pin_threads
+from execution import (
+    Backend,
+    BackendUnavailableError,
+    backend_from_args,
+    execute,
+    pin_threads,
+    shutdown_pools,
+)
 from execution.backend import WorkerLostError, _check_reachable
 
 UNITS = list(range(12))
@@ -71,7 +78,29 @@ def test_a_units_own_error_reaches_the_caller_unchanged() -> None:
         execute(operator.neg, [1, "x"], Backend("local", workers=2))
 
 
+def test_a_pool_is_kept_for_the_next_call_with_the_same_workers() -> None:
+    shutdown_pools()
+    two = Backend("local", workers=2)
+    first = set(execute(_slow_pid, range(16), two))
+    assert len(first) == 2  # both workers took units
+    assert set(execute(_slow_pid, range(8), two)) == first  # the same processes: no new start
+    pinned = set(execute(_slow_pid, range(8), Backend("local", workers=2, cpus_per_task=2)))
+    assert pinned.isdisjoint(first)  # other CPUs per worker: a pool of its own
+    assert {p.pid for p in multiprocessing.active_children()} >= first | pinned
+    shutdown_pools()
+    assert not {p.pid for p in multiprocessing.active_children()} & (first | pinned)
+
+
+def test_a_pool_that_failed_is_not_kept() -> None:
+    two = Backend("local", workers=2)
+    before = set(execute(_slow_pid, range(8), two))
+    with pytest.raises(TypeError, match="bad operand"):
+        execute(operator.neg, [1, "x", 3, 4], two)
+    assert set(execute(_slow_pid, range(8), two)).isdisjoint(before)
+
+
 def test_a_pool_worker_killed_mid_run_is_replaced_and_the_results_are_unchanged() -> None:
+    shutdown_pools()  # so that the only workers alive are this run's
     killed: list[int] = []
 
     def kill_a_worker(i: int, result: int) -> None:
@@ -162,6 +191,11 @@ def _slow_neg(x: int) -> int:
 
     time.sleep(0.05)
     return -x
+
+
+def _slow_pid(x: int) -> int:
+    _slow_neg(x)
+    return os.getpid()
 
 
 def _neg_and_threads(x: int) -> tuple[int, int, int, str | None]:
