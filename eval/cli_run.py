@@ -134,7 +134,7 @@ def _backend(args: argparse.Namespace, n_episodes: int, learned_episodes: int) -
         raise UsageError("--address is for --backend ray")
     workers = args.workers
     if args.backend == "local" and workers is None:
-        workers = auto_workers(n_episodes, learned_episodes)
+        workers = auto_workers(n_episodes, learned_episodes, scored=True)
     return backend_from_args(args.backend, workers=workers, address=args.address)
 
 

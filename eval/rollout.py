@@ -67,6 +67,10 @@ DEFAULT_TASK = "person_follow"
 # `curve` costs about 5 ms (stepping, policy, log), a pool worker about 2 s to start (imports,
 # loading the compiled kernels): a pool pays off only above this many episodes per worker.
 _EPISODES_PER_WORKER_START = 1000
+# The same with the episodes' logs and tables made on the pool too (follow-eval run): pn on
+# every scenario took 5.6 s both ways on 300 episodes, 6.3 s against 6.0 on 420 and 7.4-7.6 s
+# against 6.6 on 600, and make eval's 160 episodes 3.0 s against 4.5.
+_SCORED_EPISODES_PER_WORKER_START = 200
 # A learned agent's episode costs this many of a law's in one process (its network acts lane by
 # lane, step by step): 1,200 episodes of every scenario took ppo_law 25.7 s and pn 12.5 s on
 # the 2-core machine, and two processes ran ppo_law's 1.24x faster, pn's 0.93x.
@@ -375,17 +379,20 @@ def _step_log(
     return pd.DataFrame(data, columns=list(layout.columns))
 
 
-def auto_workers(episodes: int, learned: int = 0) -> int:
+def auto_workers(episodes: int, learned: int = 0, *, scored: bool = False) -> int:
     """How many processes pay off for ``episodes`` episodes on this machine (1 = no pool):
     small grids such as the thesis comparison (120 episodes) run fastest in this process
     (``_EPISODES_PER_WORKER_START``).
 
     :param learned: how many of them a learned agent plays; each counts as
         ``_LEARNED_EPISODE_COST`` of a law's (its network is most of the work a pool shares).
+    :param scored: the same pool then also writes their logs and computes the tables
+        (``follow-eval run``, :mod:`eval.scoring`), which it pays off sooner for.
     """
     cores = os.cpu_count() or 1
     cost = episodes + (_LEARNED_EPISODE_COST - 1.0) * learned
-    return max(1, min(cores, int(cost // _EPISODES_PER_WORKER_START)))
+    per_worker = _SCORED_EPISODES_PER_WORKER_START if scored else _EPISODES_PER_WORKER_START
+    return max(1, min(cores, int(cost // per_worker)))
 
 
 _Work = tuple[PolicySpec, str, tuple[int, ...], EnvConfigSpec, Reducer | None, str]

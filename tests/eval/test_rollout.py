@@ -150,6 +150,16 @@ def test_auto_workers_counts_a_learned_agents_episodes_as_dearer(
     assert auto_workers(160, learned=40) == 1  # make eval
 
 
+def test_auto_workers_starts_a_pool_sooner_when_it_also_scores_the_episodes(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    monkeypatch.setattr("os.cpu_count", lambda: 2)
+    assert auto_workers(600) == 1  # rollout alone: the pool's start is not paid back
+    assert auto_workers(600, scored=True) == 2  # follow-eval run's logs and tables share it
+    assert auto_workers(300, scored=True) == 1  # where the two took the same time
+    assert auto_workers(160, learned=40, scored=True) == 1  # make eval
+
+
 def test_the_grid_check_counts_the_learned_agents() -> None:
     from eval.rollout import _check_grid
 
