@@ -6,7 +6,7 @@
         --out runs/eval-<timestamp> [--workers auto|N] [--config thesis] [--video] \\
         [--platforms diff_drive,mecanum] [--backend local|ray [--address HOST:PORT]]
     follow-eval run --task line_trace --policies coordinate,pid --tracks course,random ...
-    follow-eval metrics LOG.csv [LOG.csv | FOLDER ...] [--out DIR]
+    follow-eval metrics LOG.csv [LOG.csv | FOLDER ...] [--out DIR] [--workers auto|N]
     follow-eval aggregate RUN... [--laws pn,mpn,gsmpn] [--scenarios ...] [--out DIR]
     follow-eval dominance RUN --learner ppo [--laws ...]
 
@@ -61,12 +61,36 @@ from eval.cli_base import (  # noqa: F401  (MAX_EPISODES, MAX_SEED: the limits, 
     _positive,
     _workers,
 )
-from eval.cli_run import _check_grid, cmd_run, policy_label, refuse_aliases
-from eval.steplog import StepLogError, read_step_log, step_log_files
+from eval.cli_run import _check_grid, cmd_run, policy_label, refuse_aliases, run_backend
+from eval.steplog import StepLogError, step_log_files
 from execution import BACKENDS, BackendUnavailableError
 from follow_env.sim.atomic import atomic_folder, check_new_folder
 
 __all__ = ["MAX_EPISODES", "MAX_SEED", "main"]
+
+
+def _backend_arguments(parser: argparse.ArgumentParser, where: str) -> None:
+    """--workers, --backend and --address: where ``where`` (:mod:`execution`)."""
+    parser.add_argument(
+        "--workers",
+        type=_workers,
+        default=None,
+        help="local: processes, 'auto' (default: a pool only when it pays off) or a number; "
+        "ray: work units in flight (default: the cluster's CPUs)",
+    )
+    parser.add_argument(
+        "--backend",
+        choices=BACKENDS,
+        default="local",
+        help=f"where {where}: local (this machine) or ray (a Ray cluster: --address, "
+        "RAY_ADDRESS, or a local Ray); the files written are the same (default: %(default)s)",
+    )
+    parser.add_argument(
+        "--address",
+        default=None,
+        help="with --backend ray: the cluster's address, e.g. 127.0.0.1:6379 (default: "
+        "RAY_ADDRESS, else a local Ray)",
+    )
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -132,27 +156,7 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument(
         "--out", type=Path, default=None, help="output folder (default: runs/eval-<timestamp>)"
     )
-    run.add_argument(
-        "--workers",
-        type=_workers,
-        default=None,
-        help="local: processes, 'auto' (default: a pool only when it pays off) or a number; "
-        "ray: work units in flight (default: the cluster's CPUs)",
-    )
-    run.add_argument(
-        "--backend",
-        choices=BACKENDS,
-        default="local",
-        help="where the episodes run: local (this machine) or ray (a Ray cluster: "
-        "--address, RAY_ADDRESS, or a local Ray); the files written are the same "
-        "(default: %(default)s)",
-    )
-    run.add_argument(
-        "--address",
-        default=None,
-        help="with --backend ray: the cluster's address, e.g. 127.0.0.1:6379 (default: "
-        "RAY_ADDRESS, else a local Ray)",
-    )
+    _backend_arguments(run, "the episodes and their scoring run")
     run.add_argument(
         "--plot-seed",
         type=_non_negative,
@@ -194,6 +198,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="the task the logs are of: person_follow or line_trace (default: line_trace for "
         "logs with a track column, else person_follow)",
     )
+    _backend_arguments(metrics, "the logs are read and scored")
     thesis = sub.add_parser(
         "thesis",
         help="the reference robot's Table 4.1 against the as-built and corrected chains",
@@ -385,8 +390,7 @@ def cmd_metrics(args: argparse.Namespace) -> int:
     :raises UsageError: when two logs are the same (policy, scenario, seed) episode.
     """
     from eval.report import markdown_report, write_tables
-    from eval.rollout import Episode
-    from eval.stats import compare, episode_table, summarize
+    from eval.scoring import read_episodes, score
     from eval.tasks import eval_task
 
     if args.out is not None:
@@ -394,39 +398,37 @@ def cmd_metrics(args: argparse.Namespace) -> int:
     files = step_log_files(args.logs)
     if not files:
         raise UsageError(f"no *.csv step logs under {', '.join(map(str, args.logs))}")
-    episodes = []
+    # the first log's header decides the task, unless --task says
+    task = eval_task(args.task or _task_of_log(files[0]))
+    backend = run_backend(args, len(files), 0)
+    episodes = read_episodes(
+        files,
+        task=task.name,
+        variant=task.variant,
+        policy=args.policy,
+        label=args.scenario,
+        backend=backend,
+    )
     seen: dict[tuple[str, str, int], Path] = {}
-    task = None
-    for i, path in enumerate(files):
-        if task is None:  # the first log's header decides, unless --task says
-            task = eval_task(args.task or _task_of_log(path))
-        log = read_step_log(path, task.name)
-        policy = _first_text(log, "policy") or args.policy
-        variant = _first_text(log, task.variant) or args.scenario
-        seed = int(log["seed"].iloc[0]) if "seed" in log and log["seed"].notna().all() else i
-        key = (policy, variant, seed)
+    for path, ep in zip(files, episodes, strict=True):
+        key = (ep.policy, ep.scenario, ep.seed)
         if key in seen:
             raise UsageError(
-                f"{seen[key]} and {path} are both policy {policy!r}, {task.variant} "
-                f"{variant!r}, seed {seed}: give each episode once"
+                f"{seen[key]} and {path} are both policy {ep.policy!r}, {task.variant} "
+                f"{ep.scenario!r}, seed {ep.seed}: give each episode once"
             )
         seen[key] = path
-        if "termination" not in log:
-            log = log.assign(termination="")
-        episodes.append(Episode(policy, variant, seed, log))
-    assert task is not None
     policy_order = {p: k for k, p in enumerate(dict.fromkeys(ep.policy for ep in episodes))}
     scenario_order = {s: k for k, s in enumerate(dict.fromkeys(ep.scenario for ep in episodes))}
     episodes.sort(key=lambda ep: (policy_order[ep.policy], scenario_order[ep.scenario], ep.seed))
     try:
-        table = episode_table(episodes, metrics=task.metrics, variant=task.variant)
+        scored = score(episodes, metrics=task.metrics, variant=task.variant, backend=backend)
     except KeyError as e:
         raise UsageError(
             f"the logs lack the column {e} that the {task.name} task's metrics need "
             f"(--task {task.name}; the first log: {files[0]})"
         ) from None
-    summary = summarize(table, metrics=list(task.metrics))
-    comparisons = compare(table, metrics=list(task.metrics))
+    summary, comparisons = scored.summary, scored.comparisons
     if args.out is not None:
         with atomic_folder(args.out) as tmp:
             meta = {
@@ -434,7 +436,7 @@ def cmd_metrics(args: argparse.Namespace) -> int:
                 "task": task.name,
                 "logs": [str(f) for f in files],
             }
-            write_tables(tmp, summary, table, comparisons, meta, tables=task.tables)
+            write_tables(tmp, summary, scored.table, comparisons, meta, tables=task.tables)
             (tmp / "plots").mkdir()
             task.summary_plot(summary, tmp / "plots")
     print(markdown_report(summary, comparisons, tables=task.tables))
@@ -452,13 +454,6 @@ def _task_of_log(path: Path) -> str:
     except (OSError, UnicodeDecodeError, csv.Error):
         return "person_follow"
     return "line_trace" if "track" in (cell.strip() for cell in header) else "person_follow"
-
-
-def _first_text(log: Any, column: str) -> str | None:
-    if column not in log:
-        return None
-    values = [v for v in log[column] if isinstance(v, str) and v]
-    return values[0] if values else None
 
 
 def main(argv: Sequence[str] | None = None) -> int:

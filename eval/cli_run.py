@@ -18,7 +18,7 @@ from eval.cli_base import MAX_EPISODES, MAX_SEED, PROG, UsageError, _config, _na
 from execution import Backend, backend_from_args
 from follow_env.sim.atomic import atomic_folder, atomic_write_text, check_new_folder
 
-__all__ = ["cmd_run", "policy_label", "refuse_aliases"]
+__all__ = ["cmd_run", "policy_label", "refuse_aliases", "run_backend"]
 
 
 def _plural(n: int, one: str, many: str) -> str:
@@ -126,8 +126,8 @@ def _versions() -> dict[str, str]:
     return out
 
 
-def _backend(args: argparse.Namespace, n_episodes: int, learned_episodes: int) -> Backend:
-    """The run's execution backend from --backend, --workers and --address."""
+def run_backend(args: argparse.Namespace, n_episodes: int, learned_episodes: int) -> Backend:
+    """The execution backend from --backend, --workers and --address (``run``, ``metrics``)."""
     from eval.rollout import auto_workers
 
     if args.address is not None and args.backend != "ray":
@@ -153,7 +153,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     n_episodes = len(policies) * len(scenarios) * len(seeds) * (2 if args.ideal_baseline else 1)
     learned_episodes = n_episodes // len(policies) * learned
     check_new_folder(out)
-    backend = _backend(args, n_episodes, learned_episodes)
+    backend = run_backend(args, n_episodes, learned_episodes)
     started = time.perf_counter()
     run = {"task": task.name, "policies": policies, task.variants_option: scenarios}
     run |= {"seeds": [seeds[0], seeds[-1]], "config": args.config}

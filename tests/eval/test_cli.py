@@ -106,6 +106,15 @@ def test_metrics_on_the_run_logs_reproduces_the_summary(
     pd.testing.assert_frame_equal(scored[LEADING], ran[LEADING], check_exact=False, rtol=1e-5)
 
 
+def test_metrics_on_two_workers_writes_the_same_tables(run_dir: Path, tmp_path: Path) -> None:
+    outs = [tmp_path / "one", tmp_path / "two"]
+    for workers, out in zip(("1", "2"), outs, strict=True):
+        args = ["metrics", str(run_dir / "logs"), "--out", str(out), "--workers", workers]
+        assert main(args) == 0
+    for name in ("summary.csv", "episodes.csv", "comparisons.csv", "summary.md"):
+        assert (outs[1] / name).read_text() == (outs[0] / name).read_text(), name
+
+
 def test_metrics_labels_a_minimal_robot_log(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     log = tmp_path / "robot.csv"
     log.write_text(

@@ -1,18 +1,21 @@
-"""eval/scoring.py: a run's logs and tables, scenario by scenario, equal to the serial ones."""
+"""eval/scoring.py: a run's logs and tables, scenario by scenario, equal to the serial ones;
+step logs read back as episodes on a backend, the first bad file reported."""
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import pandas as pd
 import pytest
 
+import eval.scoring
 from eval.line_metrics import LINE_METRICS
 from eval.metrics import METRICS
 from eval.rollout import Episode, rollout
-from eval.scoring import score
+from eval.scoring import read_episodes, score
 from eval.stats import compare, episode_table, summarize
-from eval.steplog import write_step_log
+from eval.steplog import StepLogError, read_step_log, write_step_log
 from execution.backend import Backend
 
 
@@ -93,3 +96,70 @@ def test_no_episodes_give_empty_tables_with_the_columns(tmp_path: Path) -> None:
     assert got.table.empty
     assert "mean_offset_px" in got.table
     assert list(tmp_path.iterdir()) == []
+
+
+def _written(folder: Path, episodes: list[Episode]) -> list[Path]:
+    paths = list(_paths(folder, episodes).values())
+    for path, ep in zip(paths, episodes, strict=True):
+        write_step_log(ep.log, path)
+    return paths
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_logs_read_back_are_the_episodes_scored_alike(
+    episodes: list[Episode], tmp_path: Path, monkeypatch: pytest.MonkeyPatch, workers: int
+) -> None:
+    monkeypatch.setattr(eval.scoring, "_FILES_PER_UNIT", 4)  # several units: 18 logs
+    paths = _written(tmp_path, episodes)
+    read = read_episodes(paths, task="person_follow", backend=Backend(workers=workers))
+    assert [(ep.policy, ep.scenario, ep.seed) for ep in read] == [
+        (ep.policy, ep.scenario, ep.seed) for ep in episodes
+    ]
+    for path, ep in zip(paths, read, strict=True):
+        pd.testing.assert_frame_equal(ep.log, read_step_log(path))
+    # a log as written and read back scores as the episode did (to the logs' 6 digits)
+    got, want = score(read, metrics=METRICS), score(episodes, metrics=METRICS)
+    pd.testing.assert_frame_equal(got.table, want.table, check_exact=False, rtol=1e-5)
+
+
+def test_a_log_without_labels_gets_the_given_ones_and_its_position_as_seed(tmp_path: Path) -> None:
+    logs = [tmp_path / "a.csv", tmp_path / "b.csv"]
+    for log in logs:
+        log.write_text("time_s,obs_distance_m,obs_offset_px,accel_mps2\n0,1,0,0\n0.1,1,2,0\n")
+    read = read_episodes(logs, task="person_follow", policy="gsmpn-real", label="hall")
+    assert [(ep.policy, ep.scenario, ep.seed) for ep in read] == [
+        ("gsmpn-real", "hall", 0),
+        ("gsmpn-real", "hall", 1),
+    ]
+    assert read[0].log["termination"].tolist() == ["", ""]
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_the_first_bad_file_in_order_is_reported(
+    episodes: list[Episode], tmp_path: Path, monkeypatch: pytest.MonkeyPatch, workers: int
+) -> None:
+    monkeypatch.setattr(eval.scoring, "_FILES_PER_UNIT", 2)
+    paths = _written(tmp_path, episodes[:6])
+    # a bad file in the second unit and another in the third, which may finish first
+    paths[3].write_text("time_s,obs_distance_m,obs_offset_px,accel_mps2\n0,1,oops,0\n")
+    paths[4].write_text("")
+    with pytest.raises(StepLogError, match=re.escape(f"{paths[3]}: line 2, column obs_offset_px")):
+        read_episodes(paths, task="person_follow", backend=Backend(workers=workers))
+
+
+def test_one_process_stops_reading_at_a_bad_file(
+    episodes: list[Episode], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setattr(eval.scoring, "_FILES_PER_UNIT", 1)
+    paths = _written(tmp_path, episodes[:4])
+    paths[1].write_text("")
+    read: list[Path] = []
+
+    def counted(path: Path, task: str) -> pd.DataFrame:
+        read.append(Path(path))
+        return read_step_log(path, task)
+
+    monkeypatch.setattr(eval.scoring, "read_step_log", counted)
+    with pytest.raises(StepLogError, match="empty file"):
+        read_episodes(paths, task="person_follow")
+    assert read == paths[:2]
