@@ -407,7 +407,8 @@ def cmd_metrics(args: argparse.Namespace) -> int:
         variant=task.variant,
         policy=args.policy,
         label=args.scenario,
-        backend=backend,
+        # Ray's workers may be on machines that do not have the files: they only score
+        backend=backend if backend.kind == "local" else None,
     )
     seen: dict[tuple[str, str, int], Path] = {}
     for path, ep in zip(files, episodes, strict=True):

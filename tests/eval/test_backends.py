@@ -61,6 +61,17 @@ def test_ray_writes_the_same_files_byte_for_byte(
 
 
 @pytest.mark.slow
+def test_metrics_on_ray_writes_the_same_tables(local_ray, tmp_path: Path) -> None:
+    run = tmp_path / "run"
+    assert main(["run", *GRID, "--out", str(run), "--workers", "1"]) == 0
+    local, ray = tmp_path / "local", tmp_path / "ray"
+    assert main(["metrics", str(run / "logs"), "--out", str(local), "--workers", "1"]) == 0
+    assert main(["metrics", str(run / "logs"), "--out", str(ray), "--backend", "ray"]) == 0
+    for name in ("summary.csv", "episodes.csv", "comparisons.csv"):
+        assert (ray / name).read_bytes() == (local / name).read_bytes(), name
+
+
+@pytest.mark.slow
 def test_ctrl_c_writes_nothing_and_the_same_command_resumes(
     reference: dict[str, bytes], tmp_path: Path, capsys: pytest.CaptureFixture
 ) -> None:
