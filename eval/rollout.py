@@ -387,7 +387,8 @@ def auto_workers(episodes: int, learned: int = 0, *, scored: bool = False) -> in
     :param learned: how many of them a learned agent plays; each counts as
         ``_LEARNED_EPISODE_COST`` of a law's (its network is most of the work a pool shares).
     :param scored: the same pool then also writes their logs and computes the tables
-        (``follow-eval run``, :mod:`eval.scoring`), which it pays off sooner for.
+        (``follow-eval run``; ``follow-eval metrics``, whose logs it reads: :mod:`eval.scoring`),
+        which it pays off sooner for.
     """
     cores = os.cpu_count() or 1
     cost = episodes + (_LEARNED_EPISODE_COST - 1.0) * learned
