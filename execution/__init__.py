@@ -15,7 +15,8 @@ Every task pins its numba, torch and OpenMP threads to the CPUs it was given
 mid-task is retried (Ray's task retries; a rebuilt pool locally); units are pure functions of
 their arguments, so a retried unit returns exactly what the first attempt would have. A local
 pool is kept for the next call with the same workers (a spawned process takes about 2 s to
-start) until the process exits or :func:`shutdown_pools`; one that failed is not kept.
+start) until it has been idle for ``execution.backend.POOL_IDLE_S`` (60 s), the process exits or
+:func:`shutdown_pools` is called; one that failed is not kept.
 
 This package imports nothing else of the project: every layer above may use it.
 """

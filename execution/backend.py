@@ -11,6 +11,7 @@ import logging
 import os
 import socket
 import sys
+import threading
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
@@ -20,6 +21,7 @@ from typing import Any, TypeVar
 
 __all__ = [
     "BACKENDS",
+    "POOL_IDLE_S",
     "Backend",
     "BackendUnavailableError",
     "WorkerLostError",
@@ -212,8 +214,18 @@ def _run_local(
                 ) from e
 
 
-#: The pools kept between calls of :func:`execute`, by (workers, CPUs per worker).
+#: A kept pool's workers exit after this long without a unit (s): long enough to span the
+#: batches of one command (a tuning search's trials, a run's episodes and then its scoring, each
+#: a fraction of a second apart), short enough that an interactive session does not hold an idle
+#: worker's memory (about 0.5 GB each with an agent loaded, measured) for long after its last call.
+POOL_IDLE_S = 60.0
+
+#: The pools kept between calls of :func:`execute`, by (workers, CPUs per worker), and the
+#: timers that stop the idle ones; both under ``_POOLS_LOCK`` (a timer fires on its own thread).
 _POOLS: dict[tuple[int, int], ProcessPoolExecutor] = {}
+_IDLE: dict[tuple[int, int], threading.Timer] = {}
+_BUSY: dict[tuple[int, int], int] = {}  # passes running on each pool (threads may share one)
+_POOLS_LOCK = threading.Lock()
 
 
 def _pool(workers: int, cpus: int) -> ProcessPoolExecutor:
@@ -224,20 +236,63 @@ def _pool(workers: int, cpus: int) -> ProcessPoolExecutor:
     costs about 2 s to start. Its processes start as units arrive, not all at once.
     """
     key = (workers, cpus)
-    if key not in _POOLS:
-        # spawn, not fork: a forked child of a process with live threads (tqdm's monitor, BLAS
-        # pools) can deadlock; spawned workers load the cached kernels in about 2 s.
-        _POOLS[key] = ProcessPoolExecutor(
-            workers, mp_context=get_context("spawn"), initializer=pin_threads, initargs=(cpus,)
-        )
-    return _POOLS[key]
+    with _POOLS_LOCK:
+        timer = _IDLE.pop(key, None)
+        if timer is not None:
+            timer.cancel()
+        if key not in _POOLS:
+            # spawn, not fork: a forked child of a process with live threads (tqdm's monitor,
+            # BLAS pools) can deadlock; spawned workers load the cached kernels in about 2 s.
+            _POOLS[key] = ProcessPoolExecutor(
+                workers, mp_context=get_context("spawn"), initializer=pin_threads, initargs=(cpus,)
+            )
+            _BUSY[key] = 0
+        _BUSY[key] += 1
+        return _POOLS[key]
+
+
+def _keep(key: tuple[int, int], pool: ProcessPoolExecutor) -> None:
+    """``pool`` has finished its units: stop it if no call takes it within ``POOL_IDLE_S``."""
+    with _POOLS_LOCK:
+        if _POOLS.get(key) is not pool:
+            return
+        _BUSY[key] -= 1
+        if _BUSY[key]:
+            return  # another thread's pass is running on it
+        timer = threading.Timer(POOL_IDLE_S, _expire, (key, pool))
+        timer.daemon = True
+        _IDLE[key] = timer
+        timer.start()
+
+
+def _expire(key: tuple[int, int], pool: ProcessPoolExecutor) -> None:
+    with _POOLS_LOCK:
+        # A call that took the pool meanwhile cancelled this timer (or replaced it).
+        if _IDLE.get(key) is not threading.current_thread() or _POOLS.get(key) is not pool:
+            return
+        del _IDLE[key], _POOLS[key], _BUSY[key]
+    pool.shutdown(wait=True)
+
+
+def _drop(key: tuple[int, int], pool: ProcessPoolExecutor) -> None:
+    """Forget ``pool`` (it failed, or holds units nobody waits for) and stop it."""
+    with _POOLS_LOCK:
+        if _POOLS.get(key) is pool:
+            del _POOLS[key], _BUSY[key]
+    pool.shutdown(wait=False, cancel_futures=True)
 
 
 def shutdown_pools() -> None:
     """Stop the worker processes kept between calls of :func:`execute` (at exit, or to free
-    their memory; the next call with a pool starts a new one)."""
-    while _POOLS:
-        _, pool = _POOLS.popitem()
+    their memory before ``POOL_IDLE_S`` does; the next call with a pool starts a new one)."""
+    with _POOLS_LOCK:
+        pools = list(_POOLS.values())
+        _POOLS.clear()
+        _BUSY.clear()
+        for timer in _IDLE.values():
+            timer.cancel()
+        _IDLE.clear()
+    for pool in pools:
         pool.shutdown(wait=True, cancel_futures=True)
 
 
@@ -272,12 +327,12 @@ def _pool_pass(
                 yield i, result
         finished_all = True
     finally:
-        if not finished_all:
+        if finished_all:
+            _keep((workers, cpus), pool)
+        else:
             # An error, a dead worker, Ctrl-C or a caller that stopped reading: this pool may
             # be broken or still busy with units nobody waits for, so it is not kept.
-            if _POOLS.get((workers, cpus)) is pool:
-                del _POOLS[(workers, cpus)]
-            pool.shutdown(wait=False, cancel_futures=True)
+            _drop((workers, cpus), pool)
 
 
 # -- ray --------------------------------------------------------------------------------------

@@ -8,10 +8,12 @@ import os
 import signal
 import socket
 import sys
+import time
 from pathlib import Path
 
 import pytest
 
+import execution.backend
 from execution import (
     Backend,
     BackendUnavailableError,
@@ -89,6 +91,27 @@ def test_a_pool_is_kept_for_the_next_call_with_the_same_workers() -> None:
     assert {p.pid for p in multiprocessing.active_children()} >= first | pinned
     shutdown_pools()
     assert not {p.pid for p in multiprocessing.active_children()} & (first | pinned)
+
+
+def test_a_kept_pool_stops_when_idle_and_a_call_in_time_keeps_it(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    shutdown_pools()
+    monkeypatch.setattr(execution.backend, "POOL_IDLE_S", 1.5)
+    two = Backend("local", workers=2)
+    first = set(execute(_slow_pid, range(8), two))
+    time.sleep(0.5)  # within the idle time: the same workers, and the wait starts again
+    assert set(execute(_slow_pid, range(8), two)) == first
+    time.sleep(1.0)  # 1.0 s after the last call: still there
+    assert {p.pid for p in multiprocessing.active_children()} >= first
+    deadline = time.monotonic() + 10.0
+    while {p.pid for p in multiprocessing.active_children()} & first:
+        assert time.monotonic() < deadline, "the idle pool's workers did not exit"
+        time.sleep(0.1)
+    assert not execution.backend._POOLS
+    # the next call starts a new pool
+    assert set(execute(_slow_pid, range(8), two)).isdisjoint(first)
+    shutdown_pools()
 
 
 def test_a_pool_that_failed_is_not_kept() -> None:
