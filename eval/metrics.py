@@ -258,8 +258,11 @@ def turn_accel_rms_rad_s2(log: pd.DataFrame) -> float:
 def _ending(log: pd.DataFrame) -> str | None:
     if "termination" not in log:
         return None
-    endings = [str(e) for e in log["termination"] if isinstance(e, str) and e]
-    return endings[-1] if endings else ""
+    # The last non-blank cell, looked for from the end: an ending is on the last row or two.
+    for e in log["termination"].to_numpy(dtype=object)[::-1]:
+        if isinstance(e, str) and e:
+            return str(e)
+    return ""
 
 
 @metric("lost_rate_pct", "%", "lost person (%)")
