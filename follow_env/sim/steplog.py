@@ -81,11 +81,12 @@ def read_columns(path: str | Path, layout: LogLayout) -> tuple[dict[str, Sequenc
                 f"found {len(row)}"
             )
     lines = [line for line, _ in numbered]
+    data = list(zip(*(row for _, row in numbered), strict=True))  # the cells column by column
     columns: dict[str, Sequence] = {}
     for j, name in enumerate(header):
         if not name:
             continue
-        cells = [row[j].strip() for _, row in numbered]
+        cells = [cell.strip() for cell in data[j]]
         columns[name] = cells if name in layout.text else _numbers(path, name, cells, lines)
         if name in layout.required and name not in layout.text:
             blank = np.flatnonzero(np.isnan(columns[name]))
@@ -115,8 +116,10 @@ def _check_header(path: Path, header: list[str], layout: LogLayout) -> None:
 
 def _numbers(path: Path, name: str, cells: list[str], lines: list[int]) -> np.ndarray:
     """One column's cells as float64 (NaN where blank), or the first bad cell named."""
+    raw = np.array(cells, dtype=str)
+    written = raw != ""
     try:  # numpy parses in C; only a column it refuses is walked cell by cell for the message
-        values = np.array([cell or "nan" for cell in cells]).astype(np.float64)
+        values = np.where(written, raw, "nan").astype(np.float64)
     except ValueError:
         parsed = []
         for k, cell in enumerate(cells):
@@ -130,7 +133,6 @@ def _numbers(path: Path, name: str, cells: list[str], lines: list[int]) -> np.nd
     # "nan" written in the file is no measurement; "inf" parses, but every metric drops
     # non-finite values, so a logging fault would vanish from the scores instead of being
     # reported like "nan" is.
-    written = np.array([cell != "" for cell in cells], dtype=bool)
     bad = np.flatnonzero((np.isnan(values) & written) | np.isinf(values))
     if bad.size:
         k = int(bad[0])
