@@ -15,7 +15,7 @@ machines need not share the run's folder.
 
 ``follow-eval metrics`` scores step logs from disk the same way, after :func:`read_episodes` has
 read them on the same backend, a chunk of files to a unit (reading costs about as much as the
-scoring: 6-7 ms a simulated log).
+scoring: about 4 ms a simulated log).
 """
 
 from __future__ import annotations
@@ -34,7 +34,7 @@ from execution.backend import Backend, execute
 
 __all__ = ["Scored", "read_episodes", "score"]
 
-#: Step logs read by one work unit of :func:`read_episodes`: enough that a unit's 0.5-0.7 s of
+#: Step logs read by one work unit of :func:`read_episodes`: enough that a unit's 0.4 s of
 #: reading outweighs sending it, few enough that two workers share 200 logs evenly.
 _FILES_PER_UNIT = 100
 
