@@ -57,6 +57,9 @@ def bench_scale(quick: bool) -> list[tuple[str, float, str]]:
     here, base = _grid_rate(Backend("local", workers=1), seeds)
     shutdown_pools()  # a pool kept by an earlier section would hide the start
     pool, on_pool = _grid_rate(Backend("local", workers=2), seeds)
+    units = EMPTY_UNITS[quick]
+    # Right after the grid, so that its pool is still kept (POOL_IDLE_S) however long Ray takes.
+    pool_ms = _overhead_ms(Backend("local", workers=2), units)
     ours = not ray.is_initialized()
     started = time.perf_counter()
     Backend("ray").slots()  # starts a local Ray with this machine's CPUs (unless one runs)
@@ -71,8 +74,6 @@ def bench_scale(quick: bool) -> list[tuple[str, float, str]]:
         (f"{n} episodes, local Ray", on_ray_rate, f"{on_ray_rate / here:.2f}x (l)"),
         ("local Ray start-up (s)", startup, "once per command"),
     ]
-    units = EMPTY_UNITS[quick]
-    pool_ms = _overhead_ms(Backend("local", workers=2), units)
     rows.append(("pool, per empty unit (ms)", pool_ms, "the grid's pool, kept"))
     rows.append(("Ray, per empty unit (ms)", _overhead_ms(Backend("ray"), units), ""))
     if ours:
