@@ -8,7 +8,7 @@
     follow-eval run --task line_trace --policies coordinate,pid --tracks course,random ...
     follow-eval metrics LOG.csv [LOG.csv | FOLDER ...] [--out DIR] [--workers auto|N]
     follow-eval aggregate RUN... [--laws pn,mpn,gsmpn] [--scenarios ...] [--out DIR]
-    follow-eval dominance RUN --learner ppo [--laws ...]
+    follow-eval dominance RUN --learner ppo[,...] [--laws ...]
 
 (also ``python -m eval ...``). ``run`` writes into its output folder::
 
@@ -242,17 +242,23 @@ def build_parser() -> argparse.ArgumentParser:
     dom = sub.add_parser(
         "dominance",
         help="a learner against the best law per scenario and criterion (eval.dominance)",
-        description="Read a follow-eval run folder's episodes.csv and compare the learner with "
+        description="Read a follow-eval run folder's episodes.csv and compare each learner with "
         "the best of the laws on each scenario and criterion, paired over seeds; writes "
         "dominance-<learner>.md|csv into the folder.",
     )
     dom.add_argument("run", type=Path, help="a follow-eval run output folder")
-    dom.add_argument("--learner", required=True, help="the learner's policy label, e.g. ppo")
+    dom.add_argument(
+        "--learner",
+        required=True,
+        help="the learner's policy label, e.g. ppo; several, comma-separated (a study's seeds), "
+        "are each met by the same laws, and a table of all of them follows",
+    )
     dom.add_argument(
         "--laws",
         default=None,
         help="the laws' labels (default: every other policy in the run under the learner's "
-        "sensing: with --ideal-baseline, ppo+ideal meets the +ideal laws)",
+        "sensing, the learners named left out: with --ideal-baseline, ppo+ideal meets the "
+        "+ideal laws)",
     )
     return parser
 
@@ -311,22 +317,52 @@ def cmd_dominance(args: argparse.Namespace) -> int:
 
     metrics = [*(c.metric for c in CRITERIA), *ENDINGS, FINISHED]
     table = _episode_table(args.run / "episodes.csv", metrics)
-    laws = _names(args.laws, "laws") if args.laws is not None else default_laws(table, args.learner)
-    frame = dominance(table, args.learner, laws)
-    calibrated = calibration(table, laws) if len(laws) > 1 else None
-    report = dominance_markdown(frame, args.learner, calibrated)
-    stem = args.run / f"dominance-{safe_name(args.learner)}"
-    written = f"{stem}.md|csv"
-    if FINISHED in table:  # episode tables written before the metric existed have none
-        view = finished_view(table, frame, args.learner)
-        report += finished_markdown(view, args.learner)
-        atomic_write_text(f"{stem}-finished.csv", view.to_csv(index=False))
-        written += f", {stem.name}-finished.csv"
-    atomic_write_text(f"{stem}.csv", frame.to_csv(index=False))
-    atomic_write_text(f"{stem}.md", report)
-    print(report, end="")
-    print(f"Wrote {written}")
+    learners = _names(args.learner, "learner")
+    given = _names(args.laws, "laws") if args.laws is not None else None
+    if given is not None and (both := [name for name in learners if name in given]):
+        raise UsageError(f"--learner and --laws both name {', '.join(both)}: give each once")
+    # Every learner is judged before anything is written, so a bad label writes nothing.
+    judged = []
+    for learner in learners:
+        laws = given or [p for p in default_laws(table, learner) if p not in learners]
+        judged.append((learner, laws, dominance(table, learner, laws)))
+    calibrated: dict[tuple[str, ...], Any] = {}
+    for learner, laws, frame in judged:
+        if tuple(laws) not in calibrated:  # the laws against each other: once per set
+            calibrated[tuple(laws)] = calibration(table, laws) if len(laws) > 1 else None
+        report = dominance_markdown(frame, learner, calibrated[tuple(laws)])
+        stem = args.run / f"dominance-{safe_name(learner)}"
+        written = f"{stem}.md|csv"
+        if FINISHED in table:  # episode tables written before the metric existed have none
+            view = finished_view(table, frame, learner)
+            report += finished_markdown(view, learner)
+            atomic_write_text(f"{stem}-finished.csv", view.to_csv(index=False))
+            written += f", {stem.name}-finished.csv"
+        atomic_write_text(f"{stem}.csv", frame.to_csv(index=False))
+        atomic_write_text(f"{stem}.md", report)
+        print(report, end="")
+        print(f"Wrote {written}")
+    if len(judged) > 1:
+        print(_learners_table(judged))
     return 0
+
+
+def _learners_table(judged: list[tuple[str, list[str], Any]]) -> str:
+    """Several learners' verdicts side by side, a row each (``follow-eval dominance``)."""
+    from eval.dominance import dominates, tally
+
+    rows = [
+        "",
+        "| learner | dominates | requirements met | significantly better | significantly worse |",
+        "|---|---|---:|---:|---:|",
+    ]
+    for learner, _, frame in judged:
+        t = tally(frame)
+        rows.append(
+            f"| {learner} | {'yes' if dominates(frame) else 'no'} | {t['met']} of {len(frame)} "
+            f"| {t['better']} | {t['worse']} |"
+        )
+    return "\n".join(rows)
 
 
 def _episode_table(path: Path, metrics: list[str]) -> Any:

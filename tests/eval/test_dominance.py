@@ -280,6 +280,60 @@ def test_the_command_reads_a_run_folder_and_writes_its_tables(tmp_path: Path, ca
     assert (tmp_path / "dominance-ppo.md").read_text().startswith("`ppo`")
 
 
+def test_several_learners_meet_the_same_laws_and_are_tabled_together(
+    tmp_path: Path, capsys
+) -> None:
+    """A study's seeds in one command: each learner meets the laws alone (not the other
+    learners), gets its own files, and a table of all of them follows."""
+    table = _table(
+        {
+            "seed-0": {"mean_offset_px": [1.0] * 6},
+            "seed-1": {"mean_offset_px": [3.0] * 6},
+            "pn": {"mean_offset_px": [2.0] * 6},
+            "gsmpn": {"mean_offset_px": [2.5] * 6},
+        }
+    )
+    table.to_csv(tmp_path / "episodes.csv", index=False)
+    assert main(["dominance", str(tmp_path), "--learner", "seed-0,seed-1"]) == 0
+    out = capsys.readouterr().out
+    for learner, other in (("seed-0", "seed-1"), ("seed-1", "seed-0")):
+        written = pd.read_csv(tmp_path / f"dominance-{learner}.csv")
+        # the best law on each line is a law, never the other learner
+        assert set(written["best_law"]) <= {"pn", "gsmpn"}
+        assert other not in set(written["best_law"])
+        alone = dominance(table, learner, ["pn", "gsmpn"])
+        assert list(written["verdict"]) == list(alone["verdict"])
+    offset = pd.read_csv(tmp_path / "dominance-seed-1.csv").set_index("criterion")
+    assert offset.loc["mean_offset_px", "verdict"] == "worse"  # 3 px against pn's 2
+    rows = [line for line in out.splitlines() if line.startswith("| seed-")]
+    met = {
+        learner: tally(dominance(table, learner, ["pn", "gsmpn"]))
+        for learner in ("seed-0", "seed-1")
+    }
+    assert rows == [
+        f"| {learner} | no | {t['met']} of 6 | {t['better']} | {t['worse']} |"
+        for learner, t in met.items()
+    ]
+    assert met["seed-1"]["worse"] == 1
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--learner", "seed-0,nope"], "learner 'nope' is not in the table"),
+        (["--learner", "seed-0", "--laws", "pn,seed-0"], "--learner and --laws both name seed-0"),
+    ],
+)
+def test_a_bad_learner_list_writes_nothing(
+    tmp_path: Path, capsys, args: list, message: str
+) -> None:
+    table = _table({"seed-0": {"mean_offset_px": [1.0] * 3}, "pn": {"mean_offset_px": [2.0] * 3}})
+    table.to_csv(tmp_path / "episodes.csv", index=False)
+    assert main(["dominance", str(tmp_path), *args]) == 2
+    assert message in capsys.readouterr().err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["episodes.csv"]
+
+
 def _crash_table() -> pd.DataFrame:
     """A law that collides early on seeds 0-1 (its short episodes all in frame) and a learner
     that goes on there (in frame less), both finishing seeds 2-9, where the learner is ahead."""
