@@ -321,6 +321,13 @@ def cmd_dominance(args: argparse.Namespace) -> int:
     given = _names(args.laws, "laws") if args.laws is not None else None
     if given is not None and (both := [name for name in learners if name in given]):
         raise UsageError(f"--learner and --laws both name {', '.join(both)}: give each once")
+    stems: dict[str, str] = {}
+    for learner in learners:  # "pn:x" and "pn_x" would write the same files
+        if (first := stems.setdefault(safe_name(learner), learner)) != learner:
+            raise UsageError(
+                f"--learner: {first!r} and {learner!r} would both write "
+                f"dominance-{safe_name(learner)}.md: judge them in two commands"
+            )
     # Every learner is judged before anything is written, so a bad label writes nothing.
     judged = []
     for learner in learners:

@@ -322,12 +322,20 @@ def test_several_learners_meet_the_same_laws_and_are_tabled_together(
     [
         (["--learner", "seed-0,nope"], "learner 'nope' is not in the table"),
         (["--learner", "seed-0", "--laws", "pn,seed-0"], "--learner and --laws both name seed-0"),
+        (["--learner", "seed_0,seed:0"], "'seed_0' and 'seed:0' would both write"),
     ],
 )
 def test_a_bad_learner_list_writes_nothing(
     tmp_path: Path, capsys, args: list, message: str
 ) -> None:
-    table = _table({"seed-0": {"mean_offset_px": [1.0] * 3}, "pn": {"mean_offset_px": [2.0] * 3}})
+    table = _table(
+        {
+            "seed-0": {"mean_offset_px": [1.0] * 3},
+            "seed:0": {"mean_offset_px": [1.5] * 3},
+            "seed_0": {"mean_offset_px": [1.2] * 3},
+            "pn": {"mean_offset_px": [2.0] * 3},
+        }
+    )
     table.to_csv(tmp_path / "episodes.csv", index=False)
     assert main(["dominance", str(tmp_path), *args]) == 2
     assert message in capsys.readouterr().err
