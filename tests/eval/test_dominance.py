@@ -296,20 +296,19 @@ def test_several_learners_meet_the_same_laws_and_are_tabled_together(
     table.to_csv(tmp_path / "episodes.csv", index=False)
     assert main(["dominance", str(tmp_path), "--learner", "seed-0,seed-1"]) == 0
     out = capsys.readouterr().out
+    alone = {
+        learner: dominance(table, learner, ["pn", "gsmpn"]) for learner in ("seed-0", "seed-1")
+    }
     for learner, other in (("seed-0", "seed-1"), ("seed-1", "seed-0")):
         written = pd.read_csv(tmp_path / f"dominance-{learner}.csv")
         # the best law on each line is a law, never the other learner
         assert set(written["best_law"]) <= {"pn", "gsmpn"}
         assert other not in set(written["best_law"])
-        alone = dominance(table, learner, ["pn", "gsmpn"])
-        assert list(written["verdict"]) == list(alone["verdict"])
+        assert list(written["verdict"]) == list(alone[learner]["verdict"])
     offset = pd.read_csv(tmp_path / "dominance-seed-1.csv").set_index("criterion")
     assert offset.loc["mean_offset_px", "verdict"] == "worse"  # 3 px against pn's 2
     rows = [line for line in out.splitlines() if line.startswith("| seed-")]
-    met = {
-        learner: tally(dominance(table, learner, ["pn", "gsmpn"]))
-        for learner in ("seed-0", "seed-1")
-    }
+    met = {learner: tally(frame) for learner, frame in alone.items()}
     assert rows == [
         f"| {learner} | no | {t['met']} of 6 | {t['better']} | {t['worse']} |"
         for learner, t in met.items()
