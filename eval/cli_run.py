@@ -42,14 +42,14 @@ def _check_grid(n_policies: int, n_scenarios: int, episodes: int, seed: int) -> 
         )
 
 
-def _check_run_args(args: argparse.Namespace) -> tuple[list[str], list[str], int]:
-    """The run's policies and variants (scenarios, tracks), checked, and how many of the
-    policies are learned agents; sets ``args.config`` to the task's configuration read from its
-    text and ``args.eval_task`` to the task."""
+def _check_run_args(args: argparse.Namespace) -> tuple[list[str], list[str], list[tuple[str, Any]]]:
+    """The run's policies and variants (scenarios, tracks), checked, and each policy as built
+    for the check, with the label its episodes carry (the run's record of their parameters
+    reads these, so no policy is loaded twice); sets ``args.config`` to the task's configuration
+    read from its text and ``args.eval_task`` to the task."""
     from eval.grid import checked_policy
     from eval.tasks import eval_task
     from follow_env.platforms import get_platform
-    from policies.learned.ppo import PPOPolicy
 
     try:
         task = eval_task(args.task)
@@ -85,16 +85,15 @@ def _check_run_args(args: argparse.Namespace) -> tuple[list[str], list[str], int
     # Size first: it needs only the counts, and loading a policy is already work.
     runs = 2 if getattr(args, "ideal_baseline", False) else 1  # the grid again, perfect sensing
     _check_grid(len(policies) * runs, len(scenarios), args.episodes, args.seed)
-    labels: list[tuple[str, str]] = []
-    learned = 0
+    built: list[tuple[str, Any]] = []
     for name in policies:
         try:
             policy, platform = checked_policy(name, task.name)
         except (ValueError, TypeError) as e:
             raise UsageError(f"--policies: {e}") from None
-        labels.append((name, _episode_label(policy, platform)))
-        learned += isinstance(policy, PPOPolicy)
-    refuse_aliases(labels, "policies")
+        built.append((_episode_label(policy, platform), policy))
+    named = [(name, label) for name, (label, _) in zip(policies, built, strict=True)]
+    refuse_aliases(named, "policies")
     from follow_env.tasks import get_task
 
     known_variants = get_task(task.name).variants()
@@ -111,7 +110,7 @@ def _check_run_args(args: argparse.Namespace) -> tuple[list[str], list[str], int
             f"--plot-seed {args.plot_seed} is out of range: must be one of the run's seeds "
             f"{seeds.start}..{seeds.stop - 1}"
         )
-    return policies, scenarios, learned
+    return policies, scenarios, built
 
 
 def _versions() -> dict[str, str]:
@@ -144,8 +143,10 @@ def cmd_run(args: argparse.Namespace) -> int:
     from eval.report import markdown_report, safe_name, write_tables, write_video
     from eval.rollout import chunk_size, rollout
     from eval.scoring import score
+    from policies.learned.ppo import PPOPolicy
 
-    policies, scenarios, learned = _check_run_args(args)
+    policies, scenarios, built = _check_run_args(args)
+    learned = sum(isinstance(policy, PPOPolicy) for _, policy in built)
     task = args.eval_task
     seeds = list(range(args.seed, args.seed + args.episodes))
     plot_seed = args.seed if args.plot_seed is None else args.plot_seed
@@ -243,9 +244,7 @@ def cmd_run(args: argparse.Namespace) -> int:
             "command": " ".join([PROG, *sys.argv[1:]]),
             "finished_utc": datetime.now(UTC).isoformat(timespec="seconds"),
             "elapsed_s": round(elapsed, 2),
-            "policies": {
-                name: repr(getattr(p, "params", p)) for name, p in _built(policies, task.name)
-            },
+            "policies": {label: repr(getattr(p, "params", p)) for label, p in built},
             "task": task.name,
             task.variants_option: scenarios,
             "seeds": seeds,
@@ -301,19 +300,6 @@ def _where(backend: Backend) -> str:
         return f"Ray, {backend.slots()} slots"
     n = backend.workers or 1
     return f"{n} process" + ("es" if n > 1 else "")
-
-
-def _built(policies: list[str], task: str) -> list[tuple[str, Any]]:
-    """``(episode label, policy)`` of every policy spec (``pn@mecanum`` included)."""
-    from eval.grid import policy_spec
-    from policies import make_policy
-
-    out = []
-    for name in policies:
-        spec, platform = policy_spec(name)
-        law = make_policy(spec, task)  # type: ignore[arg-type]
-        out.append((_episode_label(law, platform), law))
-    return out
 
 
 def _episode_label(policy: Any, platform: str | None) -> str:
