@@ -143,10 +143,10 @@ def cmd_run(args: argparse.Namespace) -> int:
     from eval.report import markdown_report, safe_name, write_tables, write_video
     from eval.rollout import chunk_size, rollout
     from eval.scoring import score
-    from policies.learned.ppo import PPOPolicy
+    from policies.learned.ensemble import is_learned
 
     policies, scenarios, built = _check_run_args(args)
-    learned = sum(isinstance(policy, PPOPolicy) for _, policy in built)
+    learned = sum(is_learned(policy) for _, policy in built)
     task = args.eval_task
     seeds = list(range(args.seed, args.seed + args.episodes))
     plot_seed = args.seed if args.plot_seed is None else args.plot_seed

@@ -42,7 +42,7 @@ from follow_env.sim.runner import BatchedSim
 from follow_env.tasks import get_task
 from policies import Policy, for_platform, make_policy
 from policies.lanes import Lanes
-from policies.learned.ppo import PPOPolicy
+from policies.learned.ensemble import is_learned
 
 __all__ = [
     "BATCH_LANES",
@@ -493,7 +493,7 @@ def _check_grid(
     learned = 0
     for given in policies:
         policy, _ = checked_policy(given, task)
-        learned += isinstance(policy, PPOPolicy)
+        learned += is_learned(policy)
     known, what = t.model.variants(), t.model.variant_key
     for scenario in scenarios:
         if scenario not in known:

@@ -24,7 +24,8 @@ Learned agents: ``ppo`` is each task's shipped PPO agent (PersonFollow's
 its observation has ``ahead_m``, ``PerceptionConfig.ahead_rays``; its view gates the detection's
 jumps), ``ppo_law`` PersonFollow's that reads ahead and starts from ``pn:thesis``'s command
 (``policies/agents/ppo_law``; its view holds the law's command, :mod:`policies.learned.hint`),
-and a path
+``ppo_ensemble`` the mean of two such agents' actions (``policies/agents/ppo_ensemble``, whose
+``ensemble.yaml`` lists them: :mod:`policies.learned.ensemble`), and a path
 (a run folder of ``follow-train``, its ``model.zip``, or a checkpoint ``.zip``) loads that
 agent under the path as its name (:mod:`policies.learned.ppo`).
 
@@ -296,10 +297,11 @@ register_law(
     "pid", pid_line.PIDLine, pid_line.PRESETS, task="line_trace", search_space=pid_line.SEARCH_SPACE
 )
 # Learned agents: the shipped ones by name (policies.learned.ppo.SHIPPED says which folder is
-# which), any other by its path (a run folder or a .zip). policies.learned.ppo loads torch and
-# stable-baselines3 only when an agent is built.
+# which; a folder with an ensemble.yaml is the mean of its members), any other by its path (a
+# run folder or a .zip). policies.learned.ppo loads torch and stable-baselines3 only when an
+# agent is built.
 for _folder, (_name, _task) in ppo.SHIPPED.items():
-    register_policy(_name, partial(ppo.load_shipped, _folder, name=_name), task=_task)
+    register_policy(_name, partial(ensemble.shipped, _folder, name=_name), task=_task)
 # A folder with an ensemble.yaml (a seed study's) is the mean of its members' actions.
 register_resolver(ensemble.resolve_path)
 register_resolver(ppo.resolve_path)

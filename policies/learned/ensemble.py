@@ -33,9 +33,9 @@ import yaml
 from follow_env.sim.checks import yaml_problem
 from policies.learned.features import Pipeline
 from policies.learned.networks import Memory
-from policies.learned.ppo import AgentLoadError, PPOPolicy, _Loaded
+from policies.learned.ppo import AGENTS, AgentLoadError, PPOPolicy, _Loaded, load_shipped
 
-__all__ = ["ENSEMBLE", "EnsemblePolicy", "member_folders", "resolve_path"]
+__all__ = ["ENSEMBLE", "EnsemblePolicy", "is_learned", "member_folders", "resolve_path", "shipped"]
 
 #: The file that makes a folder an ensemble.
 ENSEMBLE = "ensemble.yaml"
@@ -187,3 +187,19 @@ def resolve_path(name: str) -> EnsemblePolicy | None:
     if path.name == ENSEMBLE or (path.is_dir() and (path / ENSEMBLE).exists()):
         return EnsemblePolicy(path, name)
     return None
+
+
+def shipped(folder: str, name: str | None = None) -> EnsemblePolicy | PPOPolicy:
+    """The shipped agent ``policies/agents/<folder>`` named ``name`` (default: ``folder``): the
+    mean of its members when the folder holds an ``ensemble.yaml`` (``ppo_ensemble``), else one
+    agent (:func:`policies.learned.ppo.load_shipped`)."""
+    if (AGENTS / folder / ENSEMBLE).is_file():
+        return EnsemblePolicy(AGENTS / folder, name or folder)
+    return load_shipped(folder, name)
+
+
+def is_learned(policy: object) -> bool:
+    """Whether ``policy`` is a learned agent (one, or an ensemble of them): its episodes cost a
+    network's work a step, which is what a pool of workers shares
+    (:func:`eval.rollout.auto_workers`)."""
+    return isinstance(policy, PPOPolicy | EnsemblePolicy)
