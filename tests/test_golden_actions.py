@@ -53,3 +53,21 @@ def test_a_changed_view_is_caught(tmp_path: Path) -> None:
     obs, recorded = RECORDED[f"{name}/obs"], RECORDED[f"{name}/actions"]
     actions = golden.actions_of(PPOPolicy(agent), obs)
     assert np.abs(actions - recorded).max() > 100 * golden.ATOL
+
+
+def test_recording_one_agent_keeps_the_others(tmp_path: Path, monkeypatch, capsys) -> None:
+    kept = tmp_path / "actions.npz"
+    shutil.copy(golden.GOLDEN, kept)
+    monkeypatch.setattr(golden, "GOLDEN", kept)
+    assert golden.record(["no_such_agent"]) == 2
+    assert "no_such_agent" in capsys.readouterr().err
+    # one agent (the line tracer, the quickest to run) recorded anew: a new closed-loop episode
+    # (its length may differ by CPU), every other agent's arrays left as they were
+    assert golden.record(["ppo_line"]) == 0
+    with np.load(kept) as archive:
+        again = {name: archive[name] for name in archive.files}
+    assert set(again) == set(RECORDED)
+    others = [name for name in RECORDED if not name.startswith("ppo_line/")]
+    assert len(others) > len(RECORDED) // 2
+    for name in others:
+        np.testing.assert_array_equal(again[name], RECORDED[name], err_msg=name)

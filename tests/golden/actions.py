@@ -12,12 +12,14 @@ more than a CPU's last bits do.
 
 Record anew (only when an agent's behaviour changes on purpose, and say why in the commit)::
 
-    .venv/bin/python tests/golden/actions.py
+    .venv/bin/python tests/golden/actions.py              # every shipped agent
+    .venv/bin/python tests/golden/actions.py ppo_ensemble # one (a new one), the others kept
 """
 
 from __future__ import annotations
 
 import sys
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -83,9 +85,20 @@ def key(folder: str, scenario: str) -> str:
     return f"{folder}/{scenario}/{SEED}"
 
 
-def record() -> None:
+def record(folders: Sequence[str] = ()) -> int:
+    """Record the named shipped agents' cases (their folders; none: every agent's), keeping
+    what is recorded of the others."""
+    unknown = sorted(set(folders) - set(SHIPPED))
+    if unknown:
+        print(f"not a shipped agent's folder: {', '.join(unknown)}", file=sys.stderr)
+        return 2
     arrays: dict[str, np.ndarray] = {}
+    if folders:
+        with np.load(GOLDEN) as kept:
+            arrays = {k: kept[k] for k in kept.files if k.split("/", 1)[0] not in folders}
     for folder, task, scenario in cases():
+        if folders and folder not in folders:
+            continue
         obs, actions = record_case(folder, task, scenario)
         # the recording must itself be what the agent does open loop on its observations
         np.testing.assert_allclose(replay(folder, task, obs), actions, rtol=0, atol=ATOL)
@@ -95,7 +108,8 @@ def record() -> None:
     tmp = GOLDEN.with_suffix(".tmp.npz")
     np.savez_compressed(tmp, **arrays)
     tmp.replace(GOLDEN)
+    return 0
 
 
 if __name__ == "__main__":
-    sys.exit(record())
+    sys.exit(record(sys.argv[1:]))
