@@ -27,6 +27,7 @@ LABELS: dict[str, str] = {
     "ppo": "PPO",
     "ppo_ahead": "PPO (ahead)",
     "ppo_law": "PPO (law)",
+    "ppo_ensemble": "PPO (ensemble)",
     "stop": "STOP",
     "manual": "manual",
 }

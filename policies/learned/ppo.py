@@ -87,6 +87,11 @@ SHIPPED: dict[str, tuple[str, str]] = {
     # of the shipped agents meets the most of the dominance table; its perception must publish
     # the reading ahead
     "ppo_law": ("ppo_law", "person_follow"),
+    # the mean of two agents' actions (policies.learned.ensemble: the folder's ensemble.yaml
+    # lists them), seeds 0 and 1 of train/configs/ppo_ahead_law_wide.yaml (ppo_law's view and
+    # reward with the headway, networks of 128 x 128), the gate added after training:
+    # significantly worse than the best law on no line of the dominance table
+    "ppo_ensemble": ("ppo_ensemble", "person_follow"),
     "ppo_line": ("ppo", "line_trace"),  # LineTrace-v0's agent
 }
 #: The shipped agent, trained by ``follow-train --export policies/agents/ppo``.

@@ -352,10 +352,10 @@ def test_the_sim_monitor_offers_the_shipped_agents_its_simulation_can_run() -> N
         proc.send_signal(signal.SIGINT)
         proc.wait(timeout=10)
     assert modes == (
-        "follow-robot: monitor modes pn, mpn, gsmpn, ppo, ppo_ahead, ppo_law, manual, stop (not "
-        "offered: policy 'ppo_mecanum' was trained on the mecanum platform, acting [v_mps, "
-        "vy_mps, w_radps]; it cannot drive a platform acting [v_mps, w_radps] (train an agent "
-        "for that platform, or run it @mecanum))\n"
+        "follow-robot: monitor modes pn, mpn, gsmpn, ppo, ppo_ahead, ppo_law, ppo_ensemble, "
+        "manual, stop (not offered: policy 'ppo_mecanum' was trained on the mecanum platform, "
+        "acting [v_mps, vy_mps, w_radps]; it cannot drive a platform acting [v_mps, w_radps] "
+        "(train an agent for that platform, or run it @mecanum))\n"
     )
     # the simulated camera publishes the reading ahead that ppo_ahead reads
     assert state["mode"] == "stop"

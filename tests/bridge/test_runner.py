@@ -308,7 +308,7 @@ def test_the_robots_monitor_refuses_an_agent_its_camera_cannot_feed(
         proc.send_signal(signal.SIGINT)
         out, _ = proc.communicate(timeout=20)
     assert modes.startswith(
-        "follow-robot: monitor modes pn, mpn, gsmpn, ppo, ppo_ahead, ppo_law, manual"
+        "follow-robot: monitor modes pn, mpn, gsmpn, ppo, ppo_ahead, ppo_law, ppo_ensemble, manual"
     )
     assert "not offered: ppo_mecanum commands [v_mps, vy_mps, w_radps]" in modes
     assert ["ppo_ahead", "PPO (ahead)"] in seen[0]["modes"]

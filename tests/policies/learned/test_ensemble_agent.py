@@ -1,0 +1,70 @@
+"""The shipped agent that is two agents' mean action, ``ppo_ensemble``
+(policies/agents/ppo_ensemble): seeds 0 and 1 of train/configs/ppo_ahead_law_wide.yaml, the
+jump gate added to both after training."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from eval.rollout import run_batch, run_episode
+from policies import make_policy
+from policies.learned.ensemble import EnsemblePolicy, is_learned
+from policies.learned.ppo import AGENTS, PPOPolicy
+
+FOLDER = AGENTS / "ppo_ensemble"
+
+
+def test_it_is_built_by_name_as_the_mean_of_its_two_seeds() -> None:
+    agent = make_policy("ppo_ensemble")
+    assert isinstance(agent, EnsemblePolicy)
+    assert is_learned(agent)
+    assert agent.name == "ppo_ensemble"
+    assert agent.path == str(FOLDER)
+    assert agent.members == (str(FOLDER / "seed-0"), str(FOLDER / "seed-1"))
+    # it reads ahead as ppo_law does, so a robot that publishes the reading feeds both
+    assert agent.reads_ahead == make_policy("ppo_law").reads_ahead
+    for member in agent.members:
+        lone = PPOPolicy(member)
+        config = yaml.safe_load((Path(member) / "config.yaml").read_text(encoding="utf-8"))
+        assert config["hyperparams"]["policy_kwargs"]["net_arch"] == [128, 128]
+        steps = [type(s).__name__ for s in lone._agent.pipeline(1).steps]
+        assert steps == [
+            "RescaleAction",
+            "JumpGate",  # added after training (in_training: false)
+            "ObservationAge",
+            "LawHint",
+            "ScaleObservation",
+            "IncrementalAction",
+            "FrameStack",
+        ]
+
+
+def test_its_members_differ_so_the_mean_is_not_one_of_them() -> None:
+    obs = np.array([1.6, 80.0, 1.6], dtype=np.float32)  # a person 1.6 m ahead, 80 px right
+    ensemble = make_policy("ppo_ensemble")
+    members = [PPOPolicy(m) for m in ensemble.members]
+    seen = [np.asarray(m.act(obs), dtype=np.float64) for m in members]
+    assert not np.allclose(seen[0], seen[1], atol=1e-4)
+    assert np.isfinite(ensemble.act(obs)).all()
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("member", ["seed-0", "seed-1"])
+def test_each_member_acts_as_its_training_stack_did(acts_as_trained, member: str) -> None:
+    # A walk with no jump of the detection, so the gate (absent from the training stack)
+    # passes every reading.
+    acts_as_trained(FOLDER / member, PPOPolicy(FOLDER / member), 60, scenario="curve", seed=7)
+
+
+@pytest.mark.slow
+def test_batched_episodes_are_the_lone_ones() -> None:
+    batched = run_batch("ppo_ensemble", "crowd", [30000, 30001])
+    for episode in batched:
+        alone = run_episode("ppo_ensemble", "crowd", episode.seed)
+        np.testing.assert_array_equal(
+            episode.log["action_w_radps"].to_numpy(), alone.log["action_w_radps"].to_numpy()
+        )
