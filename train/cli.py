@@ -160,13 +160,14 @@ def _study(ns: argparse.Namespace) -> tuple[Args, tuple[int, ...], Backend] | No
         if given:
             raise UsageError(", ".join(f"--{k}" for k in given) + " applies to --seeds only")
         return None
-    for option in ("resume", "export", "force"):
-        if getattr(ns, option) is not None:
-            raise UsageError(
-                f"--{option} takes one run, not a study: run the same --seeds command again to "
-                "resume it; a seed's agent is the run folder OUT/seed-K (make_policy and "
-                "follow-eval load it by that path)"
-            )
+    if ns.resume is not None:
+        raise UsageError(
+            "--resume takes one run, not a study: run the same --seeds command again to "
+            "resume it; a seed's agent is the run folder OUT/seed-K (make_policy and "
+            "follow-eval load it by that path)"
+        )
+    if ns.force is not None and ns.export is None:
+        raise UsageError("--force applies to --export only (it lets --export write into a folder)")
     try:
         seeds = parse_seeds(given["seeds"])
     except ValueError as e:
@@ -343,6 +344,7 @@ def _main_study(args: Args, seeds: tuple[int, ...], backend: Backend, command: s
     print((study / SUMMARY_MD).read_text(encoding="utf-8"))
     print(
         f"Trained {len(seeds)} seeds. Wrote {study}/: seed-<k>/ (runs), {SEEDS_CSV}, {SUMMARY_MD}"
+        + (f"; exported the study to {args.export}/" if args.export else "")
     )
     return 0
 

@@ -25,6 +25,11 @@ an interrupted one from its newest checkpoint (:mod:`train.run`) and starts the 
 (so ``--seeds 0-9`` after ``--seeds 0-4`` trains five more); other settings pointed at the same
 folder are refused.
 
+``--export DIR`` exports the study as one agent once every seed is trained
+(:func:`export_study`): each seed's run into ``DIR/seed-<k>`` as one run's export
+(:mod:`train.export`) and ``DIR/ensemble.yaml`` listing them; it is checked before any seed
+trains (:func:`check_study_export`). ``policies/agents/ppo_ensemble`` is such a folder.
+
 On a cluster the run folders are written by the nodes that train them: give ``--runs`` /
 ``--out`` on a file system every node shares.
 """
@@ -43,13 +48,23 @@ import pandas as pd
 import yaml
 
 from execution import Backend, execute
-from follow_env.sim.atomic import atomic_write_text
+from follow_env.sim.atomic import atomic_folder, atomic_write_text
 from policies.learned.ensemble import ENSEMBLE
 from train import run as runs
 from train.algos import DEFAULT_ALGO, algo
+from train.export import ExportError, check_export, export_agent
 from train.ppo import MAX_SEED, Args, check_new_run, train
 
-__all__ = ["MAX_SEEDS", "SEED_STRIDE", "parse_seeds", "seed_args", "train_seeds", "write_ensemble"]
+__all__ = [
+    "MAX_SEEDS",
+    "SEED_STRIDE",
+    "check_study_export",
+    "export_study",
+    "parse_seeds",
+    "seed_args",
+    "train_seeds",
+    "write_ensemble",
+]
 
 #: Training seed k's lanes start this many seeds after seed k - 1's: more than any run's
 #: env steps plus lanes (a run of n_timesteps steps uses seed .. seed + n_timesteps + n_envs).
@@ -92,7 +107,12 @@ def parse_seeds(text: str) -> tuple[int, ...]:
 def seed_args(args: Args, k: int, study: Path) -> Args:
     """The options of training seed ``k``'s run in ``study`` (see the module docstring)."""
     return dataclasses.replace(
-        args, seed=args.seed + k * SEED_STRIDE, out=study / f"seed-{k}", progress=False
+        args,
+        seed=args.seed + k * SEED_STRIDE,
+        out=study / f"seed-{k}",
+        progress=False,
+        export=None,  # the study exports its seeds together, once all are trained
+        force=False,
     )
 
 
@@ -178,12 +198,75 @@ def train_seeds(
                 raise ValueError(f"--seeds: seed {k} is out of range with --seed {args.seed}")
             check_new_run(one)  # every option, before any seed trains
             units.append((k, one, f"{command} [seed {k}]"))
+    if args.export is not None:  # before any seed trains, as for one run's export
+        check_study_export(args.export, seeds, study, force=args.force)
     _claim(study, settings)
     rows = execute(_train_unit, units, backend, done=done)
     write_summary(study, rows)
     if len(rows) > 1:
         write_ensemble(study, [f"seed-{row['seed']}" for row in rows])
+    if args.export is not None:
+        export_study(study, seeds, args.export, force=args.force)
     return study
+
+
+def check_study_export(
+    dest: str | Path, seeds: Sequence[int], study: Path, *, force: bool = False
+) -> None:
+    """Check that :func:`export_study` loses nothing: each seed's folder ``dest/seed-<k>`` as
+    one run's export is checked (:func:`train.export.check_export`), and ``dest`` itself must
+    be new, empty, or a study's earlier export (it holds an ``ensemble.yaml``); ``--force``
+    writes into any folder, replacing only the export's files. One seed is exported as one
+    agent, into ``dest`` itself.
+
+    :raises ExportError: naming the path and what is in the way.
+    """
+    dest, study = Path(dest), Path(study)
+    if len(seeds) == 1:
+        check_export(dest, force=force, run=study / f"seed-{seeds[0]}")
+        return
+    option = f"--export {dest}"
+    target, folder = dest.resolve(), study.resolve()
+    if target == folder or target in folder.parents or folder in target.parents:
+        raise ExportError(f"{option}: is, holds or lies in the study folder {study}; give another")
+    if dest.is_dir() and any(dest.iterdir()) and not (dest / ENSEMBLE).is_file() and not force:
+        raise ExportError(
+            f"{option}: the folder is not empty and holds no study's export (no {ENSEMBLE}); "
+            "choose a new or empty folder, or give --force to write the seeds' folders and "
+            f"{ENSEMBLE} into it (nothing else is touched)"
+        )
+    for k in seeds:
+        check_export(dest / f"seed-{k}", force=force, run=study / f"seed-{k}")
+
+
+def export_study(
+    study: Path, seeds: Sequence[int], dest: str | Path, *, force: bool = False
+) -> Path:
+    """Copy the trained ``seeds`` of ``study`` into ``dest`` as one agent: each seed's run
+    exported into ``dest/seed-<k>`` (:func:`train.export.export_agent`) and an
+    ``ensemble.yaml`` listing them, so ``make_policy(str(dest))`` is the mean of their actions.
+    A new ``dest`` appears whole or not at all; in an earlier export each seed's files are
+    replaced as one run's export replaces them, and the ensemble file last. One seed is
+    exported as one agent, into ``dest`` itself.
+
+    :raises ExportError: as :func:`check_study_export` (nothing is written then).
+    :returns: ``dest``.
+    """
+    dest = Path(dest)
+    check_study_export(dest, seeds, study, force=force)
+    if len(seeds) == 1:
+        return export_agent(study / f"seed-{seeds[0]}", dest, force=force)
+    members = [f"seed-{k}" for k in seeds]
+    if not dest.exists() or not any(dest.iterdir()):
+        with atomic_folder(dest) as tmp:
+            for member in members:
+                export_agent(study / member, tmp / member)
+            write_ensemble(tmp, members)
+        return dest
+    for member in members:
+        export_agent(study / member, dest / member, force=force)
+    write_ensemble(dest, members)
+    return dest
 
 
 def write_ensemble(study: Path, members: Sequence[str]) -> Path:

@@ -146,3 +146,74 @@ def test_ray_trains_the_same_agents_as_one_after_another(
     local = pd.read_csv(study.parent / "first-seeds.csv").set_index("seed")["heldout_return"]
     ray = pd.read_csv(out / "seeds.csv").set_index("seed")["heldout_return"]
     assert ray.tolist() == local.tolist()
+
+
+def test_a_study_is_exported_as_one_agent_and_again_over_its_export(
+    study: Path, tmp_path: Path
+) -> None:
+    dest = tmp_path / "agents" / "pair"
+    # the seeds are finished, so the same command trains nothing and exports them
+    assert main([*TINY, "--seeds", "0-1", "--out", str(study), "--export", str(dest)]) == 0
+    assert yaml.safe_load((dest / "ensemble.yaml").read_text()) == {"members": ["seed-0", "seed-1"]}
+    for k in (0, 1):
+        exported, run = dest / f"seed-{k}", study / f"seed-{k}"
+        assert (exported / "model.zip").read_bytes() == (run / "model.zip").read_bytes()
+        assert (exported / "follow-train-export.json").is_file()
+    assert sorted(p.name for p in dest.parent.iterdir()) == ["pair"]  # no temporary left
+    pair = make_policy(str(dest))
+    assert isinstance(pair, EnsemblePolicy)
+    obs = np.array([1.3, 40.0], np.float32)
+    alone = [PPOPolicy(dest / f"seed-{k}").act(obs) for k in (0, 1)]
+    np.testing.assert_allclose(pair.act(obs), (alone[0] + alone[1]) / 2, rtol=0, atol=1e-6)
+    # an earlier export is written over, member by member
+    (dest / "notes.txt").write_text("kept")
+    assert main([*TINY, "--seeds", "0-1", "--out", str(study), "--export", str(dest)]) == 0
+    assert (dest / "notes.txt").read_text() == "kept"
+    assert isinstance(make_policy(str(dest)), EnsemblePolicy)
+
+
+def test_one_seed_is_exported_as_one_agent(study: Path, tmp_path: Path) -> None:
+    dest = tmp_path / "one"
+    assert main([*TINY, "--seeds", "0", "--out", str(study), "--export", str(dest)]) == 0
+    assert not (dest / "ensemble.yaml").exists()
+    assert (dest / "model.zip").read_bytes() == (study / "seed-0" / "model.zip").read_bytes()
+
+
+@pytest.mark.parametrize(
+    ("where", "message"),
+    [
+        ("other", "holds no study's export (no ensemble.yaml)"),
+        ("inside", "lies in the study folder"),
+    ],
+)
+def test_a_study_export_that_would_lose_a_file_is_refused_before_training(
+    where: str, message: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "study"
+    dest = out / "export" if where == "inside" else tmp_path / "other"
+    if where == "other":
+        dest.mkdir()
+        (dest / "mine.txt").write_text("mine")
+    assert main([*TINY, "--seeds", "0-1", "--out", str(out), "--export", str(dest)]) == 2
+    err = capsys.readouterr().err
+    assert message in err
+    assert err.count("\n") == 1
+    assert not out.exists()  # nothing trained
+    if where == "other":
+        assert sorted(p.name for p in dest.iterdir()) == ["mine.txt"]
+
+
+def test_force_without_export_is_refused(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main([*TINY, "--seeds", "0-1", "--out", str(tmp_path / "s"), "--force"]) == 2
+    assert "--force applies to --export only" in capsys.readouterr().err
+    assert not (tmp_path / "s").exists()
+
+
+def test_a_new_study_trains_then_exports_its_seeds_together(tmp_path: Path) -> None:
+    out, dest = tmp_path / "study", tmp_path / "pair"
+    assert main([*TINY, "--seeds", "0-1", "--out", str(out), "--export", str(dest)]) == 0
+    # the seeds' runs export nothing of their own: the study's export is the whole of dest
+    assert sorted(p.name for p in dest.iterdir()) == ["ensemble.yaml", "seed-0", "seed-1"]
+    assert isinstance(make_policy(str(dest)), EnsemblePolicy)
