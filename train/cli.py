@@ -80,7 +80,8 @@ def build_parser() -> argparse.ArgumentParser:
         type=Path,
         metavar="DIR",
         help="also copy the agent into DIR: a new or empty folder, or one an earlier export "
-        "wrote (its files are replaced, nothing else)",
+        "wrote (its files are replaced, nothing else); with --seeds, the study as one agent "
+        "(DIR/seed-<k> and DIR/ensemble.yaml)",
     )
     p.add_argument(
         "--force",
