@@ -206,7 +206,10 @@ def train_seeds(
     if len(rows) > 1:
         write_ensemble(study, [f"seed-{row['seed']}" for row in rows])
     if args.export is not None:
-        export_study(study, seeds, args.export, force=args.force)
+        try:
+            export_study(study, seeds, args.export, force=args.force)
+        except ValueError as e:  # the folder changed during training: the study stays whole
+            raise ValueError(f"{e} (training finished: the study is complete in {study})") from None
     return study
 
 

@@ -217,3 +217,26 @@ def test_a_new_study_trains_then_exports_its_seeds_together(tmp_path: Path) -> N
     # the seeds' runs export nothing of their own: the study's export is the whole of dest
     assert sorted(p.name for p in dest.iterdir()) == ["ensemble.yaml", "seed-0", "seed-1"]
     assert isinstance(make_policy(str(dest)), EnsemblePolicy)
+
+
+def test_an_export_folder_filled_during_training_keeps_the_study(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import train.seeds
+
+    out, dest = tmp_path / "study", tmp_path / "pair"
+    trained = train.seeds.execute
+
+    def and_then_a_file_in_the_way(*args, **kwargs):
+        rows = trained(*args, **kwargs)
+        dest.mkdir()
+        (dest / "mine.txt").write_text("mine")
+        return rows
+
+    monkeypatch.setattr(train.seeds, "execute", and_then_a_file_in_the_way)
+    assert main([*TINY, "--seeds", "0-1", "--out", str(out), "--export", str(dest)]) == 2
+    err = capsys.readouterr().err
+    assert f"training finished: the study is complete in {out}" in err
+    assert err.count("\n") == 1
+    assert sorted(p.name for p in dest.iterdir()) == ["mine.txt"]
+    assert isinstance(make_policy(str(out)), EnsemblePolicy)
