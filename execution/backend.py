@@ -323,8 +323,11 @@ def _pool_pass(
                 i = in_flight.pop(future)
                 result = future.result()
                 del pending[i]
-                submit()
                 yield i, result
+                # After the yield: a pool broken meanwhile (a worker died) raises here, and the
+                # unit just finished must already have been handed out, or it would be neither
+                # pending for the retry nor in the results.
+                submit()
         finished_all = True
     finally:
         if finished_all:

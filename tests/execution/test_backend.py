@@ -244,3 +244,39 @@ def test_a_malformed_cluster_address_is_refused() -> None:
     with pytest.raises(BackendUnavailableError, match="not a Ray cluster address"):
         _check_reachable("headnode")
     _check_reachable("auto")  # Ray's own word: nothing to try
+
+
+def test_a_unit_finished_as_the_pool_breaks_is_neither_lost_nor_run_twice(monkeypatch) -> None:
+    """The pool breaks (a worker died) between a unit's result and the next submission: the
+    finished unit is handed out once, and the retry runs only the others."""
+    from concurrent.futures import Future
+    from concurrent.futures.process import BrokenProcessPool
+
+    import execution.backend as backend_module
+
+    class BreaksOnSubmit:  # runs units at once; its 5th submission finds the pool broken
+        submitted = 0
+
+        def submit(self, fn, unit):
+            BreaksOnSubmit.submitted += 1
+            if BreaksOnSubmit.submitted == 5:
+                raise BrokenProcessPool("a worker died")
+            future: Future = Future()
+            future.set_result(fn(unit))
+            return future
+
+        def shutdown(self, wait: bool = True, cancel_futures: bool = False) -> None:
+            pass
+
+    monkeypatch.setattr(backend_module, "_pool", lambda workers, cpus: BreaksOnSubmit())
+    monkeypatch.setattr(backend_module, "_keep", lambda key, pool: None)
+    monkeypatch.setattr(backend_module, "_drop", lambda key, pool: None)
+    handed: list[int] = []
+    got = execute(
+        operator.neg,
+        list(range(10)),
+        Backend("local", workers=2, max_retries=1),
+        on_result=lambda i, result: handed.append(i),
+    )
+    assert got == [-u for u in range(10)]
+    assert sorted(handed) == list(range(10))  # each unit once
