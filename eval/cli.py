@@ -8,7 +8,7 @@
     follow-eval run --task line_trace --policies coordinate,pid --tracks course,random ...
     follow-eval metrics LOG.csv [LOG.csv | FOLDER ...] [--out DIR] [--workers auto|N]
     follow-eval aggregate RUN... [--laws pn,mpn,gsmpn] [--scenarios ...] [--out DIR]
-    follow-eval dominance RUN --learner ppo[,...] [--laws ...]
+    follow-eval dominance RUN... --learner ppo[,...] [--laws ...] [--out DIR]
 
 (also ``python -m eval ...``). ``run`` writes into its output folder::
 
@@ -44,7 +44,6 @@ import time
 from collections.abc import Sequence
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any
 
 import follow_env
 from eval.cli_base import (  # noqa: F401  (MAX_EPISODES, MAX_SEED: the limits, read here)
@@ -61,6 +60,7 @@ from eval.cli_base import (  # noqa: F401  (MAX_EPISODES, MAX_SEED: the limits, 
     _positive,
     _workers,
 )
+from eval.cli_dominance import cmd_dominance
 from eval.cli_run import _check_grid, cmd_run, policy_label, refuse_aliases, run_backend
 from eval.steplog import StepLogError, step_log_files
 from execution import BACKENDS, BackendUnavailableError
@@ -244,9 +244,17 @@ def build_parser() -> argparse.ArgumentParser:
         help="a learner against the best law per scenario and criterion (eval.dominance)",
         description="Read a follow-eval run folder's episodes.csv and compare each learner with "
         "the best of the laws on each scenario and criterion, paired over seeds; writes "
-        "dominance-<learner>.md|csv into the folder.",
+        "dominance-<learner>.md|csv into the folder. Several runs on disjoint seeds, made "
+        "alike, are pooled into one table (a run holds at most "
+        f"{MAX_EPISODES:,} episodes) and written into --out.",
     )
-    dom.add_argument("run", type=Path, help="a follow-eval run output folder")
+    dom.add_argument(
+        "runs",
+        type=Path,
+        nargs="+",
+        metavar="RUN",
+        help="a follow-eval run output folder; several are pooled",
+    )
     dom.add_argument(
         "--learner",
         required=True,
@@ -259,6 +267,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="the laws' labels (default: every other policy in the run under the learner's "
         "sensing, the learners named left out: with --ideal-baseline, ppo+ideal meets the "
         "+ideal laws)",
+    )
+    dom.add_argument(
+        "--out",
+        type=Path,
+        default=None,
+        help="a new folder for the tables and the pooled episodes (needed with several runs; "
+        "default: the run's folder)",
     )
     return parser
 
@@ -297,113 +312,6 @@ def cmd_aggregate(args: argparse.Namespace) -> int:
     files = "aggregate.csv|md, improvement.csv, splits.csv, profiles.csv, scores.csv, plots/"
     print(f"Wrote {out}/: {files}")
     return 0
-
-
-def cmd_dominance(args: argparse.Namespace) -> int:
-    """``follow-eval dominance``: see :mod:`eval.dominance`."""
-    from eval.dominance import (
-        CRITERIA,
-        ENDINGS,
-        FINISHED,
-        calibration,
-        default_laws,
-        dominance,
-        dominance_markdown,
-        finished_markdown,
-        finished_view,
-    )
-    from eval.report import safe_name
-    from follow_env.sim.atomic import atomic_write_text
-
-    metrics = [*(c.metric for c in CRITERIA), *ENDINGS, FINISHED]
-    table = _episode_table(args.run / "episodes.csv", metrics)
-    learners = _names(args.learner, "learner")
-    given = _names(args.laws, "laws") if args.laws is not None else None
-    if given is not None and (both := [name for name in learners if name in given]):
-        raise UsageError(f"--learner and --laws both name {', '.join(both)}: give each once")
-    stems: dict[str, str] = {}
-    for learner in learners:  # "pn:x" and "pn_x" would write the same files
-        if (first := stems.setdefault(safe_name(learner), learner)) != learner:
-            raise UsageError(
-                f"--learner: {first!r} and {learner!r} would both write "
-                f"dominance-{safe_name(learner)}.md: judge them in two commands"
-            )
-    # Every learner is judged before anything is written, so a bad label writes nothing.
-    judged = []
-    for learner in learners:
-        laws = given or [p for p in default_laws(table, learner) if p not in learners]
-        judged.append((learner, laws, dominance(table, learner, laws)))
-    calibrated: dict[tuple[str, ...], Any] = {}
-    for learner, laws, frame in judged:
-        if tuple(laws) not in calibrated:  # the laws against each other: once per set
-            calibrated[tuple(laws)] = calibration(table, laws) if len(laws) > 1 else None
-        report = dominance_markdown(frame, learner, calibrated[tuple(laws)])
-        stem = args.run / f"dominance-{safe_name(learner)}"
-        written = f"{stem}.md|csv"
-        if FINISHED in table:  # episode tables written before the metric existed have none
-            view = finished_view(table, frame, learner)
-            report += finished_markdown(view, learner)
-            atomic_write_text(f"{stem}-finished.csv", view.to_csv(index=False))
-            written += f", {stem.name}-finished.csv"
-        atomic_write_text(f"{stem}.csv", frame.to_csv(index=False))
-        atomic_write_text(f"{stem}.md", report)
-        print(report, end="")
-        print(f"Wrote {written}")
-    if len(judged) > 1:
-        print(_learners_table(judged))
-    return 0
-
-
-def _learners_table(judged: list[tuple[str, list[str], Any]]) -> str:
-    """Several learners' verdicts side by side, a row each (``follow-eval dominance``)."""
-    from eval.dominance import dominates, tally
-
-    rows = [
-        "",
-        "| learner | dominates | requirements met | significantly better | significantly worse |",
-        "|---|---|---:|---:|---:|",
-    ]
-    for learner, _, frame in judged:
-        t = tally(frame)
-        rows.append(
-            f"| {learner} | {'yes' if dominates(frame) else 'no'} | {t['met']} of {len(frame)} "
-            f"| {t['better']} | {t['worse']} |"
-        )
-    return "\n".join(rows)
-
-
-def _episode_table(path: Path, metrics: list[str]) -> Any:
-    """``follow-eval run``'s ``episodes.csv`` at ``path``, checked: episodes in it, integer
-    seeds, and a number (or nothing) in each cell of ``metrics``' columns.
-
-    :raises UsageError: naming the file, and the line and column of a bad cell.
-    """
-    import pandas as pd
-
-    if not path.is_file():
-        raise UsageError(f"{path}: no such file (give a follow-eval run output folder)")
-    try:
-        table = pd.read_csv(path)
-    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as e:
-        raise UsageError(f"{path}: not an episode table ({e})") from None
-    if not {"policy", "seed"} <= set(table.columns):
-        raise UsageError(f"{path}: not an episode table (no policy and seed columns)")
-    if table.empty:
-        raise UsageError(f"{path}: holds no episodes (a header only)")
-    for column in ["seed", *(m for m in metrics if m in table.columns)]:
-        values = pd.to_numeric(table[column], errors="coerce")
-        bad = values.isna() & table[column].notna()
-        if column == "seed":  # a seed pairs the episodes: it must be there, and whole
-            bad |= values.isna() | (values % 1 != 0)
-        if bad.any():
-            row = int(bad.to_numpy().argmax())  # line 1 is the header
-            what = "an integer seed" if column == "seed" else "a number"
-            raise UsageError(
-                f"{path}: line {row + 2}, column {column}: {str(table[column].iloc[row])!r} is not "
-                + what
-            )
-        table[column] = values.astype(int) if column == "seed" else values
-    return table
 
 
 def cmd_thesis(args: argparse.Namespace) -> int:

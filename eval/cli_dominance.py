@@ -1,0 +1,280 @@
+"""``follow-eval dominance``: a learner against the best law, from one run folder or several
+pooled (see :mod:`eval.cli` and :mod:`eval.dominance`).
+
+A run holds at most :data:`~eval.cli_base.MAX_EPISODES` episodes, and the strict reading of
+"at least as good" needs many: the best of six laws on a line is the best of six noisy means,
+so with 100 episodes a scenario a learner that ties the laws misses lines by chance. Several
+runs on disjoint seeds are therefore pooled into one table, as if one run had held them all,
+after checking that they can be: each run made alike (task, configuration, ideal baseline, and
+the same gains or model under each label, from ``meta.json``), each holding the same scenarios
+and every learner and law judged, and no episode (policy, scenario, seed) in two of them. The
+pooled table keeps a ``run`` column naming each episode's run.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+from typing import Any
+
+from eval.cli_base import UsageError, _names
+
+__all__ = ["check_covered", "cmd_dominance", "episode_table", "pooled_table"]
+
+#: What ``meta.json`` records that must agree for two runs to be pooled.
+ALIKE = ("task", "config", "ideal_baseline")
+
+
+def cmd_dominance(args: argparse.Namespace) -> int:
+    """``follow-eval dominance``: see :mod:`eval.dominance`."""
+    from eval.dominance import (
+        CRITERIA,
+        ENDINGS,
+        FINISHED,
+        calibration,
+        default_laws,
+        dominance,
+        dominance_markdown,
+        finished_markdown,
+        finished_view,
+    )
+    from eval.report import safe_name
+    from follow_env.sim.atomic import atomic_folder, atomic_write_text, check_new_folder
+
+    runs: list[Path] = args.runs
+    if len(runs) > 1 and args.out is None:
+        raise UsageError(
+            f"{len(runs)} runs are pooled: give --out, a new folder for the pooled tables"
+        )
+    if args.out is not None:
+        check_new_folder(args.out)
+    metrics = [*(c.metric for c in CRITERIA), *ENDINGS, FINISHED]
+    table = pooled_table(runs, metrics)
+    learners = _names(args.learner, "learner")
+    given = _names(args.laws, "laws") if args.laws is not None else None
+    if given is not None and (both := [name for name in learners if name in given]):
+        raise UsageError(f"--learner and --laws both name {', '.join(both)}: give each once")
+    stems: dict[str, str] = {}
+    for learner in learners:  # "pn:x" and "pn_x" would write the same files
+        if (first := stems.setdefault(safe_name(learner), learner)) != learner:
+            raise UsageError(
+                f"--learner: {first!r} and {learner!r} would both write "
+                f"dominance-{safe_name(learner)}.md: judge them in two commands"
+            )
+    # Every learner is judged before anything is written, so a bad label writes nothing.
+    judged = []
+    for learner in learners:
+        laws = given or [p for p in default_laws(table, learner) if p not in learners]
+        check_covered(table, [learner, *laws])
+        judged.append((learner, laws, dominance(table, learner, laws)))
+    pooled = _pooled_note(runs, table) if len(runs) > 1 else ""
+    calibrated: dict[tuple[str, ...], Any] = {}
+    files: dict[str, str] = {}  # file name -> text, written together at the end
+    written: list[str] = []
+    for learner, laws, frame in judged:
+        if tuple(laws) not in calibrated:  # the laws against each other: once per set
+            calibrated[tuple(laws)] = calibration(table, laws) if len(laws) > 1 else None
+        report = pooled + dominance_markdown(frame, learner, calibrated[tuple(laws)])
+        stem = f"dominance-{safe_name(learner)}"
+        written.append(f"{stem}.md|csv")
+        if FINISHED in table:  # episode tables written before the metric existed have none
+            view = finished_view(table, frame, learner)
+            report += finished_markdown(view, learner)
+            files[f"{stem}-finished.csv"] = view.to_csv(index=False)
+            written.append(f"{stem}-finished.csv")
+        files[f"{stem}.csv"] = frame.to_csv(index=False)
+        files[f"{stem}.md"] = report
+        print(report)
+    if args.out is None:  # one run: its folder takes the tables, each file atomically
+        for name, text in files.items():
+            atomic_write_text(runs[0] / name, text)
+    else:  # a new folder appears whole, with the pooled episodes the tables were read from
+        with atomic_folder(args.out) as tmp:
+            for name, text in files.items():
+                atomic_write_text(tmp / name, text)
+            atomic_write_text(tmp / "episodes.csv", table.to_csv(index=False))
+            written.append("episodes.csv (the pooled episodes)")
+    print(f"Wrote {args.out if args.out is not None else runs[0]}/: {', '.join(written)}")
+    if len(judged) > 1:
+        print(_learners_table(judged))
+    return 0
+
+
+def pooled_table(runs: list[Path], metrics: list[str]) -> Any:
+    """The episode tables of ``runs`` as one (one run: its own table, read and checked).
+
+    :raises UsageError: naming the run and what keeps it out: a folder given twice, a missing
+        or unreadable table or ``meta.json``, runs made differently or of different scenarios,
+        or an episode in two runs (:func:`check_covered` checks the policies judged).
+    """
+    import pandas as pd
+
+    from eval.stats import variant_column
+
+    resolved = [run.resolve() for run in runs]
+    for k, run in enumerate(resolved):
+        if run in resolved[:k]:
+            raise UsageError(f"{runs[k]}: given twice; give each run once")
+    tables = [episode_table(run / "episodes.csv", metrics) for run in runs]
+    if len(runs) == 1:
+        return _once(tables[0], runs[0] / "episodes.csv")
+    metas = [_meta(run) for run in runs]
+    first, meta0, table0 = runs[0], metas[0], tables[0]
+    variant = variant_column(table0)
+    for run, meta, table in zip(runs[1:], metas[1:], tables[1:], strict=True):
+        for key in ALIKE:
+            if meta.get(key) != meta0.get(key):
+                raise UsageError(
+                    f"{run}: its {key} is {meta.get(key)!r} and {first}'s {meta0.get(key)!r}: "
+                    "pool runs made alike"
+                )
+        ours, theirs = meta0.get("policies", {}), meta.get("policies", {})
+        for label in ours.keys() & theirs.keys():
+            if ours[label] != theirs[label]:
+                raise UsageError(
+                    f"{run}: {label} is {theirs[label]} there and {ours[label]} in {first}: "
+                    "pool runs of the same controllers"
+                )
+        if variant not in table or set(table[variant]) != set(table0[variant]):
+            mine = sorted(set(table[variant])) if variant in table else []
+            raise UsageError(
+                f"{run}: holds the {variant}s {mine} and {first} "
+                f"{sorted(set(table0[variant]))}: pool runs of the same {variant}s"
+            )
+    for run, table in zip(runs, tables, strict=True):
+        table.insert(0, "run", str(run))
+    pooled = pd.concat(tables, ignore_index=True)
+    key = ["policy", variant, "seed"]
+    twice = pooled[pooled.duplicated(key, keep=False)]
+    if not twice.empty:
+        row = twice.iloc[0]
+        where = sorted(set(twice[(twice[key] == row[key]).all(axis=1)]["run"]))
+        raise UsageError(
+            f"seed {row['seed']} of {row[variant]} for {row['policy']} is in "
+            f"{' and '.join(where)}: pool runs of disjoint seeds"
+        )
+    return pooled
+
+
+def check_covered(table: Any, policies: list[str]) -> None:
+    """Refuse a pooled ``table`` in which a run lacks one of ``policies`` on a scenario: each
+    policy judged must have met the same persons, so every run pooled must hold it.
+
+    :raises UsageError: naming the run, the policy and the scenario.
+    """
+    from eval.stats import variant_column
+
+    if "run" not in table:  # one run: nothing pooled
+        return
+    variant = variant_column(table)
+    held = set(table.groupby(["run", "policy", variant]).groups)
+    present = set(table["policy"])  # a label in no run is the judge's to name
+    for run in dict.fromkeys(table["run"]):
+        for policy in (p for p in policies if p in present):
+            for scenario in dict.fromkeys(table[variant]):
+                if (run, policy, scenario) not in held:
+                    raise UsageError(
+                        f"{run}: holds no episode of {policy} on {scenario}: every run pooled "
+                        "must hold each learner and law judged"
+                    )
+
+
+def episode_table(path: Path, metrics: list[str]) -> Any:
+    """``follow-eval run``'s ``episodes.csv`` at ``path``, checked: episodes in it, integer
+    seeds, and a number (or nothing) in each cell of ``metrics``' columns.
+
+    :raises UsageError: naming the file, and the line and column of a bad cell.
+    """
+    import pandas as pd
+
+    if not path.is_file():
+        raise UsageError(f"{path}: no such file (give a follow-eval run output folder)")
+    try:
+        table = pd.read_csv(path)
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as e:
+        raise UsageError(f"{path}: not an episode table ({e})") from None
+    if not {"policy", "seed"} <= set(table.columns):
+        raise UsageError(f"{path}: not an episode table (no policy and seed columns)")
+    if table.empty:
+        raise UsageError(f"{path}: holds no episodes (a header only)")
+    for column in ["seed", *(m for m in metrics if m in table.columns)]:
+        values = pd.to_numeric(table[column], errors="coerce")
+        bad = values.isna() & table[column].notna()
+        if column == "seed":  # a seed pairs the episodes: it must be there, and whole
+            bad |= values.isna() | (values % 1 != 0)
+        if bad.any():
+            row = int(bad.to_numpy().argmax())  # line 1 is the header
+            what = "an integer seed" if column == "seed" else "a number"
+            raise UsageError(
+                f"{path}: line {row + 2}, column {column}: {str(table[column].iloc[row])!r} is not "
+                + what
+            )
+        table[column] = values.astype(int) if column == "seed" else values
+    return table
+
+
+def _once(table: Any, path: Path) -> Any:
+    """``table`` if it holds each (policy, scenario, seed) once: a repeated episode would be
+    paired with itself and every other copy."""
+    from eval.stats import variant_column
+
+    key = ["policy", variant_column(table), "seed"]
+    if not set(key) <= set(table.columns):
+        return table  # a table without scenarios is refused by the judge, which names it
+    twice = table.duplicated(key)
+    if twice.any():
+        row = int(twice.to_numpy().argmax())
+        r = table.iloc[row]
+        raise UsageError(
+            f"{path}: line {row + 2}: seed {r['seed']} of {r[key[1]]} for {r['policy']} "
+            "is there twice"
+        )
+    return table
+
+
+def _meta(run: Path) -> dict[str, Any]:
+    """A run's ``meta.json``, which pooling reads to check that the runs were made alike."""
+    path = run / "meta.json"
+    if not path.is_file():
+        raise UsageError(
+            f"{path}: no such file; pooling reads it to check that the runs were made alike "
+            "(follow-eval run writes it)"
+        )
+    try:
+        meta = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
+        raise UsageError(f"{path}: not a run's meta.json ({e})") from None
+    if not isinstance(meta, dict):
+        raise UsageError(f"{path}: not a run's meta.json (not a JSON object)")
+    return meta
+
+
+def _pooled_note(runs: list[Path], table: Any) -> str:
+    """The line that opens a pooled report: which runs, how many episodes a cell."""
+    from eval.stats import variant_column
+
+    cells = table.groupby(["policy", variant_column(table)]).size()
+    per = f"{cells.min():,}" if cells.min() == cells.max() else f"{cells.min():,}-{cells.max():,}"
+    return (
+        f"Pooled from {len(runs)} runs ({', '.join(str(r) for r in runs)}): {per} episodes "
+        "per policy and scenario.\n\n"
+    )
+
+
+def _learners_table(judged: list[tuple[str, list[str], Any]]) -> str:
+    """Several learners' verdicts side by side, a row each (``follow-eval dominance``)."""
+    from eval.dominance import dominates, tally
+
+    rows = [
+        "",
+        "| learner | dominates | requirements met | significantly better | significantly worse |",
+        "|---|---|---:|---:|---:|",
+    ]
+    for learner, _, frame in judged:
+        t = tally(frame)
+        rows.append(
+            f"| {learner} | {'yes' if dominates(frame) else 'no'} | {t['met']} of {len(frame)} "
+            f"| {t['better']} | {t['worse']} |"
+        )
+    return "\n".join(rows)

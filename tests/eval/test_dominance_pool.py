@@ -1,0 +1,191 @@
+"""follow-eval dominance RUN RUN... --out DIR: runs on disjoint seeds pooled into one table."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from eval.cli import main
+from eval.dominance import CRITERIA, dominance
+
+METRICS = [c.metric for c in CRITERIA]
+POLICIES = ("ppo", "pn:tuned", "gsmpn:tuned")
+META = {
+    "task": "person_follow",
+    "config": "thesis",
+    "ideal_baseline": False,
+    "policies": {"ppo": "PPOPolicy(name='ppo')", "pn:tuned": "PNParams(kv=5)"},
+}
+
+
+def _run(folder: Path, first_seed: int, n: int, *, meta: dict | None = None) -> Path:
+    """A run folder as follow-eval run leaves it (the parts dominance reads): every policy on
+    two scenarios, seeds first_seed..first_seed+n-1, with noisy metrics."""
+    rng = np.random.default_rng(first_seed)
+    rows = []
+    for policy in POLICIES:
+        for scenario in ("straight", "crowd"):
+            for seed in range(first_seed, first_seed + n):
+                row = {"policy": policy, "scenario": scenario, "seed": seed}
+                row.update({m: float(rng.normal(50.0, 5.0)) for m in METRICS})
+                rows.append(row)
+    folder.mkdir()
+    pd.DataFrame(rows).to_csv(folder / "episodes.csv", index=False)
+    (folder / "meta.json").write_text(json.dumps(META if meta is None else meta))
+    return folder
+
+
+def _listing(*folders: Path) -> dict[Path, list[str]]:
+    return {f: sorted(p.name for p in f.iterdir()) for f in folders}
+
+
+def test_runs_on_disjoint_seeds_are_judged_as_one_table(tmp_path: Path, capsys) -> None:
+    a, b = _run(tmp_path / "a", 0, 6), _run(tmp_path / "b", 100, 9)
+    before = _listing(a, b)
+    out = tmp_path / "pooled"
+    assert main(["dominance", str(a), str(b), "--learner", "ppo", "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "Pooled from 2 runs" in printed
+    assert "15 episodes per policy and scenario" in printed
+    both = pd.concat([pd.read_csv(a / "episodes.csv"), pd.read_csv(b / "episodes.csv")])
+    expected = dominance(both.reset_index(drop=True), "ppo", ["pn:tuned", "gsmpn:tuned"])
+    written = pd.read_csv(out / "dominance-ppo.csv")
+    assert written["n"].tolist() == [15] * len(written)  # every line paired over both runs
+    assert np.allclose(written["diff"], expected["diff"])
+    assert written["verdict"].tolist() == expected["verdict"].tolist()
+    pooled = pd.read_csv(out / "episodes.csv")
+    assert len(pooled) == len(both)
+    assert sorted(p.name for p in out.iterdir()) == [
+        "dominance-ppo.csv",
+        "dominance-ppo.md",
+        "episodes.csv",
+    ]
+    assert (out / "dominance-ppo.md").read_text().startswith("Pooled from 2 runs")
+    assert _listing(a, b) == before  # the runs themselves are left as they were
+
+
+def test_one_run_may_write_into_a_new_folder_too(tmp_path: Path) -> None:
+    a = _run(tmp_path / "a", 0, 5)
+    out = tmp_path / "judged"
+    assert main(["dominance", str(a), "--learner", "ppo", "--out", str(out)]) == 0
+    assert (out / "dominance-ppo.md").is_file()
+    assert _listing(a) == {a: ["episodes.csv", "meta.json"]}
+
+
+def _changed(key: str, value: object) -> dict:
+    meta = json.loads(json.dumps(META))
+    meta[key] = value
+    return meta
+
+
+@pytest.mark.parametrize(
+    ("meta", "message"),
+    [
+        (_changed("config", {"perception": {"association": "tracker"}}), "its config is"),
+        (_changed("ideal_baseline", True), "its ideal_baseline is True"),
+        (
+            _changed("policies", {"pn:tuned": "PNParams(kv=6)"}),
+            "pn:tuned is PNParams(kv=6) there and PNParams(kv=5) in",
+        ),
+    ],
+)
+def test_runs_made_differently_are_not_pooled(
+    tmp_path: Path, capsys, meta: dict, message: str
+) -> None:
+    a, b = _run(tmp_path / "a", 0, 4), _run(tmp_path / "b", 10, 4, meta=meta)
+    out = tmp_path / "pooled"
+    assert main(["dominance", str(a), str(b), "--learner", "ppo", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1
+    assert f"error: {b}: " in err
+    assert message in err
+    assert not out.exists()
+
+
+def test_an_episode_in_two_runs_is_refused_naming_both(tmp_path: Path, capsys) -> None:
+    a, b = _run(tmp_path / "a", 0, 4), _run(tmp_path / "b", 3, 4)  # seed 3 in both
+    out = tmp_path / "pooled"
+    assert main(["dominance", str(a), str(b), "--learner", "ppo", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert f"seed 3 of straight for ppo is in {a} and {b}: pool runs of disjoint seeds" in err
+    assert not out.exists()
+
+
+def test_every_run_pooled_must_hold_each_policy_judged(tmp_path: Path, capsys) -> None:
+    a, b = _run(tmp_path / "a", 0, 4), _run(tmp_path / "b", 10, 4)
+    table = pd.read_csv(b / "episodes.csv")
+    table = table[(table["policy"] != "gsmpn:tuned") | (table["scenario"] != "crowd")]
+    table.to_csv(b / "episodes.csv", index=False)
+    out = tmp_path / "pooled"
+    assert main(["dominance", str(a), str(b), "--learner", "ppo", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert f"{b}: holds no episode of gsmpn:tuned on crowd: every run pooled must hold" in err
+    assert not out.exists()
+    # a policy that is not judged may be missing: here gsmpn:tuned is left out of the laws
+    argv = [str(a), str(b), "--learner", "ppo", "--laws", "pn:tuned", "--out", str(out)]
+    assert main(["dominance", *argv]) == 0
+    assert set(pd.read_csv(out / "dominance-ppo.csv")["n"]) == {8}
+    pooled = pd.read_csv(out / "episodes.csv")
+    assert sorted(set(pooled["run"])) == sorted([str(a), str(b)])  # where each episode came from
+
+
+def test_runs_of_different_scenarios_are_refused(tmp_path: Path, capsys) -> None:
+    a, b = _run(tmp_path / "a", 0, 4), _run(tmp_path / "b", 10, 4)
+    table = pd.read_csv(b / "episodes.csv")
+    table[table["scenario"] != "crowd"].to_csv(b / "episodes.csv", index=False)
+    out = tmp_path / "pooled"
+    assert main(["dominance", str(a), str(b), "--learner", "ppo", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert f"{b}: holds the scenarios ['straight'] and {a} ['crowd', 'straight']" in err
+    assert not out.exists()
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["{a}", "{b}"], "2 runs are pooled: give --out"),
+        (["{a}", "{a}/", "--out", "{out}"], "given twice"),
+        (["{a}", "{bare}", "--out", "{out}"], "meta.json: no such file; pooling reads it"),
+        (["{a}", "{b}", "--out", "{a}"], "already exists and is not an empty folder"),
+    ],
+)
+def test_a_bad_pool_writes_nothing(tmp_path: Path, capsys, args: list, message: str) -> None:
+    a, b = _run(tmp_path / "a", 0, 4), _run(tmp_path / "b", 10, 4)
+    bare = _run(tmp_path / "bare", 20, 4)
+    (bare / "meta.json").unlink()
+    before = _listing(a, b, bare)
+    names = {"a": a, "b": b, "bare": bare, "out": tmp_path / "pooled"}
+    argv = [arg.format(**names) for arg in args]
+    assert main(["dominance", *argv, "--learner", "ppo"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1
+    assert message in err
+    assert _listing(a, b, bare) == before
+    assert not (tmp_path / "pooled").exists()
+
+
+def test_a_corrupt_meta_is_named(tmp_path: Path, capsys) -> None:
+    a, b = _run(tmp_path / "a", 0, 4), _run(tmp_path / "b", 10, 4)
+    (b / "meta.json").write_text("{not json")
+    assert (
+        main(["dominance", str(a), str(b), "--learner", "ppo", "--out", str(tmp_path / "o")]) == 2
+    )
+    assert f"{b / 'meta.json'}: not a run's meta.json" in capsys.readouterr().err
+
+
+def test_an_episode_twice_in_one_run_is_refused_by_its_line(tmp_path: Path, capsys) -> None:
+    """A repeated (policy, scenario, seed) would be paired with every copy of the other side."""
+    a = _run(tmp_path / "a", 0, 4)
+    table = pd.read_csv(a / "episodes.csv")
+    pd.concat([table, table.iloc[[5]]]).to_csv(a / "episodes.csv", index=False)
+    assert main(["dominance", str(a), "--learner", "ppo"]) == 2
+    err = capsys.readouterr().err
+    assert (
+        f"{a / 'episodes.csv'}: line {len(table) + 2}: seed 1 of crowd for ppo is there twice"
+        in err
+    )
+    assert _listing(a) == {a: ["episodes.csv", "meta.json"]}
