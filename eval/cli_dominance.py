@@ -20,7 +20,7 @@ from typing import Any
 
 from eval.cli_base import UsageError, _names
 
-__all__ = ["check_covered", "cmd_dominance", "episode_table", "pooled_table"]
+__all__ = ["check_covered", "cmd_dominance", "pooled_table", "read_episode_table"]
 
 #: What ``meta.json`` records that must agree for two runs to be pooled.
 ALIKE = ("task", "config", "ideal_baseline")
@@ -116,9 +116,10 @@ def pooled_table(runs: list[Path], metrics: list[str]) -> Any:
     for k, run in enumerate(resolved):
         if run in resolved[:k]:
             raise UsageError(f"{runs[k]}: given twice; give each run once")
-    tables = [episode_table(run / "episodes.csv", metrics) for run in runs]
+    # each run's own table holds an episode once; pooling then looks only across runs
+    tables = [_once(read_episode_table(run / "episodes.csv", metrics), run) for run in runs]
     if len(runs) == 1:
-        return _once(tables[0], runs[0] / "episodes.csv")
+        return tables[0]
     metas = [_meta(run) for run in runs]
     first, meta0, table0 = runs[0], metas[0], tables[0]
     variant = variant_column(table0)
@@ -149,7 +150,7 @@ def pooled_table(runs: list[Path], metrics: list[str]) -> Any:
     twice = pooled[pooled.duplicated(key, keep=False)]
     if not twice.empty:
         row = twice.iloc[0]
-        where = sorted(set(twice[(twice[key] == row[key]).all(axis=1)]["run"]))
+        where = dict.fromkeys(twice[(twice[key] == row[key]).all(axis=1)]["run"])
         raise UsageError(
             f"seed {row['seed']} of {row[variant]} for {row['policy']} is in "
             f"{' and '.join(where)}: pool runs of disjoint seeds"
@@ -168,7 +169,7 @@ def check_covered(table: Any, policies: list[str]) -> None:
     if "run" not in table:  # one run: nothing pooled
         return
     variant = variant_column(table)
-    held = set(table.groupby(["run", "policy", variant]).groups)
+    held = set(zip(table["run"], table["policy"], table[variant], strict=True))
     present = set(table["policy"])  # a label in no run is the judge's to name
     for run in dict.fromkeys(table["run"]):
         for policy in (p for p in policies if p in present):
@@ -180,7 +181,7 @@ def check_covered(table: Any, policies: list[str]) -> None:
                     )
 
 
-def episode_table(path: Path, metrics: list[str]) -> Any:
+def read_episode_table(path: Path, metrics: list[str]) -> Any:
     """``follow-eval run``'s ``episodes.csv`` at ``path``, checked: episodes in it, integer
     seeds, and a number (or nothing) in each cell of ``metrics``' columns.
 
@@ -214,10 +215,12 @@ def episode_table(path: Path, metrics: list[str]) -> Any:
     return table
 
 
-def _once(table: Any, path: Path) -> Any:
-    """``table`` if it holds each (policy, scenario, seed) once: a repeated episode would be
-    paired with itself and every other copy."""
+def _once(table: Any, run: Path) -> Any:
+    """``table`` (``run``'s) if it holds each (policy, scenario, seed) once: a repeated episode
+    would be paired with every copy on the other side."""
     from eval.stats import variant_column
+
+    path = run / "episodes.csv"
 
     key = ["policy", variant_column(table), "seed"]
     if not set(key) <= set(table.columns):

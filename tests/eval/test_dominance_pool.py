@@ -182,10 +182,12 @@ def test_an_episode_twice_in_one_run_is_refused_by_its_line(tmp_path: Path, caps
     a = _run(tmp_path / "a", 0, 4)
     table = pd.read_csv(a / "episodes.csv")
     pd.concat([table, table.iloc[[5]]]).to_csv(a / "episodes.csv", index=False)
+    message = f"{a / 'episodes.csv'}: line {len(table) + 2}: seed 1 of crowd for ppo is there twice"
     assert main(["dominance", str(a), "--learner", "ppo"]) == 2
-    err = capsys.readouterr().err
-    assert (
-        f"{a / 'episodes.csv'}: line {len(table) + 2}: seed 1 of crowd for ppo is there twice"
-        in err
-    )
+    assert message in capsys.readouterr().err
     assert _listing(a) == {a: ["episodes.csv", "meta.json"]}
+    # pooled, the run's own repeat is named the same way, not as an episode of two runs
+    b, out = _run(tmp_path / "b", 10, 4), tmp_path / "pooled"
+    assert main(["dominance", str(b), str(a), "--learner", "ppo", "--out", str(out)]) == 2
+    assert message in capsys.readouterr().err
+    assert not out.exists()
