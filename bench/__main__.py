@@ -184,6 +184,13 @@ def bench_run_scoring(quick: bool) -> list[tuple[str, float, str]]:
     return bench_scoring(quick)
 
 
+def bench_run_without_logs(quick: bool) -> list[tuple[str, float, str]]:
+    """follow-eval run --no-logs against the run with its step logs (bench.nologs)."""
+    from bench.nologs import bench_no_logs
+
+    return bench_no_logs(quick)
+
+
 def bench_robot(quick: bool) -> list[tuple[str, float, str]]:
     """The runner's loop lateness (idle, busy) and the monitor's latency (bench.robot)."""
     from bench.robot import bench_monitor, bench_runner
@@ -214,6 +221,7 @@ BENCHMARKS: dict[str, Callable[[bool], list[tuple[str, float, str]]]] = {
     "learned agent (lane-steps/s)": bench_agent,
     "step logs (logs/s)": bench_step_logs,
     "a run's scoring (episodes/s)": bench_run_scoring,
+    "a run without step logs": bench_run_without_logs,
     "serial link": bench_serial_link,
     "robot: runner and monitor (ms)": bench_robot,
     "scale-out: evaluation (episodes/s)": bench_scale_out,

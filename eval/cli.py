@@ -3,7 +3,7 @@
 ::
 
     follow-eval run --policies pn,mpn,gsmpn --scenarios straight,curve --episodes 20 --seed 0 \\
-        --out runs/eval-<timestamp> [--workers auto|N] [--config thesis] [--video] \\
+        --out runs/eval-<timestamp> [--workers auto|N] [--config thesis] [--video] [--no-logs] \\
         [--platforms diff_drive,mecanum] [--backend local|ray [--address HOST:PORT]]
     follow-eval run --task line_trace --policies coordinate,pid --tracks course,random ...
     follow-eval metrics LOG.csv [LOG.csv | FOLDER ...] [--out DIR] [--workers auto|N]
@@ -15,7 +15,7 @@
     summary.csv summary.md summary.json summary.tex   the table (policy x scenario)
     comparisons.csv                                  paired differences per pair of policies
     episodes.csv                                     every episode's metrics
-    logs/<policy>/<scenario>/seed_<k>.csv            step logs (eval.steplog)
+    logs/<policy>/<scenario>/seed_<k>.csv            step logs (eval.steplog), unless --no-logs
     plots/thesis_metrics.png offsets_seed<k>.png trajectories_seed<k>.png
     videos/<policy>_<scenario>_seed<k>.mp4           with --video
     meta.json                                        command, grid, gains, versions, timing
@@ -32,7 +32,10 @@ runs the units as Ray tasks (:mod:`execution`) and writes the same files, byte f
 ``--backend local``. Bad arguments or input give one line on stderr (``follow-eval: error:
 ...``) and exit status 2, never a traceback, and are caught before any episode runs. A run is
 at most :data:`MAX_EPISODES` episodes (policies x scenarios x episodes), and its seeds stay
-within :data:`MAX_SEED`.
+within :data:`MAX_SEED`. With ``--no-logs`` each episode is reduced to its table row in the
+process that ran it and no step log is written (the plot seed's episodes are kept for the
+plots); the tables are the same, byte for byte, and a run takes up to
+:data:`MAX_EPISODES_WITHOUT_LOGS` episodes.
 """
 
 from __future__ import annotations
@@ -48,6 +51,7 @@ from pathlib import Path
 import follow_env
 from eval.cli_base import (  # noqa: F401  (MAX_EPISODES, MAX_SEED: the limits, read here)
     MAX_EPISODES,
+    MAX_EPISODES_WITHOUT_LOGS,
     MAX_SEED,
     PROG,
     USAGE_ERROR,
@@ -165,6 +169,14 @@ def build_parser() -> argparse.ArgumentParser:
     )
     run.add_argument(
         "--video", action="store_true", help="also write an mp4 per policy and scenario"
+    )
+    run.add_argument(
+        "--no-logs",
+        action="store_true",
+        help="write no step logs: each episode is reduced to its row of episodes.csv where it "
+        "ran (the --plot-seed's episodes kept for the plots), so memory stays small and a run "
+        f"takes up to {MAX_EPISODES_WITHOUT_LOGS:,} episodes instead of {MAX_EPISODES:,}; the "
+        "tables are the same",
     )
     run.add_argument(
         "--ideal-baseline",

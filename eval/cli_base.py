@@ -8,7 +8,14 @@ from typing import Any, NoReturn
 
 from follow_env.tasks.person_follow.config import config_from_text
 
-__all__ = ["MAX_EPISODES", "MAX_SEED", "PROG", "USAGE_ERROR", "UsageError"]
+__all__ = [
+    "MAX_EPISODES",
+    "MAX_EPISODES_WITHOUT_LOGS",
+    "MAX_SEED",
+    "PROG",
+    "USAGE_ERROR",
+    "UsageError",
+]
 
 PROG = "follow-eval"
 USAGE_ERROR = 2
@@ -18,6 +25,11 @@ USAGE_ERROR = 2
 #: episodes can take 10 GB of memory and 7 GB of disk. Larger searches use ``eval.rollout``
 #: with a ``reduce`` function, as ``follow-tune`` (:mod:`eval.tuning`) does.
 MAX_EPISODES = 50_000
+#: The most episodes one ``follow-eval run --no-logs`` takes: each episode is reduced to its
+#: table row where it ran, so memory grows by about 2 kB an episode instead of 50-200 kB
+#: (README "Evaluation", measured by ``make bench``); this is the rollout's own limit
+#: (:data:`eval.rollout.MAX_EPISODES`).
+MAX_EPISODES_WITHOUT_LOGS = 1_000_000
 #: The largest seed the env accepts: ``reset(seed=s)`` takes 0 <= s < 2**256 (follow_env seeds
 #: numpy's SeedSequence with up to eight 32-bit words; a test pins this).
 MAX_SEED = 2**256 - 1

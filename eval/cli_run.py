@@ -14,7 +14,15 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from eval.cli_base import MAX_EPISODES, MAX_SEED, PROG, UsageError, _config, _names
+from eval.cli_base import (
+    MAX_EPISODES,
+    MAX_EPISODES_WITHOUT_LOGS,
+    MAX_SEED,
+    PROG,
+    UsageError,
+    _config,
+    _names,
+)
 from execution import Backend, backend_from_args
 from follow_env.sim.atomic import atomic_folder, atomic_write_text, check_new_folder
 
@@ -25,15 +33,25 @@ def _plural(n: int, one: str, many: str) -> str:
     return one if n == 1 else many
 
 
-def _check_grid(n_policies: int, n_scenarios: int, episodes: int, seed: int) -> None:
-    """Refuse a grid larger than :data:`MAX_EPISODES` or seeds beyond :data:`MAX_SEED`."""
+def _check_grid(
+    n_policies: int, n_scenarios: int, episodes: int, seed: int, *, logs: bool = True
+) -> None:
+    """Refuse a grid larger than :data:`MAX_EPISODES` (:data:`MAX_EPISODES_WITHOUT_LOGS` for a
+    run without step logs) or seeds beyond :data:`MAX_SEED`."""
     total = n_policies * n_scenarios * episodes
-    if total > MAX_EPISODES:
+    limit = MAX_EPISODES if logs else MAX_EPISODES_WITHOUT_LOGS
+    if total > limit:
+        why = (
+            "every step log is held in memory and written to disk; --no-logs keeps only each "
+            f"episode's table row and takes up to {MAX_EPISODES_WITHOUT_LOGS:,}"
+            if logs
+            else "each episode's table row is held in memory"
+        )
         raise UsageError(
             f"--episodes {episodes:,}: {n_policies} {_plural(n_policies, 'policy', 'policies')} "
             f"x {n_scenarios} {_plural(n_scenarios, 'scenario', 'scenarios')} x "
             f"{episodes:,} episodes = {total:,} episodes is out of range: a run takes at most "
-            f"{MAX_EPISODES:,} episodes (every step log is held in memory and written to disk)"
+            f"{limit:,} episodes ({why})"
         )
     if seed + episodes - 1 > MAX_SEED:
         raise UsageError(
@@ -84,7 +102,9 @@ def _check_run_args(args: argparse.Namespace) -> tuple[list[str], list[str], lis
     scenarios = _names(task.default_variants if given is None else given, task.variants_option)
     # Size first: it needs only the counts, and loading a policy is already work.
     runs = 2 if getattr(args, "ideal_baseline", False) else 1  # the grid again, perfect sensing
-    _check_grid(len(policies) * runs, len(scenarios), args.episodes, args.seed)
+    _check_grid(
+        len(policies) * runs, len(scenarios), args.episodes, args.seed, logs=not args.no_logs
+    )
     built: list[tuple[str, Any]] = []
     for name in policies:
         try:
@@ -141,8 +161,9 @@ def cmd_run(args: argparse.Namespace) -> int:
     """``follow-eval run``: see the module docstring."""
     from eval.journal import UnitJournal, journal_folder
     from eval.report import markdown_report, safe_name, write_tables, write_video
-    from eval.rollout import chunk_size, rollout
+    from eval.rollout import Episode, chunk_size, rollout
     from eval.scoring import score
+    from eval.stats import TableRow
     from policies.learned.ensemble import is_learned
 
     policies, scenarios, built = _check_run_args(args)
@@ -158,6 +179,10 @@ def cmd_run(args: argparse.Namespace) -> int:
     started = time.perf_counter()
     run = {"task": task.name, "policies": policies, task.variants_option: scenarios}
     run |= {"seeds": [seeds[0], seeds[-1]], "config": args.config}
+    # Without step logs a unit keeps rows, not episodes: its journal is of another run.
+    run |= {"step_logs": False} if args.no_logs else {}
+    # Each episode reduced to its table row where it ran, the plot seed's kept for the plots.
+    reduce = TableRow(task.metrics, plot_seed) if args.no_logs else None
     folder = journal_folder(out)
     chunk = _journal_chunk(folder) or chunk_size(
         len(seeds), backend.slots(), len(policies) * len(scenarios)
@@ -190,6 +215,7 @@ def cmd_run(args: argparse.Namespace) -> int:
                 chunk=chunk,
                 done=done,
                 on_unit=kept_in.put,
+                reduce=reduce,
             )
             episodes += [_labelled(ep, suffix) for ep in got] if suffix else got
     except BaseException as e:
@@ -210,21 +236,19 @@ def cmd_run(args: argparse.Namespace) -> int:
         )
         return 130
     with atomic_folder(out) as tmp:
-        for ep in episodes:
+        log_path = None if args.no_logs else functools.partial(_log_path, tmp)
+        for ep in [] if args.no_logs else episodes:
             _log_path(tmp, ep).parent.mkdir(parents=True, exist_ok=True)
         # By scenario on the run's backend, with the bootstrap's default seed, as in
         # `follow-eval metrics`: the same episodes give the same intervals whichever command
         # scores them.
         scored = score(
-            episodes,
-            metrics=task.metrics,
-            variant=task.variant,
-            log_path=functools.partial(_log_path, tmp),
-            backend=backend,
+            episodes, metrics=task.metrics, variant=task.variant, log_path=log_path, backend=backend
         )
         table, summary, comparisons = scored.table, scored.summary, scored.comparisons
         (tmp / "plots").mkdir()
-        task.plots(summary, episodes, plot_seed, tmp / "plots", args.config)
+        whole = [ep for ep in episodes if isinstance(ep, Episode)]  # all, or the plot seed's
+        task.plots(summary, whole, plot_seed, tmp / "plots", args.config)
         if args.video:
             (tmp / "videos").mkdir()
             for policy in dict.fromkeys(ep.policy for ep in episodes):
@@ -252,6 +276,7 @@ def cmd_run(args: argparse.Namespace) -> int:
             "backend": {"kind": backend.kind, "workers": backend.workers, "chunk": chunk},
             "plot_seed": plot_seed,
             "ideal_baseline": bool(args.ideal_baseline),
+            "step_logs": not args.no_logs,
             "versions": _versions(),
         }
         write_tables(tmp, summary, table, comparisons, meta, tables=task.tables)
@@ -262,7 +287,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     print(
         f"{n_episodes} episodes in {elapsed:.1f} s ({_where(backend)}). Wrote {out}/: "
         "summary.csv|md|json|tex, "
-        f"comparisons.csv, episodes.csv, logs/, plots/ ({plots})"
+        f"comparisons.csv, episodes.csv, {'' if args.no_logs else 'logs/, '}plots/ ({plots})"
         + (", videos/" if args.video else "")
     )
     return 0
@@ -281,8 +306,13 @@ def _log_path(folder: Path, episode: Any) -> Path:
 
 
 def _labelled(episode: Any, suffix: str) -> Any:
-    """The episode under another policy label (its step log's ``policy`` column too)."""
+    """The episode (or its table row) under another policy label (its step log's ``policy``
+    column too)."""
+    from eval.stats import EpisodeRow
+
     label = episode.policy + suffix
+    if isinstance(episode, EpisodeRow):
+        return dataclasses.replace(episode, policy=label)
     return dataclasses.replace(episode, policy=label, log=episode.log.assign(policy=label))
 
 

@@ -28,7 +28,7 @@ import pandas as pd
 
 from eval.metrics import Metric
 from eval.rollout import Episode
-from eval.stats import compare, episode_table, summarize
+from eval.stats import EpisodeRow, compare, episode_table, summarize
 from eval.steplog import StepLogError, read_step_log, step_log_text
 from execution.backend import Backend, execute
 
@@ -57,7 +57,7 @@ class Scored:
 class _Scenario:
     """One work unit: a scenario's episodes, and what to score them by."""
 
-    episodes: list[Episode]
+    episodes: list[Episode | EpisodeRow]
     metrics: Mapping[str, Metric]
     variant: str
     policies: tuple[str, ...]  # the run's policies in table order: the comparisons' pairs
@@ -66,7 +66,7 @@ class _Scenario:
 
 def _score_scenario(unit: _Scenario) -> tuple[list[str], pd.DataFrame, pd.DataFrame, pd.DataFrame]:
     """A scenario's log texts (``[]`` without logs), episode table, summary and comparisons."""
-    texts = [step_log_text(ep.log) for ep in unit.episodes] if unit.logs else []
+    texts = [step_log_text(ep.log) for ep in unit.episodes] if unit.logs else []  # type: ignore[union-attr]
     table = episode_table(unit.episodes, metrics=unit.metrics, variant=unit.variant)
     names = list(unit.metrics)
     summary = summarize(table, metrics=names)
@@ -75,7 +75,7 @@ def _score_scenario(unit: _Scenario) -> tuple[list[str], pd.DataFrame, pd.DataFr
 
 
 def score(
-    episodes: Sequence[Episode],
+    episodes: Sequence[Episode | EpisodeRow],
     *,
     metrics: Mapping[str, Metric],
     variant: str = "scenario",
@@ -84,6 +84,8 @@ def score(
 ) -> Scored:
     """Score ``episodes`` and write their step logs, one work unit per scenario on ``backend``.
 
+    :param episodes: the episodes, or with ``log_path=None`` also episodes already reduced to
+        their table rows (:class:`eval.stats.TableRow`, a run without step logs).
     :param metrics: the metrics by name, in table order (the task's).
     :param variant: the name of the tables' ``scenario`` column (``"track"`` for LineTrace).
     :param log_path: where each episode's step log goes (its folder must exist); None writes no
@@ -94,6 +96,8 @@ def score(
         default seed).
     """
     names = list(metrics)
+    if log_path is not None and any(isinstance(ep, EpisodeRow) for ep in episodes):
+        raise ValueError("log_path is given, but some episodes were reduced to rows: no step log")
     if not episodes:
         table = episode_table([], metrics=metrics, variant=variant)
         return Scored(table, summarize(table, metrics=names), compare(table, metrics=names))

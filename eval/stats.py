@@ -28,6 +28,8 @@ import itertools
 import warnings
 import zlib
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -38,6 +40,8 @@ from eval.rollout import Episode
 
 __all__ = [
     "CONFIDENCE",
+    "EpisodeRow",
+    "TableRow",
     "compare",
     "episode_table",
     "mean_ci",
@@ -68,30 +72,73 @@ def metric_columns() -> list[str]:
     return [*THESIS_METRICS, *extra_metrics()]
 
 
+@dataclass(frozen=True)
+class EpisodeRow:
+    """An episode reduced to its row of :func:`episode_table`, without its step log: what a run
+    without step logs keeps (``follow-eval run --no-logs``, :class:`TableRow`).
+
+    :param policy: the policy's label, as :class:`~eval.rollout.Episode`'s.
+    :param scenario: the scenario (the task's variant: LineTrace's track).
+    :param seed: the episode's seed.
+    :param values: ``steps``, ``termination`` and each metric's value, by column name.
+    """
+
+    policy: str
+    scenario: str
+    seed: int
+    values: dict[str, Any]
+
+
+def _row_values(ep: Episode | EpisodeRow, metrics: Mapping[str, Metric] | None) -> dict[str, Any]:
+    """An episode's ``steps``, ``termination`` and metrics (a row's own, if it is one)."""
+    if isinstance(ep, EpisodeRow):
+        return ep.values
+    scores = (
+        episode_metrics(ep.log)
+        if metrics is None
+        else {name: float(m.fn(ep.log)) for name, m in metrics.items()}
+    )
+    return {"steps": ep.steps, "termination": ep.termination, **scores}
+
+
+@dataclass(frozen=True)
+class TableRow:
+    """A rollout's reducer (``rollout(reduce=TableRow(...))``): each episode as its
+    :class:`EpisodeRow`, computed in the process that ran it, so that its step log is let go
+    there; the episodes of ``keep_seed`` are returned whole (a run's plots draw them).
+
+    :param metrics: the metrics by name, as for :func:`episode_table`.
+    :param keep_seed: the seed whose episodes keep their step logs (None: none).
+    """
+
+    metrics: Mapping[str, Metric] | None = None
+    keep_seed: int | None = None
+
+    def __post_init__(self) -> None:
+        if self.metrics is not None:  # a task's metrics are a read-only view, which no pool
+            object.__setattr__(self, "metrics", dict(self.metrics))  # can send: a copy
+
+    def __call__(self, ep: Episode) -> Episode | EpisodeRow:
+        if ep.seed == self.keep_seed:
+            return ep
+        return EpisodeRow(ep.policy, ep.scenario, ep.seed, _row_values(ep, self.metrics))
+
+
 def episode_table(
-    episodes: Sequence[Episode],
+    episodes: Sequence[Episode | EpisodeRow],
     *,
     metrics: Mapping[str, Metric] | None = None,
     variant: str = "scenario",
 ) -> pd.DataFrame:
     """One row per episode: ``policy, scenario, seed, steps, termination`` and every metric.
 
+    :param episodes: episodes, or episodes already reduced to their rows (:class:`TableRow`,
+        with the same ``metrics``); the table is the same either way.
     :param metrics: the metrics by name, in table order (default: :data:`eval.metrics.METRICS`).
     :param variant: the name of the ``scenario`` column (``"track"`` for LineTrace).
     """
     rows = [
-        {
-            "policy": ep.policy,
-            variant: ep.scenario,
-            "seed": ep.seed,
-            "steps": ep.steps,
-            "termination": ep.termination,
-            **(
-                episode_metrics(ep.log)
-                if metrics is None
-                else {name: float(m.fn(ep.log)) for name, m in metrics.items()}
-            ),
-        }
+        {"policy": ep.policy, variant: ep.scenario, "seed": ep.seed, **_row_values(ep, metrics)}
         for ep in episodes
     ]
     names = list(METRICS if metrics is None else metrics)
