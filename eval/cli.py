@@ -49,7 +49,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 
 import follow_env
-from eval.cli_base import (  # noqa: F401  (MAX_EPISODES, MAX_SEED: the limits, read here)
+from eval.cli_base import (  # noqa: F401  (the limits, read here)
     MAX_EPISODES,
     MAX_EPISODES_WITHOUT_LOGS,
     MAX_SEED,
@@ -70,7 +70,7 @@ from eval.steplog import StepLogError, step_log_files
 from execution import BACKENDS, BackendUnavailableError
 from follow_env.sim.atomic import atomic_folder, check_new_folder
 
-__all__ = ["MAX_EPISODES", "MAX_SEED", "main"]
+__all__ = ["MAX_EPISODES", "MAX_EPISODES_WITHOUT_LOGS", "MAX_SEED", "main"]
 
 
 def _backend_arguments(parser: argparse.ArgumentParser, where: str) -> None:
@@ -258,7 +258,8 @@ def build_parser() -> argparse.ArgumentParser:
         "the best of the laws on each scenario and criterion, paired over seeds; writes "
         "dominance-<learner>.md|csv into the folder. Several runs on disjoint seeds, made "
         "alike, are pooled into one table (a run holds at most "
-        f"{MAX_EPISODES:,} episodes) and written into --out.",
+        f"{MAX_EPISODES:,} episodes, {MAX_EPISODES_WITHOUT_LOGS:,} with --no-logs) and "
+        "written into --out.",
     )
     dom.add_argument(
         "runs",

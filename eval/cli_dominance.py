@@ -1,7 +1,8 @@
 """``follow-eval dominance``: a learner against the best law, from one run folder or several
 pooled (see :mod:`eval.cli` and :mod:`eval.dominance`).
 
-A run holds at most :data:`~eval.cli_base.MAX_EPISODES` episodes, and the strict reading of
+A run holds at most :data:`~eval.cli_base.MAX_EPISODES` episodes
+(:data:`~eval.cli_base.MAX_EPISODES_WITHOUT_LOGS` with ``--no-logs``), and the strict reading of
 "at least as good" needs many: the best of six laws on a line is the best of six noisy means,
 so with 100 episodes a scenario a learner that ties the laws misses lines by chance. Several
 runs on disjoint seeds are therefore pooled into one table, as if one run had held them all,
