@@ -438,7 +438,14 @@ def _run_ray(
                 raise WorkerLostError(
                     f"unit {i}'s worker died {backend.max_retries + 1} times: {e}"
                 ) from None
-            submit()
+            # The next unit goes out before this result is handed on (the cluster stays busy
+            # while the caller keeps it), but a submission that fails (the cluster lost) must
+            # not lose the unit just finished: it is handed on first, then the error raised.
+            try:
+                submit()
+            except BaseException:
+                yield i, result
+                raise
             yield i, result
     finally:
         for ref in in_flight:

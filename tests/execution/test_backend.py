@@ -280,3 +280,37 @@ def test_a_unit_finished_as_the_pool_breaks_is_neither_lost_nor_run_twice(monkey
     )
     assert got == [-u for u in range(10)]
     assert sorted(handed) == list(range(10))  # each unit once
+
+
+@pytest.mark.slow
+def test_a_ray_unit_finished_as_the_next_submission_fails_is_handed_on(
+    local_ray, monkeypatch
+) -> None:
+    """The cluster is lost between a unit's result and the next submission: the finished unit
+    still reaches the caller (a run's journal keeps it) before the error."""
+    from execution.backend import _IN_FLIGHT_PER_SLOT
+
+    first = _IN_FLIGHT_PER_SLOT * Backend("ray").slots()  # submitted before any result
+    real = local_ray.remote
+
+    class LostOnSubmit:  # the real task, until the submission after the first ones
+        def __init__(self, task) -> None:
+            self.task, self.submitted = task, 0
+
+        def options(self, **options):
+            self.task = self.task.options(**options)
+            return self
+
+        def remote(self, *args):
+            self.submitted += 1
+            if self.submitted > first:
+                raise ConnectionError("the cluster is gone")
+            return self.task.remote(*args)
+
+    monkeypatch.setattr(local_ray, "remote", lambda fn: LostOnSubmit(real(fn)))
+    handed: list[int] = []
+    with pytest.raises(ConnectionError, match="the cluster is gone"):
+        execute(
+            operator.neg, list(range(10)), Backend("ray"), on_result=lambda i, r: handed.append(i)
+        )
+    assert len(handed) == 1  # the unit whose result came before the failed submission
