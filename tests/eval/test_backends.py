@@ -61,6 +61,18 @@ def test_ray_writes_the_same_files_byte_for_byte(
 
 
 @pytest.mark.slow
+def test_ray_without_logs_writes_the_same_tables_and_plots(
+    reference: dict[str, bytes], local_ray, tmp_path: Path
+) -> None:
+    out = tmp_path / "ray"
+    assert main(["run", *GRID, "--out", str(out), "--backend", "ray", "--no-logs"]) == 0
+    got = _files(out)  # the rows made in Ray's workers, the plot seed's episodes kept whole
+    assert got.keys() == {name for name in reference if not name.startswith("logs/")}
+    for name, data in got.items():
+        assert data == reference[name], name
+
+
+@pytest.mark.slow
 def test_metrics_on_ray_writes_the_same_tables(local_ray, tmp_path: Path) -> None:
     run = tmp_path / "run"
     assert main(["run", *GRID, "--out", str(run), "--workers", "1"]) == 0
