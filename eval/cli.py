@@ -42,6 +42,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import json
 import sys
 import time
 from collections.abc import Sequence
@@ -345,6 +346,27 @@ def cmd_thesis(args: argparse.Namespace) -> int:
     return 0
 
 
+def _refuse_run_without_logs(path: Path) -> None:
+    """A run folder written with ``--no-logs`` (or its missing ``logs/``) has nothing to score:
+    say so, rather than read its tables as step logs or report a missing file.
+
+    :raises UsageError: naming the run.
+    """
+    run = path if path.is_dir() else path.parent
+    if path.exists() and not path.is_dir():
+        return
+    try:
+        meta = json.loads((run / "meta.json").read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return  # not a run folder: the logs are read, or refused, as given
+    if isinstance(meta, dict) and meta.get("step_logs") is False:
+        where = f"{run}" if path == run else f"{path}: the run {run}"
+        raise UsageError(
+            f"{where} holds no step logs to score (follow-eval run --no-logs wrote it); its "
+            f"tables are {run / 'episodes.csv'} and summary.*"
+        )
+
+
 def cmd_metrics(args: argparse.Namespace) -> int:
     """``follow-eval metrics``: the same tables from step-log files.
 
@@ -359,6 +381,8 @@ def cmd_metrics(args: argparse.Namespace) -> int:
 
     if args.out is not None:
         check_new_folder(args.out)  # before scoring: a bad --out should not cost the work
+    for path in args.logs:
+        _refuse_run_without_logs(Path(path))
     files = step_log_files(args.logs)
     if not files:
         raise UsageError(f"no *.csv step logs under {', '.join(map(str, args.logs))}")

@@ -146,3 +146,22 @@ def test_an_interrupted_run_resumes_only_in_the_same_mode(
     assert f"resuming: {units} work units already done" in capsys.readouterr().err
     _same_tables(with_logs, out)
     assert not journal.exists()
+
+
+def test_metrics_on_a_run_without_logs_says_it_has_none(
+    with_logs: Path, tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
+    out = tmp_path / "run"
+    args = ["run", *GRID, "--seed", "5", "--out", str(out), "--workers", "1", "--no-logs"]
+    assert main(args) == 0
+    capsys.readouterr()
+    for given in (out / "logs", out):
+        assert main(["metrics", str(given), "--out", str(tmp_path / "tables")]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1
+        named = f"{given}: the run {out} holds" if given != out else f"error: {out} holds"
+        assert named in err
+        assert "holds no step logs to score (follow-eval run --no-logs wrote it)" in err
+    assert not (tmp_path / "tables").exists()
+    # A run with its logs is scored as before.
+    assert main(["metrics", str(with_logs / "logs"), "--out", str(tmp_path / "tables")]) == 0
