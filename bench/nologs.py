@@ -75,8 +75,8 @@ def bench_no_logs(quick: bool) -> list[tuple[str, float, str]]:
     logs, rows = _held(seeds, None), _held(seeds, TableRow(METRICS))
     n = len(LAWS) * len(get_task("person_follow").variants()) * seeds
     return [
-        (f"run with step logs, {n} episodes (episodes/s)", n / with_logs, "1x (baseline)"),
-        ("  --no-logs (episodes/s)", n / without, f"{with_logs / without:.2f}x faster"),
-        ("an episode held, with its log (bytes)", logs, "1x (baseline)"),
+        (f"run with logs, {n} episodes (ep/s)", n / with_logs, "1x (baseline)"),
+        ("  --no-logs (ep/s)", n / without, f"{with_logs / without:.2f}x faster"),
+        ("an episode with its log (bytes)", logs, "1x (baseline)"),
         ("  as its table row (bytes)", rows, f"{logs / rows:.0f}x less"),
     ]

@@ -12,9 +12,9 @@ def test_the_run_without_logs_has_rows_and_their_baselines(monkeypatch: pytest.M
     rows = bench.nologs.bench_no_logs(quick=True)
     names = [name for name, _, _ in rows]
     assert names == [
-        "run with step logs, 24 episodes (episodes/s)",  # 1 policy x 12 scenarios x 2
-        "  --no-logs (episodes/s)",
-        "an episode held, with its log (bytes)",
+        "run with logs, 24 episodes (ep/s)",  # 1 policy x 12 scenarios x 2
+        "  --no-logs (ep/s)",
+        "an episode with its log (bytes)",
         "  as its table row (bytes)",
     ]
     (_, logs_rate, one), (_, rows_rate, faster), (_, log, base), (_, row, less) = rows
