@@ -176,8 +176,8 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="write no step logs: each episode is reduced to its row of episodes.csv where it "
         "ran (the --plot-seed's episodes kept for the plots), so memory stays small and a run "
-        f"takes up to {MAX_EPISODES_WITHOUT_LOGS:,} episodes instead of {MAX_EPISODES:,}; the "
-        "tables are the same",
+        f"takes up to {MAX_EPISODES_WITHOUT_LOGS:,} episodes instead of {MAX_EPISODES:,} (at most "
+        f"{MAX_EPISODES:,} seeds a scenario); the tables are the same",
     )
     run.add_argument(
         "--ideal-baseline",

@@ -37,7 +37,8 @@ def _check_grid(
     n_policies: int, n_scenarios: int, episodes: int, seed: int, *, logs: bool = True
 ) -> None:
     """Refuse a grid larger than :data:`MAX_EPISODES` (:data:`MAX_EPISODES_WITHOUT_LOGS` for a
-    run without step logs) or seeds beyond :data:`MAX_SEED`."""
+    run without step logs), more than :data:`MAX_EPISODES` seeds a scenario, or seeds beyond
+    :data:`MAX_SEED`."""
     total = n_policies * n_scenarios * episodes
     limit = MAX_EPISODES if logs else MAX_EPISODES_WITHOUT_LOGS
     if total > limit:
@@ -52,6 +53,13 @@ def _check_grid(
             f"x {n_scenarios} {_plural(n_scenarios, 'scenario', 'scenarios')} x "
             f"{episodes:,} episodes = {total:,} episodes is out of range: a run takes at most "
             f"{limit:,} episodes ({why})"
+        )
+    if episodes > MAX_EPISODES:  # only without logs: with them the run's limit is smaller
+        raise UsageError(
+            f"--episodes {episodes:,} is out of range: a scenario takes at most "
+            f"{MAX_EPISODES:,} seeds (each cell's bootstrap intervals cost time with the square "
+            "of its episodes, about 11 s an interval at 50,000); run more seeds as several "
+            "runs and pool them with follow-eval dominance"
         )
     if seed + episodes - 1 > MAX_SEED:
         raise UsageError(

@@ -54,6 +54,14 @@ __all__ = [
 CONFIDENCE = 0.95
 #: Bootstrap resamples (scipy's default); 9999 keeps the interval ends stable to ~1 % here.
 N_RESAMPLES = 9999
+#: Values one vectorised call of the bootstrap's statistic may take (``scipy.stats.bootstrap``'s
+#: ``batch`` is this over the sample's size): 2 MB of float64. All at once, scipy holds
+#: ``N_RESAMPLES x n`` resampled values and BCa's ``n x (n - 1)`` jackknife, 8.2 GB for a cell
+#: of 20,000 episodes; in batches, 0.2 GB. The intervals are the same to the last bit (the
+#: resamples are drawn from the stream in the same order; tested), and faster, since a batch
+#: stays in the cache: 0.11 s against 0.37 s an interval at 2,000 episodes, 2.1 s against 10.5
+#: at 20,000 (``make bench``, "a run's scoring").
+BOOTSTRAP_BATCH_VALUES: int | None = 2**18
 KEY_COLUMNS = ("policy", "scenario")
 #: Names a table's variant column may have (PersonFollow's scenario, LineTrace's track).
 VARIANT_COLUMNS = ("scenario", "track")
@@ -153,6 +161,15 @@ def _stream(seed: int, *names: str) -> np.random.Generator:
     return np.random.default_rng([seed, zlib.crc32("\x1f".join(names).encode("utf-8"))])
 
 
+def _batch(n: int) -> int | None:
+    """Resamples of ``n`` values per vectorised call, :data:`BOOTSTRAP_BATCH_VALUES` values in
+    all; None (the constant set to None, as the bench does to compare) is scipy's default, every
+    resample at once."""
+    if BOOTSTRAP_BATCH_VALUES is None:
+        return None
+    return max(1, BOOTSTRAP_BATCH_VALUES // max(n, 1))
+
+
 def _ci(values: np.ndarray, rng: np.random.Generator) -> tuple[float, float]:
     """Bootstrap CI of the mean of ``values`` (NaN-free); degenerate cases handled by hand."""
     if values.size < 2:
@@ -170,6 +187,7 @@ def _ci(values: np.ndarray, rng: np.random.Generator) -> tuple[float, float]:
             n_resamples=N_RESAMPLES,
             method="BCa",
             random_state=rng,
+            batch=_batch(values.size),
         )
         low, high = res.confidence_interval
         if not (np.isfinite(low) and np.isfinite(high)):
@@ -180,6 +198,7 @@ def _ci(values: np.ndarray, rng: np.random.Generator) -> tuple[float, float]:
                 n_resamples=N_RESAMPLES,
                 method="percentile",
                 random_state=rng,
+                batch=_batch(values.size),
             )
             low, high = res.confidence_interval
     return (float(low), float(high))

@@ -108,9 +108,13 @@ def test_a_run_without_logs_takes_twenty_times_the_episodes(
     assert "at most 50,000 episodes" in err
     assert "--no-logs keeps only each episode's table row and takes up to 1,000,000" in err
     _check_grid(2, 2, 12501, seed=0, logs=False)  # allowed without logs
-    _check_grid(2, 2, MAX_EPISODES_WITHOUT_LOGS // 4, seed=0, logs=False)  # the limit itself
-    with pytest.raises(UsageError, match="1,000,004 episodes is out of range"):
-        _check_grid(2, 2, MAX_EPISODES_WITHOUT_LOGS // 4 + 1, seed=0, logs=False)
+    _check_grid(4, 5, MAX_EPISODES, seed=0, logs=False)  # both limits exactly: 1,000,000
+    with pytest.raises(UsageError, match="1,050,000 episodes is out of range"):
+        _check_grid(21, 1, MAX_EPISODES, seed=0, logs=False)
+    # A cell's intervals take time with the square of its episodes: a scenario's seeds are
+    # held to the run's limit with logs.
+    with pytest.raises(UsageError, match="a scenario takes at most 50,000 seeds"):
+        _check_grid(1, 1, MAX_EPISODES + 1, seed=0, logs=False)
     args = ["run", *grid, "--episodes", "250001", "--no-logs", "--out", str(tmp_path / "b")]
     assert main(args) == 2
     assert "at most 1,000,000 episodes" in capsys.readouterr().err

@@ -87,3 +87,25 @@ def test_a_comparison_does_not_depend_on_the_order_of_episodes() -> None:
     t = table({"a": list(rng.normal(10, 2, 12)), "b": list(rng.normal(11, 2, 12))})
     seeds_descending = t.sort_values(["policy", "seed"], ascending=[True, False])
     pd.testing.assert_frame_equal(compare(t), compare(seeds_descending))
+
+
+@pytest.mark.parametrize("budget", [2**18, 997, 1])
+def test_resampling_in_batches_gives_the_intervals_of_all_at_once(
+    budget: int, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import eval.stats
+
+    rng = np.random.default_rng(7)
+    n = 300 if budget > 1 else 40  # one resample a call is slow: fewer episodes
+    # 2**18 values is 873 resamples of 300 a call, 997 is 3, 1 is one; a rare event's metric
+    # (mostly zeros) beside a smooth one.
+    values = {p: list(rng.normal(mu, 2.0, size=n)) for p, mu in (("pn", 20.0), ("mpn", 20.3))}
+    rare = {p: [float(k == 5) for k in range(n)] for p in values}
+    t = table(values).assign(collision_rate_pct=table(rare, "c")["c"])
+    monkeypatch.setattr(eval.stats, "BOOTSTRAP_BATCH_VALUES", budget)
+    assert eval.stats._batch(n) < eval.stats.N_RESAMPLES  # really in batches
+    batched = (summarize(t), compare(t))
+    monkeypatch.setattr(eval.stats, "BOOTSTRAP_BATCH_VALUES", None)
+    at_once = (summarize(t), compare(t))
+    for got, expected in zip(batched, at_once, strict=True):
+        pd.testing.assert_frame_equal(got, expected)
