@@ -23,6 +23,11 @@ def _files(folder: Path) -> set[str]:
     return {p.relative_to(folder).as_posix() for p in folder.rglob("*") if p.is_file()}
 
 
+def _without_logs(out: Path, workers: int = 1) -> list[str]:
+    """``follow-eval run``'s arguments for :data:`GRID` from seed 5 into ``out``, without logs."""
+    return ["run", *GRID, "--seed", "5", "--out", str(out), "--workers", str(workers), "--no-logs"]
+
+
 def _same_tables(a: Path, b: Path) -> None:
     for name in TABLES:
         assert (a / name).read_bytes() == (b / name).read_bytes(), name
@@ -40,7 +45,7 @@ def test_the_tables_are_those_of_a_run_with_logs_and_no_log_is_written(
 ) -> None:
     out = tmp_path / "run"
     # Two processes: the rows are made in the workers and sent back.
-    args = ["run", *GRID, "--seed", "5", "--out", str(out), "--workers", "2", "--no-logs"]
+    args = _without_logs(out, workers=2)
     assert main(args) == 0
     _same_tables(with_logs, out)
     logs = {name for name in _files(with_logs) if name.startswith("logs/")}
@@ -57,7 +62,7 @@ def test_the_plot_seeds_episodes_keep_their_logs_for_the_plots(
     with_logs: Path, tmp_path: Path
 ) -> None:
     out = tmp_path / "run"
-    args = ["run", *GRID, "--seed", "5", "--out", str(out), "--workers", "1", "--no-logs"]
+    args = _without_logs(out)
     assert main([*args, "--plot-seed", "7"]) == 0
     _same_tables(with_logs, out)
     assert {p.name for p in (out / "plots").iterdir()} == {
@@ -156,7 +161,7 @@ def test_metrics_on_a_run_without_logs_says_it_has_none(
     with_logs: Path, tmp_path: Path, capsys: pytest.CaptureFixture
 ) -> None:
     out = tmp_path / "run"
-    args = ["run", *GRID, "--seed", "5", "--out", str(out), "--workers", "1", "--no-logs"]
+    args = _without_logs(out)
     assert main(args) == 0
     capsys.readouterr()
     for given in (out / "logs", out):
