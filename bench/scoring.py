@@ -11,9 +11,11 @@ same table, in this process; they must come out equal as well.
 
 from __future__ import annotations
 
+import contextlib
 import tempfile
 import time
 import tracemalloc
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -77,13 +79,12 @@ def bench_scoring(quick: bool) -> list[tuple[str, float, str]]:
 
 def _one_interval(
     n: int, batch: int | None = eval.stats.BOOTSTRAP_BATCH_VALUES
-) -> tuple[float, int]:
+) -> tuple[float, int, tuple[float, float]]:
     """Seconds and peak traced bytes (numpy's buffers included) of the BCa interval of ``n``
-    values, resampled in batches of ``batch`` values (None: all at once); timed untraced."""
+    values, resampled in batches of ``batch`` values (None: all at once), and the interval;
+    timed untraced."""
     values = np.random.default_rng(0).normal(size=n)
-    kept = eval.stats.BOOTSTRAP_BATCH_VALUES
-    eval.stats.BOOTSTRAP_BATCH_VALUES = batch
-    try:
+    with _resampling(batch):
         start = time.perf_counter()
         interval = eval.stats.mean_ci(values, 0, "bench")
         seconds = time.perf_counter() - start
@@ -94,8 +95,6 @@ def _one_interval(
             peak = tracemalloc.get_traced_memory()[1]
         finally:
             tracemalloc.stop()
-    finally:
-        eval.stats.BOOTSTRAP_BATCH_VALUES = kept
     return seconds, peak, interval
 
 
@@ -104,11 +103,18 @@ def _intervals(
 ) -> tuple[float, tuple[pd.DataFrame, pd.DataFrame]]:
     """Seconds of the summary's and comparisons' intervals of ``table``, resampled in batches
     of ``batch`` values (None: all at once), and the two tables."""
-    kept = eval.stats.BOOTSTRAP_BATCH_VALUES
-    eval.stats.BOOTSTRAP_BATCH_VALUES = batch
-    try:
+    with _resampling(batch):
         start = time.perf_counter()
         tables = summarize(table, metrics=list(METRICS)), compare(table, metrics=list(METRICS))
         return time.perf_counter() - start, tables
+
+
+@contextlib.contextmanager
+def _resampling(batch: int | None) -> Iterator[None]:
+    """Inside, :mod:`eval.stats` resamples ``batch`` values a call (None: all at once)."""
+    kept = eval.stats.BOOTSTRAP_BATCH_VALUES
+    eval.stats.BOOTSTRAP_BATCH_VALUES = batch
+    try:
+        yield
     finally:
         eval.stats.BOOTSTRAP_BATCH_VALUES = kept

@@ -352,9 +352,9 @@ def _refuse_run_without_logs(path: Path) -> None:
 
     :raises UsageError: naming the run.
     """
-    run = path if path.is_dir() else path.parent
     if path.exists() and not path.is_dir():
-        return
+        return  # a file: read as a step log
+    run = path if path.is_dir() else path.parent
     try:
         meta = json.loads((run / "meta.json").read_text(encoding="utf-8"))
     except (OSError, ValueError):

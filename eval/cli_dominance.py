@@ -222,7 +222,6 @@ def _once(table: Any, run: Path) -> Any:
     from eval.stats import variant_column
 
     path = run / "episodes.csv"
-
     key = ["policy", variant_column(table), "seed"]
     if not set(key) <= set(table.columns):
         return table  # a table without scenarios is refused by the judge, which names it

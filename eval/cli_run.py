@@ -245,8 +245,9 @@ def cmd_run(args: argparse.Namespace) -> int:
         return 130
     with atomic_folder(out) as tmp:
         log_path = None if args.no_logs else functools.partial(_log_path, tmp)
-        for ep in [] if args.no_logs else episodes:
-            _log_path(tmp, ep).parent.mkdir(parents=True, exist_ok=True)
+        if log_path is not None:
+            for ep in episodes:
+                log_path(ep).parent.mkdir(parents=True, exist_ok=True)
         # By scenario on the run's backend, with the bootstrap's default seed, as in
         # `follow-eval metrics`: the same episodes give the same intervals whichever command
         # scores them.

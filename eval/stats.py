@@ -60,7 +60,8 @@ N_RESAMPLES = 9999
 #: of 20,000 episodes; in batches, 0.2 GB. The intervals are the same to the last bit (the
 #: resamples are drawn from the stream in the same order; tested), and faster, since a batch
 #: stays in the cache: 0.11 s against 0.37 s an interval at 2,000 episodes, 2.1 s against 10.5
-#: at 20,000 (``make bench``, "a run's scoring").
+#: at 20,000 (measured once, in one process); ``make bench``'s "a run's scoring" rows time an
+#: interval of 10,000 both ways.
 BOOTSTRAP_BATCH_VALUES: int | None = 2**18
 KEY_COLUMNS = ("policy", "scenario")
 #: Names a table's variant column may have (PersonFollow's scenario, LineTrace's track).
