@@ -16,6 +16,7 @@ from typing import NoReturn
 from execution import BACKENDS, Backend, BackendUnavailableError, backend_from_args
 from train.algos import ALGOS, CONFIGS, DEFAULT_ALGO
 from train.config import ConfigError
+from train.export import FORCE_ALONE_ERROR
 from train.ppo import MAX_THREADS, PROG, USAGE_ERROR, Args, Interrupted, TrainingError, train
 from train.seeds import parse_seeds, train_seeds
 
@@ -168,7 +169,7 @@ def _study(ns: argparse.Namespace) -> tuple[Args, tuple[int, ...], Backend] | No
             "follow-eval load it by that path)"
         )
     if ns.force is not None and ns.export is None:
-        raise UsageError("--force applies to --export only (it lets --export write into a folder)")
+        raise UsageError(FORCE_ALONE_ERROR)
     try:
         seeds = parse_seeds(given["seeds"])
     except ValueError as e:

@@ -63,6 +63,8 @@ EXPORT_NAMES = (*AGENT_FILES, *EXPORT_EXTRAS, MANIFEST)
 # Only a run without normalisation lacks this one.
 _OPTIONAL = ("vecnormalize.pkl",)
 _WRITER = "follow-train --export"
+#: The error for ``--force`` without ``--export`` (a single run and a study both check it).
+FORCE_ALONE_ERROR = "--force applies to --export only (it lets --export write into a folder)"
 
 
 class ExportError(ValueError):

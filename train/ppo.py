@@ -50,7 +50,7 @@ from train.config import (
     policy_class,
     sole_section,
 )
-from train.export import AGENT_FILES, EXPORT_EXTRAS, check_export, export_agent
+from train.export import AGENT_FILES, EXPORT_EXTRAS, FORCE_ALONE_ERROR, check_export, export_agent
 
 __all__ = ["AGENT_FILES", "EXPORT_EXTRAS", "Args", "Interrupted", "check_new_run", "train"]
 
@@ -383,7 +383,7 @@ def _check_options(args: Args, *, run: Path | None) -> None:
         location = run or args.out or args.runs / f"{args.algo}-<timestamp>"
         check_export(args.export, force=args.force, run=location)
     elif args.force:
-        raise ValueError("--force applies to --export only (it lets --export write into a folder)")
+        raise ValueError(FORCE_ALONE_ERROR)
 
 
 def _check_lanes(n_envs: int, scenarios: Sequence[str]) -> None:
