@@ -13,6 +13,7 @@ from __future__ import annotations
 import contextlib
 import os
 import shutil
+import stat
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
@@ -24,8 +25,15 @@ __all__ = [
     "check_new_folder",
     "check_writable",
     "file_on_path",
+    "longest_name",
     "try_new_file",
 ]
+
+
+# A temporary file's name keeps at most this much of its target's stem, so that a target whose
+# name is as long as the file system allows (255 bytes on most) still gets a temporary name.
+_STEM_KEEP_CHARS = 32
+_RANDOM_CHARS = 8  # what mkstemp puts between the prefix and the suffix
 
 
 def _umask() -> int:
@@ -34,20 +42,38 @@ def _umask() -> int:
     return mask
 
 
+def _affixes(path: Path) -> tuple[str, str]:
+    """The prefix and suffix of ``path``'s temporary file: its stem, cut short, and its
+    suffix (writers such as ``cv2.VideoWriter`` pick the format from the suffix)."""
+    return f".{path.stem[:_STEM_KEEP_CHARS]}.", f".tmp{path.suffix}"
+
+
+def longest_name(path: str | Path) -> int:
+    """Bytes of the longer of ``path``'s name and its temporary file's: the name a folder must
+    take for :func:`atomic_path` to write ``path`` there (:func:`try_new_file` tries it)."""
+    path = Path(path)
+    prefix, suffix = _affixes(path)
+    temporary = len(os.fsencode(prefix + suffix)) + _RANDOM_CHARS
+    return max(len(os.fsencode(path.name)), temporary)
+
+
 @contextlib.contextmanager
 def atomic_path(path: str | Path) -> Iterator[Path]:
     """Yield a temporary path beside ``path``; rename it to ``path`` if the block succeeds.
 
     The temporary name keeps the target's suffix (writers such as ``cv2.VideoWriter`` and
-    ``savefig`` pick the format from it). On an exception the temporary file is removed.
+    ``savefig`` pick the format from it) and at most 32 characters of its stem. On an exception
+    the temporary file is removed. A target that is there and is not a regular file (a device,
+    a FIFO, a socket: ``/dev/null`` for root) is never replaced: the block's file is removed
+    and ``OSError`` says so.
 
-    :raises OSError: if the folder is not writable (the message names it).
+    :raises OSError: if the folder is not writable (the message names it), or ``path`` is not
+        a regular file.
     """
     path = Path(path)
+    prefix, suffix = _affixes(path)
     try:
-        fd, tmp_name = tempfile.mkstemp(
-            prefix=f".{path.stem}.", suffix=f".tmp{path.suffix}", dir=path.parent
-        )
+        fd, tmp_name = tempfile.mkstemp(prefix=prefix, suffix=suffix, dir=path.parent)
     except OSError as e:
         raise OSError(f"cannot write to {path.parent}: {e.strerror or e}") from None
     os.close(fd)
@@ -55,10 +81,24 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; give the file the usual mode
     try:
         yield tmp
+        if not _replaceable(path):  # checked last: it may have become one meanwhile
+            raise OSError(
+                f"{path} is not a regular file (a device, a FIFO or a socket); left as it is"
+            )
         os.replace(tmp, path)
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
+
+
+def _replaceable(path: Path) -> bool:
+    """Whether ``path`` is absent, a regular file or a link (``os.replace`` replaces the link,
+    not what it points to); a folder is left to ``os.replace`` to refuse."""
+    try:
+        mode = os.lstat(path).st_mode
+    except OSError:
+        return True
+    return stat.S_ISREG(mode) or stat.S_ISLNK(mode) or stat.S_ISDIR(mode)
 
 
 def atomic_write_text(path: str | Path, text: str) -> Path:
@@ -123,14 +163,18 @@ def check_writable(path: str | Path) -> None:
         raise OSError(f"cannot write to {folder}: {e.strerror or e}") from None
 
 
-def try_new_file(folder: str | Path) -> None:
+def try_new_file(folder: str | Path, name_bytes: int = 0) -> None:
     """Make a file in ``folder`` and remove it at once: the one test of whether a folder takes
     new files (permissions, read-only mounts, ``/proc``, ACLs), since ``os.access`` passes for
     root. Callers put the failure in their own words.
 
+    :param name_bytes: make the file's name at least this long, bytes (:func:`longest_name`):
+        whether the folder's file system takes a name that long (255 bytes on most).
     :raises OSError: as the file system refused the file (``strerror`` says why).
     """
-    fd, name = tempfile.mkstemp(prefix=".write-check.", dir=folder)
+    prefix = ".write-check."
+    padding = "x" * max(0, name_bytes - len(prefix) - _RANDOM_CHARS)
+    fd, name = tempfile.mkstemp(prefix=prefix + padding, dir=folder)
     os.close(fd)
     os.unlink(name)
 

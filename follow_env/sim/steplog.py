@@ -48,8 +48,8 @@ def read_columns(path: str | Path, layout: LogLayout) -> tuple[dict[str, Sequenc
         others as float64 arrays, NaN when blank) and the file line of each row.
     :raises StepLogError: naming the file, and the line and column for a malformed row: a
         missing file, no header, a duplicate or missing column, a row with the wrong number of
-        fields, a cell that is not a number (``nan`` included) or is infinite, a missing
-        required value, a ``time_s`` that does not increase.
+        fields, a cell with a NUL byte, a cell that is not a number (``nan`` included) or is
+        infinite, a missing required value, a ``time_s`` that does not increase.
     """
     path = Path(path)
     try:
@@ -80,6 +80,14 @@ def read_columns(path: str | Path, layout: LogLayout) -> tuple[dict[str, Sequenc
                 f"{path}: line {line}: expected {len(header)} fields as in the header, "
                 f"found {len(row)}"
             )
+        for j, cell in enumerate(row):
+            # a NUL is no text (a zero-filled block after a power cut), and numpy's parser
+            # would drop a trailing one: "2\x00" would read as 2
+            if "\x00" in cell:
+                raise StepLogError(
+                    f"{path}: line {line}, column {header[j] or f'#{j + 1}'}: {cell!r} holds a "
+                    "NUL byte (not text: a damaged file)"
+                )
     lines = [line for line, _ in numbered]
     data = list(zip(*(row for _, row in numbered), strict=True))  # the cells column by column
     columns: dict[str, Sequence] = {}

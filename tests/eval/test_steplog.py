@@ -133,6 +133,16 @@ def test_cell_that_is_not_a_number_names_line_column_and_value(tmp_path: Path) -
         read_step_log(path)
 
 
+def test_a_nul_byte_in_a_cell_names_line_and_column(tmp_path: Path) -> None:
+    # numpy's parser drops a trailing NUL: "3\x00" would read as 3 (a zero-filled block after a
+    # power cut); the robot's replay reads logs through the same reader
+    path = write(tmp_path, f"{HEADER}\n0.0,1.0,5,0.0\n0.1,1.1,3\x00,0.2\n")
+    with pytest.raises(
+        StepLogError, match=r"log\.csv: line 3, column obs_offset_px: '3\\x00' holds a NUL byte"
+    ):
+        read_step_log(path)
+
+
 def test_empty_required_cell_names_the_line(tmp_path: Path) -> None:
     with pytest.raises(StepLogError, match=r"line 3, column obs_distance_m: value is missing"):
         read_step_log(write(tmp_path, f"{HEADER}\n0.0,1.0,5,0.0\n0.1,,5,0.0\n"))

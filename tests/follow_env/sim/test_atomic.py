@@ -1,11 +1,21 @@
 """follow_env/sim/atomic.py: files and folders appear whole or not at all."""
 
+import errno
+import os
 import re
+import stat
 from pathlib import Path
 
 import pytest
 
-from follow_env.sim.atomic import atomic_folder, atomic_path, atomic_write_text, file_on_path
+from follow_env.sim.atomic import (
+    atomic_folder,
+    atomic_path,
+    atomic_write_text,
+    file_on_path,
+    longest_name,
+    try_new_file,
+)
 
 
 def test_atomic_path_renames_into_place(tmp_path: Path) -> None:
@@ -29,6 +39,41 @@ def test_atomic_path_leaves_nothing_on_failure(tmp_path: Path) -> None:
 def test_atomic_path_keeps_the_suffix_for_format_sniffing_writers(tmp_path: Path) -> None:
     with atomic_path(tmp_path / "v.mp4") as tmp:
         assert tmp.suffix == ".mp4"
+
+
+def test_a_fifo_or_a_device_is_never_replaced(tmp_path: Path) -> None:
+    # os.replace would put a regular file in its place (/dev/null, for root)
+    fifo = tmp_path / "log.csv"
+    os.mkfifo(fifo)
+    with pytest.raises(OSError, match="is not a regular file"):
+        atomic_write_text(fifo, "x")
+    assert stat.S_ISFIFO(os.stat(fifo).st_mode)
+    assert [p.name for p in tmp_path.iterdir()] == ["log.csv"]  # no temporary file left
+    (tmp_path / "link.csv").symlink_to(fifo)  # a link is replaced, not what it points to
+    atomic_write_text(tmp_path / "link.csv", "x")
+    assert (tmp_path / "link.csv").read_text() == "x"
+    assert stat.S_ISFIFO(os.stat(fifo).st_mode)
+
+
+@pytest.mark.parametrize("name_bytes", [250, 255])
+def test_a_name_as_long_as_the_file_system_takes_gets_a_temporary_name(
+    tmp_path: Path, name_bytes: int
+) -> None:
+    target = tmp_path / ("x" * (name_bytes - 4) + ".csv")
+    assert longest_name(target) == name_bytes
+    try_new_file(tmp_path, longest_name(target))
+    atomic_write_text(target, "x")  # its temporary file's name is shorter
+    assert [p.name for p in tmp_path.iterdir()] == [target.name]
+
+
+def test_try_new_file_tries_a_name_of_the_length_asked(tmp_path: Path) -> None:
+    try_new_file(tmp_path, 255)
+    with pytest.raises(OSError, match="too long") as caught:
+        try_new_file(tmp_path, 256)  # over the 255 bytes of ext4, tmpfs, xfs, btrfs, overlayfs
+    assert caught.value.errno == errno.ENAMETOOLONG
+    assert list(tmp_path.iterdir()) == []
+    short = tmp_path / "a.csv"
+    assert longest_name(short) > len("a.csv")  # the temporary name is the longer here
 
 
 def test_atomic_write_into_missing_folder_names_it(tmp_path: Path) -> None:
