@@ -6,7 +6,9 @@ The same Policy object that runs in the simulator drives a robot through this pa
   streaming decoders and their statistics;
 * ``bridge.link``: :class:`SerialLink`, either framing over any pyserial URL;
 * ``bridge.runner``: ``follow-robot run``: a policy at the control rate, wheel commands, the
-  PC's wheel PID where the firmware takes duties, safety stops, a step log;
+  PC's wheel PID where the firmware takes duties, safety stops, a step log (with
+  ``bridge.runconfig``, its settings and result, ``bridge.runlog``, the log on disk, and
+  ``bridge.interrupts``, a shutdown a second Ctrl-C cannot cut short);
 * ``bridge.perception``: the runner's observation sources (the emulator's simulated camera, a
   replayed step log, a RealSense camera with a YOLO detector in ``bridge.realsense``);
 * ``bridge.emulator`` (with ``bridge.mcu``, ``bridge.world``): ``follow-robot emulate``: the

@@ -78,10 +78,20 @@ def _seed(text: str) -> int:
 
 def _http(text: str) -> tuple[str, int]:
     host, _, port = text.rpartition(":")
-    host = host.strip("[]") or "127.0.0.1"
-    if not port.isdigit() or not 0 <= int(port) <= 65535:
+    bracketed = host.startswith("[") and host.endswith("]")
+    host = (host[1:-1] if bracketed else host) or "127.0.0.1"
+    if ":" in host and not bracketed:  # "::1" would read as host "::" and port 1
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is not HOST:PORT (an IPv6 host in brackets: [::1]:8000)"
+        )
+    if not (port.isascii() and port.isdigit()) or not 0 <= int(port) <= 65535:
         raise argparse.ArgumentTypeError(f"{text!r} is not HOST:PORT (port 0-65535)")
     return host, int(port)
+
+
+def _host(host: str) -> str:
+    """``host`` as ``--http`` takes it (an IPv6 address in brackets)."""
+    return f"[{host}]" if ":" in host else host
 
 
 def _config(text: str) -> Any:
@@ -153,8 +163,17 @@ def _dispatch(args: argparse.Namespace) -> int:
         host, _ = args.http
         if host not in LOOPBACK_HOSTS and not args.token:
             raise UsageError(
-                f"--http {host}: not loopback; give --token so that only you can drive the robot"
+                f"--http {_host(host)}: not loopback; give --token so that only you can drive "
+                "the robot"
             )
+        if args.token is not None:
+            try:  # bytes that are not UTF-8 arrive as lone surrogates: no page could send them
+                args.token.encode("utf-8")
+            except UnicodeEncodeError:
+                raise UsageError(
+                    f"--token {args.token!r} is out of range: must be text (its bytes are not "
+                    "UTF-8)"
+                ) from None
     if args.subcommand == "emulate":
         return _emulate(args)
     if args.subcommand == "monitor" and args.sim:
@@ -291,8 +310,10 @@ def _start_monitor(args: argparse.Namespace, hub: Any) -> Any:
     host, port = args.http
     try:
         server = serve(hub, host, port, args.token)
-    except (ValueError, RuntimeError) as exc:
+    except ValueError as exc:
         raise UsageError(str(exc)) from None
+    except RuntimeError as exc:  # the port is in use, the address is not this machine's
+        raise UsageError(f"--http {_host(host)}:{port}: {exc}") from None
     # quoted: a token with +, &, # or % would otherwise not survive the page's URL
     query = f"?token={urllib.parse.quote(args.token, safe='')}" if args.token else ""
     print(f"{PROG}: monitor on {server.url}{query}", flush=True)
@@ -347,16 +368,26 @@ def _monitor_sim(args: argparse.Namespace) -> int:
 
 
 def _run(args: argparse.Namespace, monitor: bool) -> int:
-    from bridge.fit import check_command
+    from bridge.fit import check_command, check_platform
     from bridge.runlog import check_log_path
     from bridge.runner import Runner, RunnerConfig
 
+    if args.framing == "reference" and args.command == "speed":
+        # the reference firmware reads the wire's two values as percent duty (reference §1)
+        raise UsageError(
+            "--command speed: the reference framing carries duty commands only (the reference "
+            "firmware's percent duty); use --command duty or auto, or --framing robust"
+        )
     if args.log is not None:
         try:  # now, not at the end of a session whose data it would lose
             check_log_path(args.log)
         except ValueError as exc:
             raise UsageError(str(exc)) from None
     config = _env_config(args)
+    try:  # the robot drives with two wheels: refused now, not by a crash in the session
+        check_platform(config.platform)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
     # with the monitor, the shipped agents that command [v, w] are modes too; the perception
     # is checked when one is chosen (Runner._runnable), as it is known once started
     agents, broken = _shipped_agents() if monitor else ({}, [])
@@ -366,6 +397,11 @@ def _run(args: argparse.Namespace, monitor: bool) -> int:
     policy_name = args.policy if args.subcommand == "run" else "stop"
     try:
         policy = factory(policy_name) if policy_name not in ("stop", "manual") else None
+        if policy is not None:
+            try:
+                check_command(policy)
+            except ValueError as exc:
+                raise ValueError(f"--policy {policy_name}: {exc}") from None
         run_config = RunnerConfig(duration_s=args.duration, command=args.command)
         # a camera that can publish the reading ahead does so for the policy, or else for the
         # agents the monitor offers
@@ -384,31 +420,46 @@ def _run(args: argparse.Namespace, monitor: bool) -> int:
         hub = MonitorHub(policy_name, modes=_modes(policy_name, agents, skipped))
         server = _start_monitor(args, hub)
     meta = {"policy": policy_name, "scenario": f"robot:{args.perception}", "seed": args.seed}
-    runner = Runner(
-        link,
-        policy if policy is not None else _Idle(policy_name),
-        perception,
-        config.platform,
-        run_config,
-        log=args.log,
-        meta=meta,
-        monitor=hub,
-        policy_factory=factory,
-    )
     try:
+        try:
+            runner = Runner(
+                link,
+                policy if policy is not None else _Idle(policy_name),
+                perception,
+                config.platform,
+                run_config,
+                log=args.log,
+                meta=meta,
+                monitor=hub,
+                policy_factory=factory,
+            )
+        except ValueError as exc:  # what the runner refuses before it starts (checked above)
+            raise UsageError(str(exc)) from None
         result = runner.run()
     except (LinkError, PerceptionError) as exc:
-        print(f"{PROG}: error: {exc}", file=sys.stderr)
-        return 1
+        # mid-session, the result is on the error: the summary, and where the log went
+        return _report(getattr(exc, "result", None), str(exc))
     finally:
         link.close()
         if server is not None:
             server.stop()
-    print(f"{PROG}: {result.summary()}", flush=True)
-    if result.log_error:  # the folder went away or filled up during the session
-        print(f"{PROG}: error: {result.log_error}", file=sys.stderr)
+    return _report(result)
+
+
+def _report(result: Any, error: str = "") -> int:
+    """Say how a session went: the summary (where the log is) on stdout, then on stderr one
+    line with whatever went wrong (``error``, the wheel loop's failure, no stop command, a log
+    not where asked); the exit status, 1 if anything did."""
+    problems = [error] if error else []
+    if result is not None:
+        print(f"{PROG}: {result.summary()}", flush=True)
+        for problem in (result.failure, result.stop_error, result.log_error):
+            if problem and problem not in problems:
+                problems.append(problem)
+    if problems:
+        print(f"{PROG}: error: {'; '.join(problems)}", file=sys.stderr)
         return 1
-    return 0 if not result.reason.startswith(("no feedback", "link error")) else 1
+    return 0
 
 
 def _interrupt(signum: int, frame: Any) -> None:

@@ -7,8 +7,9 @@ import json
 from typing import Any
 
 from bridge.perception import PerceptionError, PerceptionSource
+from follow_env.platforms.diff_drive import DiffDriveConfig
 
-__all__ = ["COMMAND", "check_ahead", "check_command"]
+__all__ = ["COMMAND", "check_ahead", "check_command", "check_platform"]
 
 COMMAND = ("v_mps", "w_radps")
 """What a policy must command here: the differential drive's forward speed and turn rate."""
@@ -25,6 +26,19 @@ def check_command(policy: Any) -> None:
         raise ValueError(
             f"{getattr(policy, 'name', 'the policy')} commands [{', '.join(names)}], but this "
             f"robot takes [{', '.join(COMMAND)}]"
+        )
+
+
+def check_platform(platform: Any) -> None:
+    """Refuse a platform other than the differential drive: the robot the runner drives (its
+    wheel loop sends two wheel commands; its inverse kinematics are the differential drive's).
+
+    :raises ValueError: naming ``config.platform`` and what it must be, in one line.
+    """
+    if not isinstance(platform, DiffDriveConfig):
+        raise ValueError(
+            f"config.platform={type(platform).__name__} is out of range: the robot "
+            "follow-robot drives is the differential drive (DiffDriveConfig)"
         )
 
 

@@ -277,6 +277,17 @@ def _read_replay(path: Path) -> list[tuple[float, float, float, bool, float | No
         # an agent that reads ahead needs the reading on every frame, as on the robot
         line = lines[int(np.flatnonzero(np.isnan(ahead))[0])]
         raise PerceptionError(f"{path}: line {line}, column {AHEAD_COLUMN}: value is missing")
+    for name in ("obs_distance_m", "obs_offset_px", AHEAD_COLUMN):
+        # a policy reads float32: a finite value beyond its range would reach it as infinity
+        values = np.asarray(columns.get(name, []))
+        with np.errstate(over="ignore"):
+            big = np.flatnonzero(np.isinf(values.astype(np.float32)) & np.isfinite(values))
+        if big.size:
+            k = int(big[0])
+            raise PerceptionError(
+                f"{path}: line {lines[k]}, column {name}: {values[k]:g} is out of range: "
+                f"must be within +-{float(np.finfo(np.float32).max):g} (the policy reads float32)"
+            )
     return [
         (
             float(t),

@@ -6,13 +6,15 @@ elsewhere, so that a session's data is never lost to a bad path).
 from __future__ import annotations
 
 import csv
+import errno
 import os
+import stat
 import tempfile
 import time
 from pathlib import Path
 from typing import Any
 
-from follow_env.sim.atomic import atomic_path, try_new_file
+from follow_env.sim.atomic import atomic_path, longest_name, try_new_file
 from follow_env.tasks.person_follow.steplog import log_columns
 
 __all__ = ["LOG_COLUMNS", "check_log_path", "save_rows", "write_rows"]
@@ -22,8 +24,9 @@ LOG_COLUMNS = log_columns(ahead=True)
 
 
 def check_log_path(path: str | Path) -> Path:
-    """``path`` as a :class:`~pathlib.Path` if a step log can be written there: not a folder,
-    in an existing folder where this process can create a file.
+    """``path`` as a :class:`~pathlib.Path` if a step log can be written there: not a folder
+    nor any other file that is not a regular one (a device, a FIFO: the log would replace it),
+    in an existing folder where this process can create a file of the log's name's length.
 
     :raises ValueError: ``--log PATH: ...`` saying what is wrong, in one line.
     """
@@ -31,19 +34,33 @@ def check_log_path(path: str | Path) -> Path:
         raise ValueError("--log '': empty; give a file name, such as run.csv")
     path = Path(path)
     parent = path.parent
-    if path.is_dir():
+    try:
+        mode: int | None = os.stat(path).st_mode
+    except OSError:  # absent (or a name too long, which creating a file below tells)
+        mode = None
+    if mode is not None and stat.S_ISDIR(mode):
         raise ValueError(f"--log {path}: is a folder; give a file name, such as {path / 'run.csv'}")
+    if mode is not None and not stat.S_ISREG(mode):
+        raise ValueError(
+            f"--log {path}: is not a regular file (a device, a FIFO or a socket, which a log "
+            "must not replace); give a file name, such as run.csv"
+        )
     if not parent.exists():
         raise ValueError(f"--log {path}: the folder {parent} does not exist")
     if not parent.is_dir():
         raise ValueError(f"--log {path}: {parent} is not a folder")
     # Only creating a file tells: the log is written exactly so, a temporary file beside it
-    # renamed into place.
+    # renamed into place. The file tried has the longer of the two names' lengths, which the
+    # folder's file system might refuse (255 bytes on most).
+    length = longest_name(path)
     try:
-        try_new_file(parent)
+        try_new_file(parent, length)
     except OSError as exc:
+        why = exc.strerror or str(exc)
+        if exc.errno == errno.ENAMETOOLONG:
+            why += f": the log's name, or its temporary file's, takes {length} bytes"
         raise ValueError(
-            f"--log {path}: cannot create a file in the folder {parent} ({exc.strerror or exc})"
+            f"--log {path}: cannot create a file in the folder {parent} ({why})"
         ) from None
     return path
 

@@ -14,30 +14,32 @@ the serial nodes below it):
   robot's did. When no feedback has come for ``feedback_timeout_s`` (0.1 s) it stops the wheels
   and ends the run.
 
-On Ctrl-C, at the end of the perception (the world's episode, the replay) or after
-``duration_s``, the wheels are commanded to zero before the link closes. The step log (the
-evaluation's layout, :mod:`follow_env.tasks.person_follow.steplog`) is written to a temporary
-file and renamed into place, so ``follow-eval metrics`` scores a real run like a simulated one.
+On Ctrl-C, at the end of the perception (the world's episode, the replay), after
+``duration_s``, on a link or perception error, or when the wheel loop fails, the wheels are
+commanded to zero before the link closes; a second Ctrl-C during that shutdown is deferred
+(:class:`bridge.interrupts.InterruptGuard`). The step log (the evaluation's layout,
+:mod:`follow_env.tasks.person_follow.steplog`) is written to a temporary file and renamed into
+place, so ``follow-eval metrics`` scores a real run like a simulated one.
 """
 
 from __future__ import annotations
 
-import contextlib
 import math
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from bridge.fit import check_ahead, check_command
+from bridge.fit import check_ahead, check_command, check_platform
+from bridge.interrupts import InterruptGuard
 from bridge.link import LinkError, SerialLink
 from bridge.loader import PolicyLoader
 from bridge.perception import Frame, PerceptionError, PerceptionSource
 from bridge.protocol import Capability, CommandKind, Feedback, Hello, PeerRole, WheelCommand
+from bridge.runconfig import COMMAND_MODES, RunnerConfig, RunResult
 from bridge.runlog import LOG_COLUMNS, check_log_path, save_rows
 from follow_env.platforms.diff_drive import DiffDriveConfig, diff_drive_ik
 from follow_env.platforms.wheels import pid_step
@@ -46,7 +48,6 @@ from follow_env.tasks.person_follow.steplog import AHEAD_COLUMN
 
 __all__ = ["COMMAND_MODES", "RunResult", "Runner", "RunnerConfig"]
 
-COMMAND_MODES = ("auto", "duty", "speed")
 _ZERO_REPEATS = 3  # stop commands sent at the end (one may be lost on a noisy line)
 _FIRST_FEEDBACK_S = 1.0  # longest wait for the MCU's first feedback, s
 
@@ -54,79 +55,6 @@ _FIRST_FEEDBACK_S = 1.0  # longest wait for the MCU's first feedback, s
 # runner never compiles a kernel.
 _ik = diff_drive_ik.py_func
 _pid = pid_step.py_func
-
-
-@dataclass(frozen=True)
-class RunnerConfig:
-    """How the runner drives the robot.
-
-    :param control_dt_s: control period, s (reference §1.6: 0.1 s).
-    :param wheel_dt_s: wheel loop period, s; ``None``: the platform chain's PC timer period
-        (``chain.pc_pid_period_s``) when its PID runs on the PC, else 10 ms (the MCU's
-        encoder period).
-    :param feedback_timeout_s: stop the wheels when no feedback came for this long, s.
-    :param duration_s: end after this long, s (``None``: at the end of the perception).
-    :param command: ``"speed"`` (the MCU runs the wheel PID), ``"duty"`` (the PC does), or
-        ``"auto"``: speed if the MCU's hello offers it, else duty.
-    """
-
-    control_dt_s: float = 0.1
-    wheel_dt_s: float | None = None
-    feedback_timeout_s: float = 0.1
-    duration_s: float | None = None
-    command: str = "auto"
-
-    def __post_init__(self) -> None:
-        for name, lo, hi in (("control_dt_s", 0.005, 10.0), ("feedback_timeout_s", 0.01, 10.0)):
-            value = getattr(self, name)
-            if not (isinstance(value, int | float) and lo <= value <= hi):
-                raise out_of_range(f"RunnerConfig.{name}", value, f"in [{lo}, {hi}] s")
-        if self.wheel_dt_s is not None and not (
-            isinstance(self.wheel_dt_s, int | float) and 0.001 <= self.wheel_dt_s <= 1.0
-        ):
-            raise out_of_range("RunnerConfig.wheel_dt_s", self.wheel_dt_s, "in [0.001, 1.0] s")
-        if self.wheel_dt_s is not None and self.wheel_dt_s > self.control_dt_s:
-            raise out_of_range(
-                "RunnerConfig.wheel_dt_s",
-                self.wheel_dt_s,
-                f"<= control_dt_s ({self.control_dt_s} s)",
-            )
-        if self.duration_s is not None and not (
-            isinstance(self.duration_s, int | float) and 0 < self.duration_s <= 86400
-        ):
-            raise out_of_range("RunnerConfig.duration_s", self.duration_s, "in (0, 86400] s")
-        if self.command not in COMMAND_MODES:
-            raise out_of_range(
-                "RunnerConfig.command", self.command, "one of " + ", ".join(COMMAND_MODES)
-            )
-
-
-@dataclass
-class RunResult:
-    """How a run went."""
-
-    steps: int = 0
-    reason: str = ""
-    command: str = ""
-    lateness_ms: list[float] = field(default_factory=list)  # control loop's wake lateness, ms
-    wheel_lateness_ms: list[float] = field(default_factory=list)  # the wheel loop's, ms
-    overruns: int = 0
-    feedback_frames: int = 0
-    log: Path | None = None  # where the step log was written (a spare file if --log failed)
-    log_error: str = ""  # why the step log is not at --log, in one line ("" if it is)
-
-    def lateness_percentile(self, q: float) -> float:
-        """Percentile ``q`` (0-100) of how late the control loop woke, ms."""
-        return float(np.percentile(self.lateness_ms, q)) if self.lateness_ms else math.nan
-
-    def summary(self) -> str:
-        """One line for the command line."""
-        return (
-            f"{self.steps} control steps, ended: {self.reason}; commands: {self.command}; "
-            f"loop lateness p50 {self.lateness_percentile(50):.2f} ms, p99 "
-            f"{self.lateness_percentile(99):.2f} ms, {self.overruns} overruns; "
-            f"{self.feedback_frames} feedback frames" + (f"; log: {self.log}" if self.log else "")
-        )
 
 
 class _Wheels:
@@ -149,8 +77,11 @@ class Runner:
     :param link: an open serial link to the MCU (or the emulator).
     :param policy: anything with ``reset()`` and ``act(obs) -> [v, w]``.
     :param perception: the observation source.
-    :param platform: the differential drive's configuration (geometry, PID gains, bounds).
-    :param config: periods, timeout, duration and command mode.
+    :param platform: the differential drive's configuration (geometry, PID gains, bounds);
+        another platform is refused here (``ValueError``), as is a policy that does not command
+        its ``[v, w]`` (:func:`bridge.fit.check_command`).
+    :param config: periods, timeout, duration and command mode; a mode the link's framing
+        cannot carry is refused here (``ValueError``).
     :param log: where to write the step log (``None``: no log); a path it cannot be written
         to is refused here (:func:`bridge.runlog.check_log_path`, ``ValueError``). Should the
         writing still fail at the end, the log goes to a spare file and ``RunResult.log_error``
@@ -180,6 +111,10 @@ class Runner:
         self.perception = perception
         self.platform = platform if platform is not None else DiffDriveConfig()
         self.config = config if config is not None else RunnerConfig()
+        # refused now, not as a crash of the wheel loop or the control loop mid-session
+        check_platform(self.platform)
+        check_command(policy)
+        self._framing_command()
         self.log = Path(log) if log is not None else None
         self.meta = dict(meta or {})
         self.monitor = monitor
@@ -202,12 +137,31 @@ class Runner:
 
     # ---- command mode -------------------------------------------------------------------
 
+    def _framing_command(self) -> str | None:
+        """The command mode the reference framing carries (the wire cannot say which: the
+        codec's ``command_kind``); ``None`` for the robust framing, whose frames say.
+
+        :raises ValueError: the configured mode is not the one the framing carries.
+        """
+        if self.link.framing == "robust":
+            return None
+        kind = getattr(self.link.codec, "command_kind", CommandKind.DUTY_PERCENT)
+        # the reference firmware takes whole-percent duties (reference §1.1)
+        carried = {CommandKind.DUTY_PERCENT: "duty", CommandKind.SPEED_MM_S: "speed"}.get(kind)
+        if carried is None or self.config.command not in ("auto", carried):
+            raise out_of_range(
+                "RunnerConfig.command",
+                self.config.command,
+                f"{carried or 'duty or speed'} or auto: the {self.link.framing} framing of "
+                f"{self.link.url} carries {CommandKind(kind).name} commands",
+            )
+        return carried
+
     def _choose_command(self) -> str:
         wanted = self.config.command
-        if self.link.framing != "robust":
-            if wanted == "speed":
-                return "speed"
-            return "duty"  # the reference firmware takes duties (reference §1.1)
+        carried = self._framing_command()
+        if carried is not None:
+            return carried
         hello = self.link.handshake(Hello(PeerRole.PC), timeout_s=1.0)
         caps = hello.capabilities
         if wanted == "auto":
@@ -230,6 +184,12 @@ class Runner:
     # ---- the wheel loop -----------------------------------------------------------------
 
     def _wheel_loop(self, mode: str) -> None:
+        try:
+            self._wheel_ticks(mode)
+        except Exception as exc:  # any: a run must never go on without its wheel loop
+            self._fail(f"wheel loop failed ({type(exc).__name__}: {exc}): wheels stopped")
+
+    def _wheel_ticks(self, mode: str) -> None:
         cfg, wheels, pid = self.config, self._wheels, self.platform.pid
         chain = self.platform.chain
         # As listed, the PC's PID has no output clamp (the firmware clamps the command).
@@ -325,17 +285,29 @@ class Runner:
         self._wheels.failure = why
         self._stop.set()
 
-    def _stop_wheels(self, mode: str) -> None:
+    def _stop_wheels(self, mode: str) -> str:
+        """Command zero ``_ZERO_REPEATS`` times; ``""`` if one went out, else why none did."""
+        sent, why = 0, ""
         zero = self._wheel_command(mode, [0.0, 0.0], [0.0, 0.0])
         for _ in range(_ZERO_REPEATS):
-            with contextlib.suppress(LinkError, ValueError):
+            try:
                 self.link.send(zero)
+                sent += 1
+            except (LinkError, ValueError) as exc:
+                why = str(exc)
             time.sleep(0.002)
+        return "" if sent else f"the stop command could not be sent ({why})"
 
     # ---- the control loop ---------------------------------------------------------------
 
     def run(self) -> RunResult:
-        """Run until the perception ends, ``duration_s`` passes, the link fails or Ctrl-C."""
+        """Run until the perception ends, ``duration_s`` passes, the link fails or Ctrl-C.
+
+        :raises LinkError: the MCU could not be reached or does not take the command mode, or
+            (``.result``: the session's :class:`RunResult`, its log saved) it failed mid-run.
+        :raises PerceptionError: the perception could not start or feed the policy, or (with
+            ``.result``, as above) it failed mid-run.
+        """
         cfg = self.config
         result = RunResult()
         mode = self._choose_command()
@@ -353,54 +325,71 @@ class Runner:
             self.monitor.scene = {"walls": walls}  # the emulated world's, for the top-down view
         self.policy.reset()
         wheel_thread = threading.Thread(target=self._wheel_loop, args=(mode,), name="wheel-loop")
-        start = time.monotonic()
-        wheel_thread.start()
         step = 0
         frame: Frame | None = None
         prev_speed = 0.0
-        try:
-            while not self._stop.is_set():
-                scheduled = start + step * cfg.control_dt_s
-                delay = scheduled - time.monotonic()
-                if delay > 0 and self._stop.wait(delay):
-                    break
-                woke = time.monotonic()
-                late = woke - scheduled
-                if late > cfg.control_dt_s:  # a whole period lost: skip to the next slot
-                    result.overruns += 1
-                    step = int((woke - start) // cfg.control_dt_s)
-                    continue
-                result.lateness_ms.append(1000.0 * late)
-                frame = self.perception.read()
-                t = step * cfg.control_dt_s
-                if frame.done:
-                    result.reason = f"perception over ({frame.termination or 'done'})"
-                    break
-                if cfg.duration_s is not None and t >= cfg.duration_s:
-                    result.reason = f"duration {cfg.duration_s:g} s reached"
-                    break
-                v, w = self._act(frame)
-                prev_speed = self._record(step, t, frame, v, w, prev_speed)
-                step += 1
-        except KeyboardInterrupt:
-            result.reason = "interrupted (Ctrl-C)"
-        finally:
-            self._stop.set()
-            wheel_thread.join(timeout=1.0)
-            self._stop_wheels(mode)
-            self.perception.close()
-            if self._loader is not None:
-                self._loader.close()
-            if self._wheels.failure and not result.reason:
-                result.reason = self._wheels.failure
-            if frame is not None:
-                self._record(step, step * cfg.control_dt_s, frame, None, None, prev_speed)
-            result.steps = step
-            result.feedback_frames = self._wheels.frames
-            result.wheel_lateness_ms = self._wheels.lateness_ms
-            if self.log is not None:
-                result.log, result.log_error = save_rows(self._rows, self.log)
+        with InterruptGuard() as guard:
+            try:
+                start = time.monotonic()
+                wheel_thread.start()  # in here: once started, the finally below stops it
+                while not self._stop.is_set():
+                    scheduled = start + step * cfg.control_dt_s
+                    delay = scheduled - time.monotonic()
+                    if delay > 0 and self._stop.wait(delay):
+                        break
+                    woke = time.monotonic()
+                    late = woke - scheduled
+                    if late > cfg.control_dt_s:  # a whole period lost: skip to the next slot
+                        result.overruns += 1
+                        step = int((woke - start) // cfg.control_dt_s)
+                        continue
+                    result.lateness_ms.append(1000.0 * late)
+                    frame = self.perception.read()
+                    t = step * cfg.control_dt_s
+                    if frame.done:
+                        result.reason = f"perception over ({frame.termination or 'done'})"
+                        break
+                    if cfg.duration_s is not None and t >= cfg.duration_s:
+                        result.reason = f"duration {cfg.duration_s:g} s reached"
+                        break
+                    v, w = self._act(frame)
+                    prev_speed = self._record(step, t, frame, v, w, prev_speed)
+                    step += 1
+            except KeyboardInterrupt:
+                result.reason = "interrupted (Ctrl-C)"
+            except (LinkError, PerceptionError) as exc:
+                kind = "link" if isinstance(exc, LinkError) else "perception"
+                result.reason = f"{kind} error: {exc}"
+                exc.result = result  # type: ignore[attr-defined]  # filled in below
+                raise
+            finally:
+                guard.holding = True  # first, and no call: a 2nd Ctrl-C must not cut this short
+                self._stop.set()
+                if wheel_thread.ident is not None:
+                    wheel_thread.join(timeout=1.0)
+                result.stop_error = self._stop_wheels(mode)
+                try:
+                    self.perception.close()
+                    if self._loader is not None:
+                        self._loader.close()
+                finally:
+                    self._finish(result, step, frame, prev_speed)
+            if guard.deferred and not result.reason.startswith("interrupted"):
+                result.reason += "; interrupted (Ctrl-C) while stopping"
         return result
+
+    def _finish(self, result: RunResult, step: int, frame: Frame | None, prev: float) -> None:
+        """Fill in ``result`` and save the step log (``frame``: the last one read, if any)."""
+        result.failure = self._wheels.failure
+        if result.failure and not result.reason:
+            result.reason = result.failure
+        if frame is not None:
+            self._record(step, step * self.config.control_dt_s, frame, None, None, prev)
+        result.steps = step
+        result.feedback_frames = self._wheels.frames
+        result.wheel_lateness_ms = self._wheels.lateness_ms
+        if self.log is not None:
+            result.log, result.log_error = save_rows(self._rows, self.log)
 
     def _act(self, frame: Frame) -> tuple[float, float]:
         policy = self._current_policy()

@@ -21,14 +21,27 @@ def open_source(
     :param ahead: the reading ahead the policy reads (``PPOPolicy.reads_ahead``): the
         RealSense source publishes it with these settings; the emulator's world and a replay
         publish what they were configured or recorded with (the runner checks).
-    :raises ValueError: an unknown kind, or ``sim`` without a ``socket://`` port.
+    :raises ValueError: an unknown kind, ``sim`` without a ``socket://`` port, or a
+        ``sim:HOST:PORT`` that is not one (an IPv6 host in brackets, a port in 1-65535).
     """
     kind, _, rest = spec.partition(":")
     if kind == "sim":
         if rest:
-            host, _, port = rest.rpartition(":")
-            if not host or not port.isdigit():
-                raise ValueError(f"--perception {spec!r}: expected sim or sim:HOST:PORT")
+            if rest.startswith("["):  # an IPv6 address: sim:[::1]:5761
+                host, colon, port = rest[1:].partition("]:")
+                host = host if colon else ""
+            else:
+                host, _, port = rest.rpartition(":")
+                host = "" if ":" in host else host  # an IPv6 address without its brackets
+            if not host:
+                raise ValueError(
+                    f"--perception {spec!r}: expected sim or sim:HOST:PORT (an IPv6 host in "
+                    "brackets: sim:[::1]:5761)"
+                )
+            number = port.isascii() and port.isdigit()
+            if not number or not 1 <= int(port) <= 65535:
+                what = "is out of range" if number else "is not a number"
+                raise ValueError(f"--perception {spec!r}: port {port!r} {what}: must be in 1-65535")
             return SimCamera(host, int(port), seed)
         try:
             host, port_no = perception_address(port_url)

@@ -18,8 +18,10 @@ offline, beside the robot). ``/ws`` is the WebSocket:
 
 With a ``token`` the WebSocket handshake must carry it (``/ws?token=...``, any text, compared
 as UTF-8); a wrong or missing token is refused before the connection opens: HTTP 403 with the
-body ``wrong or missing token``. The command line requires a token for any host other than
-loopback.
+body ``wrong or missing token``. ``GET /state`` (the robot's state, for scripts) needs it the
+same way (``/state?token=...``); the page and its static files, the same for everyone, do not
+(the page reads the token from its own URL), and the app serves no API schema. The command line
+requires a token for any host other than loopback.
 """
 
 from __future__ import annotations
@@ -27,6 +29,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import json
+import logging
 import math
 import secrets
 import threading
@@ -35,8 +38,8 @@ from pathlib import Path
 from typing import Annotated, Any, Literal
 
 import uvicorn
-from fastapi import FastAPI, WebSocket, WebSocketDisconnect
-from fastapi.responses import FileResponse, PlainTextResponse
+from fastapi import FastAPI, Request, WebSocket, WebSocketDisconnect
+from fastapi.responses import FileResponse, JSONResponse, PlainTextResponse
 from fastapi.staticfiles import StaticFiles
 from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, ValidationError
 
@@ -99,14 +102,15 @@ def create_app(hub: MonitorHub, token: str | None = None, rate_hz: float = 10.0)
     """The monitor app over ``hub``.
 
     :param hub: the state and mode store the robot's driver shares.
-    :param token: required at the WebSocket handshake when given (any text: it is compared
-        as UTF-8 bytes).
+    :param token: required at the WebSocket handshake and by ``/state`` when given (any text:
+        it is compared as UTF-8 bytes).
     :param rate_hz: state messages per second at most.
     """
     if not 0.1 <= rate_hz <= 100.0:
         raise ValueError(f"rate_hz={rate_hz} is out of range: must be in [0.1, 100] Hz")
     expected = None if token is None else _token_bytes(token)
-    app = FastAPI(title="PersonFollow monitor", docs_url=None, redoc_url=None)
+    # no /docs, /redoc nor /openapi.json: routes that would answer without the token
+    app = FastAPI(title="PersonFollow monitor", docs_url=None, redoc_url=None, openapi_url=None)
     app.state.hub = hub
     app.state.clients = 0
     app.mount("/static", StaticFiles(directory=STATIC), name="static")
@@ -115,17 +119,21 @@ def create_app(hub: MonitorHub, token: str | None = None, rate_hz: float = 10.0)
     async def index() -> FileResponse:
         return FileResponse(STATIC / "index.html", media_type="text/html")
 
-    @app.get("/state")
-    async def state() -> dict[str, Any]:
-        """The newest state (for scripts; the page uses the WebSocket)."""
-        return hub.latest() or {"type": "state", "seq": 0}
+    def allowed(given: str) -> bool:
+        # compare_digest takes str only when it is ASCII; UTF-8 bytes take any token. The query
+        # string was decoded with errors replaced (``%ff``), so encoding it cannot fail.
+        return expected is None or secrets.compare_digest(given.encode("utf-8"), expected)
+
+    @app.get("/state", response_model=None)
+    async def state(request: Request) -> JSONResponse | PlainTextResponse:
+        """The newest state (for scripts; the page uses the WebSocket); 403 without the token."""
+        if not allowed(request.query_params.get("token", "")):
+            return PlainTextResponse("wrong or missing token", status_code=403)
+        return JSONResponse(_clean(hub.latest() or {"type": "state", "seq": 0}))
 
     @app.websocket("/ws")
     async def websocket(ws: WebSocket) -> None:
-        # compare_digest takes str only when it is ASCII; UTF-8 bytes take any token. The query
-        # string was decoded with errors replaced (``%ff``), so encoding it cannot fail.
-        given = ws.query_params.get("token", "").encode("utf-8")
-        if expected is not None and not secrets.compare_digest(given, expected):
+        if not allowed(ws.query_params.get("token", "")):
             await _refuse(ws, "wrong or missing token")
             return
         await ws.accept()
@@ -242,18 +250,33 @@ class Server:
             app, host=host, port=port, log_level="warning", lifespan="off", ws_max_size=WS_MAX_BYTES
         )
         self._server = uvicorn.Server(config)
-        self._thread = threading.Thread(target=self._server.run, name="monitor", daemon=True)
+        self._thread = threading.Thread(target=self._serve, name="monitor", daemon=True)
         self.host = host
         self.port = port
 
+    def _serve(self) -> None:
+        # uvicorn ends a start-up that failed with sys.exit(): start() says why, in one line
+        with contextlib.suppress(SystemExit):
+            self._server.run()
+
     def start(self, timeout_s: float = 10.0) -> Server:
-        """Start serving; returns once the socket listens (``RuntimeError`` if it cannot)."""
-        self._thread.start()
-        end = time.monotonic() + timeout_s
-        while not self._server.started:
-            if not self._thread.is_alive() or time.monotonic() > end:
-                raise RuntimeError(f"the monitor could not listen on {self.host}:{self.port}")
-            time.sleep(0.02)
+        """Start serving; returns once the socket listens (``RuntimeError`` if it cannot, saying
+        why in one line: uvicorn's own error line, such as a port in use, is held back)."""
+        held = _Held()
+        logger = logging.getLogger("uvicorn.error")
+        logger.addFilter(held)
+        try:
+            self._thread.start()
+            end = time.monotonic() + timeout_s
+            while not self._server.started:
+                if not self._thread.is_alive() or time.monotonic() > end:
+                    why = f" ({'; '.join(held.errors)})" if held.errors else ""
+                    raise RuntimeError(
+                        f"the monitor could not listen on {self.host}:{self.port}{why}"
+                    )
+                time.sleep(0.02)
+        finally:
+            logger.removeFilter(held)
         if self.port == 0:
             sock = self._server.servers[0].sockets[0]
             self.port = sock.getsockname()[1]
@@ -270,6 +293,21 @@ class Server:
         self._server.should_exit = True
         if self._thread.is_alive():
             self._thread.join(timeout=5.0)
+
+
+class _Held(logging.Filter):
+    """Keeps uvicorn's error records of a start-up out of the log (the caller says why in
+    its own one line) and the messages for it."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.errors: list[str] = []
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        if record.levelno < logging.ERROR:
+            return True
+        self.errors.append(record.getMessage())
+        return False
 
 
 def serve(

@@ -3,7 +3,10 @@ is wrong, exit status 2, before any long work starts, and leaves no file behind.
 
 from __future__ import annotations
 
+import os
 import shutil
+import socket
+import stat
 import sys
 import tempfile
 from pathlib import Path
@@ -103,6 +106,132 @@ def test_a_log_that_fails_at_the_end_is_kept_elsewhere_and_said_in_one_line(
     assert not folder.exists()
 
 
+@pytest.mark.parametrize("kind", ["fifo", "device"])
+def test_a_log_that_is_not_a_regular_file_is_refused_and_never_replaced(
+    kind: str, tmp_path: Path, capsys: pytest.CaptureFixture[str], no_session: None
+) -> None:
+    # os.replace would put a regular file in the place of a FIFO or a device node (/dev/null,
+    # for root, is in a folder root may write to)
+    if kind == "fifo":
+        node = tmp_path / "pipe.csv"
+        os.mkfifo(node)
+    else:
+        node = Path("/dev/null")
+    before = os.stat(node).st_mode
+    assert main([*RUN, *REPLAY, "--log", str(node)]) == 2
+    _one_line(capsys, f"--log {node}: is not a regular file")
+    assert os.stat(node).st_mode == before
+
+
+def test_the_final_save_never_replaces_what_became_a_fifo(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from bridge.runlog import save_rows
+
+    spare = tmp_path / "spare"
+    spare.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(spare))
+    node = tmp_path / "run.csv"
+    os.mkfifo(node)  # made during the session, after --log was checked
+    where, why = save_rows([{"step": 0, "time_s": 0.0}], node)
+    assert stat.S_ISFIFO(os.stat(node).st_mode)
+    assert "is not a regular file" in why
+    assert where is not None
+    assert where.parent == spare
+    assert where.read_text() == "step,time_s\n0,0\n"
+    assert _files(tmp_path) == ["run.csv", "spare", f"spare/{where.name}"]
+
+
+@pytest.mark.parametrize("length", [250, 255])
+def test_a_long_log_name_the_folder_takes_is_written_there(
+    length: int, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from eval.steplog import read_step_log
+
+    spare = tmp_path / "spare"
+    spare.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(spare))  # where a failed save would go
+    log = tmp_path / ("x" * (length - 4) + ".csv")
+    assert main([*RUN, *REPLAY, "--log", str(log)]) == 0
+    assert len(read_step_log(log)) >= 2
+    assert _files(tmp_path) == sorted([log.name, "spare"])  # no temporary file, no spare copy
+
+
+def test_a_log_name_longer_than_the_folder_takes_is_refused_before_the_session(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], no_session: None
+) -> None:
+    log = tmp_path / ("x" * 252 + ".csv")  # 256 bytes: over the 255 of ext4, tmpfs, xfs, btrfs
+    assert main([*RUN, *REPLAY, "--log", str(log)]) == 2
+    _one_line(capsys, f"--log {log}: cannot create a file in the folder", "256 bytes")
+    assert _files(tmp_path) == []
+
+
+# ---- run: what the robot cannot do ----------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("argv", "parts"),
+    [
+        (["--framing", "reference", "--command", "speed"], ["--command speed", "--framing"]),
+        (
+            ["--config", '{"platform": "mecanum"}'],
+            ["config.platform=MecanumConfig is out of range", "differential drive"],
+        ),
+        (
+            ["--policy", "ppo_mecanum"],
+            ["--policy ppo_mecanum: ppo_mecanum commands [v_mps, vy_mps, w_radps], but this"],
+        ),
+    ],
+)
+def test_what_the_robot_cannot_run_is_refused_before_the_session(
+    argv: list[str],
+    parts: list[str],
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    no_session: None,
+) -> None:
+    assert main([*RUN, *REPLAY, "--log", str(tmp_path / "run.csv"), *argv]) == 2
+    _one_line(capsys, *parts)
+    assert _files(tmp_path) == []
+
+
+def test_an_error_mid_session_still_says_how_it_went_and_where_the_log_is(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # the camera fails after a few frames, and the log's folder went away before that: the
+    # summary and the spare log's place are said, then the error, and the exit status is 1
+    from bridge.perception import PerceptionError, Replay
+    from eval.steplog import read_step_log
+
+    folder, spare = tmp_path / "usb", tmp_path / "spare"
+    folder.mkdir()
+    spare.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(spare))
+    replay = tmp_path / "obs.csv"
+    replay.write_text(_LOG)
+    read = Replay.read
+
+    def failing(self: Replay) -> Any:
+        self.reads = getattr(self, "reads", 0) + 1
+        if self.reads == 5:
+            shutil.rmtree(folder)
+            raise PerceptionError("the camera timed out")
+        return read(self)
+
+    monkeypatch.setattr(Replay, "read", failing)
+    log = folder / "run.csv"
+    assert main([*RUN, "--perception", f"replay:{replay}", "--log", str(log)]) == 1
+    out, err = capsys.readouterr()
+    assert err.count("\n") == 1, err
+    assert err.startswith("follow-robot: error: the camera timed out; --log"), err
+    assert "could not be written" in err
+    (kept,) = spare.iterdir()
+    assert f"saved to {kept} instead" in err
+    assert "4 control steps, ended: perception error: the camera timed out" in out
+    assert f"log: {kept}" in out
+    assert len(read_step_log(kept)) == 5  # the 4 steps, and the last frame with no command
+
+
 # ---- run --perception replay: -------------------------------------------------------------
 
 _LOG = "time_s,obs_distance_m,obs_offset_px,detected\n" + "".join(
@@ -116,6 +245,16 @@ _LOG = "time_s,obs_distance_m,obs_offset_px,detected\n" + "".join(
         (_LOG[: _LOG.index("0.9,") + 6], "line 11: expected 4 fields as in the header, found 2"),
         (_LOG.replace("\n0.3,1.03,3,", "\n0.3,1.03,abc,"), "line 5, column obs_offset_px: 'abc'"),
         (_LOG.replace("\n0.3,1.03,", "\n0.3,inf,"), "line 5, column obs_distance_m: 'inf' is not"),
+        # finite, but infinite as the float32 a policy reads
+        (
+            _LOG.replace("\n0.3,1.03,3,", "\n0.3,1.03,1e39,"),
+            "line 5, column obs_offset_px: 1e+39 is out of range",
+        ),
+        # numpy's parser reads "3\0" as 3
+        (
+            _LOG.replace("\n0.3,1.03,3,", "\n0.3,1.03,3\x00,"),
+            "line 5, column obs_offset_px: '3\\x00' holds a NUL byte",
+        ),
     ],
 )
 def test_a_damaged_replay_is_refused_naming_the_file_line_and_column(
@@ -171,6 +310,44 @@ def test_the_monitor_refuses_what_it_would_ignore_before_it_starts(
     assert main(["monitor", *argv, "--http", "127.0.0.1:0"]) == 2
     _one_line(capsys, *parts)
     assert _files(tmp_path) == []
+
+
+@pytest.mark.parametrize(
+    ("argv", "parts"),
+    [
+        (["--token", "\udcff"], ["--token '\\udcff' is out of range: must be text"]),
+        (["--http", "::1"], ["argument --http: '::1' is not HOST:PORT", "[::1]:8000"]),
+    ],
+)
+def test_a_monitor_option_that_cannot_work_is_named(
+    argv: list[str], parts: list[str], capsys: pytest.CaptureFixture[str], no_server: None
+) -> None:
+    # a command-line argument whose bytes are not UTF-8 arrives with lone surrogates
+    assert main(["monitor", "--sim", "--http", "127.0.0.1:0", *argv]) == 2
+    _one_line(capsys, *parts)
+
+
+def test_the_monitor_on_a_port_in_use_says_so_in_one_line(
+    capfd: pytest.CaptureFixture[str],
+) -> None:
+    import argparse
+
+    from bridge.cli import UsageError, _http, _start_monitor
+    from bridge.monitor.hub import MonitorHub
+
+    assert _http("[::1]:8000") == ("::1", 8000)
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        args = argparse.Namespace(http=("127.0.0.1", port), token=None)
+        with pytest.raises(UsageError) as refused:
+            _start_monitor(args, MonitorHub())
+    message = str(refused.value)
+    assert message.startswith(f"--http 127.0.0.1:{port}: the monitor could not listen")
+    assert "address already in use" in message
+    assert "\n" not in message
+    assert capfd.readouterr().err == ""  # uvicorn's own error line is held back
 
 
 # Two ways to name a scenario: the option, and the configuration's (no default may override it).

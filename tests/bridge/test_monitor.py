@@ -146,6 +146,26 @@ def test_a_wrong_token_is_refused_at_the_handshake(hub: MonitorHub, token: str) 
         assert ws.receive_json()["type"] == "scene"
 
 
+def test_the_state_route_needs_the_token_as_the_websocket_does(hub: MonitorHub) -> None:
+    client = TestClient(create_app(hub, token="clé"))
+    for url in ("/state", "/state?token=guess", "/state?token=%ff", "/state?token=cl"):
+        refused = client.get(url)
+        assert refused.status_code == 403
+        assert refused.text == "wrong or missing token"
+    assert client.get(f"/state?token={quote('clé')}").json()["mode"] == "stop"
+    # no other route answers with anything of the robot's: no API schema, no docs
+    for url in ("/openapi.json", "/docs", "/redoc"):
+        assert client.get(url).status_code == 404
+    assert client.get("/").status_code == 200  # the page: the same for everyone
+
+
+def test_the_state_route_serves_a_state_with_nan(hub: MonitorHub) -> None:
+    hub.publish({"time_s": float("nan"), "mode": "stop", "obs": [1.0, float("inf")]})
+    state = TestClient(create_app(hub)).get("/state")
+    assert state.status_code == 200
+    assert state.json()["obs"] == [1.0, None]
+
+
 def test_a_token_that_is_not_text_is_refused_at_once(hub: MonitorHub) -> None:
     with pytest.raises(ValueError, match="token is out of range: must be text"):
         create_app(hub, token="\udcff")  # a byte that is not UTF-8 on the command line

@@ -106,10 +106,16 @@ def test_open_source_parses_the_perception_argument(tmp_path: Path) -> None:
     other = open_source("sim:10.0.0.2:7000", "/dev/ttyUSB0")
     assert isinstance(other, SimCamera)
     assert other.address == ("10.0.0.2", 7000)
+    assert open_source("sim:[::1]:5761", "/dev/ttyUSB0").address == ("::1", 5761)
     assert perception_address("socket://robot.local:80") == ("robot.local", 81)
     for bad, error in (
         ("sim", "needs --port socket://"),
         ("sim:nohost", "sim:HOST:PORT"),
+        ("sim:::1:5761", r"an IPv6 host in brackets: sim:\[::1\]:5761"),
+        ("sim:[::1]", "expected sim or sim:HOST:PORT"),
+        ("sim:host:0", "port '0' is out of range: must be in 1-65535"),
+        ("sim:host:65536", "port '65536' is out of range: must be in 1-65535"),
+        ("sim:host:x1", "port 'x1' is not a number"),
         ("replay", "needs a step log"),
         ("realsense", "needs a detector model file"),
         ("lidar", "out of range"),

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import re
 import signal
 import subprocess
@@ -16,7 +17,8 @@ import numpy as np
 import pytest
 
 from bridge import SerialLink
-from bridge.perception import Replay
+from bridge.perception import Frame, Replay
+from bridge.protocol import Feedback
 from bridge.runner import Runner, RunnerConfig
 from bridge.sources import open_source
 from eval import episode_metrics, run_episode
@@ -320,6 +322,119 @@ def test_the_robots_monitor_refuses_an_agent_its_camera_cannot_feed(
     assert proc.returncode == 0, out
 
 
+def _curve(tmp_path: Path) -> Path:
+    source = tmp_path / "source.csv"
+    write_step_log(run_episode("pn", "curve", 1).log, source)
+    return source
+
+
+def _stopped(link: SerialLink) -> bool:
+    """Whether the last commands the runner sent were its three stop commands: loop:// echoes
+    what is sent, and the wheel loop, which read the echoes, ended before those went out."""
+    echoed = [m for m in link.receive(0.2) if isinstance(m, Feedback)]
+    return len(echoed) >= 3 and all((m.right_mm_s, m.left_mm_s) == (0, 0) for m in echoed[-3:])
+
+
+def test_a_failing_wheel_loop_ends_the_run_stops_the_wheels_and_says_why(tmp_path: Path) -> None:
+    # Whatever the wheel loop raises (here a bug standing in for any), the run must not go on
+    # without it: the control loop ends, the wheels get the stop command, the result says why.
+    with SerialLink("loop://", "reference") as link:
+        runner = Runner(
+            link, make_policy("pn"), Replay(_curve(tmp_path)), config=RunnerConfig(duration_s=5)
+        )
+        command = runner._wheel_command
+        ticks = []
+
+        def buggy(*args: Any) -> Any:
+            if threading.current_thread().name == "wheel-loop":
+                ticks.append(1)
+                if len(ticks) == 30:
+                    raise RuntimeError("a bug")
+            return command(*args)
+
+        runner._wheel_command = buggy  # type: ignore[method-assign]
+        start = time.monotonic()
+        result = runner.run()
+        elapsed = time.monotonic() - start
+        assert _stopped(link)
+    assert elapsed < 2.0  # not the 5 s the run was to take
+    assert result.reason == result.failure
+    assert result.reason == "wheel loop failed (RuntimeError: a bug): wheels stopped"
+    assert result.stop_error == ""
+    assert f"ended: {result.reason}" in result.summary()
+
+
+def test_a_stop_command_that_cannot_be_sent_is_said(tmp_path: Path) -> None:
+    with SerialLink("loop://", "reference") as link:
+        runner = Runner(
+            link, make_policy("pn"), Replay(_curve(tmp_path)), config=RunnerConfig(duration_s=5)
+        )
+        threading.Timer(0.5, link.close).start()  # the adapter is pulled out
+        result = runner.run()
+    assert result.reason.startswith("link error: loop://: ")
+    assert result.reason.endswith("not open")
+    assert result.stop_error.startswith("the stop command could not be sent (")
+    assert result.stop_error in result.summary()
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "why"),
+    [
+        (
+            {"config": RunnerConfig(command="speed")},
+            r"RunnerConfig.command='speed' is out of range: must be duty or auto: the "
+            r"reference framing of loop:// carries DUTY_PERCENT commands",
+        ),
+        ({"platform": "mecanum"}, "config.platform=MecanumConfig is out of range"),
+        ({"policy": "ppo_mecanum"}, r"ppo_mecanum commands \[v_mps, vy_mps, w_radps\]"),
+    ],
+)
+def test_a_runner_refuses_what_would_fail_mid_session(
+    kwargs: dict[str, Any], why: str, tmp_path: Path
+) -> None:
+    from follow_env.platforms.mecanum import MecanumConfig
+
+    if kwargs.get("platform") == "mecanum":
+        kwargs["platform"] = MecanumConfig()
+    policy = make_policy(kwargs.pop("policy", "pn"))
+    with SerialLink("loop://", "reference") as link, pytest.raises(ValueError, match=why):
+        Runner(link, policy, Replay(_curve(tmp_path)), **kwargs)
+
+
+def test_a_second_ctrl_c_while_stopping_does_not_lose_the_log(tmp_path: Path) -> None:
+    # Ctrl-C pressed twice: the first ends the control loop, the second arrives while the
+    # runner stops the wheels and closes the perception. Both are real SIGINTs to this process.
+    class Interrupted(Replay):
+        reads = 0
+
+        def read(self) -> Frame:
+            self.reads += 1
+            if self.reads == 5:
+                os.kill(os.getpid(), signal.SIGINT)
+            return super().read()
+
+        def close(self) -> None:
+            os.kill(os.getpid(), signal.SIGINT)
+            super().close()
+
+    log = tmp_path / "run.csv"
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        with SerialLink("loop://", "reference") as link:
+            runner = Runner(link, make_policy("pn"), Interrupted(_curve(tmp_path)), log=log)
+            try:
+                result = runner.run()
+            except KeyboardInterrupt:
+                pytest.fail("the second Ctrl-C cut the shutdown short")
+            assert _stopped(link)
+        assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    assert result.reason == "interrupted (Ctrl-C)"
+    assert len(read_step_log(log)) == 5  # 4 steps and the last frame
+    assert [p.name for p in tmp_path.iterdir()] == sorted(["run.csv", "source.csv"])
+
+
 def test_runner_settings_are_checked() -> None:
     with pytest.raises(ValueError, match=r"RunnerConfig.control_dt_s=0 is out of range"):
         RunnerConfig(control_dt_s=0)
@@ -348,6 +463,8 @@ REPLAY = "replay:" + str(Path(__file__).with_name("data") / "replay_obs.csv")
         (["run", "--policy", "pn"], "run needs --port URL"),
         (["run", "--port", "loop://", "--policy", "nope"], "nope"),
         ([*RUN, "--perception", "sim"], "socket://HOST:PORT"),
+        ([*RUN, "--perception", "sim:localhost:99999"], "'99999' is out of range: must be in 1-"),
+        ([*RUN, "--perception", "sim:::1:5761"], "an IPv6 host in brackets"),
         ([*RUN, "--perception", "webcam"], "out of range"),
         ([*RUN, "--perception", "replay:/no/such.csv"], "such.csv: no such file"),
         ([*RUN, "--perception", "realsense:/no/m.pt"], "is not a file"),
