@@ -14,6 +14,8 @@ import argparse
 import importlib.util
 import re
 import shlex
+import subprocess
+import sys
 from collections.abc import Callable
 from pathlib import Path
 
@@ -145,17 +147,23 @@ def _python_examples() -> list[tuple[int, str]]:
     ]
 
 
-def test_the_readmes_python_examples_run(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
-) -> None:
-    """In order, in one namespace, as a reader pasting them into one session would; the serial
+def test_the_readmes_python_examples_run(tmp_path: Path) -> None:
+    """In order, in one fresh interpreter, as a reader pasting them into one session would (one
+    registers a scenario of its own, which must not leak into the other tests); the serial
     example talks to pyserial's loopback port instead of a robot's."""
     examples = _python_examples()
     assert len(examples) >= 8
-    monkeypatch.chdir(tmp_path)
-    namespace: dict[str, object] = {"__name__": "readme"}
-    for number, code in examples:
-        code = code.replace('"/dev/ttyUSB0"', '"loop://"')
-        exec(compile(code, f"README.md, the example at line {number}", "exec"), namespace)
-    capsys.readouterr()
-    assert list(tmp_path.iterdir()) == [], "an example left files behind"
+    script = tmp_path / "examples" / "readme_examples.py"
+    script.parent.mkdir()
+    code = "\n".join(
+        f"# README.md, the example at line {number}\n" + code.replace('"/dev/ttyUSB0"', '"loop://"')
+        for number, code in examples
+    )
+    script.write_text(code, encoding="utf-8")
+    cwd = tmp_path / "cwd"
+    cwd.mkdir()
+    done = subprocess.run(
+        [sys.executable, str(script)], cwd=cwd, capture_output=True, text=True, timeout=300
+    )
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert list(cwd.iterdir()) == [], "an example left files behind"
