@@ -58,6 +58,7 @@ __all__ = [
     "LearnerRuns",
     "aggregate",
     "aggregate_metrics",
+    "check_learners",
     "learner_runs",
     "normalised_scores",
     "scenario_split",
@@ -108,6 +109,48 @@ def learner_runs(path: str | Path) -> LearnerRuns:
     raise ValueError(f"{path}: holds no trained agent (no model.zip, no seed-<k>/model.zip)")
 
 
+def check_learners(
+    paths: Sequence[str | Path], learners: Sequence[LearnerRuns], laws: Sequence[tuple[str, str]]
+) -> None:
+    """Refuse learners whose lines would merge with another controller's: two learners of one
+    name (a folder given twice, or two folders of one name), a learner named as a law (its
+    name or its label: ``learners/pn`` against ``--laws pn``), or one agent in two learners
+    (a study and its own ``seed-0`` folder), which would count that agent for one of them only.
+
+    :param paths: the learners' folders as given, in the order of ``learners``.
+    :param laws: each law's name as given and the label its episodes carry.
+    :raises ValueError: one line, naming both sides of the clash.
+    """
+    seen: dict[str, Path] = {}
+    for path, learner in zip(paths, learners, strict=True):
+        if learner.name in seen:
+            same = Path(path).resolve() == seen[learner.name].resolve()
+            raise ValueError(
+                f"{path}: names the learner {learner.name!r} twice; give each folder once"
+                if same
+                else f"{seen[learner.name]} and {path} are both named {learner.name!r} (a "
+                "learner is named by its folder): rename one"
+            )
+        seen[learner.name] = Path(path)
+        for law, label in laws:
+            if learner.name in (law, label):
+                raise ValueError(
+                    f"{path}: the learner is named {learner.name!r} (by its folder), as the law "
+                    f"{law!r} in --laws is: rename the folder or leave the law out"
+                )
+    owners: dict[Path, tuple[Path, Path]] = {}  # agent -> (its learner's folder, as given)
+    for path, learner in zip(paths, learners, strict=True):
+        for agent in learner.agents:
+            where = Path(agent).resolve()
+            if where in owners:
+                first, given = owners[where]
+                raise ValueError(
+                    f"the agent {given} is in two learners, {first} and {path}: give each "
+                    "agent in one learner only (a study, or one of its seed folders)"
+                )
+            owners[where] = (Path(path), Path(agent))
+
+
 def normalised_scores(raw: pd.DataFrame) -> pd.DataFrame:
     """``raw`` (columns controller, run, scenario, seed, score) with ``normalised``: per
     scenario, (score - lowest) / (highest - lowest) over every controller's episodes."""
@@ -142,7 +185,12 @@ def stratified_ci(
     level: float = 0.95,
 ) -> tuple[float, float, float]:
     """``func(*matrices)`` and its percentile CI over ``reps`` stratified bootstrap samples
-    (each matrix resampled on its own, within each task)."""
+    (each matrix resampled on its own, within each task).
+
+    :raises ValueError: for ``reps`` < 1 (a percentile of no draws is undefined).
+    """
+    if reps < 1:
+        raise ValueError(f"stratified_ci: reps must be >= 1, got {reps}")
     rng = np.random.default_rng(seed)
     point = float(func(*matrices))
     draws = np.array([func(*(_resample(m, rng) for m in matrices)) for _ in range(reps)])
@@ -202,7 +250,10 @@ def aggregate(
     for c in controllers:
         for tau in taus:
             point, low, high = stratified_ci(
-                lambda m, t=tau: float(np.mean(m > t)), [matrix[c]], reps // 4
+                lambda m, t=tau: float(np.mean(m > t)),
+                [matrix[c]],
+                # a share of the draws (21 taus each), at least one: --reps 1..3 is allowed
+                max(1, reps // _PROFILE_REPS_SHARE),
             )
             profiles.append((c, float(tau), point, low, high))
     return {

@@ -18,7 +18,8 @@
     logs/<policy>/<scenario>/seed_<k>.csv            step logs (eval.steplog), unless --no-logs
     plots/thesis_metrics.png offsets_seed<k>.png trajectories_seed<k>.png
     videos/<policy>_<scenario>_seed<k>.mp4           with --video
-    meta.json                                        command, grid, gains, versions, timing
+    meta.json                                        command, grid, gains, model digests,
+                                                     versions, timing
 
 With ``--task line_trace`` (LineTrace-v0) the grid's variants are tracks (``--tracks``), the
 tables hold the line metrics (:mod:`eval.line_metrics`), the logs sit in
@@ -61,12 +62,13 @@ from eval.cli_base import (  # noqa: F401  (the limits, read here)
     _integer,
     _names,
     _non_negative,
+    _out_folder,
     _Parser,
     _positive,
     _workers,
 )
 from eval.cli_dominance import cmd_dominance
-from eval.cli_run import _check_grid, cmd_run, policy_label, refuse_aliases, run_backend
+from eval.cli_run import _check_grid, cmd_run, policy_label, refuse_aliases, run_backend, run_order
 from eval.steplog import StepLogError, step_log_files
 from execution import BACKENDS, BackendUnavailableError
 from follow_env.sim.atomic import atomic_folder, check_new_folder
@@ -159,7 +161,10 @@ def build_parser() -> argparse.ArgumentParser:
         + " the default)",
     )
     run.add_argument(
-        "--out", type=Path, default=None, help="output folder (default: runs/eval-<timestamp>)"
+        "--out",
+        type=_out_folder,
+        default=None,
+        help="output folder (default: runs/eval-<timestamp>)",
     )
     _backend_arguments(run, "the episodes and their scoring run")
     run.add_argument(
@@ -203,7 +208,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="scenario label for logs without a scenario column (default: %(default)s)",
     )
     metrics.add_argument(
-        "--out", type=Path, default=None, help="also write the tables into this new folder"
+        "--out", type=_out_folder, default=None, help="also write the tables into this new folder"
     )
     metrics.add_argument(
         "--task",
@@ -226,7 +231,10 @@ def build_parser() -> argparse.ArgumentParser:
     )
     thesis.add_argument("--seed", type=_non_negative, default=0, help="first seed (default: 0)")
     thesis.add_argument(
-        "--out", type=Path, default=None, help="output folder (default: runs/thesis-<timestamp>)"
+        "--out",
+        type=_out_folder,
+        default=None,
+        help="output folder (default: runs/thesis-<timestamp>)",
     )
     agg = sub.add_parser(
         "aggregate",
@@ -247,10 +255,17 @@ def build_parser() -> argparse.ArgumentParser:
         "--seed", type=_non_negative, default=9001, help="first seed (default: %(default)s)"
     )
     agg.add_argument(
-        "--reps", type=_positive, default=2000, help="bootstrap samples (default: %(default)s)"
+        "--reps",
+        type=_positive,
+        default=2000,
+        help="bootstrap samples (default: %(default)s; the performance profiles' bands draw a "
+        "quarter of them, at least one)",
     )
     agg.add_argument(
-        "--out", type=Path, default=None, help="output folder (default: runs/aggregate-<time>)"
+        "--out",
+        type=_out_folder,
+        default=None,
+        help="output folder (default: runs/aggregate-<time>)",
     )
     dom = sub.add_parser(
         "dominance",
@@ -284,7 +299,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     dom.add_argument(
         "--out",
-        type=Path,
+        type=_out_folder,
         default=None,
         help="a new folder for the tables and the pooled episodes (needed with several runs; "
         "default: the run's folder)",
@@ -298,22 +313,14 @@ def cmd_aggregate(args: argparse.Namespace) -> int:
     from follow_env.sim.atomic import atomic_folder
 
     learners = [agg.learner_runs(path) for path in args.runs]
-    # Each learner is named by its folder, and its tables are keyed by that name.
-    seen: dict[str, Path] = {}
-    for path, learner in zip(args.runs, learners, strict=True):
-        if learner.name in seen:
-            same = Path(path).resolve() == seen[learner.name].resolve()
-            raise UsageError(
-                f"{path}: names the learner {learner.name!r} twice; give each folder once"
-                if same
-                else f"{seen[learner.name]} and {path} are both named {learner.name!r} (a "
-                "learner is named by its folder): rename one"
-            )
-        seen[learner.name] = Path(path)
     laws = _names(args.laws, "laws")
-    refuse_aliases([(law, policy_label(law, "laws")) for law in laws], "laws")
+    named = [(law, policy_label(law, "laws")) for law in laws]
+    refuse_aliases(named, "laws")
+    # Each learner is named by its folder and its tables are keyed by that name, each agent
+    # by its path: a clash would merge two controllers' lines after every episode had run.
+    agg.check_learners(args.runs, learners, named)
     scenarios = _names(args.scenarios, "scenarios")
-    # the scenarios are checked by the rollout, before any episode runs
+    _check_scenarios(scenarios)
     n_agents = sum(len(learner.agents) for learner in learners)
     _check_grid(n_agents + len(laws), len(scenarios), args.episodes, args.seed)
     out = args.out or Path("runs") / f"aggregate-{datetime.now(UTC):%Y%m%d-%H%M%S}"
@@ -326,6 +333,19 @@ def cmd_aggregate(args: argparse.Namespace) -> int:
     files = "aggregate.csv|md, improvement.csv, splits.csv, profiles.csv, scores.csv, plots/"
     print(f"Wrote {out}/: {files}")
     return 0
+
+
+def _check_scenarios(scenarios: list[str]) -> None:
+    """Refuse a ``--scenarios`` name PersonFollow does not know, naming the option."""
+    from follow_env.tasks import get_task
+
+    known = get_task("person_follow").variants()
+    for name in scenarios:
+        if name not in known:
+            raise UsageError(
+                f"--scenarios: unknown scenario {name!r}; known scenarios: "
+                + ", ".join(sorted(known))
+            )
 
 
 def cmd_thesis(args: argparse.Namespace) -> int:
@@ -348,7 +368,8 @@ def cmd_thesis(args: argparse.Namespace) -> int:
 
 def _refuse_run_without_logs(path: Path) -> None:
     """A run folder written with ``--no-logs`` (or its missing ``logs/``) has nothing to score:
-    say so, rather than read its tables as step logs or report a missing file.
+    say so, rather than read its tables as step logs or report a missing file. A run folder
+    with its logs is sent to them: its own tables are not step logs.
 
     :raises UsageError: naming the run.
     """
@@ -359,7 +380,14 @@ def _refuse_run_without_logs(path: Path) -> None:
         meta = json.loads((run / "meta.json").read_text(encoding="utf-8"))
     except (OSError, ValueError):
         return  # not a run folder: the logs are read, or refused, as given
-    if isinstance(meta, dict) and meta.get("step_logs") is False:
+    if not isinstance(meta, dict):
+        return
+    if path == run and meta.get("step_logs") is not False and (run / "logs").is_dir():
+        raise UsageError(
+            f"{run} is a follow-eval run folder, whose tables are not step logs: give "
+            f"{run / 'logs'}, its step logs"
+        )
+    if meta.get("step_logs") is False:
         where = f"{run}" if path == run else f"{path}: the run {run}"
         raise UsageError(
             f"{where} holds no step logs to score (follow-eval run --no-logs wrote it); its "
@@ -370,8 +398,9 @@ def _refuse_run_without_logs(path: Path) -> None:
 def cmd_metrics(args: argparse.Namespace) -> int:
     """``follow-eval metrics``: the same tables from step-log files.
 
-    Episodes are ordered as ``run`` orders them (policy and scenario in the order first seen,
-    then seed as a number, not as text), so the same logs give the same tables and intervals.
+    Episodes are ordered as ``run`` orders them (policy and scenario in the order of the run's
+    ``meta.json`` for a run's logs, else in the order first seen; then seed as a number, not as
+    text), so the same logs give the same tables, the comparisons' pairs the same way round.
 
     :raises UsageError: when two logs are the same (policy, scenario, seed) episode.
     """
@@ -383,9 +412,21 @@ def cmd_metrics(args: argparse.Namespace) -> int:
         check_new_folder(args.out)  # before scoring: a bad --out should not cost the work
     for path in args.logs:
         _refuse_run_without_logs(Path(path))
+    if args.task is not None:  # named before any log is read
+        try:
+            eval_task(args.task)
+        except ValueError as e:
+            raise UsageError(f"--task: {e}") from None
     files = step_log_files(args.logs)
     if not files:
         raise UsageError(f"no *.csv step logs under {', '.join(map(str, args.logs))}")
+    # A log without a seed column takes its position as its seed: the same file given twice
+    # (or a folder and a file in it) would be two episodes, not one given twice.
+    given: dict[Path, Path] = {}
+    for path in files:
+        if (first := given.setdefault(path.resolve(), path)) is not path:
+            same = f"{path}" if first == path else f"{first} and {path}"
+            raise UsageError(f"{same}: the same step log given twice; give each log once")
     # the first log's header decides the task, unless --task says
     task = eval_task(args.task or _task_of_log(files[0]))
     backend = run_backend(args, len(files), 0)
@@ -407,8 +448,12 @@ def cmd_metrics(args: argparse.Namespace) -> int:
                 f"{ep.scenario!r}, seed {ep.seed}: give each episode once"
             )
         seen[key] = path
-    policy_order = {p: k for k, p in enumerate(dict.fromkeys(ep.policy for ep in episodes))}
-    scenario_order = {s: k for k, s in enumerate(dict.fromkeys(ep.scenario for ep in episodes))}
+    # A run's logs in the run's order (its meta.json's), others as first seen
+    ran_policies, ran_variants = run_order(args.logs)
+    policies = dict.fromkeys([*ran_policies, *(ep.policy for ep in episodes)])
+    variants = dict.fromkeys([*ran_variants, *(ep.scenario for ep in episodes)])
+    policy_order = {p: k for k, p in enumerate(policies)}
+    scenario_order = {s: k for k, s in enumerate(variants)}
     episodes.sort(key=lambda ep: (policy_order[ep.policy], scenario_order[ep.scenario], ep.seed))
     try:
         scored = score(episodes, metrics=task.metrics, variant=task.variant, backend=backend)

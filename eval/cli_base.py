@@ -4,6 +4,7 @@ parsers of its option values."""
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 from typing import Any, NoReturn
 
 from follow_env.tasks.person_follow.config import config_from_text
@@ -53,6 +54,14 @@ def _config(text: str, read: Any = config_from_text) -> str | dict[str, Any]:
         return read(text)  # type: ignore[no-any-return]
     except ValueError as exc:
         raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def _out_folder(text: str) -> Path:
+    """``--out``: a folder's path; an empty one is refused (``Path("")`` is the current folder,
+    which would be reported as "``.`` already exists")."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError(f"{text!r} is empty: give the path of a new folder")
+    return Path(text)
 
 
 def _names(text: str, what: str) -> list[str]:

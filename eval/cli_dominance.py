@@ -7,17 +7,24 @@ A run holds at most :data:`~eval.cli_base.MAX_EPISODES` episodes
 so with 100 episodes a scenario a learner that ties the laws misses lines by chance. Several
 runs on disjoint seeds are therefore pooled into one table, as if one run had held them all,
 after checking that they can be: each run made alike (task, configuration, ideal baseline, and
-the same gains or model under each label, from ``meta.json``), each holding the same scenarios
-and every learner and law judged, and no episode (policy, scenario, seed) in two of them. The
-pooled table keeps a ``run`` column naming each episode's run.
+the same gains or model under each label, from ``meta.json``: a learned policy's model by the
+SHA-256 of its files where both runs record one, else by its ``repr``), each holding the same
+scenarios and every learner and law judged, and no episode (policy, scenario, seed) in two of
+them. The pooled table keeps a ``run`` column naming each episode's run.
 """
 
 from __future__ import annotations
 
 import argparse
+import csv
 import json
+from array import array
+from collections.abc import Sequence
+from decimal import Decimal, InvalidOperation
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from eval.cli_base import UsageError, _names
 
@@ -50,8 +57,10 @@ def cmd_dominance(args: argparse.Namespace) -> int:
         )
     if args.out is not None:
         check_new_folder(args.out)
-    metrics = [*(c.metric for c in CRITERIA), *ENDINGS, FINISHED]
-    table = pooled_table(runs, metrics)
+    # the criteria's columns (the endings among them) are needed; a table written before the
+    # finished metric existed has none, and the report then leaves its view out
+    metrics = list(dict.fromkeys([*(c.metric for c in CRITERIA), *ENDINGS]))
+    table = pooled_table(runs, metrics, optional=[FINISHED])
     learners = _names(args.learner, "learner")
     given = _names(args.laws, "laws") if args.laws is not None else None
     if given is not None and (both := [name for name in learners if name in given]):
@@ -102,8 +111,9 @@ def cmd_dominance(args: argparse.Namespace) -> int:
     return 0
 
 
-def pooled_table(runs: list[Path], metrics: list[str]) -> Any:
-    """The episode tables of ``runs`` as one (one run: its own table, read and checked).
+def pooled_table(runs: list[Path], metrics: list[str], optional: Sequence[str] = ()) -> Any:
+    """The episode tables of ``runs`` as one (one run: its own table, read and checked by
+    :func:`read_episode_table`: ``metrics`` needed, ``optional`` checked where present).
 
     :raises UsageError: naming the run and what keeps it out: a folder given twice, a missing
         or unreadable table or ``meta.json``, runs made differently or of different scenarios,
@@ -118,7 +128,9 @@ def pooled_table(runs: list[Path], metrics: list[str]) -> Any:
         if run in resolved[:k]:
             raise UsageError(f"{runs[k]}: given twice; give each run once")
     # each run's own table holds an episode once; pooling then looks only across runs
-    tables = [_once(read_episode_table(run / "episodes.csv", metrics), run) for run in runs]
+    tables = [
+        _once(read_episode_table(run / "episodes.csv", metrics, optional), run) for run in runs
+    ]
     if len(runs) == 1:
         return tables[0]
     metas = [_meta(run) for run in runs]
@@ -131,13 +143,7 @@ def pooled_table(runs: list[Path], metrics: list[str]) -> Any:
                     f"{run}: its {key} is {meta.get(key)!r} and {first}'s {meta0.get(key)!r}: "
                     "pool runs made alike"
                 )
-        ours, theirs = meta0.get("policies", {}), meta.get("policies", {})
-        for label in ours.keys() & theirs.keys():
-            if ours[label] != theirs[label]:
-                raise UsageError(
-                    f"{run}: {label} is {theirs[label]} there and {ours[label]} in {first}: "
-                    "pool runs of the same controllers"
-                )
+        _same_controllers(first, meta0, run, meta)
         if variant not in table or set(table[variant]) != set(table0[variant]):
             mine = sorted(set(table[variant])) if variant in table else []
             raise UsageError(
@@ -157,6 +163,34 @@ def pooled_table(runs: list[Path], metrics: list[str]) -> Any:
             f"{' and '.join(where)}: pool runs of disjoint seeds"
         )
     return pooled
+
+
+def _same_controllers(first: Path, meta0: dict[str, Any], run: Path, meta: dict[str, Any]) -> None:
+    """Refuse ``run`` if a label it shares with ``first`` is another controller there: another
+    model (the SHA-256 of its files, where both runs record one: a learned policy's ``repr``
+    names only the path it was loaded from) or other gains (the ``repr``, for a law, and for
+    a learned policy when a run written before the digests has none).
+
+    :raises UsageError: naming the label and both runs.
+    """
+    ours, theirs = meta0.get("policies", {}), meta.get("policies", {})
+    our_digests, their_digests = (
+        digests if isinstance(digests := m.get("model_sha256"), dict) else {} for m in (meta0, meta)
+    )
+    for label in ours.keys() & theirs.keys():
+        mine, other = our_digests.get(label), their_digests.get(label)
+        if mine is not None and other is not None:
+            if mine != other:
+                raise UsageError(
+                    f"{run}: the model under {label} is not the one in {first} (SHA-256 of "
+                    f"its files {other[:12]}... there, {mine[:12]}... in {first}): pool runs "
+                    "of the same controllers"
+                )
+        elif ours[label] != theirs[label]:
+            raise UsageError(
+                f"{run}: {label} is {theirs[label]} there and {ours[label]} in {first}: "
+                "pool runs of the same controllers"
+            )
 
 
 def check_covered(table: Any, policies: list[str]) -> None:
@@ -182,38 +216,150 @@ def check_covered(table: Any, policies: list[str]) -> None:
                     )
 
 
-def read_episode_table(path: Path, metrics: list[str]) -> Any:
-    """``follow-eval run``'s ``episodes.csv`` at ``path``, checked: episodes in it, integer
-    seeds, and a number (or nothing) in each cell of ``metrics``' columns.
+def read_episode_table(path: Path, metrics: list[str], optional: Sequence[str] = ()) -> Any:
+    """``follow-eval run``'s ``episodes.csv`` at ``path``, checked: every row as long as the
+    header, the columns ``policy``, the variant's (``scenario`` or ``track``), ``seed`` and
+    ``metrics`` each once, a name in every text cell, an integer seed, and a finite number (or
+    nothing: a metric undefined for that episode) in each cell of ``metrics`` and of those
+    ``optional`` columns the table has.
+
+    Seeds are read as exact integers (``run`` takes seeds up to 2**256 - 1): int64 when they
+    all fit, else Python ints. The other cells are read as pandas reads a CSV (so a table
+    written back is the same text): a metric's empty cell (or ``NaN``) is a metric undefined
+    for that episode.
 
     :raises UsageError: naming the file, and the line and column of a bad cell.
     """
     import pandas as pd
 
+    from eval.stats import variant_column
+
     if not path.is_file():
         raise UsageError(f"{path}: no such file (give a follow-eval run output folder)")
-    try:
-        table = pd.read_csv(path)
-    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as e:
-        raise UsageError(f"{path}: not an episode table ({e})") from None
-    if not {"policy", "seed"} <= set(table.columns):
-        raise UsageError(f"{path}: not an episode table (no policy and seed columns)")
-    if table.empty:
-        raise UsageError(f"{path}: holds no episodes (a header only)")
-    for column in ["seed", *(m for m in metrics if m in table.columns)]:
+    header, lines = _checked_rows(path, metrics)
+    variant = variant_column(pd.DataFrame(columns=header))
+    labels = ["policy", variant]
+    try:  # the structure is checked: the cells are converted below
+        table = pd.read_csv(path, dtype=dict.fromkeys([*labels, "seed"], str), index_col=False)
+    except (pd.errors.ParserError, UnicodeDecodeError, OSError) as e:
+        raise UsageError(f"{path}: not an episode table ({_one_line(e)})") from None
+    if list(table.columns) != header or len(table) != len(lines):  # what the rows said
+        raise UsageError(f"{path}: not an episode table (its rows do not parse as CSV)")
+    for column in labels:  # "NA" or "nan" in a label reads as missing
+        if (missing := table[column].isna().to_numpy()).any():
+            row = int(missing.argmax())
+            cell = _cell(path, row, header.index(column))
+            raise UsageError(f"{path}: line {lines[row]}, column {column}: {cell!r} names none")
+    table["seed"] = _seeds(path, table["seed"], lines)
+    for column in [*metrics, *(m for m in optional if m in header)]:
         values = pd.to_numeric(table[column], errors="coerce")
-        bad = values.isna() & table[column].notna()
-        if column == "seed":  # a seed pairs the episodes: it must be there, and whole
-            bad |= values.isna() | (values % 1 != 0)
+        # missing: undefined for that episode; text, inf or 1e400 (which reads as inf): not
+        infinite = np.isinf(values.to_numpy(dtype=np.float64))
+        bad = (values.isna() & table[column].notna()).to_numpy() | infinite
         if bad.any():
-            row = int(bad.to_numpy().argmax())  # line 1 is the header
-            what = "an integer seed" if column == "seed" else "a number"
+            row = int(bad.argmax())
+            what = "not finite" if infinite[row] else "not a number"
             raise UsageError(
-                f"{path}: line {row + 2}, column {column}: {str(table[column].iloc[row])!r} is not "
-                + what
+                f"{path}: line {lines[row]}, column {column}: "
+                f"{_cell(path, row, header.index(column))!r} is {what} (a metric's cell "
+                "holds a finite number, or nothing where it is undefined)"
             )
-        table[column] = values.astype(int) if column == "seed" else values
+        table[column] = values
     return table
+
+
+def _cell(path: Path, row: int, column: int) -> str:
+    """The text of data row ``row`` (0: the first after the header), ``column``, as written:
+    for a message (the table read has made ``1e400`` inf, ``NA`` missing)."""
+    with path.open(newline="", encoding="utf-8") as f:
+        for k, cells in enumerate(csv.reader(f)):
+            if k == row + 1:
+                return cells[column]
+    return ""
+
+
+def _one_line(error: Exception) -> str:
+    """An exception's message on one line (pandas' parser errors end in a line break)."""
+    return " ".join(str(error).split())
+
+
+def _checked_rows(path: Path, metrics: list[str]) -> tuple[list[str], array[int]]:
+    """``path``'s header and the line each row starts on, after checking the rows: each as
+    long as the header (a truncated or ragged table is refused, not padded), no blank line,
+    the required columns there once each, and ``policy`` and the variant named in every row.
+
+    :raises UsageError: naming the file and the first bad line.
+    """
+    from eval.stats import VARIANT_COLUMNS
+
+    lines: array[int] = array("q")
+    try:
+        with path.open(newline="", encoding="utf-8") as f:
+            reader = csv.reader(f)
+            header = next(reader, None)
+            if header is None:
+                raise UsageError(f"{path}: not an episode table (the file is empty)")
+            twice = [name for name in dict.fromkeys(header) if header.count(name) > 1]
+            if twice:
+                raise UsageError(f"{path}: line 1: the column {twice[0]} is there twice")
+            variant = next((v for v in VARIANT_COLUMNS if v in header), VARIANT_COLUMNS[0])
+            needed = ["policy", variant, "seed", *metrics]
+            missing = [name for name in needed if name not in header]
+            if missing:
+                raise UsageError(
+                    f"{path}: not an episode table (no {', '.join(missing)} "
+                    f"column{'s' if len(missing) > 1 else ''}; follow-eval run writes them)"
+                )
+            names = [(header.index(name), name) for name in ("policy", variant)]
+            start = 2
+            for row in reader:
+                if len(row) != len(header):
+                    got = "an empty line" if not row else f"{len(row)} fields"
+                    raise UsageError(
+                        f"{path}: line {start}: {got} where the header has {len(header)} "
+                        "(a truncated or damaged table)"
+                    )
+                for k, name in names:
+                    if not row[k]:
+                        raise UsageError(f"{path}: line {start}, column {name}: empty")
+                lines.append(start)
+                start = reader.line_num + 1
+    except (UnicodeDecodeError, csv.Error) as e:
+        raise UsageError(f"{path}: not an episode table ({_one_line(e)})") from None
+    if not lines:
+        raise UsageError(f"{path}: holds no episodes (a header only)")
+    return header, lines
+
+
+def _seeds(path: Path, text: Any, lines: array[int]) -> Any:
+    """The ``seed`` column as exact integers: int64 when every seed fits, else Python ints (a
+    float would merge seeds 2**53 apart, int64 wraps past 2**63).
+
+    :raises UsageError: naming the line of a cell that is not an integer.
+    """
+    import pandas as pd
+
+    fast = pd.to_numeric(text, errors="coerce")
+    if fast.dtype == np.int64:  # decimal digits within int64: read exactly
+        return fast
+    seeds: list[int] = []
+    for k, cell in enumerate(text.tolist()):
+        if not isinstance(cell, str):  # empty, or NA
+            raise UsageError(
+                f"{path}: line {lines[k]}, column seed: no seed (every episode has one)"
+            )
+        try:
+            value = Decimal(cell)  # exact: "12", "12.0" and "1.2e1" are the seed 12
+            if not value.is_finite() or value != value.to_integral_value():
+                raise InvalidOperation
+        except InvalidOperation:
+            raise UsageError(
+                f"{path}: line {lines[k]}, column seed: {cell!r} is not an integer seed"
+            ) from None
+        seeds.append(int(value))
+    if all(-(2**63) <= s < 2**63 for s in seeds):
+        return pd.Series(seeds, index=text.index, dtype=np.int64)
+    return pd.Series(seeds, index=text.index, dtype=object)
 
 
 def _once(table: Any, run: Path) -> Any:

@@ -10,6 +10,7 @@ import json
 import platform
 import sys
 import time
+from collections.abc import Sequence
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
@@ -26,7 +27,7 @@ from eval.cli_base import (
 from execution import Backend, backend_from_args
 from follow_env.sim.atomic import atomic_folder, atomic_write_text, check_new_folder
 
-__all__ = ["cmd_run", "policy_label", "refuse_aliases", "run_backend"]
+__all__ = ["cmd_run", "policy_label", "refuse_aliases", "run_backend", "run_order"]
 
 
 def _plural(n: int, one: str, many: str) -> str:
@@ -86,6 +87,11 @@ def _check_run_args(args: argparse.Namespace) -> tuple[list[str], list[str], lis
     if getattr(args, other) is not None:
         raise UsageError(
             f"--{other} is not an option of the {task.name} task: give --{task.variants_option}"
+        )
+    if args.config is not None and not args.config.strip():  # "" would be read as the folder .
+        raise UsageError(
+            f"argument --config: {args.config!r} is empty: give a preset, a JSON object of "
+            "config sections or a .json/.yaml file (or leave --config out for the default)"
         )
     try:
         args.config = _config(
@@ -167,6 +173,7 @@ def run_backend(args: argparse.Namespace, n_episodes: int, learned_episodes: int
 
 def cmd_run(args: argparse.Namespace) -> int:
     """``follow-eval run``: see the module docstring."""
+    from eval.grid import model_digest
     from eval.journal import UnitJournal, journal_folder
     from eval.report import markdown_report, safe_name, write_tables, write_video
     from eval.rollout import Episode, chunk_size, rollout
@@ -187,8 +194,10 @@ def cmd_run(args: argparse.Namespace) -> int:
     started = time.perf_counter()
     run = {"task": task.name, "policies": policies, task.variants_option: scenarios}
     run |= {"seeds": [seeds[0], seeds[-1]], "config": args.config}
-    # Without step logs a unit keeps rows, not episodes: its journal is of another run.
-    run |= {"step_logs": False} if args.no_logs else {}
+    # Without step logs a unit keeps rows, not episodes: its journal is of another run. It
+    # keeps the plot seed's episodes whole, so another --plot-seed is another run too (a run
+    # with logs keeps every episode, and its journal stays as it was).
+    run |= {"step_logs": False, "plot_seed": plot_seed} if args.no_logs else {}
     # Each episode reduced to its table row where it ran, the plot seed's kept for the plots.
     reduce = TableRow(task.metrics, plot_seed) if args.no_logs else None
     folder = journal_folder(out)
@@ -278,6 +287,10 @@ def cmd_run(args: argparse.Namespace) -> int:
             "finished_utc": datetime.now(UTC).isoformat(timespec="seconds"),
             "elapsed_s": round(elapsed, 2),
             "policies": {label: repr(getattr(p, "params", p)) for label, p in built},
+            # what each learned policy's files held: its repr names only a path
+            "model_sha256": {
+                label: digest for label, p in built if (digest := model_digest(p)) is not None
+            },
             "task": task.name,
             task.variants_option: scenarios,
             "seeds": seeds,
@@ -304,6 +317,35 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 #: What ``--ideal-baseline`` appends to a policy's label: the policy under perfect sensing.
 IDEAL_SUFFIX = "+ideal"
+
+
+def run_order(paths: Sequence[str | Path]) -> tuple[list[str], list[str]]:
+    """The policy labels and variants (scenarios, tracks) in the order a run gave them, for
+    step logs read from a run's ``logs/`` folder (or below it): ``follow-eval metrics``
+    orders its tables so, as the run ordered its own (the files are found in alphabetical
+    order). Logs of no run give ``([], [])``; logs of several runs their orders in turn.
+    """
+    policies: list[str] = []
+    variants: list[str] = []
+    for given in map(Path, paths):
+        where = given.resolve()
+        logs = next((f for f in (where, *where.parents) if f.name == "logs"), None)
+        if logs is None:
+            continue
+        try:
+            meta = json.loads((logs.parent / "meta.json").read_text(encoding="utf-8"))
+        except (OSError, ValueError):
+            continue  # not a run's logs: the order the logs are read in
+        if not isinstance(meta, dict) or not isinstance(meta.get("policies"), dict):
+            continue
+        labels = [str(label) for label in meta["policies"]]
+        # the run's grid, then with --ideal-baseline the same grid under perfect sensing
+        ideal = [f"{p}{IDEAL_SUFFIX}" for p in labels] if meta.get("ideal_baseline") is True else []
+        policies += labels + ideal
+        for key in ("scenarios", "tracks"):
+            if isinstance(meta.get(key), list):
+                variants += [str(v) for v in meta[key]]
+    return list(dict.fromkeys(policies)), list(dict.fromkeys(variants))
 
 
 def _log_path(folder: Path, episode: Any) -> Path:

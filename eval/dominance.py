@@ -50,6 +50,7 @@ learner's, so a reader can tell a near miss from a bar no controller clears.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
@@ -273,12 +274,15 @@ def _line(
     diff = a[ok] - b[ok]
     low, high = mean_ci(diff, seed, "dominance", str(scenario), learner, best, c.metric)
     sign = 1.0 if c.higher_is_better else -1.0
-    gain = sign * float(diff.mean())  # > 0: the learner is better
+    # "At least as good" compares the two means themselves: the mean of the differences can
+    # come out a rounding error off zero (4.6e-18) when the means are equal. fsum sums exactly
+    # (then rounds once), so equal values in another seed order give equal means.
+    no_worse = sign * (math.fsum(a[ok]) - math.fsum(b[ok])) >= 0.0
     if np.all(diff == 0.0):
         low = high = 0.0  # identical on every seed: the interval is the point
     good_low, good_high = (low, high) if c.higher_is_better else (-high, -low)
     verdict = "better" if good_low > 0.0 else "worse" if good_high < 0.0 else "tie"
-    meets = gain >= 0.0 if c.need == "at_least" else verdict == "better"
+    meets = no_worse if c.need == "at_least" else verdict == "better"
     row.update(
         learner_mean=float(a[ok].mean()),
         best_law=best,

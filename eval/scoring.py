@@ -20,8 +20,10 @@ scoring: about 4 ms a simulated log).
 
 from __future__ import annotations
 
+import csv
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from decimal import Decimal
 from pathlib import Path
 
 import pandas as pd
@@ -156,11 +158,28 @@ def _read_files(unit: _Files) -> tuple[list[Episode], StepLogError | None]:
             return episodes, e
         policy = _first_text(log, "policy") or unit.labels[0]
         variant = _first_text(log, unit.variant) or unit.labels[1]
-        seed = int(log["seed"].iloc[0]) if "seed" in log and log["seed"].notna().all() else i
+        seed = _seed(path, float(log["seed"].iloc[0])) if _has_seeds(log) else i
         if "termination" not in log:
             log = log.assign(termination="")
         episodes.append(Episode(policy, variant, seed, log))
     return episodes, None
+
+
+def _has_seeds(log: pd.DataFrame) -> bool:
+    return "seed" in log and bool(log["seed"].notna().all())
+
+
+def _seed(path: Path, value: float) -> int:
+    """The log's seed, exactly: ``value`` is its first row's ``seed`` as the log was read
+    (float64, exact up to 2**53); a larger one is read again from the file's text, since runs
+    take seeds up to 2**256 - 1 and two seeds 2**53 apart would be one float."""
+    if abs(value) < 2.0**53:
+        return int(value)
+    with path.open(newline="", encoding="utf-8") as f:  # read_step_log has checked it
+        reader = csv.reader(f)
+        column = [cell.strip() for cell in next(reader)].index("seed")
+        first = next(row for row in reader if any(cell.strip() for cell in row))  # as read
+    return int(Decimal(first[column].strip()))
 
 
 def _first_text(log: pd.DataFrame, column: str) -> str | None:

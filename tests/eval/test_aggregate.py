@@ -148,3 +148,77 @@ def test_each_split_is_scored_on_its_own_scenarios_only() -> None:
     assert got["single_target", "agent", "p_improvement"] == pytest.approx(1.0)
     assert got["distractor", "agent", "p_improvement"] == pytest.approx(0.0)
     assert set(table["scenarios"]) == {"straight", "crossing"}
+
+
+@pytest.mark.slow
+def test_any_accepted_reps_gives_the_tables(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    # --reps 3 used to run every episode and then fail: the profiles drew reps // 4 = 0 samples
+    out = tmp_path / "agg"
+    grid = ["--laws", "pn", "--scenarios", "straight", "--episodes", "2", "--reps", "3"]
+    assert main(["aggregate", str(AGENT), *grid, "--out", str(out)]) == 0
+    capsys.readouterr()
+    profiles = pd.read_csv(out / "profiles.csv")
+    assert len(profiles) == 2 * 21  # two controllers, 21 taus
+    assert (profiles["ci_low"] <= profiles["ci_high"]).all()
+    with pytest.raises(ValueError, match="reps must be >= 1, got 0"):
+        stratified_ci(np.mean, [np.ones((3, 1))], reps=0)
+
+
+@pytest.fixture
+def no_episode(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Fail the test if any episode would run: the refusals below come first."""
+
+    def refuse(*_: object, **__: object) -> None:
+        pytest.fail("an episode ran before the arguments were refused")
+
+    monkeypatch.setattr("eval.aggregate.rollout", refuse)
+
+
+def _one_line(capsys: pytest.CaptureFixture) -> str:
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1, err
+    assert err.startswith("follow-eval: error: ")
+    return err
+
+
+@pytest.mark.parametrize(
+    ("folder", "laws", "law"),
+    [("pn", "pn,gsmpn", "pn"), ("ppo", "ppo", "ppo"), ("pn:tuned", "gsmpn,pn", "pn")],
+)
+def test_a_learner_named_as_a_law_is_refused_before_any_episode(
+    tmp_path: Path, capsys: pytest.CaptureFixture, no_episode: None, folder: str, laws: str,
+    law: str,
+) -> None:  # fmt: skip
+    learner = tmp_path / "learners" / folder
+    shutil.copytree(AGENT, learner)
+    out = tmp_path / "x"
+    argv = ["aggregate", str(learner), "--laws", laws, "--scenarios", "straight", "--out", str(out)]
+    assert main(argv) == 2
+    err = _one_line(capsys)
+    assert f"{learner}: the learner is named {folder!r} (by its folder), as the law {law!r}" in err
+    assert not out.exists()
+
+
+def test_an_agent_in_two_learners_is_refused_before_any_episode(
+    tmp_path: Path, capsys: pytest.CaptureFixture, no_episode: None
+) -> None:
+    study = tmp_path / "study"
+    for k in (0, 1):
+        shutil.copytree(AGENT, study / f"seed-{k}")
+    out = tmp_path / "x"
+    grid = ["--laws", "pn", "--scenarios", "straight", "--out", str(out)]
+    assert main(["aggregate", str(study), str(study / "seed-0"), *grid]) == 2
+    err = _one_line(capsys)
+    assert f"the agent {study / 'seed-0'} is in two learners, {study} and {study / 'seed-0'}" in err
+    # the same agent spelled another way is the same agent
+    assert main(["aggregate", str(study / "seed-1"), f"{study}/./", *grid]) == 2
+    assert f"is in two learners, {study / 'seed-1'} and {study}: give" in _one_line(capsys)
+    assert not out.exists()
+
+
+def test_an_unknown_scenario_names_the_option(
+    tmp_path: Path, capsys: pytest.CaptureFixture, no_episode: None
+) -> None:
+    argv = ["aggregate", str(AGENT), "--laws", "pn", "--scenarios", "straight,bogus"]
+    assert main([*argv, "--out", str(tmp_path / "x")]) == 2
+    assert "error: --scenarios: unknown scenario 'bogus'; known scenarios: " in _one_line(capsys)

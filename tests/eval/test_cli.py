@@ -170,6 +170,12 @@ def test_metrics_on_malformed_row_names_file_and_line(
         (["run", "--config", "missing.yaml"], "cannot read missing.yaml"),
         (["run", "--plot-seed", "99", "--episodes", "2"], "--plot-seed 99 is out of range"),
         (["metrics", "nowhere.csv"], "nowhere.csv: no such file"),
+        # named before any log is read, by its option
+        (["metrics", "nowhere.csv", "--task", "bogus"], "error: --task: task 'bogus' is out of"),
+        # "" is not the current folder: not "'' is a folder", not ". already exists"
+        (["run", "--config", ""], "error: argument --config: '' is empty: give a preset"),
+        (["run", "--out", ""], "error: argument --out: '' is empty: give the path of a new"),
+        (["metrics", "nowhere.csv", "--out", " "], "argument --out: ' ' is empty"),
         (["fly"], "invalid choice: 'fly'"),
         ([], "the following arguments are required: {run,metrics,thesis,aggregate,dominance}"),
     ],
@@ -414,3 +420,44 @@ def test_a_platform_a_policy_cannot_run_on_is_one_line_and_status_2(
     assert message in err
     assert err.count("\n") == 1
     assert not (tmp_path / "x").exists()
+
+
+def test_metrics_on_a_runs_logs_orders_its_tables_as_the_run_did(
+    run_dir: Path, tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
+    # The logs are found in alphabetical order (gsmpn_thesis before pn_tuned, curve before
+    # straight); the run's meta.json says the run's: pn:tuned, gsmpn:thesis; straight, curve.
+    out = tmp_path / "scored"
+    assert main(["metrics", str(run_dir / "logs"), "--out", str(out)]) == 0
+    capsys.readouterr()
+    for name, key in (
+        ("summary.csv", ["policy", "scenario"]),
+        ("episodes.csv", ["policy", "scenario", "seed"]),
+        ("comparisons.csv", ["scenario", "policy_a", "policy_b", "metric"]),
+    ):
+        ran, scored = pd.read_csv(run_dir / name), pd.read_csv(out / name)
+        pd.testing.assert_frame_equal(scored[key], ran[key])
+    ran, scored = pd.read_csv(run_dir / "summary.csv"), pd.read_csv(out / "summary.csv")
+    pd.testing.assert_frame_equal(scored[LEADING], ran[LEADING], check_exact=False, rtol=1e-5)
+    # one log of the run, given alone, is ordered by the run too (nothing to reorder)
+    one = run_dir / "logs" / "pn_tuned" / "curve" / "seed_5.csv"
+    assert main(["metrics", str(one)]) == 0
+    assert "| pn:tuned" in capsys.readouterr().out
+
+
+def test_metrics_refuses_the_same_log_twice_and_a_run_folder(
+    run_dir: Path, capsys: pytest.CaptureFixture
+) -> None:
+    log = run_dir / "logs" / "pn_tuned" / "straight" / "seed_5.csv"
+    # without the check, a log without a seed column is scored twice (its position as seed)
+    for argv in ([log, log], [run_dir / "logs" / "pn_tuned", log]):
+        assert main(["metrics", *map(str, argv)]) == 2
+        assert f"error: {log}: the same step log given twice" in one_line_error(capsys)
+    other = run_dir / "logs" / "pn_tuned" / ".." / "pn_tuned" / "straight" / "seed_5.csv"
+    assert main(["metrics", str(log), str(other)]) == 2
+    assert f"{log} and {other}: the same step log given twice" in one_line_error(capsys)
+    # the run's folder: its summary tables are not step logs
+    assert main(["metrics", str(run_dir)]) == 2
+    err = one_line_error(capsys)
+    assert f"{run_dir} is a follow-eval run folder, whose tables are not step logs: give " in err
+    assert str(run_dir / "logs") in err

@@ -454,3 +454,121 @@ def test_a_table_without_episodes_and_an_empty_law_list_are_refused(tmp_path: Pa
     assert main(["dominance", str(tmp_path), "--learner", "ppo", "--laws", ""]) == 2
     assert "--laws is empty" in capsys.readouterr().err  # not "every other policy"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["episodes.csv"]
+
+
+def test_at_least_compares_the_means_so_equal_means_meet_it() -> None:
+    """The reviewer's case: the same three values in another seed order. The paired mean
+    difference comes out +4.6e-18, not 0, which read as "the learner's error is larger"."""
+    learner, law = [0.267, 0.187, 0.106], [0.106, 0.267, 0.187]
+    assert np.mean(np.array(learner) - np.array(law)) != 0.0  # the rounding the fix is about
+    table = _table(
+        {"agent": {"rms_distance_error_m": learner}, "pn": {"rms_distance_error_m": law}}
+    )
+    line = _line(dominance(table, "agent"), "rms_distance_error_m")
+    assert line["meets"]
+    assert line["verdict"] == "tie"
+    # a learner a hair worse (larger error) still misses it
+    worse = _table(
+        {
+            "agent": {"rms_distance_error_m": [0.267, 0.187, 0.1060001]},
+            "pn": {"rms_distance_error_m": law},
+        }
+    )
+    assert not _line(dominance(worse, "agent"), "rms_distance_error_m")["meets"]
+
+
+def _episodes_text(seeds: list[int] | None = None) -> str:
+    """A valid episodes.csv of ppo and pn:tuned on straight, four seeds, with a few metric
+    cells empty as a run leaves them (a metric undefined for that episode)."""
+    table = _table({p: {"mean_offset_px": [1.0, 2.0, 3.0, 4.0]} for p in ("ppo", "pn:tuned")})
+    if seeds is not None:
+        table["seed"] = seeds * 2
+    table["success_pct"] = 100.0
+    table.loc[[1, 5], "rms_distance_error_m"] = np.nan
+    return table.to_csv(index=False)
+
+
+def _replace_line(text: str, k: int, line: str) -> str:
+    lines = text.splitlines(keepends=True)
+    lines[k] = line + "\n"
+    return "".join(lines)
+
+
+def _cell(text: str, k: int, column: str, value: str) -> str:
+    header = text.splitlines()[0].split(",")
+    cells = text.splitlines()[k].split(",")
+    cells[header.index(column)] = value
+    return _replace_line(text, k, ",".join(cells))
+
+
+@pytest.mark.parametrize(
+    ("damage", "message"),
+    [
+        # cut off mid-line, with or without the line break
+        (lambda t: t[: t.rindex(",")] + "\n", "line 9: 9 fields where the header has 10"),
+        (lambda t: t[: t.rindex("\n", 0, -1) + 15], "line 9: 2 fields where the header has 10"),
+        (
+            lambda t: _replace_line(t, 3, t.splitlines()[3].rsplit(",", 1)[0]),
+            "line 4: 9 fields where the header has 10",
+        ),
+        (lambda t: _replace_line(t, 2, t.splitlines()[2] + ",7"), "line 3: 11 fields where"),
+        (lambda t: _replace_line(t, 2, ""), "line 3: an empty line where the header has 10"),
+        (lambda t: t.replace("scenario", "setting", 1), "not an episode table (no scenario column"),
+        (
+            lambda t: t.replace("lost_rate_pct", "lost", 1),
+            "not an episode table (no lost_rate_pct column",
+        ),
+        (
+            lambda t: t.replace("mean_offset_px", "lost_rate_pct", 1),
+            "line 1: the column lost_rate_pct is there twice",
+        ),
+        (lambda t: _cell(t, 3, "policy", ""), "line 4, column policy: empty"),
+        (lambda t: _cell(t, 6, "scenario", ""), "line 7, column scenario: empty"),
+        (lambda t: _cell(t, 2, "seed", ""), "line 3, column seed: no seed"),
+        (lambda t: _cell(t, 2, "policy", "NA"), "line 3, column policy: 'NA' names none"),
+        (lambda t: _cell(t, 4, "mean_offset_px", "inf"), "line 5, column mean_offset_px: 'inf'"),
+        (lambda t: _cell(t, 5, "lost_rate_pct", "-inf"), "line 6, column lost_rate_pct: '-inf'"),
+        (lambda t: _cell(t, 7, "std_accel_mm_s2", "1e400"), "std_accel_mm_s2: '1e400' is not fin"),
+        (lambda t: _cell(t, 2, "success_pct", "inf"), "line 3, column success_pct: 'inf' is not"),
+        (lambda t: _cell(t, 2, "in_frame_rate_pct", "n/a!"), "'n/a!' is not a number"),
+    ],
+)
+def test_a_damaged_episode_table_is_refused_in_one_line_naming_the_file_and_line(
+    damage, message: str, tmp_path: Path, capsys
+) -> None:
+    path = tmp_path / "episodes.csv"
+    path.write_text(_episodes_text())
+    assert main(["dominance", str(tmp_path), "--learner", "ppo"]) == 0  # whole, it is judged
+    capsys.readouterr()
+    for name in ("dominance-ppo.md", "dominance-ppo.csv", "dominance-ppo-finished.csv"):
+        (tmp_path / name).unlink(missing_ok=True)
+    path.write_text(damage(_episodes_text()))
+    assert main(["dominance", str(tmp_path), "--learner", "ppo"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1, err
+    assert "Traceback" not in err
+    assert f"error: {path}: " in err
+    assert message in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["episodes.csv"]
+
+
+def test_seeds_past_int64_and_float_precision_are_read_exactly(tmp_path: Path, capsys) -> None:
+    """follow-eval run takes seeds up to 2**256 - 1: as floats, seeds 2**70 .. 2**70 + 3 would
+    be one seed, and as int64 they wrap."""
+    seeds = [2**70 + k for k in range(4)]
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "episodes.csv").write_text(_episodes_text(seeds))
+    assert main(["dominance", str(run), "--learner", "ppo"]) == 0
+    capsys.readouterr()
+    assert set(pd.read_csv(run / "dominance-ppo.csv")["n"]) <= {3, 4}  # 3 where a cell is empty
+    from eval.cli_dominance import read_episode_table
+
+    table = read_episode_table(run / "episodes.csv", ["mean_offset_px"])
+    assert table["seed"].tolist() == seeds * 2
+    small = read_episode_table(tmp_path / "run" / "episodes.csv", []).iloc[:0]
+    assert small.empty
+    # a repeat is named by its exact seed
+    (run / "episodes.csv").write_text(_episodes_text([seeds[0], seeds[1], seeds[1], seeds[3]]))
+    assert main(["dominance", str(run), "--learner", "ppo"]) == 2
+    assert f"line 4: seed {seeds[1]} of straight for ppo is there twice" in capsys.readouterr().err

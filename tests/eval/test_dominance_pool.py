@@ -191,3 +191,77 @@ def test_an_episode_twice_in_one_run_is_refused_by_its_line(tmp_path: Path, caps
     assert main(["dominance", str(b), str(a), "--learner", "ppo", "--out", str(out)]) == 2
     assert message in capsys.readouterr().err
     assert not out.exists()
+
+
+def _with_digest(digest: str | None, model: str = "PPOPolicy(name='ppo')") -> dict:
+    meta = _changed("policies", {**META["policies"], "ppo": model})
+    if digest is not None:
+        meta["model_sha256"] = {"ppo": digest}
+    return meta
+
+
+@pytest.mark.parametrize(
+    ("mine", "theirs", "pooled"),
+    [
+        ((None, "A"), (None, "A"), True),  # runs written before the digests: by the repr
+        (("aa" * 32, "A"), (None, "A"), True),  # one digest: the repr is what both have
+        (("aa" * 32, "A"), (None, "B"), False),
+        (("aa" * 32, "A"), ("aa" * 32, "B"), True),  # the same files, loaded from elsewhere
+        (("aa" * 32, "A"), ("bb" * 32, "A"), False),  # the same path, other files
+    ],
+)
+def test_a_label_pools_by_its_models_digest_where_both_runs_record_one(
+    tmp_path: Path, capsys, mine: tuple, theirs: tuple, pooled: bool
+) -> None:
+    a = _run(tmp_path / "a", 0, 4, meta=_with_digest(mine[0], mine[1]))
+    b = _run(tmp_path / "b", 10, 4, meta=_with_digest(theirs[0], theirs[1]))
+    out = tmp_path / "pooled"
+    code = main(["dominance", str(a), str(b), "--learner", "ppo", "--out", str(out)])
+    err = capsys.readouterr().err
+    assert code == (0 if pooled else 2), err
+    assert out.exists() == pooled
+    if not pooled:
+        assert err.count("\n") == 1
+        assert f"error: {b}: " in err
+        assert "pool runs of the same controllers" in err
+        if mine[0] and theirs[0]:
+            assert f"the model under ppo is not the one in {a} (SHA-256 of its files bbbb" in err
+
+
+def test_two_runs_of_one_agent_path_holding_two_models_are_not_pooled(
+    tmp_path: Path, capsys, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``--policies agent`` in two folders: the same relative path, the same repr, and two
+    models (here their config.yaml differs by a comment)."""
+    import hashlib
+    import shutil
+
+    shipped = Path(__file__).parents[2] / "policies" / "agents" / "ppo"
+    runs = []
+    for first_seed, where in ((0, tmp_path / "a"), (10, tmp_path / "b")):
+        shutil.copytree(shipped, where / "agent")
+        if first_seed:
+            with (where / "agent" / "config.yaml").open("a") as f:
+                f.write("# retrained\n")
+        monkeypatch.chdir(where)
+        grid = ["--policies", "agent,pn", "--scenarios", "straight", "--episodes", "2"]
+        argv = ["run", *grid, "--seed", str(first_seed), "--no-logs", "--out", "run"]
+        assert main([*argv, "--workers", "1"]) == 0
+        runs.append(where / "run")
+    capsys.readouterr()
+    metas = [json.loads((run / "meta.json").read_text()) for run in runs]
+    assert metas[0]["policies"]["agent"] == metas[1]["policies"]["agent"]  # the repr: a path
+    files = ("model.zip", "vecnormalize.pkl", "config.yaml")
+    for meta, where in zip(metas, (tmp_path / "a", tmp_path / "b"), strict=True):
+        expected = hashlib.sha256()
+        for role, name in zip(("model", "normalization", "config"), files, strict=True):
+            data = (where / "agent" / name).read_bytes()
+            expected.update(role.encode() + b"\0%d\0" % len(data) + data)
+        assert meta["model_sha256"] == {"agent": expected.hexdigest()}  # laws have none
+    out = tmp_path / "pooled"
+    argv = ["dominance", *map(str, runs), "--learner", "agent", "--out", str(out)]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1
+    assert f"{runs[1]}: the model under agent is not the one in {runs[0]}" in err
+    assert not out.exists()

@@ -174,3 +174,30 @@ def test_metrics_on_a_run_without_logs_says_it_has_none(
     assert not (tmp_path / "tables").exists()
     # A run with its logs is scored as before.
     assert main(["metrics", str(with_logs / "logs"), "--out", str(tmp_path / "tables")]) == 0
+
+
+def test_a_resumed_run_without_logs_keeps_its_plot_seed(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys
+) -> None:
+    """A unit without logs keeps only the plot seed's episodes whole: resumed with another
+    --plot-seed it would have nothing to plot, or plot some policies only."""
+    out = tmp_path / "run"
+    grid = ["--policies", "pn", "--scenarios", "straight", "--episodes", "2", "--seed", "5"]
+    args = ["run", *grid, "--out", str(out), "--workers", "1", "--no-logs"]
+
+    def interrupted(*_: object, **__: object) -> None:
+        raise KeyboardInterrupt  # after every unit has run and been kept
+
+    with monkeypatch.context() as patch:
+        patch.setattr("eval.scoring.score", interrupted)
+        assert main(args) == 130
+    assert json.loads((journal_folder(out) / "run.json").read_text())["plot_seed"] == 5
+    capsys.readouterr()
+    assert main([*args, "--plot-seed", "6"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1
+    assert "holds the finished units of another run" in err
+    assert not out.exists()
+    assert main([*args, "--plot-seed", "5"]) == 0  # the same plot seed, given: the same run
+    assert "resuming: 1 work units already done" in capsys.readouterr().err
+    assert (out / "plots" / "offsets_seed5.png").is_file()

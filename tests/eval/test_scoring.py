@@ -163,3 +163,24 @@ def test_one_process_stops_reading_at_a_bad_file(
     with pytest.raises(StepLogError, match="empty file"):
         read_episodes(paths, task="person_follow")
     assert read == paths[:2]
+
+
+def test_seeds_past_float_precision_are_read_exactly(tmp_path: Path, capsys) -> None:
+    """A run takes seeds up to 2**256 - 1; read as float64, seeds 2**60 and 2**60 + 1 of one
+    policy and scenario were one seed, and follow-eval metrics refused them as one episode."""
+    from eval.cli import main
+
+    big = 2**64 + 3  # past int64 too: the run's seed column holds Python ints
+    for first in (2**60, big):
+        run = tmp_path / f"run-{first}"
+        grid = ["--policies", "pn", "--scenarios", "straight", "--episodes", "2"]
+        assert main(["run", *grid, "--seed", str(first), "--out", str(run), "--workers", "1"]) == 0
+        logs = sorted((run / "logs").rglob("*.csv"))
+        read = read_episodes(logs, task="person_follow")
+        assert sorted(ep.seed for ep in read) == [first, first + 1]
+        out = tmp_path / f"scored-{first}"
+        assert main(["metrics", str(run / "logs"), "--out", str(out)]) == 0
+        ran = (run / "episodes.csv").read_text().splitlines()
+        assert (out / "episodes.csv").read_text().splitlines()[1].split(",")[2] == str(first)
+        assert [line.split(",")[2] for line in ran[1:]] == [str(first), str(first + 1)]
+    capsys.readouterr()
