@@ -38,6 +38,16 @@ def _files(folder: Path) -> list[str]:
 
 
 @pytest.fixture
+def spare(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
+    """The system's temporary folder, where a log that cannot be saved at --log goes: a folder
+    of the test's own, ``tmp_path / "spare"``."""
+    folder = tmp_path / "spare"
+    folder.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(folder))
+    return folder
+
+
+@pytest.fixture
 def no_session(monkeypatch: pytest.MonkeyPatch) -> None:
     """Fail a test whose bad argument lets a robot session start."""
 
@@ -82,14 +92,12 @@ def test_a_log_that_cannot_be_written_is_refused_before_the_session(
 
 
 def test_a_log_that_fails_at_the_end_is_kept_elsewhere_and_said_in_one_line(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str], spare: Path
 ) -> None:
     from eval.steplog import read_step_log
 
-    folder, spare = tmp_path / "usb", tmp_path / "spare"
+    folder = tmp_path / "usb"
     folder.mkdir()
-    spare.mkdir()
-    monkeypatch.setattr(tempfile, "tempdir", str(spare))
     session = Runner.run
 
     def unplugged(self: Runner) -> Any:  # the stick is pulled out during the session
@@ -123,14 +131,9 @@ def test_a_log_that_is_not_a_regular_file_is_refused_and_never_replaced(
     assert os.stat(node).st_mode == before
 
 
-def test_the_final_save_never_replaces_what_became_a_fifo(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
-) -> None:
+def test_the_final_save_never_replaces_what_became_a_fifo(tmp_path: Path, spare: Path) -> None:
     from bridge.runlog import save_rows
 
-    spare = tmp_path / "spare"
-    spare.mkdir()
-    monkeypatch.setattr(tempfile, "tempdir", str(spare))
     node = tmp_path / "run.csv"
     os.mkfifo(node)  # made during the session, after --log was checked
     where, why = save_rows([{"step": 0, "time_s": 0.0}], node)
@@ -144,13 +147,10 @@ def test_the_final_save_never_replaces_what_became_a_fifo(
 
 @pytest.mark.parametrize("length", [250, 255])
 def test_a_long_log_name_the_folder_takes_is_written_there(
-    length: int, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+    length: int, tmp_path: Path, spare: Path
 ) -> None:
     from eval.steplog import read_step_log
 
-    spare = tmp_path / "spare"
-    spare.mkdir()
-    monkeypatch.setattr(tempfile, "tempdir", str(spare))  # where a failed save would go
     log = tmp_path / ("x" * (length - 4) + ".csv")
     assert main([*RUN, *REPLAY, "--log", str(log)]) == 0
     assert len(read_step_log(log)) >= 2
@@ -196,17 +196,15 @@ def test_what_the_robot_cannot_run_is_refused_before_the_session(
 
 
 def test_an_error_mid_session_still_says_how_it_went_and_where_the_log_is(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str], spare: Path
 ) -> None:
     # the camera fails after a few frames, and the log's folder went away before that: the
     # summary and the spare log's place are said, then the error, and the exit status is 1
     from bridge.perception import PerceptionError, Replay
     from eval.steplog import read_step_log
 
-    folder, spare = tmp_path / "usb", tmp_path / "spare"
+    folder = tmp_path / "usb"
     folder.mkdir()
-    spare.mkdir()
-    monkeypatch.setattr(tempfile, "tempdir", str(spare))
     replay = tmp_path / "obs.csv"
     replay.write_text(_LOG)
     read = Replay.read
