@@ -69,6 +69,7 @@ class _Wheels:
         self.frames = 0
         self.lateness_ms: list[float] = []  # how late each wheel tick woke (the loop's own)
         self.failure = ""  # why the wheel loop stopped the robot
+        self.stopped = False  # the wheel loop sent a stop command itself, on its failure
 
 
 class Runner:
@@ -188,6 +189,11 @@ class Runner:
             self._wheel_ticks(mode)
         except Exception as exc:  # any: a run must never go on without its wheel loop
             self._fail(f"wheel loop failed ({type(exc).__name__}: {exc}): wheels stopped")
+        if self._wheels.failure:
+            # Stop now, from here: the control loop may sit in the camera's read for up to its
+            # timeout before its own shutdown stops the wheels, and the reference firmware
+            # holds its last duty until told otherwise (it has no watchdog, reference §1.1).
+            self._wheels.stopped = not self._stop_wheels(mode)
 
     def _wheel_ticks(self, mode: str) -> None:
         cfg, wheels, pid = self.config, self._wheels, self.platform.pid
@@ -367,7 +373,8 @@ class Runner:
                 self._stop.set()
                 if wheel_thread.ident is not None:
                     wheel_thread.join(timeout=1.0)
-                result.stop_error = self._stop_wheels(mode)
+                stop_error = self._stop_wheels(mode)  # again: one may be lost on a noisy line
+                result.stop_error = "" if self._wheels.stopped else stop_error
                 try:
                     self.perception.close()
                     if self._loader is not None:

@@ -111,6 +111,51 @@ def test_lost_feedback_stops_the_wheels(emulator_process: Start) -> None:
     assert wheels["target_mps"] == [0.0, 0.0]  # the stop command arrived (the line is one-way cut)
 
 
+def test_lost_feedback_stops_the_wheels_while_the_camera_still_blocks(
+    emulator_process: Start,
+) -> None:
+    # The control loop can sit in the camera's read for up to its timeout; the wheels must not
+    # wait for it: the reference firmware has no watchdog and holds its last duty.
+    emu = emulator_process("--framing", "reference", "--firmware", "reference")
+    cut_at: list[float] = []
+
+    class SlowAfterTheCut:
+        def __init__(self, source: Any) -> None:
+            self.source = source
+
+        def __getattr__(self, name: str) -> Any:
+            return getattr(self.source, name)
+
+        def read(self) -> Frame:
+            if cut_at:
+                time.sleep(2.0)  # a camera that stopped answering, until its timeout
+            return self.source.read()
+
+    with SerialLink(emu.url, "reference") as link:
+        runner = Runner(link, make_policy("pn"), SlowAfterTheCut(open_source("sim", emu.url)))
+        seen: dict[str, Any] = {}
+
+        def cut_then_look() -> None:
+            time.sleep(1.0)
+            seen["before"] = emu.ask(op="info")["wheels"]["duty_pct"]
+            emu.ask(op="cut", seconds=5)  # the MCU falls silent; it still takes commands
+            cut_at.append(time.monotonic())
+            time.sleep(0.5)  # the 100 ms limit, and the stop commands
+            seen["after"] = emu.ask(op="info")["wheels"]["duty_pct"]
+            seen["when"] = time.monotonic() - cut_at[0]
+
+        looker = threading.Thread(target=cut_then_look, daemon=True)
+        looker.start()
+        result = runner.run()
+        ended = time.monotonic() - cut_at[0]
+        looker.join(timeout=5.0)
+    assert result.reason.startswith("no feedback from the MCU for")
+    assert seen["before"] != [0.0, 0.0]  # the robot was driving
+    assert seen["when"] < ended - 0.5  # looked while the control loop still waited on the camera
+    assert seen["after"] == [0.0, 0.0]  # stopped by the wheel loop itself
+    assert result.stop_error == ""
+
+
 @pytest.mark.slow
 def test_ctrl_c_stops_the_wheels_and_keeps_the_log(emulator_process: Start, tmp_path: Path) -> None:
     emu = emulator_process("--framing", "robust", "--firmware", "fixed")
