@@ -226,6 +226,13 @@ class Platform:
         """Entries of the action."""
         return len(self.actions)
 
+    def __reduce__(self) -> tuple[Callable[[str], Platform], tuple[str]]:
+        """Copied and pickled by name: the registry's own object, whose parameter block the
+        runner's cached record types are keyed on (and whose lambdas cannot be pickled)."""
+        from follow_env.platforms import get_platform
+
+        return get_platform, (self.name,)
+
 
 def motor_gains(keys: np.ndarray, n_motors: int, spread: float) -> np.ndarray:
     """Per-episode gain factors ``(len(keys), n_motors)``: ``1 + spread z`` clipped to

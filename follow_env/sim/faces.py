@@ -32,8 +32,11 @@ def lane_seeds(num_envs: int, seed: int | list[int | None] | None) -> list[int |
         seeds: list[int | None] = [None] * num_envs
     elif is_integer(seed):
         seeds = [int(seed) + i for i in range(num_envs)]  # type: ignore[arg-type]
+    elif not isinstance(seed, list | tuple | np.ndarray):
+        # A float, a bool or a string is no seed (a string would be read as a list of letters).
+        raise out_of_range("seed", seed, f"an int, None, or a list of num_envs={num_envs} seeds")
     else:
-        seeds = list(seed)  # type: ignore[arg-type]
+        seeds = list(seed)
         if len(seeds) != num_envs:
             raise ValueError(
                 f"seed has {len(seeds)} entries: must be an int, None, or a list of "
@@ -42,14 +45,24 @@ def lane_seeds(num_envs: int, seed: int | list[int | None] | None) -> list[int |
     return seeds
 
 
+REAL_KINDS = "biuf"
+"""numpy dtype kinds an action may have: bool, integers, floats. Strings would be parsed and
+complex numbers lose their imaginary part in a cast to float, silently."""
+
+
 def action_array(action: Any, shape: tuple[int, ...], names: str) -> np.ndarray:
     """``action`` as a float64 array of exactly ``shape``, finite; ``ValueError`` naming the
-    expected and the received shape (or the bad entries) otherwise."""
+    expected and the received shape (or the bad entries, or a dtype that is not real numbers)
+    otherwise."""
     try:
-        arr = np.asarray(action, dtype=np.float64)
+        arr = np.asarray(action)
+        if arr.dtype.kind not in REAL_KINDS + "O":  # objects: e.g. Python ints past 2**64
+            raise TypeError(arr.dtype)
+        arr = arr.astype(np.float64, copy=False)
     except (TypeError, ValueError):
         raise ValueError(
-            f"action={action!r} is out of range: must be an array of shape {shape} {names}"
+            f"action={action!r} is out of range: must be an array of real numbers of shape "
+            f"{shape} {names}"
         ) from None
     if arr.shape != shape:
         raise ValueError(f"action has shape {arr.shape}: must be {shape} {names} (got {action!r})")
@@ -118,7 +131,11 @@ class TaskEnv(gym.Env[np.ndarray, np.ndarray]):
         """Apply ``action`` (the platform's, in SI) for one control step."""
         if self._needs_reset:
             raise ResetNeeded("call reset() before step()")
-        if type(action) is np.ndarray and action.shape == self._action_shape:
+        if (
+            type(action) is np.ndarray
+            and action.shape == self._action_shape
+            and action.dtype.kind in REAL_KINDS
+        ):
             self._action[0] = action  # the common case, checked below for NaN and inf
             if not np.isfinite(self._action).all():
                 action_array(action, self._action_shape, self._action_names)  # raises
@@ -154,6 +171,12 @@ class TaskEnv(gym.Env[np.ndarray, np.ndarray]):
             self._window.close()
             self._window = None
         self.sim.close()
+
+    def __getstate__(self) -> dict[str, Any]:
+        """A copy (``copy.deepcopy``, pickle) opens its own window when it renders."""
+        state = self.__dict__.copy()
+        state["_window"] = None
+        return state
 
     # -- helpers --------------------------------------------------------------------------------
 
@@ -224,6 +247,8 @@ class TaskVectorEnv(VectorEnv):
         self.action_space = batch_space(self.single_action_space, self.num_envs)
         self._action_names = "[" + ", ".join(a.name for a in self.sim.platform.actions) + "]"
         self._autoreset = np.zeros(self.num_envs, dtype=np.bool_)
+        # Lanes reset at least once: a lane never reset holds zeroed records, no episode.
+        self._started = np.zeros(self.num_envs, dtype=np.bool_)
         self._actions = np.zeros((self.num_envs, self.single_action_space.shape[0]))
         self._mask = np.ones(self.num_envs, dtype=np.bool_)
         self._renderers: list[Any] = []
@@ -254,6 +279,7 @@ class TaskVectorEnv(VectorEnv):
         seeds = None if seed is None else [lane_seeds(self.num_envs, seed)[i] for i in lanes]
         self._reset_lanes(lanes, seeds)
         self._autoreset[lanes] = False
+        self._started[lanes] = True
         info = self._info()
         if not mask.all():
             # Only the reset lanes report an info, as in SyncVectorEnv.
@@ -265,7 +291,13 @@ class TaskVectorEnv(VectorEnv):
     def step(
         self, actions: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
-        """Step every lane with its row of ``actions`` (num_envs, action size)."""
+        """Step every lane with its row of ``actions`` (num_envs, action size); raises
+        ``ResetNeeded`` while a lane was never reset (as ``SyncVectorEnv``'s envs do)."""
+        if not self._started.all():
+            raise ResetNeeded(
+                f"lanes {np.flatnonzero(~self._started).tolist()} were never reset: call "
+                "reset() before step()"
+            )
         self._actions[:] = action_array(actions, self._actions.shape, self._action_names)
         ep = self.sim.episode
         if self.autoreset_mode == AutoresetMode.NEXT_STEP:

@@ -251,6 +251,39 @@ class BatchedSim:
         for job in jobs:
             job.result()
 
+    # -- copies -----------------------------------------------------------------------------------
+
+    def __getstate__(self) -> dict[str, Any]:
+        """What a copy needs: the configuration and the lanes' records, not the views onto them.
+
+        ``copy.deepcopy`` and pickle copy a numpy view as a separate array, so a copy of the
+        raw attributes would step ``state`` while reading stale ``state_words`` (and reset
+        through a ``_state_raw`` that no longer aliases ``state``); the kernels and the thread
+        pool are rebuilt rather than copied.
+        """
+        return {
+            "task": self.task,
+            "cfg": self.cfg,
+            "n": self.n,
+            "params": self.params,
+            "state": self.state,
+            "world": self.world,
+            "keys": self.keys,
+            "seeds": self.seeds,
+        }
+
+    def __setstate__(self, saved: dict[str, Any]) -> None:
+        """Rebuild the runner (views, kernels, pool) and copy the saved records into it."""
+        self.__init__(saved["task"], saved["cfg"], saved["n"])  # type: ignore[misc]
+        # Raw 8-byte copies: the saved records have the layout of this runner's, but may be
+        # of an equal rather than the very same dtype object (see _composed_dtypes).
+        self._params_raw[:] = saved["params"].view(np.uint64).reshape(self.n, -1)
+        self._state_raw[:] = saved["state"].view(np.uint64).reshape(self.n, -1)
+        for mine, theirs in zip(self.world, saved["world"], strict=True):
+            mine.view(np.uint64)[...] = theirs.view(np.uint64)
+        self.keys[:] = saved["keys"]
+        self.seeds = saved["seeds"]
+
     def close(self) -> None:
         """Stop the worker threads (if any)."""
         if self._pool is not None:

@@ -18,6 +18,7 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
+from gymnasium.error import ResetNeeded
 from stable_baselines3.common.vec_env import VecEnv
 from stable_baselines3.common.vec_env.base_vec_env import VecEnvIndices, VecEnvStepReturn
 
@@ -63,17 +64,28 @@ class TaskSB3VecEnv(VecEnv):
         self._actions = np.zeros((int(num_envs), act_space.shape[0]))
         self._action_names = "[" + ", ".join(a.name for a in self.sim.platform.actions) + "]"
         super().__init__(int(num_envs), obs_space, act_space)
+        # Until the first reset() the lanes hold zeroed records, no episode.
+        self._needs_reset = True
 
     # -- SB3 VecEnv API -----------------------------------------------------------------------
 
     def reset(self) -> np.ndarray:
-        """Reset every lane (seeded by ``seed()`` if it was called since the last reset)."""
+        """Reset every lane (seeded by ``seed()`` if it was called since the last reset).
+
+        :raises ValueError: when ``set_options`` gave options: the task takes none (the single
+            env refuses them too, rather than ignore them).
+        """
+        given = [options for options in self._options if options]
+        if given:
+            self._reset_options()
+            raise ValueError(f"options={given[0]!r} is out of range: this env takes no options")
         seeded = [i for i, seed in enumerate(self._seeds) if seed is not None]
         if seeded:
             self.sim.seeds.seed(np.array(seeded), [self._seeds[i] for i in seeded])
         self.sim.reset_lanes(np.arange(self.num_envs))
         self._reset_seeds()
         self._reset_options()
+        self._needs_reset = False
         return self.task.observations(self.sim)
 
     def step_async(self, actions: np.ndarray) -> None:
@@ -85,7 +97,13 @@ class TaskSB3VecEnv(VecEnv):
         self._actions[:] = action_array(a, self._actions.shape, self._action_names)
 
     def step_wait(self) -> VecEnvStepReturn:
-        """Step all lanes; finished lanes are reset at once (SB3's same-step autoreset)."""
+        """Step all lanes; finished lanes are reset at once (SB3's same-step autoreset).
+
+        :raises gymnasium.error.ResetNeeded: before the first ``reset()`` (as the envs of
+            SB3's ``DummyVecEnv`` do).
+        """
+        if self._needs_reset:
+            raise ResetNeeded("call reset() before step()")
         self.sim.step(self._actions)
         ep = self.sim.episode
         rewards = ep["reward"].astype(np.float32)

@@ -23,11 +23,18 @@ from gymnasium import spaces
 
 from follow_env.platforms import get_platform
 from follow_env.platforms.base import Platform, PlatformConfig
-from follow_env.sim.checks import out_of_range, yaml_problem
+from follow_env.sim.checks import is_integer, is_real, out_of_range, yaml_problem
 from follow_env.sim.config import Sections
 from follow_env.tasks.spec import TaskSpec
 
-__all__ = ["TaskConfig", "TaskPlatforms", "config_from_text", "named_platform", "resolve_config"]
+__all__ = [
+    "TaskConfig",
+    "TaskPlatforms",
+    "config_from_text",
+    "named_platform",
+    "resolve_config",
+    "section_or_name",
+]
 
 
 @dataclass(frozen=True)
@@ -139,6 +146,15 @@ def resolve_config(
     return cls.from_overrides(cfg, flat) if flat else cfg
 
 
+def section_or_name(section: str, value: Any) -> dict[str, Any]:
+    """The override a task's shorthand argument (``scenario=``, ``track=``) stands for: a name
+    sets the section's ``name``; a mapping or a section object is the whole section, as every
+    other section may be given to ``gym.make``. For ``resolve_config``'s ``shorthands``."""
+    if isinstance(value, str) or value is None or is_integer(value) or is_real(value):
+        return {f"{section}.name": value}  # a number is refused there, naming the field
+    return {section: value}
+
+
 def _platform(platform: str | PlatformConfig | Mapping[str, Any] | None) -> PlatformConfig | None:
     """``gym.make``'s ``platform=``: a name, a config object, or a mapping with a ``name``."""
     if platform is None or isinstance(platform, PlatformConfig):
@@ -207,6 +223,11 @@ class TaskPlatforms:
     classes, which set ``spec``)."""
 
     spec: TaskSpec
+
+    def __reduce__(self) -> str:
+        """Copied and pickled by reference to its module's ``TASK`` (a task model is one
+        object per task: the runner's cached record types and columns are keyed on it)."""
+        return "TASK"
 
     def platform_of(self, cfg: Any) -> Platform:
         """The registered platform of ``cfg.platform``."""

@@ -22,9 +22,9 @@ from follow_env.sim import streams
 from follow_env.sim.rng import LaneRandom
 from follow_env.sim.runner import BatchedSim
 from follow_env.sim.schema import Block, f8, float_column, i8, nested
-from follow_env.tasks.config import TaskPlatforms, resolve_config
+from follow_env.tasks.config import TaskPlatforms, resolve_config, section_or_name
 from follow_env.tasks.line_trace import reward
-from follow_env.tasks.line_trace.config import PAPER, PRESETS, LineTraceConfig
+from follow_env.tasks.line_trace.config import PAPER, PRESETS, LineTraceConfig, TrackConfig
 from follow_env.tasks.line_trace.spec import N_CELLS, SPEC
 from follow_env.tasks.line_trace.tracks import Track, TrackSpec, get_track, lay
 from follow_env.world.floor_line import LINE_SEGMENT, SEG
@@ -161,7 +161,7 @@ class LineTraceTask(TaskPlatforms):
     def resolve_config(
         self,
         config: LineTraceConfig | str | dict[str, Any] | None = None,
-        track: str | None = None,
+        track: str | TrackConfig | Mapping[str, Any] | None = None,
         platform: str | PlatformConfig | Mapping[str, Any] | None = None,
         **overrides: Any,
     ) -> LineTraceConfig:
@@ -169,7 +169,8 @@ class LineTraceTask(TaskPlatforms):
 
         :param config: a preset name (``"paper"``, ``"ideal"``, ``"noisy"``), a
             ``LineTraceConfig``, or a mapping of section overrides applied to ``paper``.
-        :param track: shorthand for ``track={"name": ...}``.
+        :param track: a track name (shorthand for ``track={"name": ...}``), or the
+            ``track`` section itself (a ``TrackConfig`` or a mapping of its fields).
         :param platform: a platform name (its default configuration), a platform config,
             or a mapping ``{"name": ..., <section>: {...}}``.
         :param overrides: sections (``sensor={...}``) or ``section__field=value`` pairs.
@@ -180,7 +181,7 @@ class LineTraceTask(TaskPlatforms):
             PAPER,
             config,
             platform,
-            shorthands={"track.name": track},
+            shorthands=section_or_name("track", track),
             overrides=overrides,
         )
 

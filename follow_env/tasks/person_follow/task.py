@@ -20,9 +20,9 @@ from follow_env.sensors import camera, depth, detector
 from follow_env.sensors.detector import PEOPLE_MAX
 from follow_env.sim.runner import BatchedSim
 from follow_env.sim.schema import Block, f8, float_column, i8, nested
-from follow_env.tasks.config import TaskPlatforms, resolve_config
+from follow_env.tasks.config import TaskPlatforms, resolve_config, section_or_name
 from follow_env.tasks.person_follow import reward
-from follow_env.tasks.person_follow.config import PRESETS, THESIS, EnvConfig
+from follow_env.tasks.person_follow.config import PRESETS, THESIS, EnvConfig, ScenarioConfig
 from follow_env.tasks.person_follow.people import PERSON, WAYPOINT
 from follow_env.tasks.person_follow.scenarios import ScenarioSpec, get_scenario
 from follow_env.tasks.person_follow.spec import SPEC, observation_bounds, observation_size
@@ -173,7 +173,7 @@ class PersonFollowTask(TaskPlatforms):
     def resolve_config(
         self,
         config: EnvConfig | str | dict[str, Any] | None = None,
-        scenario: str | None = None,
+        scenario: str | ScenarioConfig | Mapping[str, Any] | None = None,
         platform: str | PlatformConfig | Mapping[str, Any] | None = None,
         **overrides: Any,
     ) -> EnvConfig:
@@ -181,7 +181,8 @@ class PersonFollowTask(TaskPlatforms):
 
         :param config: a preset name (``"thesis"``, ``"ideal"``, ``"noisy"``, ``"randomized"``),
             an ``EnvConfig``, or a mapping of section overrides applied to the ``thesis`` preset.
-        :param scenario: shorthand for ``scenario={"name": ...}``.
+        :param scenario: a scenario name (shorthand for ``scenario={"name": ...}``), or the
+            ``scenario`` section itself (a ``ScenarioConfig`` or a mapping of its fields).
         :param platform: a platform name (its default configuration), a platform config
             object, or a mapping ``{"name": ..., <section>: {...}}``; sections of the platform
             may still be overridden (``robot={...}``), in ``config`` too.
@@ -193,7 +194,7 @@ class PersonFollowTask(TaskPlatforms):
             THESIS,
             config,
             platform,
-            shorthands={"scenario.name": scenario},
+            shorthands=section_or_name("scenario", scenario),
             overrides=overrides,
         )
 
