@@ -57,7 +57,7 @@ from typing import Any
 
 import yaml
 
-from follow_env.sim.checks import yaml_problem
+from follow_env.sim.checks import load_yaml, utf8_problem, yaml_problem
 from policies.learned.feature import wrapper_entries
 from train.algos import DEFAULT_ALGO, PPO_RULES, Algo, algo
 from train.rules import (
@@ -80,6 +80,7 @@ __all__ = [
     "load_hyperparams",
     "parse_hyperparams",
     "policy_class",
+    "read_document",
     "schedule",
     "wrapper_specs",
 ]
@@ -124,12 +125,19 @@ _POLICY_FLAGS = (
 )
 
 
-def _document(path: Path) -> Any:
-    """The parsed hyperparameter file (one-line errors naming it)."""
+def read_document(path: str | Path) -> Any:
+    """The parsed hyperparameter file (one-line errors naming it).
+
+    :raises ConfigError: if the file is unreadable, not UTF-8 text or not YAML, or gives a key
+        twice in one mapping.
+    """
+    path = Path(path)
     try:
-        return yaml.safe_load(path.read_text(encoding="utf-8"))
+        return load_yaml(path.read_text(encoding="utf-8"))
     except OSError as e:
         raise ConfigError(f"{path}: cannot read hyperparameters: {e.strerror or e}") from None
+    except UnicodeDecodeError as e:
+        raise ConfigError(f"{path}: {utf8_problem(e)}") from None
     except yaml.YAMLError as e:
         raise ConfigError(f"{path}: not valid YAML: {yaml_problem(e)}") from None
 
@@ -140,7 +148,7 @@ def sole_section(path: str | Path) -> str:
     :raises ConfigError: if the file is unreadable or has several sections (name one).
     """
     path = Path(path)
-    document = _document(path)
+    document = read_document(path)
     if not isinstance(document, dict):
         kind = "nothing" if document is None else f"a {type(document).__name__}"
         raise ConfigError(
@@ -169,7 +177,7 @@ def load_hyperparams(
         key or value is not understood (the message names the file and the key).
     """
     path = Path(path)
-    document = _document(path)
+    document = read_document(path)
     if not isinstance(document, dict) or env_id not in document:
         found = ", ".join(map(str, document)) if isinstance(document, dict) else "nothing"
         raise ConfigError(f"{path}: no section {env_id!r} (found: {found})")

@@ -41,6 +41,7 @@ from eval.tuning.objective import DEFAULT_VARIANTS, SCORE_KEYS, TUNE_SEED0, epis
 from execution import Backend, BackendUnavailableError, backend_from_args, execute
 from follow_env.sim.atomic import atomic_write_text, check_writable
 from policies.space import ParamRange
+from train.config import read_document
 from train.ppo import DEFAULT_HYPERPARAMS, Args
 
 __all__ = ["INTEGER_KEYS", "PPO_SPACE", "PPOObjective", "hyperparams_for", "main"]
@@ -110,7 +111,7 @@ class PPOObjective:
     def section(self) -> dict[str, Any]:
         """The hyperparameter file's section the trials start from."""
         env_id = self.base.env_id or "PersonFollow-v0"
-        document = yaml.safe_load(Path(self.base.hyperparams).read_text(encoding="utf-8"))
+        document = read_document(self.base.hyperparams)
         if not isinstance(document, dict) or env_id not in document:
             raise ValueError(f"{self.base.hyperparams}: no section {env_id!r}")
         return dict(document[env_id])

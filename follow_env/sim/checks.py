@@ -10,21 +10,28 @@ numpy integer and floating scalars are accepted wherever Python numbers are (swe
 with ``np.linspace``); :func:`as_number` turns them into Python numbers.
 
 A file that does not parse is reported in one line too: :func:`yaml_problem` gives a YAML
-error's place and problem without PyYAML's multi-line quotation of the file.
+error's place and problem without PyYAML's multi-line quotation of the file, and
+:func:`utf8_problem` says where a file that should be text is not UTF-8. Every YAML file the
+project reads goes through :func:`load_yaml`, which refuses a key given twice in one mapping.
 """
 
 from __future__ import annotations
 
 import math
 from numbers import Integral, Real
+from typing import Any
+
+import yaml
 
 __all__ = [
     "as_number",
     "check_number",
     "is_integer",
     "is_real",
+    "load_yaml",
     "out_of_range",
     "range_text",
+    "utf8_problem",
     "yaml_problem",
 ]
 
@@ -139,3 +146,46 @@ def yaml_problem(exc: Exception) -> str:
     if context and start is not None:  # e.g. "while parsing a flow sequence" and where it began
         out += f" ({context} from line {start.line + 1}, column {start.column + 1})"
     return out
+
+
+class _StrictLoader(yaml.SafeLoader):
+    """``yaml.SafeLoader`` that refuses a key given twice in one mapping.
+
+    PyYAML keeps the last of two equal keys without a word, so a file read that way may train
+    or run with a value its reader does not see. Keys brought in by a merge (``<<: *base``) are
+    not the mapping's own and may be overridden, as YAML says.
+    """
+
+    def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict[Any, Any]:
+        if isinstance(node, yaml.MappingNode):
+            seen: set[Any] = set()
+            for key_node, _ in node.value:
+                if key_node.tag == "tag:yaml.org,2002:merge":
+                    continue
+                key = self.construct_object(key_node, deep=True)
+                try:
+                    new = key not in seen
+                except TypeError:  # an unhashable key: SafeLoader's own error says so
+                    continue
+                if not new:
+                    raise yaml.constructor.ConstructorError(
+                        None, None, f"found the key {key!r} twice", key_node.start_mark
+                    )
+                seen.add(key)
+        return super().construct_mapping(node, deep=deep)
+
+
+def load_yaml(text: str) -> Any:
+    """``text`` parsed as ``yaml.safe_load`` does, but a key given twice in one mapping raises.
+
+    :raises yaml.YAMLError: for text that is not YAML, or a mapping that gives a key twice
+        (``found the key 'gamma' twice``, with its place for :func:`yaml_problem`).
+    """
+    return yaml.load(text, Loader=_StrictLoader)  # a SafeLoader subclass: no arbitrary objects
+
+
+def utf8_problem(exc: UnicodeDecodeError) -> str:
+    """Where a file that should be UTF-8 text is not: ``not a UTF-8 text file (byte 1 is 0xff)``."""
+    bad = exc.object[exc.start : exc.start + 1]
+    shown = f" is 0x{bad[0]:02x}" if bad else ""
+    return f"not a UTF-8 text file (byte {exc.start + 1}{shown})"

@@ -23,7 +23,14 @@ from gymnasium import spaces
 
 from follow_env.platforms import get_platform
 from follow_env.platforms.base import Platform, PlatformConfig
-from follow_env.sim.checks import is_integer, is_real, out_of_range, yaml_problem
+from follow_env.sim.checks import (
+    is_integer,
+    is_real,
+    load_yaml,
+    out_of_range,
+    utf8_problem,
+    yaml_problem,
+)
 from follow_env.sim.config import Sections
 from follow_env.tasks.spec import TaskSpec
 
@@ -189,9 +196,11 @@ def config_from_text(
     path = Path(text)
     if path.suffix.lower() in (".json", ".yaml", ".yml"):
         try:
-            overrides = yaml.safe_load(path.read_text(encoding="utf-8"))
+            overrides = load_yaml(path.read_text(encoding="utf-8"))
         except OSError as exc:
             raise ValueError(f"cannot read {path}: {exc.strerror}") from None
+        except UnicodeDecodeError as exc:
+            raise ValueError(f"{path} is {utf8_problem(exc)}") from None
         except yaml.YAMLError as exc:
             raise ValueError(f"{path} is not valid YAML/JSON: {yaml_problem(exc)}") from None
         where = str(path)

@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from follow_env.sim.checks import yaml_problem
+from follow_env.sim.checks import load_yaml, utf8_problem, yaml_problem
 from policies.learned.features import Pipeline
 from policies.learned.networks import Memory
 from policies.learned.ppo import AGENTS, AgentLoadError, PPOPolicy, _Loaded, load_shipped
@@ -47,9 +47,11 @@ _Views = tuple[Pipeline, list[Pipeline], list[Memory | None]]
 def member_folders(path: Path) -> list[Path]:
     """The member folders listed in ``path`` (an ``ensemble.yaml``), checked."""
     try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8"))
+        data = load_yaml(path.read_text(encoding="utf-8"))
     except OSError as e:
         raise AgentLoadError(f"{path}: not a readable ensemble file: {e}") from None
+    except UnicodeDecodeError as e:
+        raise AgentLoadError(f"{path}: {utf8_problem(e)}") from None
     except yaml.YAMLError as e:
         raise AgentLoadError(f"{path}: not valid YAML: {yaml_problem(e)}") from None
     members = data.get("members") if isinstance(data, dict) else None

@@ -47,7 +47,7 @@ from typing import Any, NamedTuple
 import numpy as np
 import yaml
 
-from follow_env.sim.checks import yaml_problem
+from follow_env.sim.checks import load_yaml, utf8_problem, yaml_problem
 from follow_env.tasks.person_follow.spec import AHEAD, AHEAD_SETTINGS, SPEC
 from policies.base import OBS_SIZES, validate_obs_batch, validate_obs_row
 from policies.learned.feature import wrapper_entries
@@ -185,9 +185,11 @@ class _Loaded:
             raise AgentLoadError(f"{files.config}: the agent's config.yaml is missing")
         where = files.config
         try:
-            config = yaml.safe_load(files.config.read_text(encoding="utf-8"))
+            config = load_yaml(files.config.read_text(encoding="utf-8"))
         except OSError as e:
             raise AgentLoadError(f"{where}: not a readable configuration: {e}") from None
+        except UnicodeDecodeError as e:
+            raise AgentLoadError(f"{where}: {utf8_problem(e)}") from None
         except yaml.YAMLError as e:
             raise AgentLoadError(f"{where}: not valid YAML: {yaml_problem(e)}") from None
         if not isinstance(config, dict) or not isinstance(config.get("hyperparams"), dict):

@@ -212,6 +212,13 @@ def test_a_config_file_that_is_not_yaml_is_one_line_with_its_place(
     assert "(while parsing a flow sequence from line 1, column 13)" in err
     assert main(["run", "--config", str(tmp_path), "--out", str(tmp_path / "run")]) == 2
     assert f"'{tmp_path}' is a folder: give a preset" in one_line_error(capsys)
+    twice = tmp_path / "twice.yaml"  # PyYAML alone keeps the last: the run the file hides
+    twice.write_text("perception:\n  association: tracker\n  association: nearest\n")
+    assert main(["run", "--config", str(twice), "--out", str(tmp_path / "run")]) == 2
+    assert "line 3, column 3: found the key 'association' twice" in one_line_error(capsys)
+    twice.write_bytes(b"perception: {}\n\xff\n")
+    assert main(["run", "--config", str(twice), "--out", str(tmp_path / "run")]) == 2
+    assert f"{twice} is not a UTF-8 text file (byte 16 is 0xff)" in one_line_error(capsys)
     assert not (tmp_path / "run").exists()
 
 

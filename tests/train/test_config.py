@@ -451,3 +451,39 @@ def test_the_tracker_file_is_the_headway_file_on_the_tracker() -> None:
     env = gym.make(ENV_ID, **tracked["env_kwargs"])
     assert env.unwrapped.config.perception.association == "tracker"
     env.close()
+
+
+@pytest.mark.parametrize(
+    ("text", "key"),
+    [
+        (f"{ENV_ID}:\n  n_envs: 4\n  gamma: 0.9\n  gamma: 0.5\n", "'gamma' twice"),
+        (f"{ENV_ID}:\n  n_envs: 4\n{ENV_ID}:\n  n_envs: 8\n", f"'{ENV_ID}' twice"),
+        (f"{ENV_ID}:\n  policy_kwargs: {{net_arch: [8], net_arch: [64]}}\n", "'net_arch' twice"),
+    ],
+)
+def test_a_key_given_twice_is_refused_naming_it(tmp_path: Path, text: str, key: str) -> None:
+    # PyYAML keeps the last of two equal keys without a word: the run would train with a
+    # value the reader of the file may not see.
+    path = tmp_path / "ppo.yaml"
+    path.write_text(text)
+    with pytest.raises(
+        ConfigError, match=rf"ppo\.yaml: .*line \d+, column \d+: found the key {key}"
+    ):
+        load_hyperparams(path, ENV_ID)
+
+
+def test_anchors_and_merge_keys_are_not_duplicates(tmp_path: Path) -> None:
+    path = tmp_path / "ppo.yaml"
+    path.write_text(
+        "base: &base {n_envs: 4, n_timesteps: 100, gamma: 0.9}\n"
+        f"{ENV_ID}:\n  <<: *base\n  gamma: 0.5\n"
+    )
+    hp = load_hyperparams(path, ENV_ID)
+    assert (hp["n_envs"], hp["gamma"]) == (4, 0.5)  # the section's own key wins, as YAML says
+
+
+def test_a_file_that_is_not_utf8_is_named(tmp_path: Path) -> None:
+    path = tmp_path / "ppo.yaml"
+    path.write_bytes(b"\xff\xfe" + f"{ENV_ID}: {{}}\n".encode())
+    with pytest.raises(ConfigError, match=r"ppo\.yaml: not a UTF-8 text file"):
+        load_hyperparams(path, ENV_ID)

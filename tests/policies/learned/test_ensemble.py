@@ -157,10 +157,16 @@ def test_members_may_differ_in_reward_shaping(pair: Path) -> None:
         ("members: [seed-0, seed-0]\n", "listed twice"),
         ("members: [seed-0, 3]\n", "run folder's path"),
         ("members: [seed-0\n", r"not valid YAML: line 2, column 1: expected ',' or '\]'"),
+        # PyYAML alone keeps the second list: the ensemble would not be the one the file shows
+        (
+            "members: [seed-0, seed-1]\nmembers: [seed-1, seed-0]\n",
+            r"not valid YAML: line 2, column 1: found the key 'members' twice",
+        ),
+        ("\udcff", "not a UTF-8 text file"),
     ],
 )
 def test_malformed_ensemble_files_are_named(pair: Path, text: str, message: str) -> None:
-    (pair / ENSEMBLE).write_text(text, encoding="utf-8")
+    (pair / ENSEMBLE).write_bytes(text.encode("utf-8", "surrogateescape"))  # "\udcff": 0xff
     with pytest.raises(AgentLoadError, match=message) as error:
         make_policy(str(pair))
     assert str(pair / ENSEMBLE) in str(error.value)

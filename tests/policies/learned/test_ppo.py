@@ -73,6 +73,17 @@ def test_a_configuration_that_is_not_yaml_is_named_in_one_line(agent_copy: Path)
         make_policy(str(agent_copy))
 
 
+def test_a_configuration_with_a_key_given_twice_or_not_utf8_is_named(agent_copy: Path) -> None:
+    config = agent_copy / "config.yaml"
+    text = config.read_text()
+    config.write_text(text + "hyperparams: {}\n")
+    with pytest.raises(AgentLoadError, match=r"config\.yaml: not valid YAML: line \d+, column 1: "):
+        make_policy(str(agent_copy))
+    config.write_bytes(b"\xff" + text.encode())
+    with pytest.raises(AgentLoadError, match=r"config\.yaml: not a UTF-8 text file \(byte 1 "):
+        make_policy(str(agent_copy))
+
+
 def test_missing_normalisation_statistics_are_named(agent_copy: Path) -> None:
     (agent_copy / "vecnormalize.pkl").unlink()
     with pytest.raises(AgentLoadError, match=r"vecnormalize\.pkl: normalisation statistics"):
