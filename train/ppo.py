@@ -52,7 +52,15 @@ from train.config import (
 )
 from train.export import AGENT_FILES, EXPORT_EXTRAS, FORCE_ALONE_ERROR, check_export, export_agent
 
-__all__ = ["AGENT_FILES", "EXPORT_EXTRAS", "Args", "Interrupted", "check_new_run", "train"]
+__all__ = [
+    "AGENT_FILES",
+    "EXPORT_EXTRAS",
+    "Args",
+    "Interrupted",
+    "check_new_run",
+    "check_resume",
+    "train",
+]
 
 PROG = "follow-train"
 USAGE_ERROR = 2
@@ -248,6 +256,17 @@ def check_new_run(args: Args) -> tuple[Args, Hyperparams]:
     return args, hp
 
 
+def check_resume(args: Args) -> None:
+    """Check a resume (``args.resume``) as :func:`train` would, without building or writing
+    anything: the run's configuration, logs and checkpoint, and the options given with it.
+
+    :raises ValueError: naming the file or option and what is wrong.
+    """
+    resumed, hp, *_ = _resume_settings(args)
+    _check_options(resumed, run=resumed.resume)
+    _check_against_hyperparams(resumed, hp)
+
+
 # -- Helpers ---------------------------------------------------------------------------------
 
 
@@ -286,6 +305,10 @@ def _resume_settings(args: Args) -> tuple[Args, Hyperparams, dict[str, Any], str
         force=args.force,
         resume=run,
     )
+    # The logs the session goes on writing, read now: once it has started it has written its
+    # config.yaml, progress CSV and TensorBoard file.
+    runs.read_sessions(run)
+    runs.read_evaluations(run)
     checkpoint = runs.newest_checkpoint(run, learner.name)
     if checkpoint is None:
         raise ValueError(f"{run / runs.CHECKPOINTS}: no checkpoint to resume from")

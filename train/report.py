@@ -16,7 +16,6 @@ from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import pandas as pd
 
 from eval.metrics import OUTCOME_METRICS, metric_digits, metric_label
@@ -26,6 +25,7 @@ from policies.learned.ppo import shipped_name
 from policies.registry import DEFAULT_TASK
 from train.algos import ALGOS, DEFAULT_ALGO
 from train.config import platform_label, wrapper_specs
+from train.run import read_evaluations
 
 __all__ = [
     "CARD_METRICS",
@@ -80,15 +80,13 @@ def plot_learning_curve(run: Path, path: Path, title: str = "PPO on PersonFollow
             lw=1,
             label="training episodes (env return, last 100)",
         )
-    evaluations = run / "evaluations.npz"
-    if evaluations.exists():
-        with np.load(evaluations) as log:
-            steps, results = log["timesteps"], log["results"]
-        if len(steps):
-            ax.fill_between(
-                steps, results.min(axis=1), results.max(axis=1), color="C0", alpha=0.2, lw=0
-            )
-            ax.plot(steps, results.mean(axis=1), "o-", color="C0", ms=3, label="held-out seeds")
+    log = read_evaluations(run)
+    if log is not None and len(log.timesteps):
+        steps, results = log.timesteps, log.results
+        ax.fill_between(
+            steps, results.min(axis=1), results.max(axis=1), color="C0", alpha=0.2, lw=0
+        )
+        ax.plot(steps, results.mean(axis=1), "o-", color="C0", ms=3, label="held-out seeds")
     ax.set_xlabel("env steps")
     ax.set_ylabel("episode return (env reward)")
     ax.set_title(title)
@@ -285,17 +283,15 @@ def model_card(
         "## Scores",
         "",
     ]
-    evaluations = run / "evaluations.npz"
-    if evaluations.exists():
-        with np.load(evaluations) as log:
-            if len(log["timesteps"]):
-                last = log["results"][-1]
-                lines += [
-                    f"Held-out evaluation at {int(log['timesteps'][-1]):,} steps (EvalCallback,"
-                    f" {len(last)} episodes, deterministic): env return {last.mean():.1f}"
-                    f" +- {last.std():.1f}; learning curve in `learning_curve.png`.",
-                    "",
-                ]
+    log = read_evaluations(run)
+    if log is not None and len(log.timesteps):
+        last = log.results[-1]
+        lines += [
+            f"Held-out evaluation at {int(log.timesteps[-1]):,} steps (EvalCallback,"
+            f" {len(last)} episodes, deterministic): env return {last.mean():.1f}"
+            f" +- {last.std():.1f}; learning curve in `learning_curve.png`.",
+            "",
+        ]
     if comparison is not None and len(comparison):
         law = comparison["policy_b"].iloc[0]
         lines += [

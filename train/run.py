@@ -32,10 +32,11 @@ import json
 import re
 import shutil
 import time
+import zipfile
 from collections.abc import Iterator
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import yaml
@@ -44,20 +45,23 @@ from stable_baselines3.common.callbacks import CheckpointCallback, EvalCallback
 from stable_baselines3.common.vec_env import VecNormalize
 
 from follow_env.sim.atomic import atomic_path, atomic_write_text
-from follow_env.sim.checks import yaml_problem
+from follow_env.sim.checks import load_yaml, utf8_problem, yaml_problem
 
 __all__ = [
     "CHECKPOINT_PREFIX",
     "CONFIG",
+    "EVALUATIONS",
     "MODEL",
     "NORMALIZATION",
     "AtomicCheckpointCallback",
+    "Evaluations",
     "HeldOutEvalCallback",
     "SessionLog",
     "config_text",
     "new_run_dir",
     "newest_checkpoint",
     "read_config",
+    "read_evaluations",
     "read_sessions",
     "remove_stale_scratch",
     "replay_buffer_file",
@@ -122,9 +126,11 @@ def read_config(path: str | Path) -> dict[str, Any]:
     if path.is_dir():
         path = path / CONFIG
     try:
-        config = yaml.safe_load(path.read_text(encoding="utf-8"))
+        config = load_yaml(path.read_text(encoding="utf-8"))
     except OSError as e:
         raise ValueError(f"{path}: cannot read the run configuration: {e.strerror or e}") from None
+    except UnicodeDecodeError as e:
+        raise ValueError(f"{path}: the run configuration is {utf8_problem(e)}") from None
     except yaml.YAMLError as e:
         raise ValueError(
             f"{path}: the run configuration is not valid YAML: {yaml_problem(e)}"
@@ -149,6 +155,47 @@ def read_sessions(run: Path) -> list[dict[str, Any]]:
     if not isinstance(sessions, list) or not all(isinstance(s, dict) for s in sessions):
         raise ValueError(f"{path}: not a list of training sessions")
     return sessions
+
+
+class Evaluations(NamedTuple):
+    """The held-out evaluation log, ``evaluations.npz``: after ``timesteps[i]`` env steps the
+    agent scored ``results[i, j]`` (env return) in ``ep_lengths[i, j]`` steps on episode ``j``."""
+
+    timesteps: np.ndarray
+    results: np.ndarray
+    ep_lengths: np.ndarray
+
+
+def read_evaluations(run: Path) -> Evaluations | None:
+    """The run's held-out evaluation log, checked (None if it has none yet).
+
+    :raises ValueError: naming the file if it is not a readable log whose arrays agree (a
+        truncated or foreign file: ``np.load`` would raise from deep in numpy or zipfile).
+    """
+    path = run / EVALUATIONS
+    if not path.exists():
+        return None
+    what = f"{path}: not a readable held-out evaluation log"
+    try:
+        with np.load(path, allow_pickle=False) as log:
+            arrays = Evaluations(*(np.asarray(log[k]) for k in Evaluations._fields))
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as e:
+        reason = f"no array {e}" if isinstance(e, KeyError) else f"{type(e).__name__}: {e}"
+        raise ValueError(f"{what} ({reason})") from None
+    steps, results, lengths = arrays
+    if not (
+        steps.ndim == 1
+        and results.ndim == 2
+        and results.shape == lengths.shape
+        and len(results) == len(steps)
+        and np.issubdtype(steps.dtype, np.integer)
+        and np.issubdtype(results.dtype, np.floating)
+    ):
+        raise ValueError(
+            f"{what} (timesteps {steps.shape} {steps.dtype}, results {results.shape} "
+            f"{results.dtype}, ep_lengths {lengths.shape}: they do not agree)"
+        )
+    return arrays
 
 
 def write_sessions(run: Path, sessions: list[dict[str, Any]]) -> None:
@@ -369,12 +416,11 @@ class HeldOutEvalCallback(EvalCallback):
         self.log_path: Any = io.BytesIO()
         self.run = run
         self.eval_seed = eval_seed
-        previous = run / EVALUATIONS
-        if previous.exists():
-            with np.load(previous) as log:
-                self.evaluations_timesteps = log["timesteps"].tolist()
-                self.evaluations_results = log["results"].tolist()
-                self.evaluations_length = log["ep_lengths"].tolist()
+        previous = read_evaluations(run)
+        if previous is not None:
+            self.evaluations_timesteps = previous.timesteps.tolist()
+            self.evaluations_results = previous.results.tolist()
+            self.evaluations_length = previous.ep_lengths.tolist()
 
     def _init_callback(self) -> None:
         log_path, self.log_path = self.log_path, None  # SB3 would make a folder for a path

@@ -53,7 +53,7 @@ from policies.learned.ensemble import ENSEMBLE
 from train import run as runs
 from train.algos import DEFAULT_ALGO, algo
 from train.export import ExportError, check_export, export_agent
-from train.ppo import MAX_SEED, Args, check_new_run, train
+from train.ppo import MAX_SEED, Args, check_new_run, check_resume, train
 
 __all__ = [
     "MAX_SEEDS",
@@ -86,14 +86,15 @@ def parse_seeds(text: str) -> tuple[int, ...]:
     seeds: list[int] = []
     for part in str(text).split(","):
         part = part.strip()
-        if m := re.fullmatch(r"(\d+)-(\d+)", part):
+        # [0-9], not \d or isdigit(): those take other scripts' digits ("٣") and "²"
+        if m := re.fullmatch(r"([0-9]+)-([0-9]+)", part):
             low, high = int(m[1]), int(m[2])
             if high < low:
                 raise ValueError(f"--seeds {text!r}: the range {part} counts down")
             if high > MAX_SEEDS:  # before the range is built: 0-1000000000 is 8 GB of ints
                 raise ValueError(out_of_range)
             seeds += range(low, high + 1)
-        elif part.isdigit():
+        elif re.fullmatch(r"[0-9]+", part):
             seeds.append(int(part))
         else:
             raise ValueError(f"--seeds {text!r}: {part!r} is not a seed or a range like 0-4")
@@ -148,11 +149,9 @@ def _row(k: int, folder: Path) -> dict[str, Any]:
     wall = sum(float(s.get("wall_s") or 0.0) for s in sessions)
     steps = int(sessions[-1]["last_step"])
     heldout = float("nan")
-    path = folder / runs.EVALUATIONS
-    if path.is_file():
-        with np.load(path) as log:
-            if len(log["results"]):
-                heldout = float(np.mean(log["results"][-1]))
+    log = runs.read_evaluations(folder)
+    if log is not None and len(log.results):
+        heldout = float(np.mean(log.results[-1]))
     return {
         "seed": k,
         "run": folder.name,
@@ -191,6 +190,7 @@ def train_seeds(
             units.append((k, args, command))  # a placeholder: done[i] stands for it
         elif folder.is_dir() and any(folder.iterdir()):
             resume = Args(resume=folder, threads=args.threads, progress=False)
+            check_resume(resume)  # before any seed trains, as a new seed's options are
             units.append((k, resume, f"{command} [seed {k}, resumed]"))
         else:
             one = seed_args(args, k, study)

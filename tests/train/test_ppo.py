@@ -288,6 +288,37 @@ def test_resume_with_nothing_left_to_train_is_refused(
     assert_one_line(capsys, f"--n-timesteps={steps:,} is out of range: the newest checkpoint is")
 
 
+def _tree(folder: Path) -> dict[str, bytes]:
+    """Every file below ``folder`` with its bytes: what a refused command must not change."""
+    return {str(p.relative_to(folder)): p.read_bytes() for p in folder.rglob("*") if p.is_file()}
+
+
+@pytest.mark.parametrize(
+    ("name", "damage", "message"),
+    [
+        ("evaluations.npz", b"PK\x03\x04", "evaluations.npz: not a readable held-out evaluation"),
+        ("sessions.json", b'[{"status":', "sessions.json: cannot read the training sessions"),
+    ],
+)
+def test_resume_of_a_run_with_a_damaged_log_changes_nothing(
+    smoke_run: Path,
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    name: str,
+    damage: bytes,
+    message: str,
+) -> None:
+    # Once, the session wrote config.yaml (the new n_timesteps), an empty progress CSV and a
+    # TensorBoard file before it read these logs, then failed: with a traceback for the npz.
+    run = tmp_path / "run"
+    shutil.copytree(smoke_run, run)
+    (run / name).write_bytes(damage)
+    before = _tree(run)
+    assert main(["--resume", str(run), "--n-timesteps", "3000", "--no-progress"]) == 2
+    assert_one_line(capsys, f"{run / message}")
+    assert _tree(run) == before
+
+
 def test_resume_without_checkpoint_names_the_folder(tmp_path: Path, smoke_config: Path) -> None:
     run = tmp_path / "run"
     run.mkdir()

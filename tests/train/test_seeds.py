@@ -46,6 +46,9 @@ def test_seeds_are_read_as_lists_and_ranges(text: str, seeds: tuple[int, ...]) -
         # refused before the range is built (a billion seeds once filled the memory)
         (["--seeds", "0-1000000000000"], "training seeds are 0..40"),
         (["--seeds", "x"], "is not a seed or a range"),
+        # digits of other scripts: int() read "٣" as seed 3 and refused "²" naming no option
+        (["--seeds", "\u0663"], "is not a seed or a range"),
+        (["--seeds", "0-\u00b2"], "is not a seed or a range"),
         (["--workers", "2"], "--workers applies to --seeds only"),
         (["--seeds", "0-1", "--resume", "runs/x"], "--resume takes one run, not a study"),
         (["--seeds", "0-1", "--workers", "0"], "workers=0 is out of range"),
@@ -99,6 +102,38 @@ def test_the_study_is_one_agent_the_mean_of_its_seeds(study: Path) -> None:
     obs = np.array([1.3, 40.0], np.float32)
     alone = [PPOPolicy(study / f"seed-{k}").act(obs) for k in (0, 1)]
     np.testing.assert_allclose(policy.act(obs), (alone[0] + alone[1]) / 2, rtol=0, atol=1e-6)
+
+
+def test_a_finished_seed_with_a_damaged_log_is_named_before_anything_trains(
+    study: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    copy = tmp_path / "study"
+    shutil.copytree(study, copy)
+    log = copy / "seed-1" / "evaluations.npz"
+    log.write_bytes(log.read_bytes()[:100])  # truncated, as by a full disk
+    before = {p: p.read_bytes() for p in copy.rglob("*") if p.is_file()}
+    assert main([*TINY, "--seeds", "0-1", "--out", str(copy)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"follow-train: error: {log}: not a readable held-out evaluation log")
+    assert err.count("\n") == 1, err
+    assert {p: p.read_bytes() for p in copy.rglob("*") if p.is_file()} == before
+
+
+def test_an_interrupted_seed_that_cannot_resume_is_named_before_any_seed_trains(
+    study: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # Seed 1 as a kill leaves it (checkpoints, no final model) but with a damaged log; seed 2
+    # is new and comes first on the command line, so it would train before seed 1 failed.
+    copy = tmp_path / "study"
+    shutil.copytree(study, copy)
+    seed1 = copy / "seed-1"
+    (seed1 / "model.zip").unlink()
+    log = seed1 / "evaluations.npz"
+    log.write_bytes(b"PK\x03\x04")
+    assert main([*TINY, "--seeds", "2,1", "--out", str(copy)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"follow-train: error: {log}: not a readable held-out evaluation log")
+    assert not (copy / "seed-2").exists()
 
 
 def test_the_same_command_skips_finished_seeds_and_more_seeds_extend_the_study(study: Path) -> None:
