@@ -49,6 +49,7 @@ from typing import Any
 import yaml
 
 from follow_env.sim.atomic import atomic_write_text
+from follow_env.sim.checks import load_yaml, utf8_problem
 from policies.learned.boxes import Box
 from policies.learned.ensemble import ENSEMBLE, EnsemblePolicy, member_folders
 from policies.learned.feature import IN_TRAINING, split_in_training, wrapper_entries
@@ -104,7 +105,7 @@ def parse_step(text: str) -> tuple[str, dict[str, Any]]:
         arguments.
     """
     try:
-        value = yaml.safe_load(text)
+        value = load_yaml(text)
     except yaml.YAMLError as e:
         mark = getattr(e, "problem_mark", None)
         at = f" at column {mark.column + 1}" if mark is not None else ""
@@ -172,7 +173,19 @@ def _check_loads(folder: Path, config: dict[str, Any]) -> None:
 
     with tempfile.TemporaryDirectory(prefix=".add-step-") as tmp:
         _linked_copy(folder, config, Path(tmp))
-        PPOPolicy(tmp, name=str(folder))
+        try:
+            PPOPolicy(tmp, name=str(folder))
+        except AgentLoadError as e:
+            # named as the user knows it: the temporary folder is gone when the error is read
+            raise AgentLoadError(_renamed(str(e), {tmp: str(folder)})) from None
+
+
+def _renamed(message: str, places: dict[str, str]) -> str:
+    """``message`` with each temporary path in ``places`` replaced by the user's own (the
+    longest first, so that a folder does not replace part of a file inside it)."""
+    for temporary in sorted(places, key=len, reverse=True):
+        message = message.replace(temporary, places[temporary])
+    return message
 
 
 def _flow(value: dict[str, Any]) -> str:
@@ -421,9 +434,12 @@ def _plan(folder: Path, request: _Request, *, member: bool) -> _Edit | None:
             )
     edited = copy.deepcopy(config)
     edited["hyperparams"]["vec_env_wrapper"] = view
-    _check_loads(folder, edited)  # the dearest check last: it loads the model
     card_path = folder / runs.CARD
-    card = card_path.read_text(encoding="utf-8") if card_path.is_file() else ""
+    try:
+        card = card_path.read_text(encoding="utf-8") if card_path.is_file() else ""
+    except UnicodeDecodeError as e:
+        raise ValueError(f"{card_path}: the model card is {utf8_problem(e)}") from None
+    _check_loads(folder, edited)  # the dearest check last: it loads the model
     card = card.rstrip("\n") + ("\n" if card else "")
     card += ("" if EDITED in card else f"\n{EDITED}\n\n") + line + "\n"  # one list
     return _Edit(folder, edited, card, index, manifest is not None, old, new)
@@ -448,11 +464,9 @@ def _check_ensemble_loads(
             # named as the user knows them: the ensemble's file and the member folders
             places = {str(Path(tmp) / ENSEMBLE): str(folder / ENSEMBLE)}
             places |= {str(Path(tmp) / n): str(m) for n, m in zip(listed, members, strict=True)}
-            message = str(e)
-            for temporary in sorted(places, key=len, reverse=True):
-                message = message.replace(temporary, places[temporary])
             raise ValueError(
-                f"{_option(change)} {folder}: the edited ensemble would not load: {message}"
+                f"{_option(change)} {folder}: the edited ensemble would not load: "
+                f"{_renamed(str(e), places)}"
             ) from None
 
 

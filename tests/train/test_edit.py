@@ -392,3 +392,36 @@ def test_the_command_line_refuses_mixed_edit_options_in_one_line(
         assert err.startswith("follow-train: error: "), err
         assert error in err, err
         assert err.count("\n") == 1
+
+
+def test_a_step_argument_given_twice_is_refused(agent: Path) -> None:
+    files = _files(agent)
+    with pytest.raises(ValueError, match=r"--step .*found the key 'max_jump_m' twice"):
+        add_step(agent, f"{{{GATE}: {{max_jump_m: 0.5, max_jump_m: 0.7}}}}")
+    assert _files(agent) == files
+
+
+@pytest.mark.parametrize(
+    ("name", "error"),
+    [("model.zip", "not a readable stable-baselines3"), ("vecnormalize.pkl", "not VecNormalize")],
+)
+def test_a_damaged_agent_file_is_named_where_it_is(agent: Path, name: str, error: str) -> None:
+    # The load check reads the files through a temporary folder; the message names the
+    # agent's own file, not the temporary one, which is gone when the user reads it.
+    (agent / name).write_bytes((agent / name).read_bytes()[:100])
+    files = _files(agent)
+    with pytest.raises(ValueError, match=error) as caught:
+        add_step(agent, STEP)
+    assert str(caught.value).startswith(f"{agent / name}: "), caught.value
+    assert ".add-step-" not in str(caught.value)
+    assert _files(agent) == files
+
+
+@pytest.mark.parametrize("name", ["config.yaml", "MODEL_CARD.md"])
+def test_a_file_that_is_not_utf8_is_named(agent: Path, name: str) -> None:
+    path = agent / name
+    path.write_bytes(b"\xff\xfe" + path.read_bytes())
+    files = _files(agent)
+    with pytest.raises(ValueError, match=rf"{name}: .*not a UTF-8 text file"):
+        add_step(agent, STEP, force=True)
+    assert _files(agent) == files
