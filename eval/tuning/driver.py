@@ -233,11 +233,18 @@ def _open_study(storage: str | Path, name: str, config: SearchConfig) -> optuna.
             ),
         )
     except (OSError, ImportError, ValueError, RuntimeError) as e:
-        raise ValueError(f"cannot open the storage {storage}: {e}") from None
-    except Exception as e:  # SQLAlchemy's errors (a bad URL, an unreachable server)
+        raise ValueError(f"cannot open the storage {storage}: {_first_line(e)}") from None
+    except Exception as e:  # SQLAlchemy's errors (a bad URL, an unreachable server, a damaged file)
         if type(e).__module__.startswith("sqlalchemy"):
-            raise ValueError(f"cannot open the storage {storage}: {e}") from None
+            raise ValueError(f"cannot open the storage {storage}: {_first_line(e)}") from None
         raise
+
+
+def _first_line(exc: BaseException) -> str:
+    """An error's message without what follows its first line: SQLAlchemy adds the SQL
+    statement and a link to its documentation on lines of their own."""
+    lines = str(exc).strip().splitlines()
+    return lines[0] if lines else type(exc).__name__
 
 
 _OWNER = "owner"
@@ -250,7 +257,7 @@ def _owner() -> str:
 def _alive(owner: str) -> bool:
     """Whether the process that owns a running trial still runs (unknown hosts: assumed so)."""
     host, _, pid = owner.rpartition(":")
-    if host != socket.gethostname() or not pid.isdigit():
+    if host != socket.gethostname() or not (pid.isascii() and pid.isdigit()):
         return True
     try:
         os.kill(int(pid), 0)

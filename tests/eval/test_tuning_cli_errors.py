@@ -232,3 +232,20 @@ def test_a_config_file_with_a_yaml_error_gives_its_line_and_column(
         f"argument --config: {bad} is not valid YAML/JSON: line 2, column 1: expected ','",
     )
     assert not out.exists()
+
+
+# 3. A damaged database: SQLAlchemy's message spans three lines; follow-tune's error is one.
+
+
+def test_a_damaged_sqlite_database_is_named_in_one_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    db = tmp_path / "tuning.db"
+    db.write_text("not a database, whatever its name says\n")
+    before = _tree(tmp_path)
+    url = f"sqlite:///{db}"
+    argv = ["pn", *SMALL, "--storage", url, "--out", str(tmp_path / "out")]
+    err = _refused(capsys, argv, f"cannot open the storage {url}", "file is not a database")
+    assert "[SQL:" not in err
+    assert "Background on this error" not in err
+    assert _tree(tmp_path) == before  # no --out folder, the file as it was
