@@ -45,6 +45,7 @@ from __future__ import annotations
 
 import itertools
 import operator
+import re
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -100,7 +101,7 @@ def learner_runs(path: str | Path) -> LearnerRuns:
         raise ValueError(f"{path}: not a folder (a follow-train run or --seeds study)")
     seeds = sorted(
         (p for p in path.glob("seed-*") if (p / "model.zip").is_file()),
-        key=lambda p: int(p.name.removeprefix("seed-")) if p.name[5:].isdigit() else 0,
+        key=lambda p: int(p.name[5:]) if re.fullmatch("[0-9]+", p.name[5:]) else 0,
     )
     if seeds:
         return LearnerRuns(path.name, seeds)

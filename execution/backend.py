@@ -390,7 +390,7 @@ def _check_reachable(address: str, timeout_s: float = 5.0) -> None:
     if address in ("auto", "local"):
         return
     host, sep, port = address.removeprefix("ray://").rpartition(":")
-    if not sep or not port.isdigit() or not host:
+    if not sep or not (port.isascii() and port.isdigit()) or not host:
         raise BackendUnavailableError(
             f"address={address!r} is not a Ray cluster address: give HOST:PORT (e.g. "
             "127.0.0.1:6379), ray://HOST:PORT or auto"

@@ -241,8 +241,9 @@ def test_an_unreachable_cluster_fails_at_once_naming_it() -> None:
 
 
 def test_a_malformed_cluster_address_is_refused() -> None:
-    with pytest.raises(BackendUnavailableError, match="not a Ray cluster address"):
-        _check_reachable("headnode")
+    for address in ("headnode", "headnode:\u00b2", "headnode:\u0663"):  # "²" broke int()
+        with pytest.raises(BackendUnavailableError, match="not a Ray cluster address"):
+            _check_reachable(address)
     _check_reachable("auto")  # Ray's own word: nothing to try
 
 
