@@ -17,7 +17,8 @@ from execution import BACKENDS, Backend, BackendUnavailableError, backend_from_a
 from train.algos import ALGOS, CONFIGS, DEFAULT_ALGO
 from train.config import ConfigError
 from train.export import FORCE_ALONE_ERROR
-from train.ppo import MAX_THREADS, PROG, USAGE_ERROR, Args, Interrupted, TrainingError, train
+from train.options import MAX_THREADS, Args
+from train.ppo import PROG, USAGE_ERROR, Interrupted, TrainingError, train
 from train.seeds import parse_seeds, train_seeds
 
 __all__ = ["build_parser", "main", "parse_args"]

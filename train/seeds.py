@@ -53,7 +53,8 @@ from policies.learned.ensemble import ENSEMBLE
 from train import run as runs
 from train.algos import DEFAULT_ALGO, algo
 from train.export import ExportError, check_export, export_agent
-from train.ppo import MAX_SEED, Args, check_new_run, check_resume, train
+from train.options import MAX_SEED, Args, check_new_run, check_resume
+from train.ppo import train
 
 __all__ = [
     "MAX_SEEDS",
