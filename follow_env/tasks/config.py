@@ -206,7 +206,9 @@ def config_from_text(
         where = str(path)
     else:
         try:
-            overrides = json.loads(text)
+            overrides = json.loads(text, object_pairs_hook=_unique_keys)
+        except _KeyTwiceError as exc:
+            raise ValueError(f"{text!r} is not a valid JSON object: {exc}") from None
         except json.JSONDecodeError as exc:
             if text.lstrip().startswith("{"):  # meant as JSON: say what is wrong with it
                 raise ValueError(
@@ -225,6 +227,21 @@ def config_from_text(
     except ValueError as exc:
         raise ValueError(f"{where}: {exc}") from None
     return overrides
+
+
+class _KeyTwiceError(ValueError):
+    """A JSON object that gives a key twice (``json`` keeps the last without a word)."""
+
+
+def _unique_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    """``json.loads``'s ``object_pairs_hook``: an object's keys, each once, as the YAML files'
+    (:func:`follow_env.sim.checks.load_yaml`)."""
+    out: dict[str, Any] = {}
+    for key, value in pairs:
+        if key in out:
+            raise _KeyTwiceError(f"found the key {key!r} twice")
+        out[key] = value
+    return out
 
 
 class TaskPlatforms:

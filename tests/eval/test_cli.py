@@ -216,6 +216,9 @@ def test_a_config_file_that_is_not_yaml_is_one_line_with_its_place(
     twice.write_text("perception:\n  association: tracker\n  association: nearest\n")
     assert main(["run", "--config", str(twice), "--out", str(tmp_path / "run")]) == 2
     assert "line 3, column 3: found the key 'association' twice" in one_line_error(capsys)
+    text = '{"perception": {"association": "tracker", "association": "nearest"}}'
+    assert main(["run", "--config", text, "--out", str(tmp_path / "run")]) == 2
+    assert "is not a valid JSON object: found the key 'association' twice" in one_line_error(capsys)
     twice.write_bytes(b"perception: {}\n\xff\n")
     assert main(["run", "--config", str(twice), "--out", str(tmp_path / "run")]) == 2
     assert f"{twice} is not a UTF-8 text file (byte 16 is 0xff)" in one_line_error(capsys)
