@@ -178,11 +178,16 @@ def read_evaluations(run: Path) -> Evaluations | None:
     what = f"{path}: not a readable held-out evaluation log"
     try:
         with np.load(path, allow_pickle=False) as log:
-            arrays = Evaluations(*(np.asarray(log[k]) for k in Evaluations._fields))
-    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as e:
-        reason = f"no array {e}" if isinstance(e, KeyError) else f"{type(e).__name__}: {e}"
-        raise ValueError(f"{what} ({reason})") from None
+            found = {k: np.asarray(log[k]) for k in Evaluations._fields if k in log.files}
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as e:
+        raise ValueError(f"{what} ({type(e).__name__}: {e})") from None
+    missing = [k for k in Evaluations._fields if k not in found]
+    if missing:
+        raise ValueError(f"{what} (no array {missing[0]!r})")
+    arrays = Evaluations(**found)
     steps, results, lengths = arrays
+    if steps.size == results.size == lengths.size == 0:  # no evaluation yet: no shapes to agree
+        return Evaluations(np.zeros(0, np.int64), np.zeros((0, 0)), np.zeros((0, 0), np.int64))
     if not (
         steps.ndim == 1
         and results.ndim == 2
