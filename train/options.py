@@ -28,6 +28,7 @@ __all__ = [
     "args_to_dict",
     "check_new_run",
     "check_resume",
+    "run_hyperparams",
 ]
 
 #: The largest seed any lane may get: SB3 passes the seed to ``numpy.random.seed``.
@@ -73,10 +74,20 @@ def check_new_run(args: Args) -> tuple[Args, Hyperparams]:
     _check_options(args, run=None)
     if args.n_envs is not None:  # before the file: its batch size may not fit either
         _check_lanes(args.n_envs, args.scenarios)
-    given = {k: v for k in ("n_timesteps", "n_envs") if (v := getattr(args, k)) is not None}
-    hp = load_hyperparams(args.hyperparams, args.env_id, overrides=given, algo=args.algo)
+    hp = run_hyperparams(args)
     _check_against_hyperparams(args, hp)
     return args, hp
+
+
+def run_hyperparams(args: Args) -> Hyperparams:
+    """The hyperparameters a new run with ``args`` trains with: its file's section with the
+    command line's ``--n-timesteps`` and ``--n-envs``, checked.
+
+    :raises ValueError: naming the file or the key.
+    """
+    args = _with_defaults(args)
+    given = {k: v for k in ("n_timesteps", "n_envs") if (v := getattr(args, k)) is not None}
+    return load_hyperparams(args.hyperparams, args.env_id, overrides=given, algo=args.algo)
 
 
 def check_resume(args: Args) -> tuple[Args, Hyperparams, dict[str, Any], str, tuple]:
@@ -125,7 +136,10 @@ def check_resume(args: Args) -> tuple[Args, Hyperparams, dict[str, Any], str, tu
     if checkpoint is None:
         raise ValueError(f"{run / runs.CHECKPOINTS}: no checkpoint to resume from")
     steps = checkpoint[0]
-    if hp["n_timesteps"] <= steps:
+    # A run whose training ended but whose report did not (its model card missing: a Ctrl-C
+    # while it was written) resumes with nothing to train: the session writes the report.
+    report_only = not given and hp["n_timesteps"] <= steps and not (run / runs.CARD).is_file()
+    if hp["n_timesteps"] <= steps and not report_only:
         option = "--n-timesteps" if given else f"n_timesteps in {run / runs.CONFIG}"
         raise ValueError(
             f"{option}={hp['n_timesteps']:,} is out of range: the newest checkpoint is at "

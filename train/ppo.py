@@ -114,18 +114,18 @@ def train(args: Args, command: str = PROG) -> Path:
         if saved is None:
             _remove_new_run(run, made)
         raise
-    callbacks = [
-        runs.AtomicCheckpointCallback(
-            args.checkpoint_freq, run, venv.num_envs, session, prefix=args.algo
-        ),
-        runs.HeldOutEvalCallback(eval_env, run, args.eval_seed, args.eval_freq, venv.num_envs),
-    ]
+    checkpoints = runs.AtomicCheckpointCallback(
+        args.checkpoint_freq, run, venv.num_envs, session, prefix=args.algo
+    )
+    evaluations = runs.HeldOutEvalCallback(
+        eval_env, run, args.eval_seed, args.eval_freq, venv.num_envs, start_step=start_step
+    )
 
     # -- Learn ------------------------------------------------------------------------------
     try:
         model.learn(
-            hp["n_timesteps"] - model.num_timesteps,
-            callback=callbacks,
+            max(hp["n_timesteps"] - model.num_timesteps, 0),  # 0: a resume to write the report
+            callback=[checkpoints, evaluations],
             progress_bar=args.progress,
             reset_num_timesteps=False,
         )
@@ -143,20 +143,31 @@ def train(args: Args, command: str = PROG) -> Path:
             f"interrupted; resume with --resume {run} (continues from the checkpoint at "
             f"{kept[0] if kept else start_step:,} env steps)"
         ) from None
-    except ValueError as e:
+    except Exception as e:  # SB3, torch or a wrapper failing mid-training: one line, no trace
         kept = runs.newest_checkpoint(run, args.algo)
         trained = model.num_timesteps - start_step
         session.close("failed", kept[0] if kept else start_step, trained)
-        if "invalid values" not in str(e):
-            raise
+        if isinstance(e, ValueError) and "invalid values" in str(e):
+            raise TrainingError(
+                f"training diverged at {model.num_timesteps:,} env steps: the policy's outputs "
+                f"became NaN (lower learning_rate or clip_range in {where}); {run} keeps its "
+                "checkpoints"
+            ) from None
+        if kept is None and saved is None:
+            _remove_new_run(run, made)
+            left = f"nothing to resume, removed {run}"
+        else:
+            left = f"{run} keeps its checkpoints"
+        problem = " ".join(str(e).split()) or "no message"
         raise TrainingError(
-            f"training diverged at {model.num_timesteps:,} env steps: the policy's outputs became "
-            f"NaN (lower learning_rate or clip_range in {where}); {run} keeps its checkpoints"
+            f"training failed at {model.num_timesteps:,} env steps ({type(e).__name__}: "
+            f"{problem}; check the hyperparameters in {where}); {left}"
         ) from None
     steps = model.num_timesteps - start_step
 
     # -- Save: the agent, the session, the curve, the comparison, the model card --------------
     try:
+        checkpoints.save()  # the newest checkpoint is the final state: a resume goes on there
         runs.save_normalization(model.get_vec_normalize_env(), run / runs.NORMALIZATION)
         runs.save_model(model, run / runs.MODEL)
         session.close("finished", model.num_timesteps, steps)
@@ -187,8 +198,8 @@ def train(args: Args, command: str = PROG) -> Path:
         atomic_write_text(run / runs.CARD, card)
     except KeyboardInterrupt:
         raise Interrupted(
-            f"interrupted after training, while writing the report: the agent is in {run}, "
-            f"{runs.CARD} may be missing"
+            f"interrupted after training, while writing the report: the agent is in {run}; "
+            f"--resume {run} writes the report"
         ) from None
     if args.export is not None:
         try:
@@ -233,8 +244,9 @@ def _build(
         )
     except ConfigError:
         raise
-    except (ValueError, TypeError) as e:
-        raise ConfigError(f"{where}: the agent's env cannot be built: {e}") from None
+    except (ValueError, TypeError, OverflowError, MemoryError) as e:  # e.g. frame_stack 10**9
+        problem = " ".join(str(e).split())
+        raise ConfigError(f"{where}: the agent's env cannot be built: {problem}") from None
     except Exception as e:  # a resume's statistics file: pickle and SB3 raise their own
         if normalization is None:
             raise

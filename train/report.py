@@ -68,7 +68,10 @@ def plot_learning_curve(run: Path, path: Path, title: str = "PPO on PersonFollow
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(7.0, 4.0), dpi=100)
-    frames = [pd.read_csv(p) for p in sorted((run / "logs").glob("progress-*.csv"))]
+    # A session that trained no rollout (a resume that only writes the report) left an empty
+    # progress file: nothing to plot from it.
+    logs = sorted((run / "logs").glob("progress-*.csv"))
+    frames = [pd.read_csv(p) for p in logs if p.stat().st_size > 0]
     frames = [f for f in frames if {"time/total_timesteps", "rollout/ep_rew_mean"} <= set(f)]
     if frames:
         train = pd.concat(frames).dropna(subset=["rollout/ep_rew_mean"])

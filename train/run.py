@@ -370,23 +370,32 @@ class AtomicCheckpointCallback(CheckpointCallback):
 
     def _on_step(self) -> bool:
         if self.n_calls % self.save_freq == 0:
-            save_normalization(
-                self.model.get_vec_normalize_env(),
-                Path(self._checkpoint_path("vecnormalize_", extension="pkl")),
-            )
-            model = Path(self._checkpoint_path(extension="zip"))
-            buffer = getattr(self.model, "replay_buffer", None)
-            if buffer is not None:
-                with atomic_path(replay_buffer_file(model)) as tmp:
-                    self.model.save_replay_buffer(tmp)
-            save_model(self.model, model)
-            if buffer is not None:
-                for old in model.parent.glob(f"{self.name_prefix}_replay_buffer_*_steps.pkl"):
-                    if old != replay_buffer_file(model):
-                        old.unlink(missing_ok=True)
-            if self.session is not None:
-                self.session.checkpoint(self.num_timesteps)
+            self.save()
         return True
+
+    def save(self) -> None:
+        """Write the checkpoint of the model as it is now (also called once training ends, so
+        that a finished run's newest checkpoint is its final state: a later ``--resume``
+        continues from there, not from an older checkpoint)."""
+        self.num_timesteps = self.model.num_timesteps
+        model = Path(self._checkpoint_path(extension="zip"))
+        if model.is_file():
+            return  # written at this very step already
+        save_normalization(
+            self.model.get_vec_normalize_env(),
+            Path(self._checkpoint_path("vecnormalize_", extension="pkl")),
+        )
+        buffer = getattr(self.model, "replay_buffer", None)
+        if buffer is not None:
+            with atomic_path(replay_buffer_file(model)) as tmp:
+                self.model.save_replay_buffer(tmp)
+        save_model(self.model, model)
+        if buffer is not None:
+            for old in model.parent.glob(f"{self.name_prefix}_replay_buffer_*_steps.pkl"):
+                if old != replay_buffer_file(model):
+                    old.unlink(missing_ok=True)
+        if self.session is not None:
+            self.session.checkpoint(self.num_timesteps)
 
 
 class HeldOutEvalCallback(EvalCallback):
@@ -404,10 +413,18 @@ class HeldOutEvalCallback(EvalCallback):
     :param eval_seed: the first held-out seed.
     :param eval_freq_steps: env steps between evaluations (all training lanes counted).
     :param n_envs: training lanes, to turn env steps into callback calls.
+    :param start_step: the env steps the session starts from (a resume's checkpoint).
     """
 
     def __init__(
-        self, eval_env: Any, run: Path, eval_seed: int, eval_freq_steps: int, n_envs: int
+        self,
+        eval_env: Any,
+        run: Path,
+        eval_seed: int,
+        eval_freq_steps: int,
+        n_envs: int,
+        *,
+        start_step: int = 0,
     ) -> None:
         super().__init__(
             eval_env,
@@ -423,9 +440,12 @@ class HeldOutEvalCallback(EvalCallback):
         self.eval_seed = eval_seed
         previous = read_evaluations(run)
         if previous is not None:
-            self.evaluations_timesteps = previous.timesteps.tolist()
-            self.evaluations_results = previous.results.tolist()
-            self.evaluations_length = previous.ep_lengths.tolist()
+            # A resume goes on from the checkpoint at start_step: evaluations the earlier
+            # session made after it are of steps now trained again, and go.
+            kept = previous.timesteps <= start_step
+            self.evaluations_timesteps = previous.timesteps[kept].tolist()
+            self.evaluations_results = previous.results[kept].tolist()
+            self.evaluations_length = previous.ep_lengths[kept].tolist()
 
     def _init_callback(self) -> None:
         log_path, self.log_path = self.log_path, None  # SB3 would make a folder for a path

@@ -53,7 +53,7 @@ from policies.learned.ensemble import ENSEMBLE
 from train import run as runs
 from train.algos import DEFAULT_ALGO, algo
 from train.export import ExportError, check_export, export_agent
-from train.options import MAX_SEED, Args, check_new_run, check_resume
+from train.options import MAX_SEED, Args, check_new_run, check_resume, run_hyperparams
 from train.ppo import train
 
 __all__ = [
@@ -137,8 +137,37 @@ def _settings(args: Args, seeds: Sequence[int]) -> dict[str, Any]:
     return json.loads(json.dumps(out))
 
 
+def _same_training(k: int, folder: Path, hp: dict[str, Any]) -> int | None:
+    """Check that seed ``k``'s run in ``folder`` trains with ``hp`` (the command's), so that
+    the study's seeds differ in their seed only; returns the longer ``n_timesteps`` it must be
+    resumed to, or None if its own is the command's.
+
+    :raises ValueError: naming the seed and the first hyperparameter that differs (a file
+        edited since, another --n-envs, a step added with --add-step), or a shorter budget.
+    """
+    saved = json.loads(json.dumps(runs.read_config(folder)["hyperparams"]))
+    now = json.loads(json.dumps(hp))
+    keys = sorted((saved.keys() | now.keys()) - {"n_timesteps"})
+    changed = [key for key in keys if saved.get(key) != now.get(key)]
+    if changed:
+        raise ValueError(
+            f"{folder}: seed {k} trained with {changed[0]}={saved.get(changed[0])!r}, this "
+            f"command with {now.get(changed[0])!r}; a study's seeds differ in their seed only: "
+            "give the same hyperparameters, or another --out"
+        )
+    had, want = int(saved["n_timesteps"]), int(now["n_timesteps"])
+    if want < had:
+        raise ValueError(
+            f"--n-timesteps={want:,} is out of range: seed {k} in {folder} trains to {had:,} "
+            f"env steps, so the study needs --n-timesteps >= {had:,}"
+        )
+    return want if want > had else None
+
+
 def _finished(folder: Path) -> bool:
-    if not (folder / runs.MODEL).is_file():
+    """The seed's run trained to the end and wrote its report (a run without its model card
+    is resumed, which writes the report)."""
+    if not ((folder / runs.MODEL).is_file() and (folder / runs.CARD).is_file()):
         return False
     sessions = runs.read_sessions(folder)
     return bool(sessions) and sessions[-1].get("status") == "finished"
@@ -182,15 +211,17 @@ def train_seeds(
     backend = backend or Backend("local", workers=1, cpus_per_task=args.threads)
     study = args.out if args.out is not None else _new_study_path(args.runs, args.algo)
     settings = _settings(args, seeds)
+    hp = run_hyperparams(args)  # what every seed trains with, the earlier seeds too
     units: list[tuple[int, Args, str]] = []
     done: dict[int, dict[str, Any]] = {}
     for i, k in enumerate(seeds):
         folder = study / f"seed-{k}"
-        if _finished(folder):
+        longer = _same_training(k, folder, hp) if (folder / runs.CONFIG).is_file() else None
+        if _finished(folder) and longer is None:
             done[i] = _row(k, folder)
             units.append((k, args, command))  # a placeholder: done[i] stands for it
         elif folder.is_dir() and any(folder.iterdir()):
-            resume = Args(resume=folder, threads=args.threads, progress=False)
+            resume = Args(resume=folder, n_timesteps=longer, threads=args.threads, progress=False)
             check_resume(resume)  # before any seed trains, as a new seed's options are
             units.append((k, resume, f"{command} [seed {k}, resumed]"))
         else:
@@ -294,6 +325,12 @@ def _claim(study: Path, settings: dict[str, Any]) -> None:
             had = json.loads(path.read_text(encoding="utf-8"))
         except (OSError, ValueError) as e:
             raise ValueError(f"{path}: not a readable study description ({e})") from None
+        seeds = had.get("seeds") if isinstance(had, dict) else None
+        if not (isinstance(seeds, list) and all(type(s) is int and s >= 0 for s in seeds)):
+            raise ValueError(
+                f"{path}: not a study description (a JSON object with a list of seeds, as "
+                "follow-train --seeds writes it)"
+            )
         changed = sorted(
             k
             for k in settings.keys() | had.keys()

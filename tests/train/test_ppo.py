@@ -104,6 +104,50 @@ def test_resume_continues_the_step_count_from_the_newest_checkpoint(
     assert newest_checkpoint(run)[0] > last_checkpoint
 
 
+def test_a_finished_run_resumes_from_its_final_state(smoke_run: Path, tmp_path: Path) -> None:
+    # Once, the newest checkpoint of a finished run was older than its model: a resume threw
+    # away the last steps and trained them again.
+    final = json.loads((smoke_run / "sessions.json").read_text())[-1]["last_step"]
+    assert newest_checkpoint(smoke_run)[0] == final
+    run = tmp_path / "run"
+    shutil.copytree(smoke_run, run)
+    assert main(["--resume", str(run), "--n-timesteps", "3000", "--no-progress"]) == 0
+    assert json.loads((run / "sessions.json").read_text())[-1]["first_step"] == final
+
+
+def test_a_resume_drops_the_evaluations_past_its_checkpoint(
+    smoke_run: Path, tmp_path: Path
+) -> None:
+    # As a kill leaves a run: its log holds evaluations made after its newest checkpoint.
+    run = tmp_path / "run"
+    shutil.copytree(smoke_run, run)
+    for path in (run / "checkpoints").iterdir():
+        if int(path.name.split("_")[-2]) > 800:
+            path.unlink()
+    with np.load(run / "evaluations.npz") as log:
+        assert log["timesteps"][-1] > 800
+    assert main(["--resume", str(run), "--n-timesteps", "3000", "--no-progress"]) == 0
+    with np.load(run / "evaluations.npz") as log:
+        steps = log["timesteps"].tolist()
+    assert steps == sorted(set(steps)), steps  # each step once, in order
+    assert steps[0] == 800
+
+
+def test_a_run_stopped_while_writing_its_report_resumes_to_write_it(
+    smoke_run: Path, tmp_path: Path
+) -> None:
+    run = tmp_path / "run"
+    shutil.copytree(smoke_run, run)
+    (run / "MODEL_CARD.md").unlink()
+    steps = newest_checkpoint(run)[0]
+    assert main(["--resume", str(run), "--no-progress"]) == 0
+    assert "## Scores" in (run / "MODEL_CARD.md").read_text()
+    last = json.loads((run / "sessions.json").read_text())[-1]
+    assert (last["status"], last["first_step"], last["last_step"]) == ("finished", steps, steps)
+    # with its report written, the run is complete: nothing left to do
+    assert main(["--resume", str(run), "--no-progress"]) == 2
+
+
 def shipped_yaml(tmp_path: Path, **changes: object) -> Path:
     """The shipped hyperparameter file with ``changes`` applied to its section."""
     document = yaml.safe_load(DEFAULT_HYPERPARAMS.read_text())
@@ -111,6 +155,35 @@ def shipped_yaml(tmp_path: Path, **changes: object) -> Path:
     path = tmp_path / "hp.yaml"
     path.write_text(yaml.safe_dump(document))
     return path
+
+
+def test_a_run_that_fails_while_learning_is_one_line_and_leaves_no_folder(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # SB3 accepts use_sde with the mirror policy, whose network then fails at the first
+    # update with a torch RuntimeError: once a traceback and a run folder stuck "running".
+    hp = shipped_yaml(tmp_path, use_sde=True)
+    out = tmp_path / "run"
+    argv = [*SMOKE, "--hyperparams", str(hp), "--checkpoint-freq", "100000", "--out", str(out)]
+    assert main(argv) == 1
+    assert_one_line(capsys, "training failed at ")
+    assert not out.exists()
+
+
+@pytest.mark.parametrize(
+    "changes", [{"n_steps": 10**12}, {"policy_kwargs": {"net_arch": [1_000_000, 1_000_000]}}]
+)
+def test_a_model_too_large_for_the_memory_is_one_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], changes: dict
+) -> None:
+    # numpy's rollout buffer and torch's layers raise MemoryError / RuntimeError: once tracebacks
+    out = tmp_path / "run"
+    assert (
+        main([*SMOKE, "--hyperparams", str(shipped_yaml(tmp_path, **changes)), "--out", str(out)])
+        == 2
+    )
+    assert_one_line(capsys, "the model does not fit in memory")
+    assert not out.exists()
 
 
 def rescale(**kwargs: object) -> list:
@@ -436,8 +509,9 @@ def test_the_summary_lists_only_files_that_were_written(
     assert main([*short, *never, "--no-progress", "--out", str(run)]) == 0
     printed = capsys.readouterr().out
     assert "evaluations.npz" not in printed
-    assert "checkpoints/" not in printed
+    # no checkpoint was due; the final state is one all the same, for a later --resume
+    assert "checkpoints/ (1 checkpoint)" in printed
     listed = printed.split(f"Wrote {run}/: ")[1].strip().split(", ")
     assert listed[0] == "model.zip"
     for name in listed:
-        assert (run / name).exists(), name
+        assert (run / name.removesuffix(" (1 checkpoint)")).exists(), name

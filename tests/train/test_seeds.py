@@ -11,10 +11,12 @@ import pandas as pd
 import pytest
 import yaml
 
+from follow_env.tasks.person_follow import ENV_ID
 from policies import make_policy
 from policies.learned.ensemble import EnsemblePolicy
 from policies.learned.ppo import PPOPolicy
 from train.cli import main
+from train.ppo import DEFAULT_HYPERPARAMS
 from train.seeds import SEED_STRIDE, parse_seeds
 
 TINY = [
@@ -134,6 +136,80 @@ def test_an_interrupted_seed_that_cannot_resume_is_named_before_any_seed_trains(
     err = capsys.readouterr().err
     assert err.startswith(f"follow-train: error: {log}: not a readable held-out evaluation log")
     assert not (copy / "seed-2").exists()
+
+
+def _copy(study: Path, tmp_path: Path) -> tuple[Path, dict[Path, bytes]]:
+    copy = tmp_path / "study"
+    shutil.copytree(study, copy)
+    return copy, {p: p.read_bytes() for p in copy.rglob("*") if p.is_file()}
+
+
+def _error(capsys: pytest.CaptureFixture[str]) -> str:
+    err = capsys.readouterr().err
+    assert err.startswith("follow-train: error: "), err
+    assert err.count("\n") == 1, err
+    return err
+
+
+def test_new_seeds_with_other_hyperparameters_are_refused(
+    study: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # The file's path is the study's, its contents were edited: once, seed 2 trained with the
+    # new values and the summary averaged it with seeds 0 and 1.
+    copy, before = _copy(study, tmp_path)
+    document = yaml.safe_load(DEFAULT_HYPERPARAMS.read_text())
+    document[ENV_ID]["gamma"] = 0.5
+    hp = tmp_path / "ppo.yaml"
+    hp.write_text(yaml.safe_dump(document))
+    config = copy / "seed-0" / "config.yaml"
+    saved = yaml.safe_load(config.read_text())
+    saved["args"]["hyperparams"] = str(hp)  # as if the study had been made with this file
+    config.write_text(yaml.safe_dump(saved))
+    before[config] = config.read_bytes()
+    argv = [*TINY, "--hyperparams", str(hp), "--seeds", "0,2", "--out", str(copy)]
+    assert main(argv) == 2
+    assert "seed 0 trained with gamma=" in _error(capsys)
+    assert {p: p.read_bytes() for p in copy.rglob("*") if p.is_file()} == before
+
+
+def test_new_seeds_after_a_step_was_added_to_the_study_are_refused(
+    study: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # The new seeds would not have the step: the ensemble of all of them would not load.
+    copy, _ = _copy(study, tmp_path)
+    step = "{train.wrappers.VecJumpGate: {max_jump_m: 0.5}}"
+    assert main(["--add-step", str(copy), "--step", step]) == 0
+    capsys.readouterr()
+    before = {p: p.read_bytes() for p in copy.rglob("*") if p.is_file()}
+    assert main([*TINY, "--seeds", "0-2", "--out", str(copy)]) == 2
+    assert "trained with vec_env_wrapper=" in _error(capsys)
+    assert {p: p.read_bytes() for p in copy.rglob("*") if p.is_file()} == before
+
+
+def test_a_longer_budget_resumes_the_finished_seeds_and_a_shorter_is_refused(
+    study: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    copy, _ = _copy(study, tmp_path)
+    shorter = [a if a != "600" else "300" for a in TINY]
+    assert main([*shorter, "--seeds", "0-1", "--out", str(copy)]) == 2
+    assert "seed 0 in " in _error(capsys)
+    longer = [a if a != "600" else "1200" for a in TINY]
+    assert main([*longer, "--seeds", "0-1", "--out", str(copy)]) == 0
+    rows = pd.read_csv(copy / "seeds.csv")
+    assert (rows["env_steps"] >= 1200).all(), rows
+    for k in (0, 1):
+        sessions = json.loads((copy / f"seed-{k}" / "sessions.json").read_text())
+        assert [s["status"] for s in sessions] == ["finished", "finished"]
+
+
+@pytest.mark.parametrize("text", ["[]", '"a study"', '{"seeds": 5}', "{"])
+def test_a_damaged_study_file_is_named_in_one_line(
+    study: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str], text: str
+) -> None:
+    copy, _ = _copy(study, tmp_path)
+    (copy / "study.json").write_text(text)
+    assert main([*TINY, "--seeds", "0-1", "--out", str(copy)]) == 2
+    assert f"{copy / 'study.json'}: not a" in _error(capsys)
 
 
 def test_the_same_command_skips_finished_seeds_and_more_seeds_extend_the_study(study: Path) -> None:
