@@ -392,8 +392,14 @@ def new_model(
         kwargs["train_freq"] = tuple(kwargs["train_freq"])
     try:
         return learner.cls()(policy, venv, seed=seed, device="cpu", verbose=0, **kwargs)
-    except (ValueError, TypeError, AssertionError) as e:
+    except (ValueError, TypeError, AssertionError, OverflowError) as e:
         raise ConfigError(f"{where}: {learner.library} rejects the hyperparameters: {e}") from None
+    except (MemoryError, RuntimeError) as e:  # numpy's rollout buffer, torch's layers
+        problem = " ".join(str(e).split())
+        raise ConfigError(
+            f"{where}: the model does not fit in memory with these hyperparameters (n_steps, "
+            f"buffer_size, net_arch, frame_stack): {problem}"
+        ) from None
 
 
 def load_model(learner: Algo, path: Path, venv: Any) -> Any:

@@ -85,6 +85,10 @@ __all__ = [
     "wrapper_specs",
 ]
 
+#: The most frames an agent may stack: 1,000 control steps (33 s at 30 Hz) is far beyond any
+#: use; 10**9 once filled the memory building the env, before any check could say why.
+MAX_FRAME_STACK = 1_000
+
 # Keys rl-zoo3 consumes itself; the rest go to the algorithm's constructor.
 ZOO_KEYS = (
     "policy",
@@ -221,7 +225,8 @@ def parse_hyperparams(
     hp.setdefault("policy", learner.policies[0])
     policy = policy_class(hp["policy"], where=where, algo=learner.name)
     hp["normalize"] = _check_normalize(where, hp.setdefault("normalize", False))
-    hp["frame_stack"] = integer(where, "frame_stack", hp.setdefault("frame_stack", 1), 1)
+    frames = hp.setdefault("frame_stack", 1)
+    hp["frame_stack"] = integer(where, "frame_stack", frames, 1, MAX_FRAME_STACK)
     _check_policy_kwargs(where, learner, policy, hp.setdefault("policy_kwargs", {}))
     specs = wrapper_specs(hp.setdefault("vec_env_wrapper", []), where=where)
     _refuse_double_stack(where, hp["frame_stack"], specs)

@@ -17,6 +17,7 @@ __all__ = [
     "Check",
     "ConfigError",
     "fail",
+    "finite",
     "flag",
     "integer",
     "is_number",
@@ -40,12 +41,15 @@ def fail(where: str, key: str, value: Any, rule: str) -> ConfigError:
     return ConfigError(f"{where}: {key}={value!r} is out of range: must be {rule}")
 
 
-def integer(where: str, key: str, value: Any, low: int) -> int:
-    """An integer >= ``low``; an integral float (YAML's ``!!float 4e6``) counts as one."""
+def integer(where: str, key: str, value: Any, low: int, high: int | None = None) -> int:
+    """An integer in ``[low, high]`` (no ``high``: >= ``low``); an integral float (YAML's
+    ``!!float 4e6``) counts as one."""
     if isinstance(value, float) and value.is_integer():
         value = int(value)
-    if isinstance(value, bool) or not isinstance(value, int) or value < low:
-        raise fail(where, key, value, f"an integer >= {low}")
+    bad = isinstance(value, bool) or not isinstance(value, int) or value < low
+    if bad or (high is not None and value > high):
+        rule = f"an integer >= {low}" if high is None else f"an integer in [{low}, {high:,}]"
+        raise fail(where, key, value, rule)
     return value
 
 
@@ -54,7 +58,7 @@ def number(
 ) -> float:
     """A finite number in ``[low, high]`` (``(low, high]`` with ``open_low``)."""
     above = (value > low if open_low else value >= low) if is_number(value) else False
-    if not (above and value <= high and math.isfinite(value)):
+    if not (above and value <= high and finite(value)):
         left = "(" if open_low else "["
         rule = f"a number {'>' if open_low else '>='} {low:g}"
         if low == -math.inf:
@@ -63,6 +67,15 @@ def number(
             rule = f"a number in {left}{low:g}, {high:g}]"
         raise fail(where, key, value, rule)
     return value
+
+
+def finite(value: int | float) -> bool:
+    """A number a float can hold, not inf or NaN (an int past 1.8e308 cannot: SB3 and torch
+    would raise OverflowError on it)."""
+    try:
+        return math.isfinite(value)
+    except OverflowError:
+        return False
 
 
 def is_number(value: Any) -> bool:
@@ -110,7 +123,7 @@ def schedule(value: Any, *, where: str = "schedule") -> float | Callable[[float]
     """
     start: float | None = None
     if is_number(value):
-        start = float(value)
+        start = float(value) if finite(value) else None
     elif isinstance(value, str) and value.startswith("lin_"):
         try:
             start = float(value[4:])

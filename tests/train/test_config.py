@@ -66,6 +66,10 @@ def test_missing_file_is_named(tmp_path: Path) -> None:
         ({"n_envs": 0}, "n_envs=0 is out of range"),
         ({"normalize": "dict(norm_obs=True)"}, "strings are not evaluated"),
         ({"frame_stack": 0}, "frame_stack=0 is out of range"),
+        # 10**9 frames once filled the memory building the env
+        ({"frame_stack": 10**9}, "frame_stack=1000000000 is out of range"),
+        # math.isfinite raised OverflowError on an int past float's range
+        ({"ent_coef": 10**400}, "ent_coef=1000"),
         ({"vec_env_wrapper": ["train.wrappers.NoSuchWrapper"]}, "does not import"),
         ({"policy": "CnnPolicy"}, "does not import"),
         ({"policy": "train.wrappers.VecRescaleAction"}, "not an SB3 ActorCriticPolicy"),
@@ -132,7 +136,7 @@ W = "train.wrappers.VecRescaleAction"
         ({"normalize_advantage": 1}, "normalize_advantage=1 is out of range: must be true or"),
         ({"rollout_buffer_class": "x.Buffer"}, "rollout_buffer_class='x.Buffer' is not supported"),
         ({"_init_setup_model": False}, r"unknown key\(s\) _init_setup_model"),
-        ({"frame_stack": "4"}, "frame_stack='4' is out of range: must be an integer >= 1"),
+        ({"frame_stack": "4"}, r"frame_stack='4' is out of range: must be an integer in \[1, 1,0"),
         ({"n_timesteps": -5}, "n_timesteps=-5 is out of range: must be an integer >= 1"),
         ({"normalize": {"norm_obs": "yes"}}, "normalize.norm_obs='yes' is out of range: must be"),
         ({"normalize": {"clip_obs": 0}}, "normalize.clip_obs=0 is out of range: must be a number"),
