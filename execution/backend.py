@@ -86,6 +86,16 @@ class Backend:
             if not isinstance(self.address, str) or not self.address.strip():
                 raise ValueError(f"address={self.address!r} is out of range: a non-empty string")
 
+    def check_reachable(self) -> None:
+        """Fail fast, without connecting, if this is Ray at a cluster address (given or
+        ``RAY_ADDRESS``) nothing listens at; callers check it before they write anything.
+
+        :raises BackendUnavailableError: naming the address.
+        """
+        address = self.address or os.environ.get("RAY_ADDRESS")
+        if self.kind == "ray" and address:
+            _check_reachable(address)
+
     def slots(self) -> int:
         """Units that run at once: local, the workers; ray, the cluster's CPUs (connects)."""
         if self.kind == "local":

@@ -23,6 +23,7 @@ import dataclasses
 import hashlib
 import json
 import math
+import re
 import shutil
 import sys
 from collections.abc import Mapping, Sequence
@@ -36,12 +37,13 @@ import yaml
 
 from eval.cli_base import UsageError, _names, _Parser, _positive
 from eval.rollout import rollout
-from eval.tuning.driver import SearchConfig, open_study, run_search
+from eval.tuning.driver import SearchConfig, journal_problem, open_study, run_search
 from eval.tuning.objective import DEFAULT_VARIANTS, SCORE_KEYS, TUNE_SEED0, episode_score
 from execution import Backend, BackendUnavailableError, backend_from_args, execute
-from follow_env.sim.atomic import atomic_write_text, check_writable
+from follow_env.sim.atomic import atomic_write_text, check_writable, file_on_path
 from policies.space import ParamRange
 from train.config import read_document
+from train.options import check_new_run
 from train.ppo import DEFAULT_HYPERPARAMS, Args
 
 __all__ = ["INTEGER_KEYS", "PPO_SPACE", "PPOObjective", "hyperparams_for", "main"]
@@ -62,6 +64,11 @@ minibatch ``batch_size`` (log, rounded to integers), the discount ``gamma`` and 
 coefficient ``ent_coef``; every other key keeps the hyperparameter file's value."""
 #: Keys of :data:`PPO_SPACE` that PPO takes as integers.
 INTEGER_KEYS = ("n_steps", "batch_size")
+#: What a search writes into ``--out`` (the trials' runs go into the folder ``trials``); a
+#: folder holding only these, and the temporary file of an interrupted atomic write of
+#: ``result.json``, is a search's, and may be resumed into.
+OWN_FILES = ("study.journal", "study.journal.lock", "result.json")
+_OWN_TEMPORARY = re.compile(r"\.result\..+\.tmp\.json")
 
 
 def hyperparams_for(values: Mapping[str, float], n_envs: int) -> dict[str, Any]:
@@ -203,9 +210,12 @@ def run(args: argparse.Namespace) -> int:
         checkpoint_freq=max(args.n_timesteps, 1),
         progress=False,
     )
+    _check_training(base, args.out)
     seeds = tuple(range(TUNE_SEED0, TUNE_SEED0 + args.seeds))
-    config = SearchConfig(args.trials, seeds, backend.slots(), args.seed)  # checks --seed too
-    check_writable(args.out / "result.json")  # before the folder is made, not after a trial
+    config = SearchConfig(args.trials, seeds, 1, args.seed)  # checks --seed too
+    _check_out(args.out)  # before the folder is made, not after a trial
+    backend.check_reachable()  # before anything is written: no journal left behind
+    config = dataclasses.replace(config, batch=backend.slots())
     args.out.mkdir(parents=True, exist_ok=True)
     storage = args.storage or str(args.out / "study.journal")
     study = open_study(storage, args.study, config)
@@ -226,6 +236,62 @@ def run(args: argparse.Namespace) -> int:
     atomic_write_text(args.out / "result.json", json.dumps(summary, indent=2) + "\n")
     print(json.dumps(summary, indent=2))
     return 0
+
+
+def _check_training(base: Args, out: Path) -> None:
+    """The training options and the hyperparameter file every trial shares, checked as
+    ``follow-train`` checks a new run, before ``--out`` is made: a trial's training would
+    otherwise refuse them only after the journal and the trial's folder were written.
+
+    :raises ValueError: naming the option or the file's key, its value and what is allowed.
+    """
+    env_id = base.env_id or "PersonFollow-v0"
+    # A trial's run folder that does not exist yet (its writability is checked by a file made
+    # and removed in the nearest existing folder, which --out's own check tries too).
+    run = out / "trials" / "trial-check" / "run"
+    check_new_run(dataclasses.replace(base, env_id=env_id, out=run))
+
+
+def _check_out(out: Path) -> None:
+    """``--out``: a folder that can be made, an empty one, or a search's (to resume it); never
+    a folder of other files, among which the results and trials would be written.
+
+    :raises UsageError: naming the folder and what it holds.
+    """
+    blocker = file_on_path(out)
+    if blocker is not None:
+        raise UsageError(f"--out {out}: {blocker} is a file, not a folder")
+    try:
+        check_writable(out / "result.json")
+    except OSError as e:
+        raise UsageError(f"--out {out}: {e}") from None
+    if not out.exists():
+        return
+    foreign = sorted(
+        e.name
+        for e in out.iterdir()
+        if not (e.name in OWN_FILES and not e.is_dir())
+        and not (e.name == "trials" and e.is_dir())
+        and not _OWN_TEMPORARY.fullmatch(e.name)
+    )
+    problem = None
+    if foreign:
+        more = f" and {len(foreign) - 1} more" if len(foreign) > 1 else ""
+        problem = f"the folder holds {foreign[0]}{more}, which {PROG} did not write"
+    elif (out / "study.journal").exists():
+        found = journal_problem(out / "study.journal")
+        problem = None if found is None else f"its study.journal {found}"
+    if problem is None and (out / "result.json").exists():
+        try:
+            summary = json.loads((out / "result.json").read_text(encoding="utf-8"))
+        except (OSError, UnicodeDecodeError, ValueError):
+            summary = None
+        if not isinstance(summary, dict) or not {"study", "best_hyperparams"} <= summary.keys():
+            problem = f"its result.json is not {PROG}'s"
+    if problem is not None:
+        raise UsageError(
+            f"--out {out}: {problem}; give a new or empty folder, or a search's folder to resume it"
+        )
 
 
 def main(argv: Sequence[str] | None = None) -> int:

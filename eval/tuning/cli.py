@@ -136,6 +136,8 @@ def _check(args: argparse.Namespace) -> dict[str, Any]:
     args.holdout_variants = (
         _names(given, "holdout-scenarios") if given is not None else list(variants)
     )
+    for option in ("scenarios", "holdout_scenarios"):
+        _refuse_repeats(getattr(args, option), option.replace("_", "-"))
     known = get_task(task).variants()
     for option, names in (("scenarios", variants), ("holdout-scenarios", args.holdout_variants)):
         for name in names:
@@ -170,13 +172,16 @@ def _check(args: argparse.Namespace) -> dict[str, Any]:
 
         if not is_url(args.storage):
             _check_journal_path(Path(args.storage))
+    database = _sqlite_file(args.storage)
+    args.study = args.study or f"{args.law}-{task}"
+    _check_out_owner(args.out, args.law, args.study)
     if args.write_preset is not None:
         parent = args.write_preset.parent
         if args.write_preset.is_dir() or not parent.is_dir():
             raise UsageError(
                 f"--write-preset {args.write_preset}: not a file in an existing folder"
             )
-    args.study = args.study or f"{args.law}-{task}"
+        _check_preset_target(args, database)
     space = {k: [r.low, r.high, r.log] for k, r in law.space.items()}
     return {
         "law": args.law,
@@ -186,6 +191,94 @@ def _check(args: argparse.Namespace) -> dict[str, Any]:
         "config": config,
         "space": space,
     }
+
+
+def _refuse_repeats(text: str | None, option: str) -> None:
+    """A variant named twice in ``--OPTION`` is refused rather than silently dropped: the list
+    is the study's identity, and a repeat is most likely a typo for another variant."""
+    if text is None:
+        return
+    names = [n.strip() for n in text.split(",") if n.strip()]
+    twice = next((n for i, n in enumerate(names) if n in names[:i]), None)
+    if twice is not None:
+        raise UsageError(f"--{option} {text}: {twice!r} is given twice; name each variant once")
+
+
+def _sqlite_file(storage: str) -> Path | None:
+    """The database file of a ``sqlite:`` storage URL (None for other storages).
+
+    :raises UsageError: for an in-memory database (``sqlite://``, ``sqlite:///``,
+        ``sqlite:///:memory:``, ``mode=memory``): it keeps nothing, so a study there could
+        never be resumed and its trials would be lost with the process.
+    """
+    from eval.tuning.driver import is_url
+
+    if not is_url(storage) or not storage.lower().startswith("sqlite"):
+        return None
+    try:
+        from sqlalchemy.engine import make_url
+
+        url = make_url(storage)
+    except Exception:  # a malformed URL: open_study names it in one line
+        return None
+    database = url.database or ""
+    if (
+        database in ("", ":memory:")
+        or "mode=memory" in database
+        or url.query.get("mode") == ("memory")
+    ):
+        raise UsageError(
+            f"--storage {storage}: an in-memory SQLite database keeps nothing; give a file "
+            "(sqlite:///tuning.db), a journal file or another database URL"
+        )
+    return Path(database.removeprefix("file:").partition("?")[0])
+
+
+def _check_preset_target(args: argparse.Namespace, database: Path | None) -> None:
+    """``--write-preset`` must not name a file the study keeps or follow-tune writes: writing
+    the preset over the journal (or database) would lose the study's trials."""
+    from eval.tuning.driver import is_url
+
+    kept = {name: args.out / name for name in OWN_FILES}
+    if not is_url(args.storage):
+        kept["--storage"] = Path(args.storage)
+        kept["--storage's lock"] = Path(f"{args.storage}.lock")
+    if database is not None:
+        kept["--storage"] = database
+    target = args.write_preset.resolve()
+    for what, path in kept.items():
+        if path.resolve() == target:
+            name = what if what.startswith("--") else f"--out's {what}"
+            raise UsageError(
+                f"--write-preset {args.write_preset}: that is {name}, which the study keeps "
+                "or follow-tune writes itself; give another file"
+            )
+
+
+def _check_out_owner(out: Path, law: str, study: str) -> None:
+    """``--out`` is resumed only by its own study: a folder whose ``result.json`` or journal
+    belongs to another law or ``--study`` would have its results overwritten."""
+    from eval.tuning.driver import journal_study_names
+
+    result = out / "result.json"
+    if result.is_file():  # _check_own_files found it follow-tune's (readable, with "search")
+        summary = json.loads(result.read_text(encoding="utf-8"))
+        search = summary.get("search")
+        held_law = search.get("law") if isinstance(search, dict) else None
+        held_study = summary.get("study")
+        if (held_law, held_study) != (law, study):
+            raise UsageError(
+                f"--out {out}: it holds the results of the study {held_study} of the law "
+                f"{held_law}, not {study} of {law}; give another --out, or that law and "
+                "--study to resume it"
+            )
+    journal = out / "study.journal"
+    names = journal_study_names(journal) if journal.is_file() else []
+    if names and study not in names:
+        raise UsageError(
+            f"--out {out}: its study.journal holds the study {', '.join(names)}, not {study}; "
+            "give another --out, or that --study to resume it"
+        )
 
 
 def _check_journal_path(path: Path) -> None:
@@ -314,18 +407,43 @@ def _tune_seeds(n: int) -> tuple[int, ...]:
 
 def run(args: argparse.Namespace) -> int:
     """Check, search, re-evaluate, write; see the module docstring."""
-    from eval.tuning.driver import SearchConfig, run_search
-    from eval.tuning.holdout import Candidate, holdout_candidates, reevaluate, verdict
-    from eval.tuning.objective import HOLDOUT_SEED0, LawObjective
-    from eval.tuning.report import preset_text, table_text
     from policies import tunable_law
 
     identity = _check(args)
     law = tunable_law(args.law)
     workers = args.workers if args.backend == "ray" else args.workers or 1
     backend = backend_from_args(args.backend, workers=workers, address=args.address)
-    study = _open(args, identity)
+    # The backend is reached before the study opens, so that an unreachable cluster leaves
+    # no journal behind (slots() connects only when it must count the cluster's CPUs).
+    backend.check_reachable()
     batch = args.batch or backend.slots()
+    study = _open(args, identity)
+    try:
+        return _search_and_check(args, identity, law, backend, study, batch)
+    except KeyboardInterrupt:  # anywhere after the study opened: the search or held-out check
+        print(
+            f"{PROG}: interrupted; the study {args.study} in {args.storage} keeps its finished "
+            f"trials (this run's held-out check is not in {args.out}): run the same command "
+            "again to resume",
+            file=sys.stderr,
+        )
+        return 130
+
+
+def _search_and_check(
+    args: argparse.Namespace,
+    identity: dict[str, Any],
+    law: Any,
+    backend: Any,
+    study: Any,
+    batch: int,
+) -> int:
+    """Search the opened study, re-evaluate its best on held-out seeds, write the results."""
+    from eval.tuning.driver import SearchConfig, run_search
+    from eval.tuning.holdout import Candidate, holdout_candidates, reevaluate, verdict
+    from eval.tuning.objective import HOLDOUT_SEED0, LawObjective
+    from eval.tuning.report import preset_text, table_text
+
     config = SearchConfig(args.trials, _tune_seeds(args.seeds), batch, args.seed)
     objective = LawObjective(law, tuple(identity["variants"]), backend, identity["config"])
     started = time.perf_counter()
@@ -341,15 +459,7 @@ def run(args: argparse.Namespace) -> int:
                 file=sys.stderr,
             )
 
-    try:
-        ran = run_search(study, law.space, config, objective, enqueue=base, on_batch=progress)
-    except KeyboardInterrupt:
-        print(
-            f"{PROG}: interrupted; the study {args.study} in {args.storage} keeps its finished "
-            "trials: run the same command again to resume",
-            file=sys.stderr,
-        )
-        return 130
+    ran = run_search(study, law.space, config, objective, enqueue=base, on_batch=progress)
     searched = time.perf_counter() - started
     current = Candidate(f"{law.law}:{law.default_preset}", base)
     candidates = holdout_candidates(study, current, args.top)

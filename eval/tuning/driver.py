@@ -51,6 +51,7 @@ __all__ = [
     "distributions",
     "is_url",
     "journal_problem",
+    "journal_study_names",
     "open_study",
     "run_search",
     "rungs",
@@ -169,6 +170,30 @@ def journal_problem(path: str | Path) -> str | None:
     return None
 
 
+def journal_study_names(path: str | Path) -> list[str]:
+    """The names of the studies a journal file creates, in order (none for a file that cannot
+    be read). Read from the file itself rather than through Optuna, whose journal backend
+    opens the file for appending: a check must not touch what it checks."""
+    names: list[str] = []
+    try:
+        with Path(path).open("rb") as f:
+            for line in f:
+                try:
+                    record = json.loads(line)
+                except (ValueError, UnicodeDecodeError):
+                    continue
+                if (
+                    isinstance(record, dict)
+                    and record.get("op_code") == _CREATE_STUDY
+                    and isinstance(record.get("study_name"), str)
+                    and record["study_name"] not in names
+                ):
+                    names.append(record["study_name"])
+    except OSError:
+        return []
+    return names
+
+
 def check_journal(path: str | Path) -> None:
     """Refuse a file :func:`journal_problem` finds a problem with.
 
@@ -218,20 +243,29 @@ def _open_study(storage: str | Path, name: str, config: SearchConfig) -> optuna.
             if name in existing
             else 0
         )
-        return optuna.create_study(
-            storage=backend,
-            study_name=name,
-            direction="maximize",
-            load_if_exists=True,
-            # Wrapped into the sampler's range, so a resumed study with a seed near the top
-            # still opens (each trial count still gives its own seed).
-            sampler=optuna.samplers.TPESampler(
-                seed=(config.sampler_seed + n) % (MAX_SAMPLER_SEED + 1)
-            ),
-            pruner=optuna.pruners.MedianPruner(
-                n_startup_trials=config.startup_trials, n_warmup_steps=0
-            ),
+        # Wrapped into the sampler's range, so a resumed study with a seed near the top still
+        # opens (each trial count still gives its own seed).
+        sampler = optuna.samplers.TPESampler(
+            seed=(config.sampler_seed + n) % (MAX_SAMPLER_SEED + 1)
         )
+        pruner = optuna.pruners.MedianPruner(
+            n_startup_trials=config.startup_trials, n_warmup_steps=0
+        )
+        if name not in existing:
+            try:
+                return optuna.create_study(
+                    storage=backend,
+                    study_name=name,
+                    direction="maximize",
+                    sampler=sampler,
+                    pruner=pruner,
+                )
+            except optuna.exceptions.DuplicatedStudyError:
+                pass  # another machine created it meanwhile: load theirs
+        # Loaded, never created again: `create_study(load_if_exists=True)` appends a create
+        # record to a journal on every call, so even a command refused after opening the
+        # study (other settings) would change the journal.
+        return optuna.load_study(study_name=name, storage=backend, sampler=sampler, pruner=pruner)
     except (OSError, ImportError, ValueError, RuntimeError) as e:
         raise ValueError(f"cannot open the storage {storage}: {_first_line(e)}") from None
     except Exception as e:  # SQLAlchemy's errors (a bad URL, an unreachable server, a damaged file)

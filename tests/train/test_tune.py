@@ -40,6 +40,52 @@ def test_bad_arguments_give_one_line_and_exit_2(
         assert not (tmp_path / "out").exists()  # refused before the folder is made
 
 
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--n-envs", "5"], "n_envs=5 is out of range"),
+        (["--hyperparams", "{tmp}/bad.yaml"], "bad.yaml: not valid YAML: line 2"),
+        (["--backend", "ray", "--address", "127.0.0.1:1"], "cannot reach the Ray cluster"),
+        (["--backend", "ray", "--address", "127.0.0.1:1", "--workers", "1"], "cannot reach"),
+    ],
+)
+def test_bad_training_options_are_refused_before_out_is_made(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], argv: list[str], message: str
+) -> None:
+    # Once refused only by the first trial's training: after the journal and the trial's
+    # hyperparams.yaml were written into --out.
+    (tmp_path / "bad.yaml").write_text("PersonFollow-v0: [1,2\n")
+    argv = [a.replace("{tmp}", str(tmp_path)) for a in argv]
+    assert main(["--trials", "1", *argv, "--out", str(tmp_path / "pt1")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1
+    assert err.startswith("python -m train.tune: error: ")
+    assert message in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.yaml"]
+
+
+@pytest.mark.parametrize(
+    ("files", "message"),
+    [
+        ({"notes.txt": "x"}, "the folder holds notes.txt, which python -m train.tune did not"),
+        ({"study.journal": "hi\n"}, "its study.journal is not an Optuna journal"),
+        ({"result.json": "{}"}, "its result.json is not python -m train.tune's"),
+    ],
+)
+def test_an_out_folder_of_other_files_is_refused_unchanged(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], files: dict[str, str], message: str
+) -> None:
+    out = tmp_path / "out"
+    out.mkdir()
+    for name, text in files.items():
+        (out / name).write_text(text)
+    assert main(["--trials", "1", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1
+    assert f"--out {out}: {message}" in err
+    assert {p.name: p.read_text() for p in out.iterdir()} == files
+
+
 @pytest.mark.slow
 def test_a_tiny_search_trains_and_scores_each_trial(tmp_path: Path) -> None:
     out = tmp_path / "out"
