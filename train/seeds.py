@@ -232,6 +232,7 @@ def train_seeds(
             units.append((k, one, f"{command} [seed {k}]"))
     if args.export is not None:  # before any seed trains, as for one run's export
         check_study_export(args.export, seeds, study, force=args.force)
+    backend.check_reachable()  # before study.json is written
     _claim(study, settings)
     rows = execute(_train_unit, units, backend, done=done)
     write_summary(study, rows)

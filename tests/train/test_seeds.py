@@ -202,6 +202,16 @@ def test_a_longer_budget_resumes_the_finished_seeds_and_a_shorter_is_refused(
         assert [s["status"] for s in sessions] == ["finished", "finished"]
 
 
+def test_an_unreachable_ray_cluster_leaves_no_study(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "study"
+    argv = [*TINY, "--seeds", "0-1", "--backend", "ray", "--address", "127.0.0.1:1"]
+    assert main([*argv, "--out", str(out)]) == 2
+    assert "127.0.0.1:1" in _error(capsys)
+    assert not out.exists()
+
+
 @pytest.mark.parametrize("text", ["[]", '"a study"', '{"seeds": 5}', "{"])
 def test_a_damaged_study_file_is_named_in_one_line(
     study: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str], text: str
