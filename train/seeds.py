@@ -212,6 +212,18 @@ def train_seeds(
     study = args.out if args.out is not None else _new_study_path(args.runs, args.algo)
     settings = _settings(args, seeds)
     hp = run_hyperparams(args)  # what every seed trains with, the earlier seeds too
+    had = _read_study(study)
+    # The study's other seeds, not in this command: they must have trained as these will, and
+    # the summary and the ensemble are of every finished seed.
+    others = sorted(set(had["seeds"] if had else ()) - set(seeds))
+    for k in others:
+        folder = study / f"seed-{k}"
+        if (folder / runs.CONFIG).is_file() and _same_training(k, folder, hp) is not None:
+            raise ValueError(
+                f"--seeds {','.join(map(str, seeds))}: seed {k} of the study in {study} trains "
+                f"to fewer env steps than {hp['n_timesteps']:,}; give it in --seeds too, to "
+                "resume it to them"
+            )
     units: list[tuple[int, Args, str]] = []
     done: dict[int, dict[str, Any]] = {}
     for i, k in enumerate(seeds):
@@ -235,6 +247,8 @@ def train_seeds(
     backend.check_reachable()  # before study.json is written
     _claim(study, settings)
     rows = execute(_train_unit, units, backend, done=done)
+    rows += [_row(k, study / f"seed-{k}") for k in others if _finished(study / f"seed-{k}")]
+    rows.sort(key=lambda row: row["seed"])
     write_summary(study, rows)
     if len(rows) > 1:
         write_ensemble(study, [f"seed-{row['seed']}" for row in rows])
@@ -318,20 +332,32 @@ def write_ensemble(study: Path, members: Sequence[str]) -> Path:
     return path
 
 
+def _read_study(study: Path) -> dict[str, Any] | None:
+    """The folder's ``study.json`` (None if it has none), checked.
+
+    :raises ValueError: naming the file if it is unreadable or not a study description.
+    """
+    path = study / STUDY
+    if not path.exists():
+        return None
+    try:
+        had = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as e:
+        raise ValueError(f"{path}: not a readable study description ({e})") from None
+    seeds = had.get("seeds") if isinstance(had, dict) else None
+    if not (isinstance(seeds, list) and all(type(s) is int and s >= 0 for s in seeds)):
+        raise ValueError(
+            f"{path}: not a study description (a JSON object with a list of seeds, as "
+            "follow-train --seeds writes it)"
+        )
+    return had
+
+
 def _claim(study: Path, settings: dict[str, Any]) -> None:
     """Write ``study.json``, or check that the folder's is this study's."""
     path = study / STUDY
-    if path.exists():
-        try:
-            had = json.loads(path.read_text(encoding="utf-8"))
-        except (OSError, ValueError) as e:
-            raise ValueError(f"{path}: not a readable study description ({e})") from None
-        seeds = had.get("seeds") if isinstance(had, dict) else None
-        if not (isinstance(seeds, list) and all(type(s) is int and s >= 0 for s in seeds)):
-            raise ValueError(
-                f"{path}: not a study description (a JSON object with a list of seeds, as "
-                "follow-train --seeds writes it)"
-            )
+    had = _read_study(study)
+    if had is not None:
         changed = sorted(
             k
             for k in settings.keys() | had.keys()

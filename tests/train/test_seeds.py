@@ -168,7 +168,7 @@ def test_new_seeds_with_other_hyperparameters_are_refused(
     before[config] = config.read_bytes()
     argv = [*TINY, "--hyperparams", str(hp), "--seeds", "0,2", "--out", str(copy)]
     assert main(argv) == 2
-    assert "seed 0 trained with gamma=" in _error(capsys)
+    assert "trained with gamma=" in _error(capsys)
     assert {p: p.read_bytes() for p in copy.rglob("*") if p.is_file()} == before
 
 
@@ -200,6 +200,27 @@ def test_a_longer_budget_resumes_the_finished_seeds_and_a_shorter_is_refused(
     for k in (0, 1):
         sessions = json.loads((copy / f"seed-{k}" / "sessions.json").read_text())
         assert [s["status"] for s in sessions] == ["finished", "finished"]
+
+
+def test_a_command_for_some_seeds_keeps_the_summary_and_ensemble_of_all(
+    study: Path, tmp_path: Path
+) -> None:
+    # Once, --seeds 0 on a study of seeds 0 and 1 rewrote seeds.csv with seed 0 alone while
+    # ensemble.yaml still listed both.
+    copy, _ = _copy(study, tmp_path)
+    assert main([*TINY, "--seeds", "0", "--out", str(copy)]) == 0
+    assert pd.read_csv(copy / "seeds.csv")["seed"].tolist() == [0, 1]
+    assert yaml.safe_load((copy / "ensemble.yaml").read_text())["members"] == ["seed-0", "seed-1"]
+
+
+def test_new_seeds_alone_are_checked_against_the_studys_others(
+    study: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    copy, _ = _copy(study, tmp_path)
+    longer = [a if a != "600" else "1200" for a in TINY]
+    assert main([*longer, "--seeds", "2", "--out", str(copy)]) == 2
+    assert "seed 0 of the study" in _error(capsys)
+    assert not (copy / "seed-2").exists()
 
 
 def test_an_unreachable_ray_cluster_leaves_no_study(
