@@ -220,17 +220,21 @@ def _edit(ns: argparse.Namespace) -> tuple[str, Path, str, str | None, bool] | N
     if extra:
         takes = "--step, --before and --force" if option == "add_step" else "--step and --force"
         raise UsageError(
-            ", ".join("--" + k.replace("_", "-") for k in extra)
-            + f": {flag} trains nothing; it takes {takes} only"
+            ", ".join(_flag(k) for k in extra) + f": {flag} trains nothing; it takes {takes} only"
         )
     return option, getattr(ns, option), ns.step, ns.before, bool(ns.force)
+
+
+def _flag(dest: str) -> str:
+    """The option as the user typed it: ``progress`` is only ever given as ``--no-progress``."""
+    return "--no-progress" if dest == "progress" else "--" + dest.replace("_", "-")
 
 
 def _args(ns: argparse.Namespace) -> Args:
     skip = (*_STUDY_OPTIONS, *_EDIT_OPTIONS)
     given = {k: v for k, v in vars(ns).items() if v is not None and k not in skip}
     if "resume" in given and set(given) - _RESUME_OPTIONS:
-        extra = ", ".join("--" + k.replace("_", "-") for k in sorted(set(given) - _RESUME_OPTIONS))
+        extra = ", ".join(_flag(k) for k in sorted(set(given) - _RESUME_OPTIONS))
         raise UsageError(
             f"{extra}: a resumed run keeps its own settings; with --resume only "
             "--algo (the run's own), --n-timesteps, --threads, --no-progress, --export and --force "

@@ -146,6 +146,8 @@ def check_export(dest: str | Path, *, force: bool = False, run: Path | None = No
         target, run_folder = dest.resolve(), Path(run).resolve()
         if target == run_folder:
             raise ExportError(f"{option}: is the run folder; give another folder")
+        if run_folder in target.parents:  # as a study's export may not lie in the study
+            raise ExportError(f"{option}: lies in the run folder {run}; give another folder")
         # A new or empty folder would hold the run, and no export, by the time it is written.
         fresh = not dest.exists() or (dest.is_dir() and not any(dest.iterdir()))
         if fresh and target in run_folder.parents:

@@ -386,6 +386,8 @@ def test_the_command_line_refuses_mixed_edit_options_in_one_line(
         (["--change-step", str(ahead), "--step", KEEP, "--before", AGE], "--before: --change"),
         (["--change-step", str(ahead), "--add-step", str(ahead), "--step", KEEP], "give one"),
         (["--change-step", str(ahead), "--step", KEEP, "--seed", "3"], "it takes --step and"),
+        # named as typed: there is no --progress option
+        (["--add-step", str(ahead), "--step", KEEP, "--no-progress"], "--no-progress: --add-step"),
     ]:
         assert main(argv) == 2
         err = capsys.readouterr().err

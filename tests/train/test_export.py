@@ -92,6 +92,13 @@ def test_the_run_folder_itself_is_refused(tmp_path: Path) -> None:
         check_export(run, force=True, run=run)
 
 
+def test_a_folder_inside_the_run_folder_is_refused(tmp_path: Path) -> None:
+    # The agent's files inside the run's own folder: a run holding a second copy of itself.
+    run = fake_run(tmp_path)
+    with pytest.raises(ExportError, match=r"--export .*/agent: lies in the run folder"):
+        check_export(run / "agent", run=run)
+
+
 def test_a_folder_that_will_contain_the_run_is_refused_before_either_exists(tmp_path: Path) -> None:
     with pytest.raises(ExportError, match=r"--export .*/agent: would contain the run folder"):
         check_export(tmp_path / "agent", run=tmp_path / "agent" / "run")
