@@ -173,8 +173,10 @@ class ObservationAge(Feature):
 
     def bind(self, obs: Box, act: Box, n: int) -> tuple[Box, Box]:
         steps, entries = self.max_age_steps, self.entries
-        if not is_integer(steps) or steps < 1:
-            raise out_of_range(f"{self.owner}.max_age_steps", steps, "an integer >= 1")
+        # Bounded so that the int64 age compares with it (2**63 once raised OverflowError in
+        # the first reset); 10**9 steps is years of control at 10 Hz.
+        if not is_integer(steps) or not 1 <= steps <= 10**9:
+            raise out_of_range(f"{self.owner}.max_age_steps", steps, "an integer in [1, 10**9]")
         if entries is not None and not (is_integer(entries) and 1 <= entries <= obs.shape[0]):
             raise out_of_range(f"{self.owner}.entries", entries, f"None or 1 to {obs.shape[0]}")
         self.max_age_steps, self._k = int(steps), obs.shape[0] if entries is None else int(entries)

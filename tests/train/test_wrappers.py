@@ -779,6 +779,10 @@ def test_concat_vec_env_lane_j_replays_its_scenario_seeded_s_plus_j() -> None:
         ),
         (lambda e: VecObservationAge(e, max_age_steps=2.5), r"max_age_steps=2\.5 is out of range"),
         (
+            lambda e: VecObservationAge(e, max_age_steps=2**63),
+            r"must be an integer in \[1, 10\*\*9\]",
+        ),
+        (
             lambda e: VecJumpGate(e, max_jump_m=-1.0),
             r"VecJumpGate\.max_jump_m=-1\.0 is out of range",
         ),
