@@ -36,6 +36,7 @@ On a cluster the run folders are written by the nodes that train them: give ``--
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import json
 import re
@@ -52,6 +53,7 @@ from follow_env.sim.atomic import atomic_folder, atomic_write_text
 from policies.learned.ensemble import ENSEMBLE
 from train import run as runs
 from train.algos import DEFAULT_ALGO, algo
+from train.config import ConfigError, sole_section
 from train.export import ExportError, check_export, export_agent
 from train.options import MAX_SEED, Args, check_new_run, check_resume, run_hyperparams
 from train.ppo import train
@@ -130,6 +132,9 @@ def _settings(args: Args, seeds: Sequence[int]) -> dict[str, Any]:
     # default is the same study; PPO studies keep no "algo" (as before there was a choice).
     learner = algo(args.algo or DEFAULT_ALGO)
     out["hyperparams"] = str(args.hyperparams or learner.hyperparams)
+    if args.env_id is None:  # the file's only section, as the run fills it in
+        with contextlib.suppress(ConfigError):  # the seeds' own checks name the file
+            out["env_id"] = sole_section(out["hyperparams"])
     if learner.name == DEFAULT_ALGO:
         del out["algo"]
     else:
@@ -358,6 +363,8 @@ def _claim(study: Path, settings: dict[str, Any]) -> None:
     path = study / STUDY
     had = _read_study(study)
     if had is not None:
+        if had.get("env_id") is None:  # written before the default was filled in
+            had = {**had, "env_id": settings.get("env_id")}
         changed = sorted(
             k
             for k in settings.keys() | had.keys()

@@ -223,6 +223,19 @@ def test_new_seeds_alone_are_checked_against_the_studys_others(
     assert not (copy / "seed-2").exists()
 
 
+def test_the_env_id_given_or_filled_in_is_the_same_study(
+    study: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    copy, _ = _copy(study, tmp_path)
+    assert main([*TINY, "--env-id", ENV_ID, "--seeds", "0-1", "--out", str(copy)]) == 0
+    # a study.json written before the default was filled in holds none
+    settings = json.loads((copy / "study.json").read_text())
+    (copy / "study.json").write_text(json.dumps({**settings, "env_id": None}))
+    assert main([*TINY, "--env-id", ENV_ID, "--seeds", "0-1", "--out", str(copy)]) == 0
+    assert main([*TINY, "--seeds", "0-1", "--out", str(copy)]) == 0
+    capsys.readouterr()
+
+
 def test_an_unreachable_ray_cluster_leaves_no_study(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
