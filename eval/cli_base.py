@@ -16,6 +16,7 @@ __all__ = [
     "PROG",
     "USAGE_ERROR",
     "UsageError",
+    "path_option",
 ]
 
 PROG = "follow-eval"
@@ -54,6 +55,14 @@ def _config(text: str, read: Any = config_from_text) -> str | dict[str, Any]:
         return read(text)  # type: ignore[no-any-return]
     except ValueError as exc:
         raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def path_option(text: str) -> Path:
+    """A path option's value; an empty one is refused (``Path("")`` is the current folder, which
+    the user did not name)."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError("the path is empty")
+    return Path(text)
 
 
 def _out_folder(text: str) -> Path:

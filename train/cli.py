@@ -13,6 +13,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import NoReturn
 
+from eval.cli_base import _positive, path_option
 from execution import BACKENDS, Backend, BackendUnavailableError, backend_from_args
 from train.algos import ALGOS, CONFIGS, DEFAULT_ALGO
 from train.config import ConfigError
@@ -51,7 +52,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--hyperparams",
-        type=Path,
+        type=path_option,
         help=f"YAML file (default: the algorithm's, {CONFIGS}/<algo>.yaml)",
     )
     p.add_argument(
@@ -74,12 +75,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--n-timesteps", type=int, help="total env steps (default: the YAML's)")
     p.add_argument("--n-envs", type=int, help="lanes (default: the YAML's)")
     p.add_argument("--threads", type=int, help=f"torch threads, 1..{MAX_THREADS} ({d.threads})")
-    p.add_argument("--runs", type=Path, help=f"where run folders go ({d.runs})")
-    p.add_argument("--out", type=Path, help="run folder (default: runs/<algo>-<timestamp>)")
-    p.add_argument("--resume", type=Path, metavar="RUN_DIR", help="continue this run")
+    p.add_argument("--runs", type=path_option, help=f"where run folders go ({d.runs})")
+    p.add_argument("--out", type=path_option, help="run folder (default: runs/<algo>-<timestamp>)")
+    p.add_argument("--resume", type=path_option, metavar="RUN_DIR", help="continue this run")
     p.add_argument(
         "--export",
-        type=Path,
+        type=path_option,
         metavar="DIR",
         help="also copy the agent into DIR: a new or empty folder, or one an earlier export "
         "wrote (its files are replaced, nothing else); with --seeds, the study as one agent "
@@ -99,14 +100,14 @@ def build_parser() -> argparse.ArgumentParser:
     )
     edit.add_argument(
         "--add-step",
-        type=Path,
+        type=path_option,
         metavar="DIR",
         help="the agent's folder (a run, an export or an ensemble); with --step, and --force "
         "for files changed since its export",
     )
     edit.add_argument(
         "--change-step",
-        type=Path,
+        type=path_option,
         metavar="DIR",
         help="as --add-step, for a step already in the view: --step's arguments replace its",
     )
@@ -131,7 +132,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     study.add_argument(
         "--workers",
-        type=int,
+        type=_positive,
         help="with --seeds: runs at once (local default 1: one after another; ray default: the "
         "cluster's CPUs / --threads)",
     )

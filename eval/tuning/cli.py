@@ -24,7 +24,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from eval.cli_base import UsageError, _names, _Parser, _positive
+from eval.cli_base import UsageError, _names, _Parser, _positive, path_option
 from execution import BACKENDS, BackendUnavailableError, backend_from_args
 from follow_env.sim.atomic import atomic_write_text, check_writable, file_on_path
 
@@ -54,13 +54,6 @@ def _sampler_seed(text: str) -> int:
             f"{value} is out of range: 0..2**32-1 (the TPE sampler's seeds)"
         )
     return value
-
-
-def _path(text: str) -> Path:
-    """A path option's value; an empty one would silently mean the current folder."""
-    if not text.strip():
-        raise argparse.ArgumentTypeError("the path is empty")
-    return Path(text)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -106,8 +99,12 @@ def build_parser() -> argparse.ArgumentParser:
         "mixed courses, to check that a trial generalises beyond the tracks it was tuned on",
     )
     p.add_argument("--top", type=_positive, default=3, help="trials re-evaluated (default 3)")
-    p.add_argument("--write-preset", type=_path, default=None, help="also write the preset here")
-    p.add_argument("--out", type=_path, default=None, help="output folder (default runs/tune-LAW)")
+    p.add_argument(
+        "--write-preset", type=path_option, default=None, help="also write the preset here"
+    )
+    p.add_argument(
+        "--out", type=path_option, default=None, help="output folder (default runs/tune-LAW)"
+    )
     return p
 
 

@@ -186,6 +186,20 @@ def test_a_model_too_large_for_the_memory_is_one_line(
     assert not out.exists()
 
 
+@pytest.mark.parametrize(
+    "option", ["--out", "--export", "--runs", "--resume", "--hyperparams", "--add-step"]
+)
+def test_an_empty_path_is_refused(
+    option: str, tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # Path("") is the current folder, which the user did not name: --out '' once trained
+    # into it.
+    monkeypatch.chdir(tmp_path)
+    assert main([option, ""]) == 2
+    assert_one_line(capsys, f"argument {option}: the path is empty")
+    assert list(tmp_path.iterdir()) == []
+
+
 def rescale(**kwargs: object) -> list:
     """The shipped wrapper list with VecRescaleAction's arguments replaced."""
     wrappers = yaml.safe_load(DEFAULT_HYPERPARAMS.read_text())[ENV_ID]["vec_env_wrapper"]

@@ -53,7 +53,7 @@ def test_seeds_are_read_as_lists_and_ranges(text: str, seeds: tuple[int, ...]) -
         (["--seeds", "0-\u00b2"], "is not a seed or a range"),
         (["--workers", "2"], "--workers applies to --seeds only"),
         (["--seeds", "0-1", "--resume", "runs/x"], "--resume takes one run, not a study"),
-        (["--seeds", "0-1", "--workers", "0"], "workers=0 is out of range"),
+        (["--seeds", "0-1", "--workers", "0"], "argument --workers: 0 is out of range"),
     ],
 )
 def test_bad_study_options_give_one_line_and_status_2(
