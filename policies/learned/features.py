@@ -229,12 +229,18 @@ class ScaleObservation(Feature):
                 f"{self.owner}.scale={self.given!r} is out of range: must be one factor per "
                 f"observation entry {obs.shape}"
             )
-        if not np.all(np.isfinite(factors) & (factors > 0)):
+        # The factors act in float32: 1e308 became inf there, with numpy's warning on a line
+        # of its own before the error.
+        with np.errstate(over="ignore"):
+            scale = factors.astype(np.float32)
+        if not np.all(np.isfinite(scale) & (scale > 0)):
             raise ValueError(
-                f"{self.owner}.scale={self.given!r} is out of range: must be positive numbers"
+                f"{self.owner}.scale={self.given!r} is out of range: must be positive numbers "
+                "a float32 holds (at most 3.4e38)"
             )
-        self.scale = factors.astype(np.float32)
-        return Box(obs.low * self.scale, obs.high * self.scale), act
+        self.scale = scale
+        with np.errstate(over="ignore"):  # bounds past float32 are infinite: unbounded
+            return Box(obs.low * self.scale, obs.high * self.scale), act
 
     def observe(self, obs: np.ndarray, done: np.ndarray) -> np.ndarray:
         return np.asarray(obs, dtype=np.float32) * self.scale

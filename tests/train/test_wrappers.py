@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -804,6 +805,14 @@ def test_concat_vec_env_lane_j_replays_its_scenario_seeded_s_plus_j() -> None:
 def test_constructors_refuse_bad_arguments_naming_them(build: Any, message: str) -> None:
     with pytest.raises(ValueError, match=message):
         build(ScriptedVecEnv(constant_obs(1)))
+
+
+def test_a_scale_past_float32_is_refused_without_a_warning() -> None:
+    # float64's 1e308 became inf in float32, and numpy's RuntimeWarning came first: two lines
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(ValueError, match=r"positive numbers a float32 holds"):
+            VecScaleObservation(ScriptedVecEnv(constant_obs(1)), scale=[1.0, 1e308])
 
 
 # -- A platform of three action entries (the mecanum base's [v_mps, vy_mps, w_radps]) --------
