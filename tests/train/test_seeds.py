@@ -31,6 +31,11 @@ TINY = [
 ]  # fmt: skip
 
 
+def _files(folder: Path) -> dict[Path, bytes]:
+    """Every file below ``folder`` with its bytes: what a refused command must not change."""
+    return {p: p.read_bytes() for p in folder.rglob("*") if p.is_file()}
+
+
 @pytest.mark.parametrize(
     ("text", "seeds"),
     [("0-4", (0, 1, 2, 3, 4)), ("3", (3,)), ("0,2,7", (0, 2, 7)), ("0-1,5", (0, 1, 5))],
@@ -113,12 +118,12 @@ def test_a_finished_seed_with_a_damaged_log_is_named_before_anything_trains(
     shutil.copytree(study, copy)
     log = copy / "seed-1" / "evaluations.npz"
     log.write_bytes(log.read_bytes()[:100])  # truncated, as by a full disk
-    before = {p: p.read_bytes() for p in copy.rglob("*") if p.is_file()}
+    before = _files(copy)
     assert main([*TINY, "--seeds", "0-1", "--out", str(copy)]) == 2
     err = capsys.readouterr().err
     assert err.startswith(f"follow-train: error: {log}: not a readable held-out evaluation log")
     assert err.count("\n") == 1, err
-    assert {p: p.read_bytes() for p in copy.rglob("*") if p.is_file()} == before
+    assert _files(copy) == before
 
 
 def test_an_interrupted_seed_that_cannot_resume_is_named_before_any_seed_trains(
@@ -141,7 +146,7 @@ def test_an_interrupted_seed_that_cannot_resume_is_named_before_any_seed_trains(
 def _copy(study: Path, tmp_path: Path) -> tuple[Path, dict[Path, bytes]]:
     copy = tmp_path / "study"
     shutil.copytree(study, copy)
-    return copy, {p: p.read_bytes() for p in copy.rglob("*") if p.is_file()}
+    return copy, _files(copy)
 
 
 def _error(capsys: pytest.CaptureFixture[str]) -> str:
@@ -169,7 +174,7 @@ def test_new_seeds_with_other_hyperparameters_are_refused(
     argv = [*TINY, "--hyperparams", str(hp), "--seeds", "0,2", "--out", str(copy)]
     assert main(argv) == 2
     assert "trained with gamma=" in _error(capsys)
-    assert {p: p.read_bytes() for p in copy.rglob("*") if p.is_file()} == before
+    assert _files(copy) == before
 
 
 def test_new_seeds_after_a_step_was_added_to_the_study_are_refused(
@@ -180,10 +185,10 @@ def test_new_seeds_after_a_step_was_added_to_the_study_are_refused(
     step = "{train.wrappers.VecJumpGate: {max_jump_m: 0.5}}"
     assert main(["--add-step", str(copy), "--step", step]) == 0
     capsys.readouterr()
-    before = {p: p.read_bytes() for p in copy.rglob("*") if p.is_file()}
+    before = _files(copy)
     assert main([*TINY, "--seeds", "0-2", "--out", str(copy)]) == 2
     assert "trained with vec_env_wrapper=" in _error(capsys)
-    assert {p: p.read_bytes() for p in copy.rglob("*") if p.is_file()} == before
+    assert _files(copy) == before
 
 
 def test_a_longer_budget_resumes_the_finished_seeds_and_a_shorter_is_refused(
