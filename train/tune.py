@@ -37,10 +37,11 @@ import yaml
 
 from eval.cli_base import UsageError, _names, _Parser, _positive
 from eval.rollout import rollout
-from eval.tuning.driver import SearchConfig, journal_problem, open_study, run_search
+from eval.tuning.cli import check_out_folder, journal_check, text_check
+from eval.tuning.driver import SearchConfig, open_study, run_search
 from eval.tuning.objective import DEFAULT_VARIANTS, SCORE_KEYS, TUNE_SEED0, episode_score
 from execution import Backend, BackendUnavailableError, backend_from_args, execute
-from follow_env.sim.atomic import atomic_write_text, check_writable, file_on_path
+from follow_env.sim.atomic import atomic_write_text
 from policies.space import ParamRange
 from train.config import read_document
 from train.options import check_new_run
@@ -64,10 +65,8 @@ minibatch ``batch_size`` (log, rounded to integers), the discount ``gamma`` and 
 coefficient ``ent_coef``; every other key keeps the hyperparameter file's value."""
 #: Keys of :data:`PPO_SPACE` that PPO takes as integers.
 INTEGER_KEYS = ("n_steps", "batch_size")
-#: What a search writes into ``--out`` (the trials' runs go into the folder ``trials``); a
-#: folder holding only these, and the temporary file of an interrupted atomic write of
-#: ``result.json``, is a search's, and may be resumed into.
-OWN_FILES = ("study.journal", "study.journal.lock", "result.json")
+#: The temporary name of an interrupted atomic write of ``result.json``: a search's folder may
+#: hold one (its other files and the folder ``trials`` are listed in :func:`_check_out`).
 _OWN_TEMPORARY = re.compile(r"\.result\..+\.tmp\.json")
 
 
@@ -258,40 +257,25 @@ def _check_out(out: Path) -> None:
 
     :raises UsageError: naming the folder and what it holds.
     """
-    blocker = file_on_path(out)
-    if blocker is not None:
-        raise UsageError(f"--out {out}: {blocker} is a file, not a folder")
-    try:
-        check_writable(out / "result.json")
-    except OSError as e:
-        raise UsageError(f"--out {out}: {e}") from None
-    if not out.exists():
-        return
-    foreign = sorted(
-        e.name
-        for e in out.iterdir()
-        if not (e.name in OWN_FILES and not e.is_dir())
-        and not (e.name == "trials" and e.is_dir())
-        and not _OWN_TEMPORARY.fullmatch(e.name)
-    )
-    problem = None
-    if foreign:
-        more = f" and {len(foreign) - 1} more" if len(foreign) > 1 else ""
-        problem = f"the folder holds {foreign[0]}{more}, which {PROG} did not write"
-    elif (out / "study.journal").exists():
-        found = journal_problem(out / "study.journal")
-        problem = None if found is None else f"its study.journal {found}"
-    if problem is None and (out / "result.json").exists():
+
+    def is_result(text: str) -> bool:
         try:
-            summary = json.loads((out / "result.json").read_text(encoding="utf-8"))
-        except (OSError, UnicodeDecodeError, ValueError):
-            summary = None
-        if not isinstance(summary, dict) or not {"study", "best_hyperparams"} <= summary.keys():
-            problem = f"its result.json is not {PROG}'s"
-    if problem is not None:
-        raise UsageError(
-            f"--out {out}: {problem}; give a new or empty folder, or a search's folder to resume it"
-        )
+            summary = json.loads(text)
+        except ValueError:
+            return False
+        return isinstance(summary, dict) and {"study", "best_hyperparams"} <= summary.keys()
+
+    check_out_folder(
+        out,
+        prog=PROG,
+        own={
+            "study.journal": journal_check,
+            "study.journal.lock": None,
+            "result.json": text_check(PROG, is_result),
+        },
+        temporary=_OWN_TEMPORARY,
+        folders=("trials",),
+    )
 
 
 def main(argv: Sequence[str] | None = None) -> int:

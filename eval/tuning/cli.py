@@ -18,7 +18,7 @@ import re
 import shlex
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import replace
 from datetime import UTC, datetime
 from pathlib import Path
@@ -28,7 +28,7 @@ from eval.cli_base import UsageError, _names, _Parser, _positive, path_option
 from execution import BACKENDS, BackendUnavailableError, backend_from_args
 from follow_env.sim.atomic import atomic_write_text, check_writable, file_on_path
 
-__all__ = ["PROG", "build_parser", "main"]
+__all__ = ["PROG", "build_parser", "check_out_folder", "journal_check", "main", "text_check"]
 
 PROG = "follow-tune"
 #: Most tuning or held-out seeds: 1000 + k and 2000 + k must never meet.
@@ -258,7 +258,7 @@ def _check_out_owner(out: Path, law: str, study: str) -> None:
     from eval.tuning.driver import journal_study_names
 
     result = out / "result.json"
-    if result.is_file():  # _check_own_files found it follow-tune's (readable, with "search")
+    if result.is_file():  # _check_out found it follow-tune's (readable, with "search")
         summary = json.loads(result.read_text(encoding="utf-8"))
         search = summary.get("search")
         held_law = search.get("law") if isinstance(search, dict) else None
@@ -298,6 +298,61 @@ def _check_journal_path(path: Path) -> None:
 def _check_out(out: Path) -> None:
     """``--out``: a folder that can be made, an empty one, or a follow-tune study's (to resume
     it); never a folder of other files, which the results would be written among."""
+    check_out_folder(
+        out,
+        prog=PROG,
+        own={
+            "study.journal": journal_check,
+            "study.journal.lock": None,
+            "result.json": text_check(PROG, _is_own_result),
+            "preset.txt": text_check(PROG, lambda text: text.startswith(f"# {PROG} ")),
+        },
+        temporary=_OWN_TEMPORARY,
+    )
+
+
+def journal_check(path: Path) -> str | None:
+    """What is wrong with ``path`` as a study journal, or None (:func:`check_out_folder`'s
+    test of ``study.journal``; the driver, and Optuna with it, imported only when asked)."""
+    from eval.tuning.driver import journal_problem
+
+    return journal_problem(path)
+
+
+def text_check(prog: str, test: Callable[[str], bool]) -> Callable[[Path], str | None]:
+    """:func:`check_out_folder`'s test of a file by its text: None if ``test`` takes it for
+    ``prog``'s, else what is wrong."""
+
+    def problem(path: Path) -> str | None:
+        try:
+            text = path.read_text(encoding="utf-8")
+        except (OSError, UnicodeDecodeError) as e:
+            return f"cannot be read: {getattr(e, 'strerror', None) or e}"
+        return None if test(text) else f"is not {prog}'s"
+
+    return problem
+
+
+def check_out_folder(
+    out: Path,
+    *,
+    prog: str,
+    own: Mapping[str, Callable[[Path], str | None] | None],
+    temporary: re.Pattern[str],
+    folders: tuple[str, ...] = (),
+) -> None:
+    """A search's ``--out`` (follow-tune's, or ``python -m train.tune``'s): a folder that can
+    be made, an empty one, or one of the search's own (to resume it); never a folder of other
+    files, which the results would be written among.
+
+    :param prog: the command, in messages.
+    :param own: the files the search writes, each with its test: what is wrong with the file
+        as the search's (None: nothing), e.g. :func:`journal_check`, :func:`text_check`; or
+        None for any file of that name.
+    :param temporary: the names of interrupted atomic writes the search may leave.
+    :param folders: the folders the search writes into ``out``.
+    :raises UsageError: naming the folder and what it holds.
+    """
     blocker = file_on_path(out)
     if blocker is not None:
         raise UsageError(f"--out {out}: {blocker} is a file, not a folder")
@@ -307,45 +362,24 @@ def _check_out(out: Path) -> None:
         raise UsageError(f"--out {out}: {e}") from None
     if not out.exists():  # to be made: nothing of anyone's in it
         return
+    tail = f"give a new or empty folder, or a {prog} study's folder to resume it"
     foreign = sorted(
         e.name
         for e in out.iterdir()
-        if not (e.name in OWN_FILES and not e.is_dir()) and not _OWN_TEMPORARY.fullmatch(e.name)
+        if not (e.name in own and not e.is_dir())
+        and not (e.name in folders and e.is_dir())
+        and not temporary.fullmatch(e.name)
     )
     if foreign:
         more = f" and {len(foreign) - 1} more" if len(foreign) > 1 else ""
         raise UsageError(
-            f"--out {out}: the folder holds {foreign[0]}{more}, which follow-tune did not write; "
-            "give a new or empty folder, or a follow-tune study's folder to resume it"
+            f"--out {out}: the folder holds {foreign[0]}{more}, which {prog} did not write; {tail}"
         )
-    _check_own_files(out)
-
-
-def _check_own_files(out: Path) -> None:
-    """The follow-tune names in ``out`` hold what follow-tune writes there, so a folder of
-    another tool that happens to use the same names (``result.json``) is not taken for one."""
-    from eval.tuning.driver import journal_problem
-
-    for name, ours in (
-        ("study.journal", None),
-        ("result.json", _is_own_result),
-        ("preset.txt", lambda text: text.startswith(f"# {PROG} ")),
-    ):
+    for name, check in own.items():
         path = out / name
-        if not path.exists():
-            continue
-        if ours is None:
-            problem = journal_problem(path)
-        else:
-            try:
-                problem = None if ours(path.read_text(encoding="utf-8")) else "is not follow-tune's"
-            except (OSError, UnicodeDecodeError) as e:
-                problem = f"cannot be read: {getattr(e, 'strerror', None) or e}"
+        problem = check(path) if check is not None and path.exists() else None
         if problem is not None:
-            raise UsageError(
-                f"--out {out}: its {name} {problem}; give a new or empty folder, or a "
-                "follow-tune study's folder to resume it"
-            )
+            raise UsageError(f"--out {out}: its {name} {problem}; {tail}")
 
 
 def _is_own_result(text: str) -> bool:
