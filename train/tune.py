@@ -4,12 +4,13 @@
 
 The same search as ``follow-tune`` (:mod:`eval.tuning.driver`: a seeded TPE sampler, trials
 asked in batches, a journal file or RDB URL to resume from, a median pruner on partial seed
-sets), with a training run as each trial: the hyperparameters of :data:`PPO_SPACE` put into the
-hyperparameter file's section (``train/configs/ppo.yaml`` unless told), a ``follow-train`` run
-of ``--n-timesteps`` env steps (as a work unit on the execution backend, one per trial of a
-batch), then the trained agent scored by the env's own reward summed per episode on the tuning
-variants x seeds 1000 + k (:class:`eval.tuning.objective.LawObjective`'s numbers). The pruner
-spares evaluation episodes only: a trial is trained once, at its first rung.
+sets; a study resumed only with the settings it was run with), with a training run as each
+trial: the hyperparameters of :data:`PPO_SPACE` put into the hyperparameter file's section
+(``train/configs/ppo.yaml`` unless told), a ``follow-train`` run of ``--n-timesteps`` env steps
+(as a work unit on the execution backend, one per trial of a batch), then the trained agent
+scored by the env's own reward summed per episode on the tuning variants x seeds 1000 + k
+(:class:`eval.tuning.objective.LawObjective`'s numbers). The pruner spares evaluation episodes
+only: a trial is trained once, at its first rung.
 
 Left out: the held-out check and the one-standard-error choice that ``follow-tune`` makes for
 a law (a trained agent is judged by ``follow-eval`` on held-out seeds instead), and pruning on
@@ -35,10 +36,18 @@ from typing import Any
 import numpy as np
 import yaml
 
-from eval.cli_base import UsageError, _names, _Parser, _positive
+from eval.cli_base import UsageError, _names, _Parser, _positive, path_option
 from eval.rollout import rollout
-from eval.tuning.cli import check_out_folder, journal_check, text_check
-from eval.tuning.driver import SearchConfig, open_study, run_search
+from eval.tuning.driver import SearchConfig, run_search
+from eval.tuning.folders import (
+    check_journal_owner,
+    check_out_folder,
+    check_storage,
+    journal_check,
+    open_search,
+    refuse_repeats,
+    text_check,
+)
 from eval.tuning.objective import DEFAULT_VARIANTS, SCORE_KEYS, TUNE_SEED0, episode_score
 from execution import Backend, BackendUnavailableError, backend_from_args, execute
 from follow_env.sim.atomic import atomic_write_text
@@ -131,7 +140,10 @@ class PPOObjective:
         section = self.section()
         section.update(hyperparams_for(values, self.n_envs()))
         text = yaml.safe_dump({env_id: section}, sort_keys=False)
-        key = hashlib.sha256(text.encode()).hexdigest()[:12]
+        # The budget and the lanes are in the key too: a trial's run trained for another
+        # --n-timesteps or --n-envs is another trial's, never reused for this one.
+        budget = f"n_timesteps={self.base.n_timesteps} n_envs={self.base.n_envs}\n"
+        key = hashlib.sha256((text + budget).encode()).hexdigest()[:12]
         trial = self.folder / f"trial-{key}"
         trial.mkdir(parents=True, exist_ok=True)
         if not (trial / "hyperparams.yaml").exists():
@@ -168,7 +180,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--trials", type=_positive, default=20, help="finished trials (default 20)")
     p.add_argument("--n-timesteps", type=_positive, default=200_000, help="env steps per trial")
     p.add_argument("--n-envs", type=_positive, default=None, help="lanes (default: the file's)")
-    p.add_argument("--hyperparams", type=Path, default=DEFAULT_HYPERPARAMS, help="base YAML")
+    p.add_argument("--hyperparams", type=path_option, default=DEFAULT_HYPERPARAMS, help="base YAML")
     p.add_argument("--seeds", type=_positive, default=4, help="scoring seeds 1000.. per scenario")
     p.add_argument("--scenarios", default=None, help="scored on (default straight,curve,random)")
     p.add_argument("--storage", default=None, help="journal file or RDB URL (OUT/study.journal)")
@@ -177,7 +189,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--address", default=None, help="--backend ray: the cluster")
     p.add_argument("--workers", type=_positive, default=None, help="processes or Ray slots")
     p.add_argument("--seed", type=int, default=0, help="the TPE sampler's seed (default 0)")
-    p.add_argument("--out", type=Path, default=Path("runs") / "tune-ppo", help="output folder")
+    p.add_argument(
+        "--out", type=path_option, default=Path("runs") / "tune-ppo", help="output folder"
+    )
     return p
 
 
@@ -185,11 +199,16 @@ def run(args: argparse.Namespace) -> int:
     """Search, then write ``OUT/result.json`` and print the best trial's hyperparameters."""
     from follow_env.tasks import get_task
 
+    for option in ("storage", "study", "address"):
+        value = getattr(args, option)
+        if value is not None and not value.strip():
+            raise UsageError(f"--{option} is empty")
     # an empty --scenarios '' is a mistake to name, not a request for the defaults
     given = args.scenarios
     variants = (
         _names(given, "scenarios") if given is not None else DEFAULT_VARIANTS["person_follow"]
     )
+    refuse_repeats(given, "scenarios")
     for name in variants:
         if name not in get_task("person_follow").variants():
             raise UsageError(f"--scenarios: unknown scenario {name!r}")
@@ -213,14 +232,41 @@ def run(args: argparse.Namespace) -> int:
     seeds = tuple(range(TUNE_SEED0, TUNE_SEED0 + args.seeds))
     config = SearchConfig(args.trials, seeds, 1, args.seed)  # checks --seed too
     _check_out(args.out)  # before the folder is made, not after a trial
-    backend.check_reachable()  # before anything is written: no journal left behind
-    config = dataclasses.replace(config, batch=backend.slots())
-    args.out.mkdir(parents=True, exist_ok=True)
-    storage = args.storage or str(args.out / "study.journal")
-    study = open_study(storage, args.study, config)
+    storage, _ = check_storage(args.storage, args.out)
+    _check_out_owner(args.out, args.study)
     objective = PPOObjective(base, args.out / "trials", tuple(variants), backend)
     n_envs = objective.n_envs()
-    ran = run_search(study, PPO_SPACE, config, objective)
+    identity = {
+        "trainer": "ppo",
+        "env_id": base.env_id or "PersonFollow-v0",
+        "section": json.loads(json.dumps(objective.section(), default=str)),
+        "n_timesteps": args.n_timesteps,
+        "n_envs": n_envs,
+        "variants": list(variants),
+        "seeds": args.seeds,
+        "space": {k: [r.low, r.high, r.log] for k, r in PPO_SPACE.items()},
+    }
+    backend.check_reachable()  # before anything is written: no journal left behind
+    config = dataclasses.replace(config, batch=backend.slots())
+    try:
+        study = open_search(args.out, storage, args.study, config, identity)
+    except KeyboardInterrupt:  # open_search removed what it made: the folder, a new journal
+        print(
+            f"{PROG}: interrupted while opening the study {args.study} in {storage}; no trial "
+            "ran: run the same command again",
+            file=sys.stderr,
+        )
+        return 130
+    try:
+        ran = run_search(study, PPO_SPACE, config, objective)
+    except KeyboardInterrupt:
+        print(
+            f"{PROG}: interrupted; the study {args.study} in {storage} keeps its finished "
+            f"trials, and {args.out / 'trials'} their runs: run the same command again to "
+            "resume",
+            file=sys.stderr,
+        )
+        return 130
     best = study.best_trial
     summary = {
         "study": args.study,
@@ -278,6 +324,20 @@ def _check_out(out: Path) -> None:
     )
 
 
+def _check_out_owner(out: Path, study: str) -> None:
+    """``--out`` is resumed only by its own study: a folder whose ``result.json`` or journal
+    belongs to another ``--study`` would have its results overwritten."""
+    result = out / "result.json"
+    if result.is_file():  # _check_out found it this command's (readable, with "study")
+        held = json.loads(result.read_text(encoding="utf-8"))["study"]
+        if held != study:
+            raise UsageError(
+                f"--out {out}: it holds the results of the study {held}, not {study}; give "
+                "another --out, or that --study to resume it"
+            )
+    check_journal_owner(out, study)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point; returns the exit status (2 with one line on stderr for bad arguments)."""
     try:
@@ -285,6 +345,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (UsageError, OSError, ValueError, BackendUnavailableError) as e:
         print(f"{PROG}: error: {e}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:  # before the search began (its own is caught in run)
+        print(f"{PROG}: interrupted before the search began; nothing was written", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":

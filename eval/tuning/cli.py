@@ -18,17 +18,26 @@ import re
 import shlex
 import sys
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import replace
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
 from eval.cli_base import UsageError, _names, _Parser, _positive, path_option
+from eval.tuning.folders import (
+    check_journal_owner,
+    check_out_folder,
+    check_storage,
+    journal_check,
+    open_search,
+    refuse_repeats,
+    text_check,
+)
 from execution import BACKENDS, BackendUnavailableError, backend_from_args
-from follow_env.sim.atomic import atomic_write_text, check_writable, file_on_path
+from follow_env.sim.atomic import atomic_write_text
 
-__all__ = ["PROG", "build_parser", "check_out_folder", "journal_check", "main", "text_check"]
+__all__ = ["PROG", "build_parser", "main"]
 
 PROG = "follow-tune"
 #: Most tuning or held-out seeds: 1000 + k and 2000 + k must never meet.
@@ -134,7 +143,7 @@ def _check(args: argparse.Namespace) -> dict[str, Any]:
         _names(given, "holdout-scenarios") if given is not None else list(variants)
     )
     for option in ("scenarios", "holdout_scenarios"):
-        _refuse_repeats(getattr(args, option), option.replace("_", "-"))
+        refuse_repeats(getattr(args, option), option.replace("_", "-"))
     known = get_task(task).variants()
     for option, names in (("scenarios", variants), ("holdout-scenarios", args.holdout_variants)):
         for name in names:
@@ -162,14 +171,7 @@ def _check(args: argparse.Namespace) -> dict[str, Any]:
             raise UsageError(f"argument --config: {e}") from None
     args.out = args.out or Path("runs") / f"tune-{args.law}"
     _check_out(args.out)
-    if args.storage is None:
-        args.storage = str(args.out / "study.journal")
-    else:
-        from eval.tuning.driver import is_url
-
-        if not is_url(args.storage):
-            _check_journal_path(Path(args.storage))
-    database = _sqlite_file(args.storage)
+    args.storage, database = check_storage(args.storage, args.out)
     args.study = args.study or f"{args.law}-{task}"
     _check_out_owner(args.out, args.law, args.study)
     if args.write_preset is not None:
@@ -188,47 +190,6 @@ def _check(args: argparse.Namespace) -> dict[str, Any]:
         "config": config,
         "space": space,
     }
-
-
-def _refuse_repeats(text: str | None, option: str) -> None:
-    """A variant named twice in ``--OPTION`` is refused rather than silently dropped: the list
-    is the study's identity, and a repeat is most likely a typo for another variant."""
-    if text is None:
-        return
-    names = [n.strip() for n in text.split(",") if n.strip()]
-    twice = next((n for i, n in enumerate(names) if n in names[:i]), None)
-    if twice is not None:
-        raise UsageError(f"--{option} {text}: {twice!r} is given twice; name each variant once")
-
-
-def _sqlite_file(storage: str) -> Path | None:
-    """The database file of a ``sqlite:`` storage URL (None for other storages).
-
-    :raises UsageError: for an in-memory database (``sqlite://``, ``sqlite:///``,
-        ``sqlite:///:memory:``, ``mode=memory``): it keeps nothing, so a study there could
-        never be resumed and its trials would be lost with the process.
-    """
-    from eval.tuning.driver import is_url
-
-    if not is_url(storage) or not storage.lower().startswith("sqlite"):
-        return None
-    try:
-        from sqlalchemy.engine import make_url
-
-        url = make_url(storage)
-    except Exception:  # a malformed URL: open_study names it in one line
-        return None
-    database = url.database or ""
-    if (
-        database in ("", ":memory:")
-        or "mode=memory" in database
-        or url.query.get("mode") == ("memory")
-    ):
-        raise UsageError(
-            f"--storage {storage}: an in-memory SQLite database keeps nothing; give a file "
-            "(sqlite:///tuning.db), a journal file or another database URL"
-        )
-    return Path(database.removeprefix("file:").partition("?")[0])
 
 
 def _check_preset_target(args: argparse.Namespace, database: Path | None) -> None:
@@ -255,8 +216,6 @@ def _check_preset_target(args: argparse.Namespace, database: Path | None) -> Non
 def _check_out_owner(out: Path, law: str, study: str) -> None:
     """``--out`` is resumed only by its own study: a folder whose ``result.json`` or journal
     belongs to another law or ``--study`` would have its results overwritten."""
-    from eval.tuning.driver import journal_study_names
-
     result = out / "result.json"
     if result.is_file():  # _check_out found it follow-tune's (readable, with "search")
         summary = json.loads(result.read_text(encoding="utf-8"))
@@ -269,30 +228,7 @@ def _check_out_owner(out: Path, law: str, study: str) -> None:
                 f"{held_law}, not {study} of {law}; give another --out, or that law and "
                 "--study to resume it"
             )
-    journal = out / "study.journal"
-    names = journal_study_names(journal) if journal.is_file() else []
-    if names and study not in names:
-        raise UsageError(
-            f"--out {out}: its study.journal holds the study {', '.join(names)}, not {study}; "
-            "give another --out, or that --study to resume it"
-        )
-
-
-def _check_journal_path(path: Path) -> None:
-    """A journal path: in an existing folder, and new, empty or an Optuna journal (Optuna
-    appends to whatever file it is given before it reads it)."""
-    from eval.tuning.driver import journal_problem
-
-    if path.is_dir():
-        raise UsageError(f"--storage {path}: a folder; give a journal file's path or an RDB URL")
-    blocker = file_on_path(path.parent)
-    if blocker is not None or not path.parent.is_dir():
-        raise UsageError(f"--storage {path}: its folder {path.parent} does not exist")
-    problem = journal_problem(path)
-    if problem is not None:
-        raise UsageError(
-            f"--storage {path} {problem}; give a new or empty file, or a follow-tune journal"
-        )
+    check_journal_owner(out, study)
 
 
 def _check_out(out: Path) -> None:
@@ -311,77 +247,6 @@ def _check_out(out: Path) -> None:
     )
 
 
-def journal_check(path: Path) -> str | None:
-    """What is wrong with ``path`` as a study journal, or None (:func:`check_out_folder`'s
-    test of ``study.journal``; the driver, and Optuna with it, imported only when asked)."""
-    from eval.tuning.driver import journal_problem
-
-    return journal_problem(path)
-
-
-def text_check(prog: str, test: Callable[[str], bool]) -> Callable[[Path], str | None]:
-    """:func:`check_out_folder`'s test of a file by its text: None if ``test`` takes it for
-    ``prog``'s, else what is wrong."""
-
-    def problem(path: Path) -> str | None:
-        try:
-            text = path.read_text(encoding="utf-8")
-        except (OSError, UnicodeDecodeError) as e:
-            return f"cannot be read: {getattr(e, 'strerror', None) or e}"
-        return None if test(text) else f"is not {prog}'s"
-
-    return problem
-
-
-def check_out_folder(
-    out: Path,
-    *,
-    prog: str,
-    own: Mapping[str, Callable[[Path], str | None] | None],
-    temporary: re.Pattern[str],
-    folders: tuple[str, ...] = (),
-) -> None:
-    """A search's ``--out`` (follow-tune's, or ``python -m train.tune``'s): a folder that can
-    be made, an empty one, or one of the search's own (to resume it); never a folder of other
-    files, which the results would be written among.
-
-    :param prog: the command, in messages.
-    :param own: the files the search writes, each with its test: what is wrong with the file
-        as the search's (None: nothing), e.g. :func:`journal_check`, :func:`text_check`; or
-        None for any file of that name.
-    :param temporary: the names of interrupted atomic writes the search may leave.
-    :param folders: the folders the search writes into ``out``.
-    :raises UsageError: naming the folder and what it holds.
-    """
-    blocker = file_on_path(out)
-    if blocker is not None:
-        raise UsageError(f"--out {out}: {blocker} is a file, not a folder")
-    try:  # a real file made and removed: root passes os.access, /proc takes no file
-        check_writable(out / "result.json")
-    except OSError as e:
-        raise UsageError(f"--out {out}: {e}") from None
-    if not out.exists():  # to be made: nothing of anyone's in it
-        return
-    tail = f"give a new or empty folder, or a {prog} study's folder to resume it"
-    foreign = sorted(
-        e.name
-        for e in out.iterdir()
-        if not (e.name in own and not e.is_dir())
-        and not (e.name in folders and e.is_dir())
-        and not temporary.fullmatch(e.name)
-    )
-    if foreign:
-        more = f" and {len(foreign) - 1} more" if len(foreign) > 1 else ""
-        raise UsageError(
-            f"--out {out}: the folder holds {foreign[0]}{more}, which {prog} did not write; {tail}"
-        )
-    for name, check in own.items():
-        path = out / name
-        problem = check(path) if check is not None and path.exists() else None
-        if problem is not None:
-            raise UsageError(f"--out {out}: its {name} {problem}; {tail}")
-
-
 def _is_own_result(text: str) -> bool:
     """Whether ``text`` is a ``result.json`` as :func:`run` writes it."""
     try:
@@ -389,45 +254,6 @@ def _is_own_result(text: str) -> bool:
     except ValueError:
         return False
     return isinstance(summary, dict) and {"search", "holdout", "verdict"} <= summary.keys()
-
-
-def _open(args: argparse.Namespace, identity: dict[str, Any]) -> Any:
-    """The study (created, or loaded to resume); removes an output folder it made on failure."""
-    from eval.tuning.driver import SearchConfig, open_study
-
-    # The folders this call makes (``out`` and any missing parents), deepest first.
-    made = [p for p in (args.out, *args.out.parents) if not p.exists()]
-    try:
-        args.out.mkdir(parents=True, exist_ok=True)
-    except OSError as e:
-        _remove_empty(made)
-        raise UsageError(
-            f"--out {args.out}: cannot make the folder ({e.strerror or e}); give a folder in a "
-            "writable place"
-        ) from None
-    try:
-        config = SearchConfig(args.trials, _tune_seeds(args.seeds), 1, args.seed)
-        study = open_study(args.storage, args.study, config)
-        had = study.user_attrs.get("search")
-        if had is None:
-            study.set_user_attr("search", identity)
-        elif had != json.loads(json.dumps(identity)):
-            raise UsageError(
-                f"--study {args.study}: the study in {args.storage} was run with other settings "
-                f"({had}); give another --study or --storage"
-            )
-        return study
-    except BaseException:
-        _remove_empty(made)
-        raise
-
-
-def _remove_empty(folders: Sequence[Path]) -> None:
-    """Remove the folders this run made, deepest first, while they are empty."""
-    for folder in folders:
-        if not folder.is_dir() or any(folder.iterdir()):
-            return
-        folder.rmdir()
 
 
 def _tune_seeds(n: int) -> tuple[int, ...]:
@@ -448,7 +274,18 @@ def run(args: argparse.Namespace) -> int:
     # no journal behind (slots() connects only when it must count the cluster's CPUs).
     backend.check_reachable()
     batch = args.batch or backend.slots()
-    study = _open(args, identity)
+    from eval.tuning.driver import SearchConfig
+
+    config = SearchConfig(args.trials, _tune_seeds(args.seeds), 1, args.seed)
+    try:
+        study = open_search(args.out, args.storage, args.study, config, identity)
+    except KeyboardInterrupt:  # open_search removed what it made: the folder, a new journal
+        print(
+            f"{PROG}: interrupted while opening the study {args.study} in {args.storage}; "
+            "no trial ran: run the same command again",
+            file=sys.stderr,
+        )
+        return 130
     try:
         return _search_and_check(args, identity, law, backend, study, batch)
     except KeyboardInterrupt:  # anywhere after the study opened: the search or held-out check
@@ -548,6 +385,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (UsageError, OSError, ValueError, BackendUnavailableError) as e:
         print(f"{PROG}: error: {e}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:  # before the search began (its own is caught in run)
+        print(f"{PROG}: interrupted before the search began; nothing was written", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":

@@ -180,3 +180,38 @@ def test_ctrl_c_in_the_held_out_check_says_what_was_kept(
     assert sorted(p.name for p in out.iterdir()) == ["study.journal"]
     study = open_study(out / "study.journal", "pn-person_follow", SearchConfig(1, (TUNE_SEED0,)))
     assert [t.state.name for t in study.trials] == ["COMPLETE"]
+
+
+def test_ctrl_c_while_the_study_opens_is_one_line_and_leaves_nothing(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import eval.tuning.driver
+
+    def interrupt(*_: object, **__: object) -> None:
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(eval.tuning.driver, "open_study", interrupt)
+    out = tmp_path / "a" / "out"
+    assert main(["pn", *SMALL, "--out", str(out)]) == 130
+    err = capsys.readouterr().err.splitlines()
+    assert err == [
+        f"follow-tune: interrupted while opening the study pn-person_follow in "
+        f"{out}/study.journal; no trial ran: run the same command again"
+    ]
+    assert not any(tmp_path.iterdir())  # the folders it made are gone
+
+
+def test_ctrl_c_before_the_search_is_one_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import eval.tuning.cli
+
+    def interrupt(*_: object, **__: object) -> None:
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(eval.tuning.cli, "_check", interrupt)
+    assert main(["pn", "--out", str(tmp_path / "out")]) == 130
+    assert capsys.readouterr().err.splitlines() == [
+        "follow-tune: interrupted before the search began; nothing was written"
+    ]
+    assert not any(tmp_path.iterdir())

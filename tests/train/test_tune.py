@@ -8,7 +8,10 @@ from pathlib import Path
 import pytest
 import yaml
 
-from train.tune import PPO_SPACE, hyperparams_for, main
+from eval.tuning.driver import SearchConfig, open_study
+from eval.tuning.folders import open_search
+from eval.tuning.objective import TUNE_SEED0
+from train.tune import PPO_SPACE, PPOObjective, hyperparams_for, main
 
 
 def test_integer_keys_are_rounded_and_the_minibatch_fits_one_rollout() -> None:
@@ -102,3 +105,116 @@ def test_a_tiny_search_trains_and_scores_each_trial(tmp_path: Path) -> None:
     section = yaml.safe_load(files[0].read_text())["PersonFollow-v0"]
     assert isinstance(section["batch_size"], int)
     assert all((f.parent / "run" / "model.zip").exists() for f in files)
+
+
+def _refused(capsys: pytest.CaptureFixture[str], argv: list[str], message: str) -> None:
+    assert main(["--trials", "1", *argv]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1, err
+    assert err.startswith("python -m train.tune: error: ")
+    assert message in err, err
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--storage", "sqlite:///:memory:"], "an in-memory SQLite database keeps nothing"),
+        (["--storage", "sqlite://"], "an in-memory SQLite database keeps nothing"),
+        (["--storage", " "], "--storage is empty"),
+        (["--study", ""], "--study is empty"),
+        (["--backend", "ray", "--address", ""], "--address is empty"),
+        (["--scenarios", "curve,straight,curve"], "'curve' is given twice"),
+        (["--hyperparams", ""], "--hyperparams"),
+        (["--storage", "{tmp}/no/such/j"], "its folder {tmp}/no/such does not exist"),
+    ],
+)
+def test_a_storage_study_or_scenario_list_that_cannot_work_is_refused(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], argv: list[str], message: str
+) -> None:
+    argv = [a.replace("{tmp}", str(tmp_path)) for a in argv]
+    _refused(
+        capsys, [*argv, "--out", str(tmp_path / "out")], message.replace("{tmp}", str(tmp_path))
+    )
+    assert not any(tmp_path.iterdir())
+
+
+def test_an_out_of_another_study_is_refused_unchanged(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "out"
+    out.mkdir()
+    result = {"study": "other", "best_hyperparams": {}}
+    (out / "result.json").write_text(json.dumps(result))
+    _refused(capsys, ["--out", str(out)], "it holds the results of the study other, not ppo")
+    assert [p.name for p in out.iterdir()] == ["result.json"]
+
+    (out / "result.json").unlink()
+    open_study(out / "study.journal", "other", SearchConfig(1, (TUNE_SEED0,)))
+    before = (out / "study.journal").read_bytes()
+    _refused(capsys, ["--out", str(out)], "its study.journal holds the study other, not ppo")
+    assert (out / "study.journal").read_bytes() == before
+
+
+def test_a_study_run_with_other_settings_is_not_resumed(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # Its trials were trained for another budget: a resume would rank them with this run's.
+    out = tmp_path / "out"
+    config = SearchConfig(1, (TUNE_SEED0,))
+    open_search(out, str(out / "study.journal"), "ppo", config, {"n_timesteps": 1})
+    before = (out / "study.journal").read_bytes()
+    _refused(capsys, ["--n-timesteps", "512", "--out", str(out)], "was run with other settings")
+    assert (out / "study.journal").read_bytes() == before
+    assert [p.name for p in out.iterdir()] == ["study.journal"]
+
+
+def test_a_trials_folder_is_keyed_by_its_budget_and_lanes(tmp_path: Path) -> None:
+    from execution import Backend
+    from train.ppo import DEFAULT_HYPERPARAMS, Args
+
+    def folder(**budget: int) -> str:
+        base = Args(
+            hyperparams=DEFAULT_HYPERPARAMS,
+            n_timesteps=budget.get("n", 256),
+            n_envs=budget.get("lanes", 12),
+        )
+        objective = PPOObjective(base, tmp_path, ("straight",), Backend())
+        args, _ = objective._unit({"gamma": 0.98})
+        return args.out.parent.name
+
+    assert folder() == folder()
+    assert len({folder(), folder(n=512), folder(lanes=24)}) == 3
+
+
+@pytest.mark.parametrize(
+    ("where", "message"),
+    [
+        ("open_study", "interrupted while opening the study ppo in {out}/study.journal; no trial"),
+        ("run_search", "interrupted; the study ppo in {out}/study.journal keeps its finished"),
+    ],
+)
+def test_ctrl_c_is_one_line_saying_what_was_kept(
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
+    where: str,
+    message: str,
+) -> None:
+    import eval.tuning.driver
+    import train.tune
+
+    def interrupt(*_: object, **__: object) -> None:
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(
+        eval.tuning.driver if where == "open_study" else train.tune, where, interrupt
+    )
+    out = tmp_path / "out"
+    assert main(["--trials", "1", "--out", str(out)]) == 130
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1
+    assert err[0].startswith("python -m train.tune: " + message.format(out=out))
+    if where == "open_study":
+        assert not any(tmp_path.iterdir())  # the folder it made is gone
+    else:
+        assert sorted(p.name for p in out.iterdir()) == ["study.journal"]

@@ -1,0 +1,240 @@
+"""The checks a search command makes of its files before it writes any, and the opening of its
+study: shared by ``follow-tune`` (:mod:`eval.tuning.cli`) and ``python -m train.tune``.
+
+Everything here raises :class:`~eval.cli_base.UsageError` with one line naming the option, the
+file and what is wrong, before anything is written; a file or folder the search did not write
+is never changed: ``--storage`` must be a new or empty file, an Optuna journal or a database
+URL that keeps its data, ``--out`` a new or empty folder or one of the search's own.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+from eval.cli_base import UsageError
+from follow_env.sim.atomic import check_writable, file_on_path
+
+__all__ = [
+    "check_journal_owner",
+    "check_journal_path",
+    "check_out_folder",
+    "check_storage",
+    "journal_check",
+    "open_search",
+    "refuse_repeats",
+    "sqlite_file",
+    "text_check",
+]
+
+
+def refuse_repeats(text: str | None, option: str) -> None:
+    """A variant named twice in ``--OPTION`` is refused rather than silently dropped: the list
+    is the study's identity, and a repeat is most likely a typo for another variant."""
+    if text is None:
+        return
+    names = [n.strip() for n in text.split(",") if n.strip()]
+    twice = next((n for i, n in enumerate(names) if n in names[:i]), None)
+    if twice is not None:
+        raise UsageError(f"--{option} {text}: {twice!r} is given twice; name each variant once")
+
+
+def check_storage(storage: str | None, out: Path) -> tuple[str, Path | None]:
+    """``--storage`` (None: ``OUT/study.journal``) checked: a journal path in an existing
+    folder that is new, empty or a journal, or a database URL that keeps its data.
+
+    :returns: the storage to open, and the database file of a ``sqlite:`` URL (else None).
+    """
+    from eval.tuning.driver import is_url
+
+    if storage is None:
+        return str(out / "study.journal"), None
+    if not storage.strip():
+        raise UsageError("--storage is empty")
+    if not is_url(storage):
+        check_journal_path(Path(storage))
+    return storage, sqlite_file(storage)
+
+
+def sqlite_file(storage: str) -> Path | None:
+    """The database file of a ``sqlite:`` storage URL (None for other storages).
+
+    :raises UsageError: for an in-memory database (``sqlite://``, ``sqlite:///``,
+        ``sqlite:///:memory:``, ``mode=memory``): it keeps nothing, so a study there could
+        never be resumed and its trials would be lost with the process.
+    """
+    from eval.tuning.driver import is_url
+
+    if not is_url(storage) or not storage.lower().startswith("sqlite"):
+        return None
+    try:
+        from sqlalchemy.engine import make_url
+
+        url = make_url(storage)
+    except Exception:  # a malformed URL: open_study names it in one line
+        return None
+    database = url.database or ""
+    if (
+        database in ("", ":memory:")
+        or "mode=memory" in database
+        or url.query.get("mode") == ("memory")
+    ):
+        raise UsageError(
+            f"--storage {storage}: an in-memory SQLite database keeps nothing; give a file "
+            "(sqlite:///tuning.db), a journal file or another database URL"
+        )
+    return Path(database.removeprefix("file:").partition("?")[0])
+
+
+def check_journal_path(path: Path) -> None:
+    """A journal path: in an existing folder, and new, empty or an Optuna journal (Optuna
+    appends to whatever file it is given before it reads it)."""
+    from eval.tuning.driver import journal_problem
+
+    if path.is_dir():
+        raise UsageError(f"--storage {path}: a folder; give a journal file's path or an RDB URL")
+    blocker = file_on_path(path.parent)
+    if blocker is not None or not path.parent.is_dir():
+        raise UsageError(f"--storage {path}: its folder {path.parent} does not exist")
+    problem = journal_problem(path)
+    if problem is not None:
+        raise UsageError(
+            f"--storage {path} {problem}; give a new or empty file, or a follow-tune journal"
+        )
+
+
+def check_journal_owner(out: Path, study: str) -> None:
+    """``--out``'s journal, if it has one, must hold ``study``: a folder whose journal holds
+    only other studies is another search's, whose results would be overwritten."""
+    from eval.tuning.driver import journal_study_names
+
+    journal = out / "study.journal"
+    names = journal_study_names(journal) if journal.is_file() else []
+    if names and study not in names:
+        raise UsageError(
+            f"--out {out}: its study.journal holds the study {', '.join(names)}, not {study}; "
+            "give another --out, or that --study to resume it"
+        )
+
+
+def journal_check(path: Path) -> str | None:
+    """What is wrong with ``path`` as a study journal, or None (:func:`check_out_folder`'s
+    test of ``study.journal``; the driver, and Optuna with it, imported only when asked)."""
+    from eval.tuning.driver import journal_problem
+
+    return journal_problem(path)
+
+
+def text_check(prog: str, test: Callable[[str], bool]) -> Callable[[Path], str | None]:
+    """:func:`check_out_folder`'s test of a file by its text: None if ``test`` takes it for
+    ``prog``'s, else what is wrong."""
+
+    def problem(path: Path) -> str | None:
+        try:
+            text = path.read_text(encoding="utf-8")
+        except (OSError, UnicodeDecodeError) as e:
+            return f"cannot be read: {getattr(e, 'strerror', None) or e}"
+        return None if test(text) else f"is not {prog}'s"
+
+    return problem
+
+
+def check_out_folder(
+    out: Path,
+    *,
+    prog: str,
+    own: Mapping[str, Callable[[Path], str | None] | None],
+    temporary: re.Pattern[str],
+    folders: tuple[str, ...] = (),
+) -> None:
+    """A search's ``--out`` (follow-tune's, or ``python -m train.tune``'s): a folder that can
+    be made, an empty one, or one of the search's own (to resume it); never a folder of other
+    files, which the results would be written among.
+
+    :param prog: the command, in messages.
+    :param own: the files the search writes, each with its test: what is wrong with the file
+        as the search's (None: nothing), e.g. :func:`journal_check`, :func:`text_check`; or
+        None for any file of that name.
+    :param temporary: the names of interrupted atomic writes the search may leave.
+    :param folders: the folders the search writes into ``out``.
+    :raises UsageError: naming the folder and what it holds.
+    """
+    blocker = file_on_path(out)
+    if blocker is not None:
+        raise UsageError(f"--out {out}: {blocker} is a file, not a folder")
+    try:  # a real file made and removed: root passes os.access, /proc takes no file
+        check_writable(out / "result.json")
+    except OSError as e:
+        raise UsageError(f"--out {out}: {e}") from None
+    if not out.exists():  # to be made: nothing of anyone's in it
+        return
+    tail = f"give a new or empty folder, or a {prog} study's folder to resume it"
+    foreign = sorted(
+        e.name
+        for e in out.iterdir()
+        if not (e.name in own and not e.is_dir())
+        and not (e.name in folders and e.is_dir())
+        and not temporary.fullmatch(e.name)
+    )
+    if foreign:
+        more = f" and {len(foreign) - 1} more" if len(foreign) > 1 else ""
+        raise UsageError(
+            f"--out {out}: the folder holds {foreign[0]}{more}, which {prog} did not write; {tail}"
+        )
+    for name, check in own.items():
+        path = out / name
+        problem = check(path) if check is not None and path.exists() else None
+        if problem is not None:
+            raise UsageError(f"--out {out}: its {name} {problem}; {tail}")
+
+
+def open_search(
+    out: Path, storage: str, study: str, config: Any, identity: Mapping[str, Any]
+) -> Any:
+    """The study ``study`` in ``storage``, created with ``identity`` as its ``"search"``
+    attribute, or loaded to resume if it holds the same one. The folder ``out`` (and its
+    missing parents) is made first, and removed again, with a journal made here, if the
+    study cannot be opened or is refused.
+
+    :param config: the search's :class:`~eval.tuning.driver.SearchConfig`.
+    :param identity: what the study's trials depend on (JSON): a study run with other
+        settings is refused, since its trials would not be comparable with this run's.
+    :raises UsageError: naming the folder or the study and what is wrong.
+    """
+    from eval.tuning.driver import open_study
+
+    # The folders this call makes (``out`` and any missing parents), deepest first.
+    made = [p for p in (out, *out.parents) if not p.exists()]
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        _remove_empty(made)
+        raise UsageError(
+            f"--out {out}: cannot make the folder ({e.strerror or e}); give a folder in a "
+            "writable place"
+        ) from None
+    try:
+        opened = open_study(storage, study, config)
+        had = opened.user_attrs.get("search")
+        if had is None:
+            opened.set_user_attr("search", dict(identity))
+        elif had != json.loads(json.dumps(identity)):
+            raise UsageError(
+                f"--study {study}: the study in {storage} was run with other settings "
+                f"({had}); give another --study or --storage"
+            )
+        return opened
+    except BaseException:
+        _remove_empty(made)
+        raise
+
+
+def _remove_empty(folders: Sequence[Path]) -> None:
+    """Remove the folders this run made, deepest first, while they are empty."""
+    for folder in folders:
+        if not folder.is_dir() or any(folder.iterdir()):
+            return
+        folder.rmdir()
