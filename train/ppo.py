@@ -35,7 +35,7 @@ import shutil
 from pathlib import Path
 from typing import Any
 
-from follow_env.sim.atomic import atomic_write_text
+from follow_env.sim.atomic import atomic_write_text, missing_folders, remove_empty_folders
 from train.algos import ALGOS, DEFAULT_ALGO, load_model, new_model
 from train.config import ConfigError, Hyperparams, check_action_fit, policy_class
 from train.export import AGENT_FILES, EXPORT_EXTRAS, export_agent
@@ -93,9 +93,14 @@ def train(args: Args, command: str = PROG) -> Path:
     venv, eval_env, model = _build(args, hp, where, model_path, stats_path, start_step)
 
     # -- The run folder, now that everything checked out -------------------------------------
-    made = run is None and (args.out is None or not args.out.exists())
+    # The folders this run makes (its own, and the missing parents of --out or --runs),
+    # deepest first: removed again if it ends before its first checkpoint.
+    made: list[Path] = []
     if run is None:
+        made = missing_folders(args.out if args.out is not None else args.runs)
         run = args.out if args.out is not None else runs.new_run_dir(args.runs, args.algo)
+        if args.out is None:
+            made.insert(0, run)
         run.mkdir(parents=True, exist_ok=True)
     try:
         if saved is None:
@@ -267,16 +272,15 @@ def _build(
     return venv, eval_env, new_model(learner, policy, hp, venv, args.seed, where=where)
 
 
-def _remove_new_run(run: Path, made: bool) -> None:
-    """Remove what this session wrote into a new run folder (the folder too if it made it)."""
-    if made:
-        shutil.rmtree(run, ignore_errors=True)
-    else:  # --out was an empty folder: everything in it is this session's
-        for child in run.iterdir():
-            if child.is_dir() and not child.is_symlink():
-                shutil.rmtree(child, ignore_errors=True)
-            else:
-                child.unlink(missing_ok=True)
+def _remove_new_run(run: Path, made: list[Path]) -> None:
+    """Remove what this session wrote into a new run folder, and the folders it made (``run``
+    and the missing parents of ``--out`` or ``--runs``, deepest first) once they are empty."""
+    for child in run.iterdir():  # everything in it is this session's: it was new or empty
+        if child.is_dir() and not child.is_symlink():
+            shutil.rmtree(child, ignore_errors=True)
+        else:
+            child.unlink(missing_ok=True)
+    remove_empty_folders(made)
 
 
 def _resolved_config(args: Args, hp: Hyperparams, venv: Any, command: str) -> dict[str, Any]:

@@ -11,12 +11,17 @@ from __future__ import annotations
 
 import json
 import re
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
 from eval.cli_base import UsageError
-from follow_env.sim.atomic import check_writable, file_on_path
+from follow_env.sim.atomic import (
+    check_writable,
+    file_on_path,
+    missing_folders,
+    remove_empty_folders,
+)
 
 __all__ = [
     "check_journal_owner",
@@ -206,12 +211,11 @@ def open_search(
     """
     from eval.tuning.driver import open_study
 
-    # The folders this call makes (``out`` and any missing parents), deepest first.
-    made = [p for p in (out, *out.parents) if not p.exists()]
+    made = missing_folders(out)  # ``out`` and any missing parents, deepest first
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as e:
-        _remove_empty(made)
+        remove_empty_folders(made)
         raise UsageError(
             f"--out {out}: cannot make the folder ({e.strerror or e}); give a folder in a "
             "writable place"
@@ -228,13 +232,5 @@ def open_search(
             )
         return opened
     except BaseException:
-        _remove_empty(made)
+        remove_empty_folders(made)
         raise
-
-
-def _remove_empty(folders: Sequence[Path]) -> None:
-    """Remove the folders this run made, deepest first, while they are empty."""
-    for folder in folders:
-        if not folder.is_dir() or any(folder.iterdir()):
-            return
-        folder.rmdir()

@@ -26,6 +26,8 @@ __all__ = [
     "check_writable",
     "file_on_path",
     "longest_name",
+    "missing_folders",
+    "remove_empty_folders",
     "try_new_file",
 ]
 
@@ -121,6 +123,22 @@ def file_on_path(path: str | Path) -> Path | None:
         if candidate.exists() or candidate.is_symlink():
             return None if candidate.is_dir() else candidate
     return None
+
+
+def missing_folders(path: str | Path) -> list[Path]:
+    """The folders ``mkdir(parents=True)`` of ``path`` would make: ``path`` and its missing
+    parents, deepest first (what :func:`remove_empty_folders` takes back)."""
+    path = Path(path)
+    return [p for p in (path, *path.parents) if not (p.exists() or p.is_symlink())]
+
+
+def remove_empty_folders(folders: list[Path]) -> None:
+    """Remove ``folders`` (deepest first, as :func:`missing_folders` lists them) while they are
+    empty: what a command made and then left unused, never a folder holding anything."""
+    for folder in folders:
+        if folder.is_symlink() or not folder.is_dir() or any(folder.iterdir()):
+            return
+        folder.rmdir()
 
 
 def check_new_folder(path: str | Path) -> None:

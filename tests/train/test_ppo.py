@@ -498,6 +498,24 @@ def test_ctrl_c_before_the_first_checkpoint_removes_the_new_run(
     assert not run.exists()
 
 
+@pytest.mark.parametrize("where", ["--out", "--runs", "--runs of other runs"])
+def test_ctrl_c_before_the_first_checkpoint_removes_the_folders_it_made(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str], where: str
+) -> None:
+    # The missing parents of --out or --runs went too; a folder that held something stays.
+    def interrupt(self: HeldOutEvalCallback) -> bool:
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(HeldOutEvalCallback, "_on_step", interrupt)
+    folder = tmp_path / "a" / "b"
+    if where.endswith("other runs"):
+        (folder / "ppo-old").mkdir(parents=True)
+    assert main([*SMOKE, where.split()[0], str(folder)]) == 130
+    assert "nothing to resume, removed" in capsys.readouterr().err
+    left = sorted(str(p.relative_to(tmp_path)) for p in tmp_path.rglob("*"))
+    assert left == (["a", "a/b", "a/b/ppo-old"] if where.endswith("other runs") else [])
+
+
 def test_divergence_gives_one_line_and_keeps_the_run(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
