@@ -16,22 +16,25 @@ them. The pooled table keeps a ``run`` column naming each episode's run.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import csv
 import json
 from array import array
 from collections.abc import Sequence
 from decimal import Decimal, InvalidOperation
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 import numpy as np
 
-from eval.cli_base import UsageError, _names
+from eval.cli_base import MAX_SEED, UsageError, _names
 
 __all__ = ["check_covered", "cmd_dominance", "pooled_table", "read_episode_table"]
 
 #: What ``meta.json`` records that must agree for two runs to be pooled.
 ALIKE = ("task", "config", "ideal_baseline")
+#: The largest decimal exponent of a seed: ``MAX_SEED`` = 2**256 - 1 is 1.16e77.
+_MAX_SEED_DIGITS = 77
 
 
 def cmd_dominance(args: argparse.Namespace) -> int:
@@ -96,9 +99,8 @@ def cmd_dominance(args: argparse.Namespace) -> int:
         files[f"{stem}.csv"] = frame.to_csv(index=False)
         files[f"{stem}.md"] = report
         print(report)
-    if args.out is None:  # one run: its folder takes the tables, each file atomically
-        for name, text in files.items():
-            atomic_write_text(runs[0] / name, text)
+    if args.out is None:  # one run: its folder takes the tables, all of them or none
+        _write_all(runs[0], files)
     else:  # a new folder appears whole, with the pooled episodes the tables were read from
         with atomic_folder(args.out) as tmp:
             for name, text in files.items():
@@ -109,6 +111,26 @@ def cmd_dominance(args: argparse.Namespace) -> int:
     if len(judged) > 1:
         print(_learners_table(judged))
     return 0
+
+
+def _write_all(folder: Path, files: dict[str, str]) -> None:
+    """Write ``files`` (name -> text) into ``folder`` so that a failure leaves none changed:
+    every target checked first, every text written to its temporary file, then all renamed.
+
+    :raises UsageError: naming a target that is not a regular file (a folder, a FIFO).
+    """
+    from follow_env.sim.atomic import atomic_path
+
+    for name in files:
+        path = folder / name
+        if (path.exists() or path.is_symlink()) and not path.is_file():
+            raise UsageError(
+                f"{path}: not a regular file (a folder, a device or a FIFO); left as it is, "
+                "and no table written"
+            )
+    with contextlib.ExitStack() as stack:  # renamed only once every text is written
+        for name, text in files.items():
+            stack.enter_context(atomic_path(folder / name)).write_text(text, encoding="utf-8")
 
 
 def pooled_table(runs: list[Path], metrics: list[str], optional: Sequence[str] = ()) -> Any:
@@ -128,9 +150,7 @@ def pooled_table(runs: list[Path], metrics: list[str], optional: Sequence[str] =
         if run in resolved[:k]:
             raise UsageError(f"{runs[k]}: given twice; give each run once")
     # each run's own table holds an episode once; pooling then looks only across runs
-    tables = [
-        _once(read_episode_table(run / "episodes.csv", metrics, optional), run) for run in runs
-    ]
+    tables = [read_episode_table(run / "episodes.csv", metrics, optional) for run in runs]
     if len(runs) == 1:
         return tables[0]
     metas = [_meta(run) for run in runs]
@@ -240,7 +260,9 @@ def read_episode_table(path: Path, metrics: list[str], optional: Sequence[str] =
     variant = variant_column(pd.DataFrame(columns=header))
     labels = ["policy", variant]
     try:  # the structure is checked: the cells are converted below
-        table = pd.read_csv(path, dtype=dict.fromkeys([*labels, "seed"], str), index_col=False)
+        table = pd.read_csv(
+            path, dtype=dict.fromkeys([*labels, "seed"], str), index_col=False, encoding="utf-8-sig"
+        )
     except (pd.errors.ParserError, UnicodeDecodeError, OSError) as e:
         raise UsageError(f"{path}: not an episode table ({_one_line(e)})") from None
     if list(table.columns) != header or len(table) != len(lines):  # what the rows said
@@ -265,13 +287,13 @@ def read_episode_table(path: Path, metrics: list[str], optional: Sequence[str] =
                 "holds a finite number, or nothing where it is undefined)"
             )
         table[column] = values
-    return table
+    return _once(path, table, lines)
 
 
 def _cell(path: Path, row: int, column: int) -> str:
     """The text of data row ``row`` (0: the first after the header), ``column``, as written:
     for a message (the table read has made ``1e400`` inf, ``NA`` missing)."""
-    with path.open(newline="", encoding="utf-8") as f:
+    with path.open(newline="", encoding="utf-8-sig") as f:
         for k, cells in enumerate(csv.reader(f)):
             if k == row + 1:
                 return cells[column]
@@ -294,7 +316,8 @@ def _checked_rows(path: Path, metrics: list[str]) -> tuple[list[str], array[int]
 
     lines: array[int] = array("q")
     try:
-        with path.open(newline="", encoding="utf-8") as f:
+        # utf-8-sig: a table saved by a spreadsheet starts with a byte-order mark
+        with path.open(newline="", encoding="utf-8-sig") as f:
             reader = csv.reader(f)
             header = next(reader, None)
             if header is None:
@@ -341,6 +364,9 @@ def _seeds(path: Path, text: Any, lines: array[int]) -> Any:
 
     fast = pd.to_numeric(text, errors="coerce")
     if fast.dtype == np.int64:  # decimal digits within int64: read exactly
+        if (negative := (fast < 0).to_numpy()).any():
+            k = int(negative.argmax())
+            _seed_out_of_range(path, lines[k], text.iloc[k])
         return fast
     seeds: list[int] = []
     for k, cell in enumerate(text.tolist()):
@@ -356,27 +382,38 @@ def _seeds(path: Path, text: Any, lines: array[int]) -> Any:
             raise UsageError(
                 f"{path}: line {lines[k]}, column seed: {cell!r} is not an integer seed"
             ) from None
-        seeds.append(int(value))
-    if all(-(2**63) <= s < 2**63 for s in seeds):
+        # The exponent first: int() of "1e999999999" would build a billion-digit number.
+        if value.adjusted() > _MAX_SEED_DIGITS or not 0 <= (seed := int(value)) <= MAX_SEED:
+            _seed_out_of_range(path, lines[k], cell)
+        seeds.append(seed)
+    if all(s < 2**63 for s in seeds):
         return pd.Series(seeds, index=text.index, dtype=np.int64)
     return pd.Series(seeds, index=text.index, dtype=object)
 
 
-def _once(table: Any, run: Path) -> Any:
-    """``table`` (``run``'s) if it holds each (policy, scenario, seed) once: a repeated episode
-    would be paired with every copy on the other side."""
+def _seed_out_of_range(path: Path, line: int, cell: str) -> NoReturn:
+    raise UsageError(
+        f"{path}: line {line}, column seed: {cell!r} is out of range: follow-eval run's seeds "
+        "are 0..2**256-1"
+    )
+
+
+def _once(path: Path, table: Any, lines: array[int]) -> Any:
+    """``table`` (read from ``path``, its rows starting on ``lines``) if it holds each
+    (policy, scenario, seed) once: a repeated episode would be paired with every copy on the
+    other side.
+
+    :raises UsageError: naming the line of the first repeat.
+    """
     from eval.stats import variant_column
 
-    path = run / "episodes.csv"
     key = ["policy", variant_column(table), "seed"]
-    if not set(key) <= set(table.columns):
-        return table  # a table without scenarios is refused by the judge, which names it
     twice = table.duplicated(key)
     if twice.any():
         row = int(twice.to_numpy().argmax())
         r = table.iloc[row]
         raise UsageError(
-            f"{path}: line {row + 2}: seed {r['seed']} of {r[key[1]]} for {r['policy']} "
+            f"{path}: line {lines[row]}: seed {r['seed']} of {r[key[1]]} for {r['policy']} "
             "is there twice"
         )
     return table

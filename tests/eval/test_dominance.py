@@ -531,6 +531,11 @@ def _cell(text: str, k: int, column: str, value: str) -> str:
         (lambda t: _cell(t, 7, "std_accel_mm_s2", "1e400"), "std_accel_mm_s2: '1e400' is not fin"),
         (lambda t: _cell(t, 2, "success_pct", "inf"), "line 3, column success_pct: 'inf' is not"),
         (lambda t: _cell(t, 2, "in_frame_rate_pct", "n/a!"), "'n/a!' is not a number"),
+        # seeds run never takes: int() of 1e999999999 would build a billion-digit number
+        (lambda t: _cell(t, 2, "seed", "1e999999999"), "line 3, column seed: '1e999999999' is out"),
+        (lambda t: _cell(t, 2, "seed", "1e78"), "'1e78' is out of range: follow-eval run's seeds"),
+        (lambda t: _cell(t, 2, "seed", "-1"), "line 3, column seed: '-1' is out of range"),
+        (lambda t: _cell(t, 2, "seed", "-1.0"), "line 3, column seed: '-1.0' is out of range"),
     ],
 )
 def test_a_damaged_episode_table_is_refused_in_one_line_naming_the_file_and_line(
@@ -572,3 +577,31 @@ def test_seeds_past_int64_and_float_precision_are_read_exactly(tmp_path: Path, c
     (run / "episodes.csv").write_text(_episodes_text([seeds[0], seeds[1], seeds[1], seeds[3]]))
     assert main(["dominance", str(run), "--learner", "ppo"]) == 2
     assert f"line 4: seed {seeds[1]} of straight for ppo is there twice" in capsys.readouterr().err
+
+
+def test_a_repeat_is_named_by_its_line_after_a_cell_of_two_lines(tmp_path: Path, capsys) -> None:
+    text = _episodes_text([0, 1, 1, 3]).replace("ppo,", '"ppo",', 1)
+    lines = text.splitlines(keepends=True)
+    lines.insert(1, lines[1].replace('"ppo"', '"pp\no"'))  # a policy named over two lines
+    (tmp_path / "episodes.csv").write_text("".join(lines))
+    assert main(["dominance", str(tmp_path), "--learner", "ppo"]) == 2
+    assert "episodes.csv: line 6: seed 1 of straight for ppo is there twice" in (
+        capsys.readouterr().err
+    )
+
+
+def test_a_table_saved_with_a_byte_order_mark_is_read(tmp_path: Path, capsys) -> None:
+    (tmp_path / "episodes.csv").write_text(_episodes_text(), encoding="utf-8-sig")
+    assert main(["dominance", str(tmp_path), "--learner", "ppo"]) == 0
+
+
+def test_a_target_that_is_not_a_file_leaves_every_table_as_it_was(tmp_path: Path, capsys) -> None:
+    import os
+
+    (tmp_path / "episodes.csv").write_text(_episodes_text())
+    os.mkfifo(tmp_path / "dominance-ppo.md")
+    assert main(["dominance", str(tmp_path), "--learner", "ppo"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1
+    assert "dominance-ppo.md: not a regular file" in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["dominance-ppo.md", "episodes.csv"]
