@@ -111,7 +111,10 @@ def learner_runs(path: str | Path) -> LearnerRuns:
 
 
 def check_learners(
-    paths: Sequence[str | Path], learners: Sequence[LearnerRuns], laws: Sequence[tuple[str, str]]
+    paths: Sequence[str | Path],
+    learners: Sequence[LearnerRuns],
+    laws: Sequence[tuple[str, str]],
+    aliases: Sequence[str | None] | None = None,
 ) -> None:
     """Refuse learners whose lines would merge with another controller's: two learners of one
     name (a folder given twice, or two folders of one name), a learner named as a law (its
@@ -120,10 +123,13 @@ def check_learners(
 
     :param paths: the learners' folders as given, in the order of ``learners``.
     :param laws: each law's name as given and the label its episodes carry.
+    :param aliases: each learner's name read as a law's spelling, by its label (``pn`` ->
+        ``pn:tuned``), or None: a learner ``pn`` beside ``--laws pn:tuned`` is that law too.
     :raises ValueError: one line, naming both sides of the clash.
     """
     seen: dict[str, Path] = {}
-    for path, learner in zip(paths, learners, strict=True):
+    aliases = [None] * len(learners) if aliases is None else aliases
+    for path, learner, alias in zip(paths, learners, aliases, strict=True):
         if learner.name in seen:
             same = Path(path).resolve() == seen[learner.name].resolve()
             raise ValueError(
@@ -134,7 +140,7 @@ def check_learners(
             )
         seen[learner.name] = Path(path)
         for law, label in laws:
-            if learner.name in (law, label):
+            if learner.name in (law, label) or alias == label:
                 raise ValueError(
                     f"{path}: the learner is named {learner.name!r} (by its folder), as the law "
                     f"{law!r} in --laws is: rename the folder or leave the law out"

@@ -42,6 +42,7 @@ plots); the tables are the same, byte for byte, and a run takes up to
 from __future__ import annotations
 
 import argparse
+import contextlib
 import csv
 import json
 import sys
@@ -49,6 +50,7 @@ import time
 from collections.abc import Sequence
 from datetime import UTC, datetime
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import follow_env
 from eval.cli_base import (  # noqa: F401  (the limits, read here)
@@ -74,6 +76,9 @@ from execution import BACKENDS, BackendUnavailableError
 from follow_env.sim.atomic import atomic_folder, check_new_folder
 
 __all__ = ["MAX_EPISODES", "MAX_EPISODES_WITHOUT_LOGS", "MAX_SEED", "main"]
+
+if TYPE_CHECKING:  # the module imports pandas: only when aggregate runs
+    from eval.aggregate import LearnerRuns
 
 
 def _backend_arguments(parser: argparse.ArgumentParser, where: str) -> None:
@@ -318,7 +323,7 @@ def cmd_aggregate(args: argparse.Namespace) -> int:
     refuse_aliases(named, "laws")
     # Each learner is named by its folder and its tables are keyed by that name, each agent
     # by its path: a clash would merge two controllers' lines after every episode had run.
-    agg.check_learners(args.runs, learners, named)
+    agg.check_learners(args.runs, learners, named, _law_aliases(learners, named))
     scenarios = _names(args.scenarios, "scenarios")
     _check_scenarios(scenarios)
     n_agents = sum(len(learner.agents) for learner in learners)
@@ -333,6 +338,24 @@ def cmd_aggregate(args: argparse.Namespace) -> int:
     files = "aggregate.csv|md, improvement.csv, splits.csv, profiles.csv, scores.csv, plots/"
     print(f"Wrote {out}/: {files}")
     return 0
+
+
+def _law_aliases(learners: Sequence[LearnerRuns], named: list[tuple[str, str]]) -> list[str | None]:
+    """Each learner's folder name read as a law's spelling, by the label its episodes would
+    carry (``pn`` -> ``pn:tuned``), where it spells a law in ``--laws``; else None."""
+
+    def base(name: str) -> str:  # "pn:tuned@mecanum" -> "pn"
+        return name.partition("@")[0].partition(":")[0]
+
+    bases = {base(law) for law, _ in named}
+    aliases: list[str | None] = []
+    for learner in learners:
+        alias = None
+        if base(learner.name) in bases:  # only then is a policy built
+            with contextlib.suppress(UsageError):  # raised if it is not a law's spelling at all
+                alias = policy_label(learner.name, "laws")
+        aliases.append(alias)
+    return aliases
 
 
 def _check_scenarios(scenarios: list[str]) -> None:
@@ -392,6 +415,11 @@ def _refuse_run_without_logs(path: Path) -> None:
         raise UsageError(
             f"{where} holds no step logs to score (follow-eval run --no-logs wrote it); its "
             f"tables are {run / 'episodes.csv'} and summary.*"
+        )
+    if path == run:  # a run with logs whose logs/ folder is gone
+        raise UsageError(
+            f"{run} is a follow-eval run folder whose step logs ({run / 'logs'}) are missing: "
+            f"nothing to score; its tables are {run / 'episodes.csv'} and summary.*"
         )
 
 

@@ -183,7 +183,13 @@ def _one_line(capsys: pytest.CaptureFixture) -> str:
 
 @pytest.mark.parametrize(
     ("folder", "laws", "law"),
-    [("pn", "pn,gsmpn", "pn"), ("ppo", "ppo", "ppo"), ("pn:tuned", "gsmpn,pn", "pn")],
+    [
+        ("pn", "pn,gsmpn", "pn"),
+        ("ppo", "ppo", "ppo"),
+        ("pn:tuned", "gsmpn,pn", "pn"),
+        ("pn", "gsmpn,pn:tuned", "pn:tuned"),  # the same law spelt otherwise
+        ("gsmpn:tuned", "gsmpn", "gsmpn"),
+    ],
 )
 def test_a_learner_named_as_a_law_is_refused_before_any_episode(
     tmp_path: Path, capsys: pytest.CaptureFixture, no_episode: None, folder: str, laws: str,
