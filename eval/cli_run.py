@@ -194,6 +194,10 @@ def cmd_run(args: argparse.Namespace) -> int:
     started = time.perf_counter()
     run = {"task": task.name, "policies": policies, task.variants_option: scenarios}
     run |= {"seeds": [seeds[0], seeds[-1]], "config": args.config}
+    # What each learned policy's files held, read once, before any episode: a model replaced
+    # between an interrupted run and its resume is another run, not mixed into this one.
+    digests = {label: d for label, p in built if (d := model_digest(p)) is not None}
+    run |= {"model_sha256": digests} if digests else {}
     # Without step logs a unit keeps rows, not episodes: its journal is of another run. It
     # keeps the plot seed's episodes whole, so another --plot-seed is another run too (a run
     # with logs keeps every episode, and its journal stays as it was).
@@ -288,9 +292,7 @@ def cmd_run(args: argparse.Namespace) -> int:
             "elapsed_s": round(elapsed, 2),
             "policies": {label: repr(getattr(p, "params", p)) for label, p in built},
             # what each learned policy's files held: its repr names only a path
-            "model_sha256": {
-                label: digest for label, p in built if (digest := model_digest(p)) is not None
-            },
+            "model_sha256": digests,
             "task": task.name,
             task.variants_option: scenarios,
             "seeds": seeds,

@@ -49,8 +49,11 @@ class UnitJournal:
             except (OSError, ValueError) as e:
                 raise ValueError(f"{path}: not a readable run description ({e})") from None
             if had != self.run:
+                keys = sorted(set(had) | set(self.run)) if isinstance(had, dict) else []
+                differ = [k for k in keys if had.get(k) != self.run.get(k)]
+                what = f" (its {', '.join(differ)} differ)" if differ else ""
                 raise ValueError(
-                    f"{self.folder} holds the finished units of another run (see {path}); "
+                    f"{self.folder} holds the finished units of another run{what}; see {path}: "
                     "run that command again to resume it, or delete the folder"
                 )
         else:

@@ -201,3 +201,49 @@ def test_a_resumed_run_without_logs_keeps_its_plot_seed(
     assert main([*args, "--plot-seed", "5"]) == 0  # the same plot seed, given: the same run
     assert "resuming: 1 work units already done" in capsys.readouterr().err
     assert (out / "plots" / "offsets_seed5.png").is_file()
+
+
+def test_a_resume_whose_agent_files_changed_is_another_run(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys
+) -> None:
+    """The units kept were run by the agent's old files: a resume with new ones would mix two
+    models' episodes under one label and record the new model's digest only."""
+    import shutil
+
+    from policies.learned.ppo import AGENTS
+
+    agent = tmp_path / "agents" / "mine"
+    shutil.copytree(AGENTS / "ppo", agent)
+    out = tmp_path / "run"
+    grid = ["--policies", str(agent), "--scenarios", "straight", "--episodes", "1"]
+    args = ["run", *grid, "--out", str(out), "--workers", "1", "--no-logs"]
+
+    def interrupted(*_: object, **__: object) -> None:
+        raise KeyboardInterrupt  # after every unit has run and been kept
+
+    with monkeypatch.context() as patch:
+        patch.setattr("eval.scoring.score", interrupted)
+        assert main(args) == 130
+    shutil.rmtree(agent)
+    shutil.copytree(AGENTS / "ppo_law", agent)
+    capsys.readouterr()
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1
+    assert "holds the finished units of another run (its model_sha256 differ)" in err
+    assert not out.exists()
+
+
+def test_metrics_on_a_run_whose_logs_were_deleted_says_so(
+    with_logs: Path, tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
+    import shutil
+
+    run = tmp_path / "run"
+    shutil.copytree(with_logs, run)
+    shutil.rmtree(run / "logs")
+    assert main(["metrics", str(run), "--out", str(tmp_path / "tables")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1
+    assert f"{run} is a follow-eval run folder whose step logs ({run / 'logs'}) are missing" in err
+    assert not (tmp_path / "tables").exists()
