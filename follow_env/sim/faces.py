@@ -9,6 +9,7 @@ task model supplies the configuration, the spaces, the observations, the info an
 
 from __future__ import annotations
 
+import numbers
 from typing import Any, ClassVar
 
 import gymnasium as gym
@@ -28,6 +29,8 @@ RENDER_MODES = ["rgb_array", "human"]
 def lane_seeds(num_envs: int, seed: int | list[int | None] | None) -> list[int | None]:
     """Root seed of every lane: an int ``s`` gives lane ``i`` the seed ``s + i`` (Gymnasium's
     convention), a list gives one seed per lane, ``None`` fresh OS entropy."""
+    if isinstance(seed, np.ndarray) and seed.ndim == 0:  # np.array(5): one number, not a list
+        seed = seed.item()
     if seed is None:
         seeds: list[int | None] = [None] * num_envs
     elif is_integer(seed):
@@ -50,6 +53,11 @@ REAL_KINDS = "biuf"
 complex numbers lose their imaginary part in a cast to float, silently."""
 
 
+def _is_real(x: object) -> bool:
+    """Whether ``x`` is a real number (Python's or numpy's; not a string, bytes or complex)."""
+    return isinstance(x, numbers.Real | np.bool_) and not isinstance(x, str | bytes)
+
+
 def action_array(action: Any, shape: tuple[int, ...], names: str) -> np.ndarray:
     """``action`` as a float64 array of exactly ``shape``, finite; ``ValueError`` naming the
     expected and the received shape (or the bad entries, or a dtype that is not real numbers)
@@ -58,8 +66,11 @@ def action_array(action: Any, shape: tuple[int, ...], names: str) -> np.ndarray:
         arr = np.asarray(action)
         if arr.dtype.kind not in REAL_KINDS + "O":  # objects: e.g. Python ints past 2**64
             raise TypeError(arr.dtype)
+        # An object array is taken only of real numbers: astype would parse "0.1" or b"1"
+        if arr.dtype.kind == "O" and not all(_is_real(x) for x in arr.flat):
+            raise TypeError(arr.dtype)
         arr = arr.astype(np.float64, copy=False)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):  # OverflowError: an int past float's range
         raise ValueError(
             f"action={action!r} is out of range: must be an array of real numbers of shape "
             f"{shape} {names}"

@@ -91,8 +91,15 @@ def test_a_copied_vector_env_and_sb3_adapter_step_as_the_originals() -> None:
 
 @pytest.mark.parametrize(
     "action",
-    [np.array([0.3 + 1j, 0.0]), np.array(["0.3", "0"]), np.array([b"1", b"0"])],
-    ids=["complex", "str", "bytes"],
+    [
+        np.array([0.3 + 1j, 0.0]),
+        np.array(["0.3", "0"]),
+        np.array([b"1", b"0"]),
+        np.array(["0.3", "0"], dtype=object),  # strings in an object array were parsed too
+        np.array([0.3, b"0"], dtype=object),
+        np.array([10**400, 0], dtype=object),  # an int past float's range: OverflowError once
+    ],
+    ids=["complex", "str", "bytes", "object-str", "object-bytes", "object-huge-int"],
 )
 def test_an_action_that_is_not_real_numbers_raises(action: np.ndarray) -> None:
     env = gym.make("PersonFollow-v0").unwrapped
@@ -115,7 +122,8 @@ def test_an_action_that_is_not_real_numbers_raises(action: np.ndarray) -> None:
 def test_real_actions_of_every_numeric_dtype_are_still_taken() -> None:
     env = gym.make("PersonFollow-v0").unwrapped
     env.reset(seed=0)
-    for action in ([0.3, 0.0], np.array([1, 0]), np.array([0.3, 0.0], np.float16)):
+    real = ([0.3, 0.0], np.array([1, 0]), np.array([0.3, 0.0], np.float16), [2**70, 0])
+    for action in (*real, np.array([0.3, np.float32(0)], dtype=object), [np.bool_(True), 0]):
         obs, *_ = env.step(action)
         assert env.observation_space.contains(obs)
 
@@ -159,6 +167,14 @@ def test_the_vector_env_refuses_a_seed_that_is_no_int_nor_list_naming_it(seed: o
     # one seed per letter.
     with pytest.raises(ValueError, match=rf"seed={seed!r} is out of range"):
         vec.reset(seed=seed)  # type: ignore[arg-type]
+
+
+def test_a_seed_given_as_a_numpy_scalar_or_0d_array_is_one_seed() -> None:
+    vec = follow_env.PersonFollowVectorEnv(2)
+    expected, _ = vec.reset(seed=7)
+    for seed in (np.int64(7), np.array(7), np.array(7, dtype=np.uint8)):
+        obs, _ = vec.reset(seed=seed)  # type: ignore[arg-type]
+        np.testing.assert_array_equal(obs, expected)
 
 
 def test_the_sb3_adapter_refuses_options_as_the_single_env_does() -> None:
