@@ -28,6 +28,7 @@ from typing import Any, NoReturn
 import numpy as np
 
 from eval.cli_base import MAX_SEED, UsageError, _names
+from follow_env.sim.checks import one_line
 
 __all__ = ["check_covered", "cmd_dominance", "pooled_table", "read_episode_table"]
 
@@ -264,7 +265,7 @@ def read_episode_table(path: Path, metrics: list[str], optional: Sequence[str] =
             path, dtype=dict.fromkeys([*labels, "seed"], str), index_col=False, encoding="utf-8-sig"
         )
     except (pd.errors.ParserError, UnicodeDecodeError, OSError) as e:
-        raise UsageError(f"{path}: not an episode table ({_one_line(e)})") from None
+        raise UsageError(f"{path}: not an episode table ({one_line(e)})") from None
     if list(table.columns) != header or len(table) != len(lines):  # what the rows said
         raise UsageError(f"{path}: not an episode table (its rows do not parse as CSV)")
     for column in labels:  # "NA" or "nan" in a label reads as missing
@@ -298,11 +299,6 @@ def _cell(path: Path, row: int, column: int) -> str:
             if k == row + 1:
                 return cells[column]
     return ""
-
-
-def _one_line(error: Exception) -> str:
-    """An exception's message on one line (pandas' parser errors end in a line break)."""
-    return " ".join(str(error).split())
 
 
 def _checked_rows(path: Path, metrics: list[str]) -> tuple[list[str], array[int]]:
@@ -348,7 +344,7 @@ def _checked_rows(path: Path, metrics: list[str]) -> tuple[list[str], array[int]
                 lines.append(start)
                 start = reader.line_num + 1
     except (UnicodeDecodeError, csv.Error) as e:
-        raise UsageError(f"{path}: not an episode table ({_one_line(e)})") from None
+        raise UsageError(f"{path}: not an episode table ({one_line(e)})") from None
     if not lines:
         raise UsageError(f"{path}: holds no episodes (a header only)")
     return header, lines

@@ -27,6 +27,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from follow_env.sim.checks import one_line
 from train.rules import (
     Check,
     ConfigError,
@@ -395,7 +396,7 @@ def new_model(
     except (ValueError, TypeError, AssertionError, OverflowError) as e:
         raise ConfigError(f"{where}: {learner.library} rejects the hyperparameters: {e}") from None
     except (MemoryError, RuntimeError) as e:  # numpy's rollout buffer, torch's layers
-        problem = " ".join(str(e).split())
+        problem = one_line(e)
         raise ConfigError(
             f"{where}: the model does not fit in memory with these hyperparameters (n_steps, "
             f"buffer_size, net_arch, frame_stack): {problem}"

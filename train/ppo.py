@@ -36,6 +36,7 @@ from pathlib import Path
 from typing import Any
 
 from follow_env.sim.atomic import atomic_write_text, missing_folders, remove_empty_folders
+from follow_env.sim.checks import one_line
 from train.algos import ALGOS, DEFAULT_ALGO, load_model, new_model
 from train.config import ConfigError, Hyperparams, check_action_fit, policy_class
 from train.export import AGENT_FILES, EXPORT_EXTRAS, export_agent
@@ -163,7 +164,7 @@ def train(args: Args, command: str = PROG) -> Path:
             left = f"nothing to resume, removed {run}"
         else:
             left = f"{run} keeps its checkpoints"
-        problem = " ".join(str(e).split()) or "no message"
+        problem = one_line(e) or "no message"
         raise TrainingError(
             f"training failed at {model.num_timesteps:,} env steps ({type(e).__name__}: "
             f"{problem}; check the hyperparameters in {where}); {left}"
@@ -250,7 +251,7 @@ def _build(
     except ConfigError:
         raise
     except (ValueError, TypeError, OverflowError, MemoryError) as e:  # e.g. frame_stack 10**9
-        problem = " ".join(str(e).split())
+        problem = one_line(e)
         raise ConfigError(f"{where}: the agent's env cannot be built: {problem}") from None
     except Exception as e:  # a resume's statistics file: pickle and SB3 raise their own
         if normalization is None:

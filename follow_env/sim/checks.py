@@ -29,6 +29,7 @@ __all__ = [
     "is_integer",
     "is_real",
     "load_yaml",
+    "one_line",
     "out_of_range",
     "range_text",
     "utf8_problem",
@@ -129,6 +130,12 @@ def check_number(
     if not ok:
         raise out_of_range(where, value, rule)
     return as_number(value)  # type: ignore[return-value]
+
+
+def one_line(error: BaseException) -> str:
+    """An exception's message on one line, for a command's one-line error (pandas', SB3's and
+    torch's messages run over several)."""
+    return " ".join(str(error).split())
 
 
 def yaml_problem(exc: Exception) -> str:

@@ -54,8 +54,9 @@ complex numbers lose their imaginary part in a cast to float, silently."""
 
 
 def _is_real(x: object) -> bool:
-    """Whether ``x`` is a real number (Python's or numpy's; not a string, bytes or complex)."""
-    return isinstance(x, numbers.Real | np.bool_) and not isinstance(x, str | bytes)
+    """Whether ``x`` is a real number, bools included (Python's or numpy's; not a string,
+    bytes or complex: :func:`follow_env.sim.checks.is_real` is for parameters, without bools)."""
+    return isinstance(x, numbers.Real | np.bool_)
 
 
 def action_array(action: Any, shape: tuple[int, ...], names: str) -> np.ndarray:
