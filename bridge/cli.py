@@ -144,6 +144,14 @@ def _parser() -> _Parser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point; returns the exit status."""
+    # A path typed with bytes that are not UTF-8 (a replay file, a --log without a --log check
+    # of its name) is printed in the summary after the session: under a UTF-8 locale Python's
+    # streams refuse its surrogates, and the summary would end in a traceback. Printed as the
+    # bytes were typed instead.
+    for stream in (sys.stdout, sys.stderr):
+        reconfigure = getattr(stream, "reconfigure", None)
+        if reconfigure is not None and getattr(stream, "errors", None) == "strict":
+            reconfigure(errors="surrogateescape")
     try:
         args = _parser().parse_args(argv)
         return _dispatch(args)
@@ -370,7 +378,7 @@ def _monitor_sim(args: argparse.Namespace) -> int:
 def _run(args: argparse.Namespace, monitor: bool) -> int:
     from bridge.fit import check_command, check_platform
     from bridge.runlog import check_log_path
-    from bridge.runner import Runner, RunnerConfig
+    from bridge.runner import PolicyError, Runner, RunnerConfig
 
     if args.framing == "reference" and args.command == "speed":
         # the reference firmware reads the wire's two values as percent duty (reference §1)
@@ -383,6 +391,11 @@ def _run(args: argparse.Namespace, monitor: bool) -> int:
             check_log_path(args.log)
         except ValueError as exc:
             raise UsageError(str(exc)) from None
+        # The log's policy and scenario columns hold these as typed, and the log is UTF-8 text:
+        # refused now, not at the end of the session, when the log could not be written.
+        if args.subcommand == "run":
+            _check_text("--policy", args.policy, "policy")
+        _check_text("--perception", args.perception, "scenario")
     config = _env_config(args)
     try:  # the robot drives with two wheels: refused now, not by a crash in the session
         check_platform(config.platform)
@@ -436,7 +449,7 @@ def _run(args: argparse.Namespace, monitor: bool) -> int:
         except ValueError as exc:  # what the runner refuses before it starts (checked above)
             raise UsageError(str(exc)) from None
         result = runner.run()
-    except (LinkError, PerceptionError) as exc:
+    except (LinkError, PerceptionError, PolicyError) as exc:
         # mid-session, the result is on the error: the summary, and where the log went
         return _report(getattr(exc, "result", None), str(exc))
     finally:
@@ -444,6 +457,30 @@ def _run(args: argparse.Namespace, monitor: bool) -> int:
         if server is not None:
             server.stop()
     return _report(result)
+
+
+def _check_text(option: str, value: str, column: str) -> None:
+    """Refuse ``value`` if it is not text the step log can hold: its ``column`` is UTF-8, and
+    bytes of a command line that are not UTF-8 arrive as lone surrogates, which it cannot be.
+
+    :raises UsageError: one line naming ``option`` and ``value`` (its bytes as typed).
+    """
+    try:
+        value.encode("utf-8")
+    except UnicodeEncodeError:
+        raise UsageError(
+            f"{option} {_shown(value)}: is not UTF-8 text, which the step log's {column} column "
+            "holds; rename the file or folder, or run without --log"
+        ) from None
+
+
+def _shown(value: str) -> str:
+    """``value`` printable: a byte that is not UTF-8 as ``\\xff``, as typed (the surrogate a
+    command line decodes it to, ``\\udcff``, is not what the user sees)."""
+    try:
+        return value.encode("utf-8", "surrogateescape").decode("utf-8", "backslashreplace")
+    except UnicodeEncodeError:  # a surrogate no byte decodes to: given from Python, not typed
+        return value.encode("utf-8", "backslashreplace").decode("utf-8")
 
 
 def _report(result: Any, error: str = "") -> int:

@@ -134,8 +134,20 @@ class RealSensePerception:
     def read(self) -> Frame:
         if not self._started or self._grab is None or self._detect is None:
             raise PerceptionError("realsense: call start() before read()")
-        colour, depth_m = self._grab()
-        box = next((b for b in self._detect(colour) if int(b[4]) == PERSON_CLASS), None)
+        # pyrealsense2 and the detector raise RuntimeError (a camera unplugged mid-run: "Frame
+        # didn't arrive within 1000"): a perception error, which the runner ends a session on
+        try:
+            colour, depth_m = self._grab()
+        except RuntimeError as exc:
+            raise PerceptionError(
+                f"realsense: no frame from the camera ({exc}); is it still plugged in?"
+            ) from exc
+        try:
+            boxes = self._detect(colour)
+        except RuntimeError as exc:
+            which = "" if self.model is None else f" {self.model}"  # None: a given ``detect``
+            raise PerceptionError(f"realsense: the detector{which} failed ({exc})") from exc
+        box = next((b for b in boxes if int(b[4]) == PERSON_CLASS), None)
         if box is None:  # nothing published: the guidance law acts on the last pair
             ahead = self.reading_ahead(depth_m) if self._rays else None
             return Frame(self._distance, self._offset, False, ahead_m=ahead)

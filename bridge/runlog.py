@@ -65,11 +65,15 @@ def check_log_path(path: str | Path) -> Path:
     return path
 
 
-def write_rows(rows: list[dict[str, Any]], path: Path) -> Path:
-    """Write step-log rows (the columns they use, in the layout's order) atomically."""
+def write_rows(rows: list[dict[str, Any]], path: Path, errors: str = "strict") -> Path:
+    """Write step-log rows (the columns they use, in the layout's order) atomically.
+
+    :param errors: how text that is not UTF-8 is written (:func:`open`'s ``errors``): refused
+        by default (``UnicodeEncodeError``), so that a log is never altered without a word.
+    """
     used = {k for row in rows for k, v in row.items() if v is not None}
     header = [c for c in LOG_COLUMNS if c in used]
-    with atomic_path(path) as tmp, tmp.open("w", newline="", encoding="utf-8") as f:
+    with atomic_path(path) as tmp, tmp.open("w", newline="", encoding="utf-8", errors=errors) as f:
         writer = csv.writer(f, lineterminator="\n")
         writer.writerow(header)
         for row in rows:
@@ -78,27 +82,41 @@ def write_rows(rows: list[dict[str, Any]], path: Path) -> Path:
 
 
 def save_rows(rows: list[dict[str, Any]], path: Path) -> tuple[Path | None, str]:
-    """Write the rows to ``path``; if that fails (the folder went away during the session, the
-    disk filled up), to a file of its own in the system's temporary folder instead.
+    """Write the rows to ``path``; if that fails, whatever the reason (the folder went away
+    during the session, the disk filled up, a value is not UTF-8 text), to a file of its own in
+    the system's temporary folder instead, where text that is not UTF-8 is written as
+    backslash escapes (``\\udcff``) rather than lose the rows. Never raises: it runs at the end
+    of a session, whose summary must still be said.
 
     :returns: ``(where the log is, "")``, or ``(the fallback file, why path failed)``, or
         ``(None, why both failed)``: the reason is one line naming ``--log`` and the path.
     """
     try:
         return write_rows(rows, path), ""
-    except OSError as exc:
-        why = f"--log {path}: the step log could not be written ({exc.strerror or exc})"
+    except Exception as exc:  # any: the rows go to the spare file whatever stopped them here
+        why = f"--log {path}: the step log could not be written ({_why(exc)})"
     stamp = time.strftime("%Y%m%d-%H%M%S")
     spare: Path | None = None
     try:
         fd, name = tempfile.mkstemp(prefix=f"follow-robot-{stamp}-", suffix=".csv")
         os.close(fd)  # a name of our own; write_rows renames its own temporary file onto it
         spare = Path(name)
-        return write_rows(rows, spare), f"{why}; saved to {spare} instead"
-    except OSError as exc:
+        saved = write_rows(rows, spare, errors="backslashreplace")
+        return saved, f"{why}; saved to {spare} instead"
+    except Exception as exc:  # any: said in the one line, not a traceback that hides the summary
         if spare is not None:
             spare.unlink(missing_ok=True)  # no empty file left for a log that is not there
-        return None, f"{why}, nor in {tempfile.gettempdir()} ({exc.strerror or exc}): lost"
+        return None, f"{why}, nor in {tempfile.gettempdir()} ({_why(exc)}): lost"
+
+
+def _why(exc: Exception) -> str:
+    """What went wrong, in a few words: an OS error's own, or the exception's type and text."""
+    if isinstance(exc, OSError):
+        return str(exc.strerror or exc)
+    if isinstance(exc, UnicodeEncodeError):  # its position is in a buffer, of no use to anyone
+        bad = exc.object[exc.start : exc.end].encode("utf-8", "backslashreplace").decode()
+        return f"a value holds {bad}, which is not UTF-8 text"
+    return f"{type(exc).__name__}: {exc}"
 
 
 def _cell(value: Any) -> str:

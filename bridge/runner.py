@@ -15,8 +15,9 @@ the serial nodes below it):
   and ends the run.
 
 On Ctrl-C, at the end of the perception (the world's episode, the replay), after
-``duration_s``, on a link or perception error, or when the wheel loop fails, the wheels are
-commanded to zero before the link closes; a second Ctrl-C during that shutdown is deferred
+``duration_s``, on a link, perception or policy error (whatever the perception's read or the
+policy's ``act`` raised), or when the wheel loop fails, the wheels are commanded to zero before
+the link closes; a second Ctrl-C during that shutdown is deferred
 (:class:`bridge.interrupts.InterruptGuard`). The step log (the evaluation's layout,
 :mod:`follow_env.tasks.person_follow.steplog`) is written to a temporary file and renamed into
 place, so ``follow-eval metrics`` scores a real run like a simulated one.
@@ -46,7 +47,7 @@ from follow_env.platforms.wheels import pid_step
 from follow_env.sim.checks import out_of_range
 from follow_env.tasks.person_follow.steplog import AHEAD_COLUMN
 
-__all__ = ["COMMAND_MODES", "RunResult", "Runner", "RunnerConfig"]
+__all__ = ["COMMAND_MODES", "PolicyError", "RunResult", "Runner", "RunnerConfig"]
 
 _ZERO_REPEATS = 3  # stop commands sent at the end (one may be lost on a noisy line)
 _FIRST_FEEDBACK_S = 1.0  # longest wait for the MCU's first feedback, s
@@ -55,6 +56,10 @@ _FIRST_FEEDBACK_S = 1.0  # longest wait for the MCU's first feedback, s
 # runner never compiles a kernel.
 _ik = diff_drive_ik.py_func
 _pid = pid_step.py_func
+
+
+class PolicyError(Exception):
+    """The policy failed mid-session (its ``act`` raised); the message names it and says how."""
 
 
 class _Wheels:
@@ -312,7 +317,8 @@ class Runner:
         :raises LinkError: the MCU could not be reached or does not take the command mode, or
             (``.result``: the session's :class:`RunResult`, its log saved) it failed mid-run.
         :raises PerceptionError: the perception could not start or feed the policy, or (with
-            ``.result``, as above) it failed mid-run.
+            ``.result``, as above) it failed mid-run: whatever its read raised, named so.
+        :raises PolicyError: (with ``.result``, as above) the policy's ``act`` raised mid-run.
         """
         cfg = self.config
         result = RunResult()
@@ -350,7 +356,7 @@ class Runner:
                         step = int((woke - start) // cfg.control_dt_s)
                         continue
                     result.lateness_ms.append(1000.0 * late)
-                    frame = self.perception.read()
+                    frame = self._read()
                     t = step * cfg.control_dt_s
                     if frame.done:
                         result.reason = f"perception over ({frame.termination or 'done'})"
@@ -363,8 +369,13 @@ class Runner:
                     step += 1
             except KeyboardInterrupt:
                 result.reason = "interrupted (Ctrl-C)"
-            except (LinkError, PerceptionError) as exc:
-                kind = "link" if isinstance(exc, LinkError) else "perception"
+            except (LinkError, PerceptionError, PolicyError) as exc:
+                if isinstance(exc, LinkError):
+                    kind = "link"
+                elif isinstance(exc, PolicyError):
+                    kind = "policy"
+                else:
+                    kind = "perception"
                 result.reason = f"{kind} error: {exc}"
                 exc.result = result  # type: ignore[attr-defined]  # filled in below
                 raise
@@ -398,6 +409,19 @@ class Runner:
         if self.log is not None:
             result.log, result.log_error = save_rows(self._rows, self.log)
 
+    def _read(self) -> Frame:
+        """The perception's next frame; whatever its read raises ends the session as a
+        perception error (wheels stopped, log saved, the summary said), not as a traceback:
+        a camera unplugged mid-run raises what its driver raises (pyrealsense2: RuntimeError)."""
+        try:
+            return self.perception.read()
+        except PerceptionError:
+            raise
+        except Exception as exc:
+            raise PerceptionError(
+                f"{self.perception.name}: reading a frame failed ({type(exc).__name__}: {exc})"
+            ) from exc
+
     def _act(self, frame: Frame) -> tuple[float, float]:
         policy = self._current_policy()
         if policy == "stop":
@@ -411,7 +435,13 @@ class Runner:
                     f"{self.perception.name} published a frame without it"
                 )
             obs = np.array(frame.observation(), dtype=np.float32)
-            v, w = (float(x) for x in policy.act(obs))
+            try:
+                v, w = (float(x) for x in policy.act(obs))
+            except Exception as exc:  # any: the session ends as a failure, said in one line
+                name = getattr(policy, "name", type(policy).__name__)
+                raise PolicyError(
+                    f"policy {name} failed to act ({type(exc).__name__}: {exc})"
+                ) from exc
         v_max, w_max = self.platform.max_speed_mps, self.platform.max_turn_rate_radps
         v, w = min(max(v, -v_max), v_max), min(max(w, -w_max), w_max)
         r, track = self.platform.robot.wheel_radius_m, self.platform.robot.track_width_m

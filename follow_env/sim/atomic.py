@@ -32,9 +32,13 @@ __all__ = [
 ]
 
 
-# A temporary file's name keeps at most this much of its target's stem, so that a target whose
-# name is as long as the file system allows (255 bytes on most) still gets a temporary name.
+# A temporary file's name keeps at most this much of its target's stem, and its suffix only
+# when it is at most this long (every format's is: ".csv", ".mp4", ".json"), so that a target
+# whose name is as long as the file system allows (255 bytes on most), however it is split
+# into stem and suffix, still gets a temporary name (at most 1 + 4 * 32 + 1 + 8 + 4 + 4 * 16 =
+# 206 bytes, however many bytes each character takes).
 _STEM_KEEP_CHARS = 32
+_SUFFIX_KEEP_CHARS = 16
 _RANDOM_CHARS = 8  # what mkstemp puts between the prefix and the suffix
 
 
@@ -46,8 +50,10 @@ def _umask() -> int:
 
 def _affixes(path: Path) -> tuple[str, str]:
     """The prefix and suffix of ``path``'s temporary file: its stem, cut short, and its
-    suffix (writers such as ``cv2.VideoWriter`` pick the format from the suffix)."""
-    return f".{path.stem[:_STEM_KEEP_CHARS]}.", f".tmp{path.suffix}"
+    suffix (writers such as ``cv2.VideoWriter`` pick the format from the suffix), left out when
+    longer than any format's: cut short, it could name another format."""
+    suffix = path.suffix if len(path.suffix) <= _SUFFIX_KEEP_CHARS else ""
+    return f".{path.stem[:_STEM_KEEP_CHARS]}.", f".tmp{suffix}"
 
 
 def longest_name(path: str | Path) -> int:
@@ -64,10 +70,11 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     """Yield a temporary path beside ``path``; rename it to ``path`` if the block succeeds.
 
     The temporary name keeps the target's suffix (writers such as ``cv2.VideoWriter`` and
-    ``savefig`` pick the format from it) and at most 32 characters of its stem. On an exception
-    the temporary file is removed. A target that is there and is not a regular file (a device,
-    a FIFO, a socket: ``/dev/null`` for root) is never replaced: the block's file is removed
-    and ``OSError`` says so.
+    ``savefig`` pick the format from it) if it is at most 16 characters, and at most 32
+    characters of its stem, so that any name the folder's file system takes can be written.
+    On an exception the temporary file is removed. A target that is there and is not a regular
+    file (a device, a FIFO, a socket: ``/dev/null`` for root) is never replaced: the block's
+    file is removed and ``OSError`` says so.
 
     :raises OSError: if the folder is not writable (the message names it), or ``path`` is not
         a regular file.
@@ -212,7 +219,9 @@ def atomic_folder(path: str | Path) -> Iterator[Path]:
     check_new_folder(path)
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent))
+        # the name cut short, as a file's is: a folder named as long as the file system takes
+        prefix = f".{path.name[:_STEM_KEEP_CHARS]}."
+        tmp = Path(tempfile.mkdtemp(prefix=prefix, suffix=".tmp", dir=path.parent))
         os.chmod(tmp, 0o777 & ~_umask())  # mkdtemp makes 0700; give the folder the usual mode
     except OSError as e:
         raise OSError(f"cannot write to {path.parent}: {e.strerror or e}") from None

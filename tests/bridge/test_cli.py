@@ -145,13 +145,20 @@ def test_the_final_save_never_replaces_what_became_a_fifo(tmp_path: Path, spare:
     assert _files(tmp_path) == ["run.csv", "spare", f"spare/{where.name}"]
 
 
-@pytest.mark.parametrize("length", [250, 255])
+@pytest.mark.parametrize(
+    "name",
+    [
+        "x" * 246 + ".csv",  # 250 bytes
+        "x" * 251 + ".csv",  # 255 bytes: the longest the folder takes
+        "a." + "b" * 240,  # 242 bytes, nearly all suffix (the temporary name leaves it out)
+    ],
+)
 def test_a_long_log_name_the_folder_takes_is_written_there(
-    length: int, tmp_path: Path, spare: Path
+    name: str, tmp_path: Path, spare: Path
 ) -> None:
     from eval.steplog import read_step_log
 
-    log = tmp_path / ("x" * (length - 4) + ".csv")
+    log = tmp_path / name
     assert main([*RUN, *REPLAY, "--log", str(log)]) == 0
     assert len(read_step_log(log)) >= 2
     assert _files(tmp_path) == sorted([log.name, "spare"])  # no temporary file, no spare copy
@@ -164,6 +171,110 @@ def test_a_log_name_longer_than_the_folder_takes_is_refused_before_the_session(
     assert main([*RUN, *REPLAY, "--log", str(log)]) == 2
     _one_line(capsys, f"--log {log}: cannot create a file in the folder", "256 bytes")
     assert _files(tmp_path) == []
+
+
+def _not_utf8(folder: Path, name: bytes) -> Path:
+    """``folder / name`` as a command line gives a name whose bytes are not UTF-8: each such
+    byte as a lone surrogate (``b"\\xff"`` as ``"\\udcff"``)."""
+    return folder / os.fsdecode(name)
+
+
+@pytest.mark.parametrize("option", ["--perception", "--policy"])
+def test_a_name_that_is_not_utf8_text_is_refused_before_the_session_with_a_log(
+    option: str, tmp_path: Path, capsys: pytest.CaptureFixture[str], no_session: None
+) -> None:
+    # the log's policy and scenario columns hold the two as typed, and the log is UTF-8 text:
+    # at the end of the session it could not be written
+    replay = _not_utf8(tmp_path, b"r\xff.csv")
+    replay.write_text(_LOG)
+    value = f"replay:{replay}" if option == "--perception" else str(_not_utf8(tmp_path, b"m\xff"))
+    argv = [*RUN, *REPLAY, option, value, "--log", str(tmp_path / "run.csv")]
+    assert main(argv) == 2
+    shown = value.replace("\udcff", "\\xff")  # the byte as typed, not its surrogate
+    _one_line(capsys, f"{option} {shown}: is not UTF-8 text", "run without --log")
+    assert _files(tmp_path) == [replay.name]
+
+
+def test_a_replay_whose_name_is_not_utf8_text_runs_without_a_log(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    replay = _not_utf8(tmp_path, b"r\xff.csv")
+    replay.write_text(_LOG)
+    assert main([*RUN, "--perception", f"replay:{replay}"]) == 0
+    assert "ended: duration 1 s reached" in capsys.readouterr().out
+
+
+def test_rows_that_cannot_be_written_at_log_are_saved_in_the_spare_file(
+    tmp_path: Path, spare: Path
+) -> None:
+    # any failure, not only the file system's: here a value that is not UTF-8 text (a Runner
+    # given such metadata from Python, which the command line refuses)
+    from bridge.runlog import save_rows
+
+    log = tmp_path / "run.csv"
+    rows = [{"scenario": "robot:replay:r\udcff.csv", "step": k, "time_s": k / 10} for k in (0, 1)]
+    where, why = save_rows(rows, log)
+    assert where is not None
+    assert where.parent == spare
+    assert why == (
+        f"--log {log}: the step log could not be written (a value holds \\udcff, which is not "
+        f"UTF-8 text); saved to {where} instead"
+    )
+    # UTF-8 text, what is not UTF-8 written as an escape
+    assert where.read_text(encoding="utf-8") == (
+        "scenario,step,time_s\nrobot:replay:r\\udcff.csv,0,0\nrobot:replay:r\\udcff.csv,1,0.1\n"
+    )
+    assert _files(tmp_path) == ["spare", f"spare/{where.name}"]  # nothing at --log, no temp
+
+
+def test_rows_that_cannot_be_written_anywhere_are_said_lost_in_one_line(
+    tmp_path: Path, spare: Path
+) -> None:
+    from bridge.runlog import save_rows
+
+    class Unprintable:
+        def __str__(self) -> str:
+            raise ValueError("no text for this")
+
+    log = tmp_path / "run.csv"
+    where, why = save_rows([{"step": 0, "time_s": Unprintable()}], log)
+    assert where is None
+    assert why == (
+        f"--log {log}: the step log could not be written (ValueError: no text for this), nor "
+        f"in {spare} (ValueError: no text for this): lost"
+    )
+    assert _files(tmp_path) == ["spare"]  # no empty spare file, no temporary file
+
+
+def test_a_session_whose_log_metadata_is_not_utf8_text_keeps_its_rows(
+    tmp_path: Path, spare: Path
+) -> None:
+    from bridge import SerialLink
+    from bridge.perception import Replay
+    from bridge.runner import RunnerConfig
+    from eval.steplog import read_step_log
+    from policies import make_policy
+
+    replay = tmp_path / "obs.csv"
+    replay.write_text(_LOG)
+    log = tmp_path / "run.csv"
+    meta = {"policy": "pn", "scenario": "robot:replay:r\udcff.csv", "seed": None}
+    with SerialLink("loop://", "reference") as link:
+        runner = Runner(
+            link,
+            make_policy("pn"),
+            Replay(replay),
+            config=RunnerConfig(duration_s=0.5),
+            log=log,
+            meta=meta,
+        )
+        result = runner.run()  # before: UnicodeEncodeError out of its finally, no log at all
+    assert result.reason == "duration 0.5 s reached"
+    assert result.log is not None
+    assert result.log.parent == spare
+    assert result.log_error.startswith(f"--log {log}: the step log could not be written (")
+    assert len(read_step_log(result.log)) == result.steps + 1
+    assert not log.exists()
 
 
 # ---- run: what the robot cannot do ----------------------------------------------------------
@@ -228,6 +339,86 @@ def test_an_error_mid_session_still_says_how_it_went_and_where_the_log_is(
     assert "4 control steps, ended: perception error: the camera timed out" in out
     assert f"log: {kept}" in out
     assert len(read_step_log(kept)) == 5  # the 4 steps, and the last frame with no command
+
+
+@pytest.mark.slow
+def test_a_camera_unplugged_mid_session_ends_it_with_the_summary_and_the_log(
+    emulator_process: Any,
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    # Any error of the perception's read, not only a PerceptionError: here what pyrealsense2
+    # raises when the camera is unplugged, after 15 frames of the emulator's world.
+    import bridge.cli
+
+    emu = emulator_process()  # the reference firmware, which holds its last duty until told
+    opened = bridge.cli.open_source
+    seen: dict[str, Any] = {}
+
+    def unplugged(*args: Any, **kwargs: Any) -> Any:
+        source = opened(*args, **kwargs)
+        read = source.read
+        reads: list[int] = []
+
+        def failing() -> Any:
+            reads.append(1)
+            if len(reads) == 16:
+                seen["driving"] = emu.ask(op="info")["wheels"]["duty_pct"]
+                raise RuntimeError("Frame didn't arrive within 1000")
+            return read()
+
+        source.read = failing
+        return source
+
+    monkeypatch.setattr(bridge.cli, "open_source", unplugged)
+    log = tmp_path / "run.csv"
+    assert main(["run", "--port", emu.url, "--policy", "pn", "--log", str(log)]) == 1
+    out, err = capsys.readouterr()
+    why = "sim: reading a frame failed (RuntimeError: Frame didn't arrive within 1000)"
+    assert err == f"follow-robot: error: {why}\n"
+    assert f"15 control steps, ended: perception error: {why}" in out
+    assert f"log: {log}" in out
+    assert seen["driving"] != [0.0, 0.0]
+    assert emu.ask(op="info")["wheels"]["duty_pct"] == [0.0, 0.0]  # the wheels were stopped
+    from eval.steplog import read_step_log
+
+    assert len(read_step_log(log)) == 16  # the 15 steps, and the last frame with no command
+
+
+def test_a_policy_that_fails_mid_session_ends_it_with_the_summary_and_the_log(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import policies
+    from eval.steplog import read_step_log
+
+    made = policies.make_policy
+
+    def failing_after_some_steps(name: str) -> Any:
+        policy = made(name)
+        act = policy.act
+        calls: list[int] = []
+
+        def failing(obs: Any) -> Any:
+            calls.append(1)
+            if len(calls) == 6:
+                raise ZeroDivisionError("float division by zero")
+            return act(obs)
+
+        policy.act = failing
+        return policy
+
+    monkeypatch.setattr(policies, "make_policy", failing_after_some_steps)
+    replay = tmp_path / "obs.csv"
+    replay.write_text(_LOG)
+    log = tmp_path / "run.csv"
+    assert main([*RUN, "--perception", f"replay:{replay}", "--log", str(log)]) == 1
+    out, err = capsys.readouterr()
+    why = "policy pn:tuned failed to act (ZeroDivisionError: float division by zero)"
+    assert err == f"follow-robot: error: {why}\n"
+    assert f"5 control steps, ended: policy error: {why}" in out
+    assert f"log: {log}" in out
+    assert len(read_step_log(log)) == 6  # the 5 steps, and the last frame with no command
 
 
 # ---- run --perception replay: -------------------------------------------------------------
@@ -444,3 +635,21 @@ def test_the_printed_monitor_url_carries_any_token_intact(
     _start_monitor(args, hub=None)
     url = capsys.readouterr().out.strip().rsplit(" ", 1)[1]
     assert parse_qs(urlsplit(url).query)["token"] == [token]
+
+
+def test_a_log_path_that_is_not_utf8_is_printed_as_typed_under_a_strict_stdout(
+    tmp_path: Path,
+) -> None:
+    # Under a UTF-8 locale Python's streams refuse a lone surrogate: the session ran, its log
+    # was saved, and then the summary line naming the log ended in a traceback.
+    import subprocess
+    import sys
+
+    log = tmp_path / os.fsdecode(b"run\xff.csv")
+    env = {**os.environ, "PYTHONIOENCODING": "utf-8"}
+    argv = [sys.executable, "-m", "bridge", *RUN, *REPLAY, "--log", os.fsencode(log)]
+    done = subprocess.run(argv, capture_output=True, env=env, timeout=120, check=False)
+    assert done.returncode == 0, done.stderr.decode("utf-8", "replace")
+    assert b"Traceback" not in done.stderr
+    assert os.fsencode(log) in done.stdout  # the bytes as typed
+    assert log.is_file()

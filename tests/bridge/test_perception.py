@@ -234,6 +234,30 @@ def test_the_realsense_node_never_downloads_a_model(tmp_path: Path) -> None:
         RealSensePerception(grab=FakeCamera(), detect=lambda c: []).read()
 
 
+def test_an_unplugged_camera_or_a_failing_detector_is_a_perception_error() -> None:
+    # pyrealsense2's wait_for_frames raises RuntimeError when no frame comes (the camera was
+    # unplugged); the runner ends a session on a PerceptionError as a perception failure
+    def unplugged() -> tuple[np.ndarray, np.ndarray]:
+        raise RuntimeError("Frame didn't arrive within 1000")
+
+    node = RealSensePerception(grab=unplugged, detect=lambda colour: [])
+    node.start()
+    with pytest.raises(PerceptionError) as caught:
+        node.read()
+    assert str(caught.value) == (
+        "realsense: no frame from the camera (Frame didn't arrive within 1000); is it still "
+        "plugged in?"
+    )
+
+    def broken(colour: np.ndarray) -> list[tuple[float, float, float, float, int]]:
+        raise RuntimeError("CUDA error: out of memory")
+
+    node = RealSensePerception(grab=FakeCamera(), detect=broken)
+    node.start()
+    with pytest.raises(PerceptionError, match=r"^realsense: the detector failed \(CUDA error"):
+        node.read()
+
+
 # ---- the reading ahead ---------------------------------------------------------------------
 
 

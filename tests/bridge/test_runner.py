@@ -409,6 +409,65 @@ def test_a_failing_wheel_loop_ends_the_run_stops_the_wheels_and_says_why(tmp_pat
     assert f"ended: {result.reason}" in result.summary()
 
 
+class _Unplugged(Replay):
+    """A replay whose 6th read raises what pyrealsense2 does when the camera is unplugged."""
+
+    reads = 0
+
+    def read(self) -> Frame:
+        self.reads += 1
+        if self.reads == 6:
+            raise RuntimeError("Frame didn't arrive within 1000")
+        return super().read()
+
+
+def _failing_on_the_6th_act(policy: Any) -> Any:
+    """``policy``, whose 6th ``act`` returns one value instead of two (a bug standing in for
+    any)."""
+    act, calls = policy.act, []
+
+    def failing(obs: Any) -> Any:
+        calls.append(obs)
+        return act(obs)[:1] if len(calls) == 6 else act(obs)
+
+    policy.act = failing
+    return policy
+
+
+@pytest.mark.parametrize("failing", ["perception", "policy"])
+def test_a_failing_read_or_act_ends_the_run_stops_the_wheels_and_keeps_the_log(
+    failing: str, tmp_path: Path
+) -> None:
+    # Whatever the perception's read or the policy's act raises: the session ends as a failure
+    # of the one that failed, with its result on the error, the wheels stopped, the log saved.
+    from bridge.perception import PerceptionError
+
+    if failing == "perception":
+        policy, source = make_policy("pn"), _Unplugged(_curve(tmp_path))
+        error: type[Exception] = PerceptionError
+        why = f"{source.name}: reading a frame failed (RuntimeError: Frame didn't arrive within "
+        why += "1000)"
+    else:
+        from bridge.runner import PolicyError
+
+        policy, source = _failing_on_the_6th_act(make_policy("pn")), Replay(_curve(tmp_path))
+        error = PolicyError
+        why = "policy pn:tuned failed to act (ValueError: not enough values to unpack (expected "
+        why += "2, got 1))"
+    log = tmp_path / "run.csv"
+    with SerialLink("loop://", "reference") as link:
+        runner = Runner(link, policy, source, config=RunnerConfig(duration_s=5), log=log)
+        with pytest.raises(error) as caught:
+            runner.run()
+        assert _stopped(link)
+    assert str(caught.value) == why
+    result = caught.value.result  # type: ignore[attr-defined]
+    assert result.reason == f"{failing} error: {why}"
+    assert result.steps == 5
+    assert result.log == log
+    assert len(read_step_log(log)) == 6  # the 5 steps, and the last frame with no command
+
+
 def test_a_stop_command_that_cannot_be_sent_is_said(tmp_path: Path) -> None:
     with SerialLink("loop://", "reference") as link:
         runner = Runner(

@@ -66,6 +66,27 @@ def test_a_name_as_long_as_the_file_system_takes_gets_a_temporary_name(
     assert [p.name for p in tmp_path.iterdir()] == [target.name]
 
 
+@pytest.mark.parametrize(
+    "name",
+    [
+        "a." + "b" * 240,  # 242 bytes, nearly all suffix
+        "a." + "b" * 253,  # 255 bytes: the longest a name can be
+        "a." + "\u00e9" * 126,  # 254 bytes, two for each of the suffix's characters
+    ],
+)
+def test_a_name_with_a_long_suffix_the_file_system_takes_is_written_atomically(
+    tmp_path: Path, name: str
+) -> None:
+    # the temporary name keeps no suffix longer than any format's, so it is never the longer
+    target = tmp_path / name
+    assert len(os.fsencode(name)) <= 255
+    assert longest_name(target) == len(os.fsencode(name))
+    try_new_file(tmp_path, longest_name(target))
+    atomic_write_text(target, "x")
+    assert [p.name for p in tmp_path.iterdir()] == [name]
+    assert target.read_text() == "x"
+
+
 def test_try_new_file_tries_a_name_of_the_length_asked(tmp_path: Path) -> None:
     try_new_file(tmp_path, 255)
     with pytest.raises(OSError, match="too long") as caught:
@@ -128,3 +149,14 @@ def test_file_on_path_is_none_where_a_folder_can_be_made(tmp_path: Path) -> None
     (tmp_path / "f").write_text("x")
     assert file_on_path(tmp_path / "f") == tmp_path / "f"
     assert file_on_path(tmp_path / "f" / "a" / "b") == tmp_path / "f"
+
+
+def test_a_folder_named_as_long_as_the_file_system_takes_is_made_atomically(tmp_path: Path) -> None:
+    from follow_env.sim.atomic import atomic_folder, longest_name
+
+    target = tmp_path / ("d" * 255)
+    assert longest_name(target) <= 255
+    with atomic_folder(target) as tmp:
+        (tmp / "a.txt").write_text("x")
+    assert (target / "a.txt").read_text() == "x"
+    assert sorted(p.name for p in tmp_path.iterdir()) == [target.name]
