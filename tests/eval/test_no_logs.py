@@ -126,18 +126,23 @@ def test_a_run_without_logs_takes_twenty_times_the_episodes(
     assert not any(tmp_path.iterdir())
 
 
+def _interrupted_after_every_unit(monkeypatch: pytest.MonkeyPatch, args: list[str]) -> None:
+    """Run ``follow-eval ARGS`` and Ctrl-C it after every unit has run and been kept."""
+
+    def interrupted(*_: object, **__: object) -> None:
+        raise KeyboardInterrupt
+
+    with monkeypatch.context() as patch:
+        patch.setattr("eval.scoring.score", interrupted)
+        assert main(args) == 130
+
+
 def test_an_interrupted_run_resumes_only_in_the_same_mode(
     with_logs: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys
 ) -> None:
     out = tmp_path / "run"
     args = ["run", *GRID, "--seed", "5", "--out", str(out), "--workers", "1"]
-
-    def interrupted(*_: object, **__: object) -> None:
-        raise KeyboardInterrupt  # after every unit has run and been kept
-
-    with monkeypatch.context() as patch:
-        patch.setattr("eval.scoring.score", interrupted)
-        assert main([*args, "--no-logs"]) == 130
+    _interrupted_after_every_unit(monkeypatch, [*args, "--no-logs"])
     journal = journal_folder(out)
     units = len(list(journal.glob("unit-*.pkl")))
     assert units >= 4
@@ -184,13 +189,7 @@ def test_a_resumed_run_without_logs_keeps_its_plot_seed(
     out = tmp_path / "run"
     grid = ["--policies", "pn", "--scenarios", "straight", "--episodes", "2", "--seed", "5"]
     args = ["run", *grid, "--out", str(out), "--workers", "1", "--no-logs"]
-
-    def interrupted(*_: object, **__: object) -> None:
-        raise KeyboardInterrupt  # after every unit has run and been kept
-
-    with monkeypatch.context() as patch:
-        patch.setattr("eval.scoring.score", interrupted)
-        assert main(args) == 130
+    _interrupted_after_every_unit(monkeypatch, args)
     assert json.loads((journal_folder(out) / "run.json").read_text())["plot_seed"] == 5
     capsys.readouterr()
     assert main([*args, "--plot-seed", "6"]) == 2
@@ -217,13 +216,7 @@ def test_a_resume_whose_agent_files_changed_is_another_run(
     out = tmp_path / "run"
     grid = ["--policies", str(agent), "--scenarios", "straight", "--episodes", "1"]
     args = ["run", *grid, "--out", str(out), "--workers", "1", "--no-logs"]
-
-    def interrupted(*_: object, **__: object) -> None:
-        raise KeyboardInterrupt  # after every unit has run and been kept
-
-    with monkeypatch.context() as patch:
-        patch.setattr("eval.scoring.score", interrupted)
-        assert main(args) == 130
+    _interrupted_after_every_unit(monkeypatch, args)
     shutil.rmtree(agent)
     shutil.copytree(AGENTS / "ppo_law", agent)
     capsys.readouterr()
