@@ -9,6 +9,7 @@ trained agent's folder, a :class:`policies.Policy` object, each optionally on an
 from __future__ import annotations
 
 import hashlib
+from pathlib import Path
 
 from follow_env.platforms import get_platform
 from follow_env.tasks import task_for_env
@@ -28,7 +29,12 @@ def policy_spec(spec: PolicySpec) -> tuple[PolicySpec, str | None]:
     """
     if isinstance(spec, str) and "@" in spec:
         name, _, platform = spec.rpartition("@")
-        get_platform(platform)
+        try:
+            get_platform(platform)
+        except ValueError:
+            if Path(spec).exists():  # a model's path with an "@" in it (runs/agent@v2)
+                return spec, None
+            raise
         return name, platform
     return spec, None
 

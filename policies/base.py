@@ -50,7 +50,7 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 from numpy.typing import ArrayLike
 
-from follow_env.sim.checks import check_number
+from follow_env.sim.checks import check_number, real_array
 from follow_env.tasks.person_follow.spec import AHEAD, SPEC, observation_names
 
 # A distance at or below this means "no valid reading yet" (reference §1.4: invalid depth is 0).
@@ -124,11 +124,23 @@ def validate_obs_row(obs: ArrayLike) -> np.ndarray:
 
     :raises ValueError: on a wrong shape or a NaN/inf entry.
     """
-    arr = np.asarray(obs, dtype=np.float64)
+    arr = _real(obs)
     if arr.ndim != 1 or arr.shape[0] not in OBS_SIZES:
         raise ValueError(f"obs must have shape {_SHAPES}, got shape {arr.shape}")
     if not np.all(np.isfinite(arr)):
         raise ValueError(f"obs must be finite, got {arr.tolist()}")
+    return arr
+
+
+def _real(obs: ArrayLike) -> np.ndarray:
+    """``obs`` as float64 if it holds real numbers only (:func:`follow_env.sim.checks.real_array`:
+    strings would be parsed and complex numbers cut to their real part, silently).
+
+    :raises ValueError: if it holds anything else.
+    """
+    arr = real_array(obs)
+    if arr is None:
+        raise ValueError(f"obs must be real numbers, got {obs!r}")
     return arr
 
 
@@ -137,7 +149,7 @@ def validate_obs_batch(obs: ArrayLike) -> np.ndarray:
 
     :raises ValueError: on a wrong shape or a NaN/inf entry (naming the lanes).
     """
-    arr = np.asarray(obs, dtype=np.float64)
+    arr = _real(obs)
     if arr.ndim != 2 or arr.shape[1] not in OBS_SIZES:
         raise ValueError(f"obs must have shape (n, k): rows of {_SHAPES}, got shape {arr.shape}")
     bad = ~np.isfinite(arr).all(axis=1)
@@ -231,7 +243,9 @@ class LaneMemory(LaneActing):
     """Batched acting for a scalar law: :meth:`act` per lane, each lane with its own memory, so
     each lane's actions equal a run of its episode alone (the scalar arithmetic is reused, not
     re-derived in numpy, for bitwise equality). A law with memory overrides :meth:`_memory` and
-    :meth:`_set_memory`; its class provides ``act``, ``reset`` and ``action_names``."""
+    :meth:`_set_memory` (its memory an immutable value: tuples, numbers); its class provides
+    ``act``, ``reset`` and ``action_names``. The lanes' memory is kept apart from the episode
+    :meth:`act` runs: batches and :meth:`peek` leave that episode as it was."""
 
     act: Any  # the law's own: one observation to one action
 
@@ -245,28 +259,46 @@ class LaneMemory(LaneActing):
     def _set_memory(self, memory: Any) -> None:
         """Restore what :meth:`_memory` returned."""
 
-    def reset_batch(self, n: int) -> None:
+    def _fresh_memory(self) -> Any:
+        """A new episode's memory, the episode :meth:`act` runs left as it was (the lanes'
+        memory is kept apart from it, as :class:`GuidanceLaw`'s is)."""
+        episode = self._memory()
         self.reset()
-        self._lanes = [self._memory() for _ in range(n)]
+        fresh = self._memory()
+        self._set_memory(episode)
+        return fresh
+
+    def reset_batch(self, n: int) -> None:
+        fresh = self._fresh_memory()  # immutable: every lane may hold the same one
+        self._lanes = [fresh] * n
 
     def reset_lanes(self, lanes: np.ndarray) -> None:
-        self.reset()
+        fresh = self._fresh_memory()
         for i in np.flatnonzero(lanes):
-            self._lanes[i] = self._memory()
+            self._lanes[i] = fresh
 
     def peek(self, obs: np.ndarray, lane: int) -> np.ndarray:
-        self._set_memory(self._lanes[lane])
-        return np.asarray(self.act(obs), dtype=np.float32)
+        episode = self._memory()  # the episode act() runs is not the lane's: kept as it was
+        try:
+            self._set_memory(self._lanes[lane])
+            return np.asarray(self.act(obs), dtype=np.float32)
+        finally:
+            self._set_memory(episode)
 
     def _act_lanes(self, rows: np.ndarray) -> np.ndarray:
-        """Actions ``(n, m)`` float32 for validated observation rows ``(n, k)``."""
+        """Actions ``(n, m)`` float32 for observation rows ``(n, k)`` already checked whole
+        (a bad row found midway would leave the lanes before it moved on)."""
         lanes = getattr(self, "_lanes", None)
         self._check_lanes(len(rows), lanes)
         out = np.empty((len(rows), len(self.action_names)), dtype=np.float32)
-        for i, row in enumerate(rows):
-            self._set_memory(lanes[i])
-            out[i] = self.act(row)
-            lanes[i] = self._memory()
+        episode = self._memory()  # the episode act() runs, kept apart from the lanes'
+        try:
+            for i, row in enumerate(rows):
+                self._set_memory(lanes[i])
+                out[i] = self.act(row)
+                lanes[i] = self._memory()
+        finally:
+            self._set_memory(episode)
         return out
 
 

@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
+from follow_env.sim.checks import real_array
 from follow_env.tasks.line_trace.spec import SPEC, cell_offsets
 from policies.base import LaneMemory
 
@@ -27,15 +28,24 @@ CELL_XY = np.array(cell_offsets())
 """Each cell's ``(x forward, y left)`` from the grid's centre, in cells, observation order."""
 
 
-def validate_readings(obs: ArrayLike) -> np.ndarray:
-    """The readings as float64 ``(25,)``; ``ValueError`` on another shape or a NaN/inf."""
-    arr = np.asarray(obs, dtype=np.float64)
-    if arr.shape != (LINE_OBS_SIZE,):
+def validate_readings(obs: ArrayLike, batch: bool = False) -> np.ndarray:
+    """The readings as float64 ``(25,)`` (``batch``: ``(n, 25)``, every row checked before
+    any lane acts); ``ValueError`` on another shape, a NaN/inf or entries that are not real
+    numbers (strings would be parsed, silently)."""
+    arr = real_array(obs)
+    if arr is None:
+        raise ValueError(f"obs must be real numbers: the grid's readings, got {obs!r}")
+    shape = (arr.shape[0], LINE_OBS_SIZE) if batch and arr.ndim == 2 else (LINE_OBS_SIZE,)
+    if arr.shape != shape:
+        rows = "(n, 25): rows of" if batch else f"({LINE_OBS_SIZE},):"
         raise ValueError(
-            f"obs must have shape ({LINE_OBS_SIZE},): the 5 x 5 grid's readings "
-            f"(cell_00 .. cell_44), got shape {arr.shape}"
+            f"obs must have shape {rows} the 5 x 5 grid's readings (cell_00 .. cell_44), "
+            f"got shape {arr.shape}"
         )
     if not np.all(np.isfinite(arr)):
+        if batch:
+            bad = np.flatnonzero(~np.isfinite(arr).all(axis=1)).tolist()
+            raise ValueError(f"obs of lanes {bad} must be finite readings in [0, 1]")
         raise ValueError("obs must be finite readings in [0, 1]")
     return arr
 
@@ -68,7 +78,7 @@ class LineLaw(LaneMemory, ABC):
     def act_batch(self, obs: np.ndarray) -> np.ndarray:
         """Actions ``(n, m)`` float32: :meth:`act` for each lane with that lane's memory
         (:class:`~policies.base.LaneMemory`)."""
-        return self._act_lanes(np.asarray(obs, dtype=np.float64))
+        return self._act_lanes(validate_readings(obs, batch=True))
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}(name={self.name!r}, params={self.params!r})"

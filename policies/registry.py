@@ -105,12 +105,21 @@ class PolicyRegistry:
         """Make ``name`` build a policy with ``factory()``, for ``task`` (whose observation
         it reads: ``"person_follow"`` unless told).
 
-        :raises ValueError: if the name is empty, contains whitespace or is already taken for
-            ``task`` (re-registering would silently change what a name means in earlier
-            results).
+        :raises ValueError: if the name is empty, contains whitespace or ``@`` (which names
+            a platform: ``pn@mecanum``), is already taken for ``task`` (re-registering would
+            silently change what a name means in earlier results), or ``task`` is not a task.
+        :raises TypeError: if the name is not text or the factory cannot be called.
         """
-        if not name or name != "".join(name.split()):
-            raise ValueError(f"policy name {name!r} must be non-empty and without whitespace")
+        if not isinstance(name, str):
+            raise TypeError(f"a policy name is text, such as 'my_law'; got {name!r}")
+        if not name or name != "".join(name.split()) or "@" in name:
+            raise ValueError(
+                f"policy name {name!r} must be non-empty, without whitespace and without '@' "
+                "(NAME@PLATFORM runs NAME on that platform)"
+            )
+        if not callable(factory):
+            raise TypeError(f"the factory for {name!r} must be callable, got {factory!r}")
+        _check_task(task)
         if task in self._factories.get(name, {}):
             raise ValueError(f"policy name {name!r} is already registered for {task}")
         self._factories.setdefault(name, {})[task] = factory
@@ -205,7 +214,12 @@ class PolicyRegistry:
 
     def names(self, task: str | None = None) -> list[str]:
         """All exactly registered names, sorted (names only resolvers accept are not listed);
-        with ``task``, only those for that task."""
+        with ``task``, only those for that task.
+
+        :raises ValueError: if ``task`` is not a task.
+        """
+        if task is not None:
+            _check_task(task)
         return sorted(n for n, tasks in self._factories.items() if task is None or task in tasks)
 
     def task_of(self, name: str) -> str:
@@ -213,6 +227,18 @@ class PolicyRegistry:
         have, and for a resolved name (a model path)."""
         tasks = self._factories.get(name, {})
         return next(iter(tasks)) if len(tasks) == 1 else DEFAULT_TASK
+
+
+def _check_task(task: str) -> None:
+    """Refuse a ``task`` that is not a task package's name (``person_follow``, ``line_trace``).
+
+    :raises ValueError: naming the value and the known tasks.
+    """
+    from follow_env.tasks import available_tasks
+
+    known = available_tasks()
+    if task not in known:
+        raise ValueError(f"task={task!r} is out of range: must be one of {known}")
 
 
 REGISTRY = PolicyRegistry()

@@ -21,6 +21,7 @@ import math
 from numbers import Integral, Real
 from typing import Any
 
+import numpy as np
 import yaml
 
 __all__ = [
@@ -32,6 +33,7 @@ __all__ = [
     "one_line",
     "out_of_range",
     "range_text",
+    "real_array",
     "utf8_problem",
     "yaml_problem",
 ]
@@ -130,6 +132,26 @@ def check_number(
     if not ok:
         raise out_of_range(where, value, rule)
     return as_number(value)  # type: ignore[return-value]
+
+
+#: numpy dtype kinds of real numbers, bools included (an action or observation of bools is 0/1).
+REAL_KINDS = "biuf"
+
+
+def real_array(value: object) -> np.ndarray | None:
+    """``value`` as a float64 array if it holds real numbers only (bools, integers, floats,
+    or an object array of such Python or numpy numbers), else None: strings and bytes, which
+    ``astype`` would parse, complex numbers, which it would cut to their real part, ragged
+    lists, and an int past float's range."""
+    try:
+        arr = np.asarray(value)
+        if arr.dtype.kind not in REAL_KINDS + "O":
+            return None
+        if arr.dtype.kind == "O" and not all(isinstance(x, Real | np.bool_) for x in arr.flat):
+            return None
+        return arr.astype(np.float64, copy=False)
+    except (TypeError, ValueError, OverflowError):
+        return None
 
 
 def one_line(error: BaseException) -> str:

@@ -9,7 +9,6 @@ task model supplies the configuration, the spaces, the observations, the info an
 
 from __future__ import annotations
 
-import numbers
 from typing import Any, ClassVar
 
 import gymnasium as gym
@@ -18,7 +17,7 @@ from gymnasium.error import ResetNeeded
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from follow_env.sim.checks import is_integer, out_of_range
+from follow_env.sim.checks import REAL_KINDS, is_integer, out_of_range, real_array
 from follow_env.sim.runner import BatchedSim
 
 __all__ = ["TaskEnv", "TaskVectorEnv", "action_array", "lane_seeds"]
@@ -48,34 +47,16 @@ def lane_seeds(num_envs: int, seed: int | list[int | None] | None) -> list[int |
     return seeds
 
 
-REAL_KINDS = "biuf"
-"""numpy dtype kinds an action may have: bool, integers, floats. Strings would be parsed and
-complex numbers lose their imaginary part in a cast to float, silently."""
-
-
-def _is_real(x: object) -> bool:
-    """Whether ``x`` is a real number, bools included (Python's or numpy's; not a string,
-    bytes or complex: :func:`follow_env.sim.checks.is_real` is for parameters, without bools)."""
-    return isinstance(x, numbers.Real | np.bool_)
-
-
 def action_array(action: Any, shape: tuple[int, ...], names: str) -> np.ndarray:
     """``action`` as a float64 array of exactly ``shape``, finite; ``ValueError`` naming the
-    expected and the received shape (or the bad entries, or a dtype that is not real numbers)
-    otherwise."""
-    try:
-        arr = np.asarray(action)
-        if arr.dtype.kind not in REAL_KINDS + "O":  # objects: e.g. Python ints past 2**64
-            raise TypeError(arr.dtype)
-        # An object array is taken only of real numbers: astype would parse "0.1" or b"1"
-        if arr.dtype.kind == "O" and not all(_is_real(x) for x in arr.flat):
-            raise TypeError(arr.dtype)
-        arr = arr.astype(np.float64, copy=False)
-    except (TypeError, ValueError, OverflowError):  # OverflowError: an int past float's range
+    expected and the received shape (or the bad entries, or entries that are not real numbers:
+    :func:`~follow_env.sim.checks.real_array`) otherwise."""
+    arr = real_array(action)
+    if arr is None:
         raise ValueError(
             f"action={action!r} is out of range: must be an array of real numbers of shape "
             f"{shape} {names}"
-        ) from None
+        )
     if arr.shape != shape:
         raise ValueError(f"action has shape {arr.shape}: must be {shape} {names} (got {action!r})")
     if not np.isfinite(arr).all():

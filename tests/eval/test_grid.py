@@ -46,3 +46,12 @@ def test_what_cannot_run_is_refused_naming_it(given: object, task: str, message:
 def test_rollout_refuses_an_agent_of_another_task_before_any_episode() -> None:
     with pytest.raises(ValueError, match="was trained on LineTrace-v0"):
         rollout(["pn", str(AGENTS / "ppo_line")], ["curve"], [0])
+
+
+def test_a_model_path_with_an_at_sign_is_a_path_not_a_platform(tmp_path: Path) -> None:
+    folder = tmp_path / "agent@v2"
+    with pytest.raises(ValueError, match="v2"):  # no such folder: an unknown platform
+        policy_spec(str(folder))
+    folder.mkdir()
+    assert policy_spec(str(folder)) == (str(folder), None)
+    assert policy_spec("pn@mecanum") == ("pn", "mecanum")

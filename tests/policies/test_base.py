@@ -201,3 +201,19 @@ def test_act_batch_needs_reset_batch_for_its_lane_count() -> None:
     law.reset_batch(3)
     with pytest.raises(ValueError, match=r"call reset_batch\(2\) first"):
         law.act_batch(np.ones((2, 2)))
+
+
+@pytest.mark.parametrize(
+    "bad",
+    [np.array(["2", "100"]), np.array([2 + 0j, 100]), [2.0, 1j], np.array([b"2", b"1"])],
+    ids=["str", "complex", "list-with-complex", "bytes"],
+)
+@pytest.mark.parametrize("name", LAWS)
+def test_obs_that_are_not_real_numbers_are_rejected(name: str, bad: object) -> None:
+    # strings were parsed and complex numbers cut to their real part, silently
+    law = make_policy(name)
+    with pytest.raises(ValueError, match="obs must be real numbers"):
+        law.act(bad)
+    law.reset_batch(2)
+    with pytest.raises(ValueError, match="obs must be real numbers"):
+        law.act_batch(np.stack([np.asarray(bad)] * 2))

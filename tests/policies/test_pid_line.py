@@ -60,3 +60,34 @@ def test_a_gap_after_a_centred_line_is_crossed_straight_on() -> None:
 def test_bad_parameters_name_the_field() -> None:
     with pytest.raises(ValueError, match=r"PIDLineParams\.kp=-1"):
         PIDLineParams(kp=-1)
+
+
+@pytest.mark.parametrize("name", ["pid:hand", "coordinate"])
+def test_a_refused_batch_moves_no_lane_and_batches_leave_the_episode_alone(name: str) -> None:
+    law = make_policy(name, task="line_trace")
+    left, centre = _front(1.0, 0.0, 0.0), _front(0.0, 1.0, 0.0)
+    alone = make_policy(name, task="line_trace")
+    expected = [alone.act(obs) for obs in (left, centre, centre)]
+    law.reset()
+    got = [law.act(left)]
+    law.reset_batch(2)
+    bad = np.stack([left, left])
+    bad[1, 0] = np.nan
+    with pytest.raises(ValueError, match=r"obs of lanes \[1\] must be finite"):
+        law.act_batch(bad)  # lane 0 moved on before lane 1 was refused, once
+    law.act_batch(np.stack([centre, left]))  # the lanes' memory, not the episode's
+    law.peek(left, 1)
+    got += [law.act(centre), law.act(centre)]
+    np.testing.assert_array_equal(np.array(got), np.array(expected))
+    # lane 0 had one step (centre), lane 1 one (left): a second batch goes on from there
+    batch = law.act_batch(np.stack([centre, centre]))
+    for lane, first in enumerate((centre, left)):
+        fresh = make_policy(name, task="line_trace")
+        fresh.act(first)
+        np.testing.assert_array_equal(batch[lane], fresh.act(centre))
+
+
+def test_readings_that_are_not_real_numbers_are_rejected() -> None:
+    law = make_policy("pid", task="line_trace")
+    with pytest.raises(ValueError, match="obs must be real numbers"):
+        law.act(np.array(["0"] * 25))

@@ -131,10 +131,35 @@ def test_registering_a_taken_name_is_rejected() -> None:
         registry.register("pn", PN)
 
 
-@pytest.mark.parametrize("name", ["", "my law"])
-def test_empty_or_spaced_name_is_rejected(name: str) -> None:
-    with pytest.raises(ValueError, match="without whitespace"):
+@pytest.mark.parametrize("name", ["", "my law", "x@mecanum"])
+def test_empty_spaced_or_platform_name_is_rejected(name: str) -> None:
+    # "x@mecanum" could never be asked for: NAME@PLATFORM runs NAME on that platform
+    with pytest.raises(ValueError, match="without whitespace and without '@'"):
         PolicyRegistry().register(name, PN)
+
+
+@pytest.mark.parametrize(
+    ("name", "factory", "message"),
+    [
+        (5, PN, "a policy name is text"),  # an AttributeError once
+        ("nofactory", None, "the factory for 'nofactory' must be callable"),
+    ],
+)
+def test_a_name_or_factory_that_cannot_serve_is_rejected(
+    name: object, factory: object, message: str
+) -> None:
+    registry = PolicyRegistry()
+    with pytest.raises(TypeError, match=message):
+        registry.register(name, factory)  # type: ignore[arg-type]
+    assert registry.names() == []
+
+
+def test_an_unknown_task_is_rejected_when_registering_and_listing() -> None:
+    registry = PolicyRegistry()
+    with pytest.raises(ValueError, match=r"task='no_such_task' is out of range: must be one of"):
+        registry.register("x", PN, task="no_such_task")
+    with pytest.raises(ValueError, match=r"task='bogus' is out of range"):
+        available_policies("bogus")  # [] once, while make_policy refused the same task
 
 
 def test_register_law_adds_bare_and_preset_names() -> None:
