@@ -5,17 +5,22 @@ seed chunk) for an evaluation, (trial parameters, seed chunk) for a tuning trial
 config, seed) for a training run. :func:`execute` runs ``fn(unit)`` for every unit on a
 :class:`Backend` and returns the results in the units' order, whichever finished first:
 
-- ``local``: in this process (``workers=1``) or a pool of spawned processes;
+- ``local``: in this process (``workers=1``) or a pool of spawned processes (``workers`` of
+  2 or more: a pool, however few the units);
 - ``ray``: tasks on ``ray.init()``: a local Ray sized to this machine when no cluster is named,
   ``address=`` (``--address``) or ``RAY_ADDRESS`` for a cluster. Ray is an optional extra
   (``pip install 'personfollow[ray]'``).
 
 Every task pins its numba, torch and OpenMP threads to the CPUs it was given
 (:func:`pin_threads`), so two tasks on one machine never oversubscribe it. A worker that dies
-mid-task is retried (Ray's task retries; a rebuilt pool locally); units are pure functions of
-their arguments, so a retried unit returns exactly what the first attempt would have. A local
-pool is kept for the next call with the same workers (a spawned process takes about 2 s to
-start) until it has been idle for ``execution.backend.POOL_IDLE_S`` (60 s), the process exits or
+mid-task is retried (Ray's task retries; a rebuilt pool locally), up to ``max_retries`` times
+per unit; units are pure functions of their arguments, so a retried unit returns exactly what
+the first attempt would have. An exception a unit raises is never retried: it reaches the
+caller as raised, or as a :class:`UnitError` naming it if it cannot be pickled back from its
+worker. After an error or Ctrl-C a pool's workers are ended at once (not left to finish their
+units), and a pool's workers exit if the process that started them dies. A local pool is kept
+for the next call with the same workers (a spawned process takes about 2 s to start) until it
+has been idle for ``execution.backend.POOL_IDLE_S`` (60 s), the process exits or
 :func:`shutdown_pools` is called; one that failed is not kept.
 
 This package imports nothing else of the project: every layer above may use it.
@@ -25,6 +30,7 @@ from execution.backend import (
     BACKENDS,
     Backend,
     BackendUnavailableError,
+    UnitError,
     backend_from_args,
     execute,
     pin_threads,
@@ -35,6 +41,7 @@ __all__ = [
     "BACKENDS",
     "Backend",
     "BackendUnavailableError",
+    "UnitError",
     "backend_from_args",
     "execute",
     "pin_threads",

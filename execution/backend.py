@@ -1,29 +1,42 @@
 """Backends that run work units: this process, a process pool, or Ray tasks.
 
 :func:`execute` is the only entry point callers need; :class:`Backend` says where the units
-run. See the package docstring for what a unit is.
+run. See the package docstring for what a unit is. The local pool is here; Ray is in
+:mod:`execution.on_ray`, and what runs in a worker around each unit in :mod:`execution.worker`.
 """
 
 from __future__ import annotations
 
 import atexit
-import logging
 import os
-import socket
-import sys
+import signal
 import threading
+import time
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from multiprocessing import get_context
+from numbers import Integral
 from typing import Any, TypeVar
+
+from execution.on_ray import _address_problem, _check_reachable, _connect, _import_ray, _run_ray
+from execution.worker import (
+    _IN_FLIGHT_PER_SLOT,
+    BackendUnavailableError,
+    UnitError,
+    WorkerLostError,
+    _run_unit,
+    _start_worker,
+    pin_threads,
+)
 
 __all__ = [
     "BACKENDS",
     "POOL_IDLE_S",
     "Backend",
     "BackendUnavailableError",
+    "UnitError",
     "WorkerLostError",
     "backend_from_args",
     "execute",
@@ -36,19 +49,6 @@ R = TypeVar("R")
 
 #: The backends by name: ``local`` (this process or a process pool) and ``ray``.
 BACKENDS = ("local", "ray")
-#: What to run when Ray is missing (the ``ray`` extra of pyproject.toml).
-RAY_INSTALL = "pip install 'personfollow[ray]'"
-#: Units kept in flight per slot: enough that a slot never waits for the driver, few enough
-#: that a long grid is not all queued (and pickled) at once.
-_IN_FLIGHT_PER_SLOT = 2
-
-
-class BackendUnavailableError(RuntimeError):
-    """The backend cannot run here (Ray not installed, cluster unreachable); says what to do."""
-
-
-class WorkerLostError(RuntimeError):
-    """Workers kept dying: a unit was retried ``max_retries`` times and its worker died again."""
 
 
 @dataclass(frozen=True)
@@ -59,11 +59,17 @@ class Backend:
     :param workers: local: processes (1 = this process, no pool); ray: units in flight at once
         (None = the cluster's CPUs / ``cpus_per_task``; the local Ray started when no cluster is
         named gets ``workers * cpus_per_task`` CPUs, or all of this machine's).
-    :param address: ray only: the cluster (``"auto"``, ``"ray://host:10001"``, ``"host:6379"``);
-        None uses ``RAY_ADDRESS`` when set, else starts a local Ray.
+    :param address: ray only: the cluster (``"auto"``, ``"local"``, ``"ray://host:10001"``,
+        ``"host:6379"``); None uses ``RAY_ADDRESS`` when set, else starts a local Ray. If Ray
+        is already initialised in this process it is used, but only if it is the cluster named
+        (``auto`` and ``local`` match any).
     :param cpus_per_task: CPUs each unit is given and pins its threads to (1..64).
-    :param max_retries: times a unit whose worker died is run again (0..100); an exception the
-        unit itself raises is never retried.
+    :param max_retries: times a unit whose worker died is run again (0..100), counted per unit;
+        an exception the unit itself raises is never retried. In a local pool the death counts
+        against the unit the dead worker was running (against every unit in flight if that is
+        not known: a worker ended by SIGTERM, as the pool ends the others).
+
+    Integers may be numpy integers; they are stored as ``int``.
     """
 
     kind: str = "local"
@@ -77,14 +83,17 @@ class Backend:
             raise ValueError(
                 f"backend={self.kind!r} is unknown: must be one of {', '.join(BACKENDS)}"
             )
-        _check_int("workers", self.workers, 1, 4096, optional=True)
-        _check_int("cpus_per_task", self.cpus_per_task, 1, 64)
-        _check_int("max_retries", self.max_retries, 0, 100)
+        _check_int(self, "workers", 1, 4096, optional=True)
+        _check_int(self, "cpus_per_task", 1, 64)
+        _check_int(self, "max_retries", 0, 100)
         if self.address is not None:
             if self.kind != "ray":
                 raise ValueError(f"address={self.address!r} is given but backend is {self.kind!r}")
-            if not isinstance(self.address, str) or not self.address.strip():
-                raise ValueError(f"address={self.address!r} is out of range: a non-empty string")
+            # Here, not when Ray connects: a typo is then refused with the other options, before
+            # a command writes anything, and as a bad value rather than an unreachable cluster.
+            problem = _address_problem(self.address)
+            if problem is not None:
+                raise ValueError(f"address={self.address!r} is not allowed: {problem}")
 
     def check_reachable(self) -> None:
         """Fail fast, without connecting, if this is Ray at a cluster address (given or
@@ -107,11 +116,20 @@ class Backend:
         return max(1, cpus // self.cpus_per_task)
 
 
-def _check_int(name: str, value: Any, low: int, high: int, *, optional: bool = False) -> None:
+def _check_int(backend: Backend, name: str, low: int, high: int, *, optional: bool = False) -> None:
+    """Refuse ``backend.<name>`` unless an integer in ``low..high``; store it as ``int``.
+
+    numpy integers count (a value read from an array or a config): the same test as
+    ``follow_env.sim.checks.is_integer``, not imported from there because this package imports
+    nothing of the project.
+    """
+    value = getattr(backend, name)
     if value is None and optional:
         return
-    if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
+    if isinstance(value, bool) or not isinstance(value, Integral) or not low <= value <= high:
         raise ValueError(f"{name}={value!r} is out of range: must be an integer in {low}..{high}")
+    # As int: Ray's options and the kept pools' keys want the same plain value either way.
+    object.__setattr__(backend, name, int(value))
 
 
 def backend_from_args(
@@ -132,33 +150,6 @@ def backend_from_args(
     return backend
 
 
-def pin_threads(cpus: int) -> None:
-    """Limit this process's numba, torch and OpenMP/BLAS threads to ``cpus``.
-
-    Runs at the start of every task: Ray sets ``OMP_NUM_THREADS=1`` only for tasks without
-    ``num_cpus``, and numba sizes its pool from the machine, so without this two tasks on a
-    2-core machine would each start two busy threads (STACK.md, Ray).
-    """
-    for var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
-        os.environ[var] = str(cpus)
-    if "numba" in sys.modules:
-        import numba
-
-        numba.set_num_threads(max(1, min(cpus, numba.config.NUMBA_NUM_THREADS)))
-    else:
-        # Read when numba is first imported; changing it afterwards is refused by numba.
-        os.environ["NUMBA_NUM_THREADS"] = str(cpus)
-    if "torch" in sys.modules:
-        import torch
-
-        torch.set_num_threads(cpus)
-
-
-def _call(fn: Callable[[Any], Any], unit: Any, cpus: int) -> Any:
-    pin_threads(cpus)
-    return fn(unit)
-
-
 def execute(
     fn: Callable[[U], R],
     units: Iterable[U],
@@ -177,6 +168,8 @@ def execute(
     :param on_result: called in this process as each unit finishes (in the order they finish)
         with its index and result: a progress bar, a journal for resuming.
     :raises WorkerLostError: if a unit's worker died more than ``backend.max_retries`` times.
+    :raises UnitError: in place of an exception of ``fn`` that cannot be pickled, from a pool
+        or Ray worker.
     :raises BackendUnavailableError: if Ray is wanted and missing or its cluster unreachable.
     :raises Exception: whatever ``fn`` raised for a unit, as it raised it.
     """
@@ -203,24 +196,40 @@ def execute(
 def _run_local(
     fn: Callable[[Any], Any], todo: Sequence[tuple[int, Any]], backend: Backend
 ) -> Iterator[tuple[int, Any]]:
-    workers = min(backend.workers or 1, len(todo))
+    workers = backend.workers or 1
+    # On the workers asked for, not on the number of units: a caller that asked for a pool
+    # asked for its crash isolation, retries and pinned threads even for one unit (and the
+    # pool is kept, so a later call does not start it again). Callers that want small runs in
+    # this process ask for workers=1 (eval.rollout.auto_workers does).
     if workers <= 1:
         for i, unit in todo:
             yield i, fn(unit)
         return
+    if not todo:
+        return  # nothing to run: no pool to start
     pending = dict(todo)
-    deaths = 0
+    deaths: dict[int, int] = {}  # by unit: times its worker died (see below)
     while pending:
+        submitted: set[int] = set()
+        lost: set[int] = set()
         try:
-            yield from _pool_pass(fn, pending, backend.workers or 1, backend.cpus_per_task)
+            yield from _pool_pass(fn, pending, workers, backend.cpus_per_task, submitted, lost)
         except BrokenProcessPool as e:
             # A worker died (killed, out of memory): the pool is gone with every unit it held.
             # Units are pure, so running the unfinished ones again in a new pool is a retry.
-            deaths += 1
-            if deaths > backend.max_retries:
+            # The death counts against the unit the worker was running; if that is not known
+            # (it was killed by SIGTERM, like the pool's other workers, or between units),
+            # against every unit in flight, or every pending one: some unit must count it, or
+            # a pool that can never run would be restarted for ever.
+            in_flight = {i for i in submitted if i in pending}
+            charged = sorted(lost & in_flight) or sorted(in_flight) or sorted(pending)
+            for i in charged:
+                deaths[i] = deaths.get(i, 0) + 1
+            over = [i for i in charged if deaths[i] > backend.max_retries]
+            if over:
                 raise WorkerLostError(
-                    f"a worker process died {deaths} times ({len(pending)} units unfinished); "
-                    f"max_retries={backend.max_retries}"
+                    f"unit {over[0]}: its worker process died {deaths[over[0]]} times "
+                    f"(max_retries={backend.max_retries}; {len(pending)} units unfinished)"
                 ) from e
 
 
@@ -238,6 +247,49 @@ _BUSY: dict[tuple[int, int], int] = {}  # passes running on each pool (threads m
 _POOLS_LOCK = threading.Lock()
 
 
+class _Pool(ProcessPoolExecutor):
+    """A pool of spawned workers pinned to ``cpus`` CPUs each, which exit with this process
+    and say which unit each runs (in :attr:`slots`), so that a dead worker's unit is known."""
+
+    def __init__(self, workers: int, cpus: int) -> None:
+        context = get_context("spawn")
+        # Per worker: its pid and the index of the unit it runs (-1: none). Shared memory,
+        # not a queue: a worker that dies mid-unit has written it already, and nothing has to
+        # be read while the pool runs.
+        self.slots = context.Array("q", 2 * workers)
+        # spawn, not fork: a forked child of a process with live threads (tqdm's monitor,
+        # BLAS pools) can deadlock; spawned workers load the cached kernels in about 2 s.
+        super().__init__(
+            workers,
+            mp_context=context,
+            initializer=_start_worker,
+            initargs=(cpus, os.getpid(), self.slots),
+        )
+
+    def units_of_dead_workers(self, processes: Iterable[Any]) -> set[int]:
+        """The units that were running in those of ``processes`` (this pool's, all exited) that
+        died on their own: not ended by SIGTERM, as the pool ends the others when one dies."""
+        died = {p.pid for p in processes if _exit_code(p) not in (None, -signal.SIGTERM)}
+        # Read without the lock: a worker killed while holding it would never release it.
+        slots = self.slots.get_obj()
+        return {
+            slots[k + 1] for k in range(0, len(slots), 2) if slots[k] in died and slots[k + 1] >= 0
+        }
+
+
+def _exit_code(process: Any, timeout_s: float = 1.0) -> int | None:
+    """The exit code of ``process``, which has exited (None if none is known within
+    ``timeout_s``).
+
+    Waited for: the pool's own thread may have reaped the process a moment before this one
+    looked, and not yet stored its code (``exitcode`` is None meanwhile).
+    """
+    deadline = time.monotonic() + timeout_s
+    while process.exitcode is None and time.monotonic() < deadline:
+        time.sleep(0.01)
+    return process.exitcode
+
+
 def _pool(workers: int, cpus: int) -> ProcessPoolExecutor:
     """The kept pool of ``workers`` processes pinned to ``cpus`` CPUs each, started if need be.
 
@@ -251,11 +303,7 @@ def _pool(workers: int, cpus: int) -> ProcessPoolExecutor:
         if timer is not None:
             timer.cancel()
         if key not in _POOLS:
-            # spawn, not fork: a forked child of a process with live threads (tqdm's monitor,
-            # BLAS pools) can deadlock; spawned workers load the cached kernels in about 2 s.
-            _POOLS[key] = ProcessPoolExecutor(
-                workers, mp_context=get_context("spawn"), initializer=pin_threads, initargs=(cpus,)
-            )
+            _POOLS[key] = _Pool(workers, cpus)
             _BUSY[key] = 0
         _BUSY[key] += 1
         return _POOLS[key]
@@ -284,12 +332,32 @@ def _expire(key: tuple[int, int], pool: ProcessPoolExecutor) -> None:
     pool.shutdown(wait=True)
 
 
-def _drop(key: tuple[int, int], pool: ProcessPoolExecutor) -> None:
-    """Forget ``pool`` (it failed, or holds units nobody waits for) and stop it."""
+#: How long a terminated pool worker is given to exit before it is killed (s).
+_TERMINATE_S = 2.0
+
+
+def _drop(key: tuple[int, int], pool: ProcessPoolExecutor) -> list[Any]:
+    """Forget ``pool`` (it failed, or holds units nobody waits for) and end its workers now.
+
+    Terminated, not shut down: a shutdown lets each worker finish the unit it runs, and after
+    an error or Ctrl-C the command would wait for units whose results nobody wants (minutes,
+    for a training run).
+    """
     with _POOLS_LOCK:
         if _POOLS.get(key) is pool:
             del _POOLS[key], _BUSY[key]
+    # Taken before the shutdown, which forgets them. A private attribute, but the only handle
+    # on the workers before Python 3.14's terminate_workers().
+    processes = list((getattr(pool, "_processes", None) or {}).values())
     pool.shutdown(wait=False, cancel_futures=True)
+    for process in processes:
+        process.terminate()
+    for process in processes:
+        process.join(_TERMINATE_S)
+        if process.is_alive():  # SIGTERM caught or ignored by the unit
+            process.kill()
+            process.join(_TERMINATE_S)
+    return processes
 
 
 def shutdown_pools() -> None:
@@ -310,17 +378,29 @@ atexit.register(shutdown_pools)
 
 
 def _pool_pass(
-    fn: Callable[[Any], Any], pending: dict[int, Any], workers: int, cpus: int
+    fn: Callable[[Any], Any],
+    pending: dict[int, Any],
+    workers: int,
+    cpus: int,
+    submitted: set[int] | None = None,
+    lost: set[int] | None = None,
 ) -> Iterator[tuple[int, Any]]:
     """One pass over the pending units on the kept pool; removes each from ``pending`` as it
-    is yielded."""
+    is yielded.
+
+    :param submitted: the units submitted are added to it (those still pending when the pass
+        fails were in flight).
+    :param lost: if the pass fails, the units whose worker died running them are added to it.
+    """
     pool = _pool(workers, cpus)
     queue = iter(list(pending.items()))
     in_flight: dict[Future[Any], int] = {}
 
     def submit() -> None:
         for i, unit in queue:
-            in_flight[pool.submit(fn, unit)] = i
+            in_flight[pool.submit(_run_unit, fn, unit, i)] = i
+            if submitted is not None:
+                submitted.add(i)  # after: a submission that found the pool broken sent nothing
             return
 
     finished_all = False
@@ -344,119 +424,8 @@ def _pool_pass(
             _keep((workers, cpus), pool)
         else:
             # An error, a dead worker, Ctrl-C or a caller that stopped reading: this pool may
-            # be broken or still busy with units nobody waits for, so it is not kept.
-            _drop((workers, cpus), pool)
-
-
-# -- ray --------------------------------------------------------------------------------------
-
-
-def _import_ray() -> Any:
-    try:
-        import ray
-    except ImportError:
-        raise BackendUnavailableError(
-            f"the ray backend needs Ray, which is not installed: {RAY_INSTALL}"
-        ) from None
-    return ray
-
-
-def _connect(backend: Backend) -> Any:
-    """Ray, initialised: the running instance, the named cluster, or a new local one."""
-    ray = _import_ray()
-    if ray.is_initialized():
-        return ray
-    address = backend.address or os.environ.get("RAY_ADDRESS") or None
-    options: dict[str, Any] = {
-        "include_dashboard": False,
-        "logging_level": logging.WARNING,
-        "configure_logging": True,
-    }
-    if address is None:
-        # "local": a new instance, even if a `ray start` node runs on this machine (ray.init()
-        # would join that one; a cluster is used only when named).
-        options["address"] = "local"
-        cpus = os.cpu_count() or 1
-        if backend.workers is not None:
-            cpus = backend.workers * backend.cpus_per_task
-        options["num_cpus"] = cpus
-    else:
-        _check_reachable(address)
-        options["address"] = address
-    try:
-        ray.init(**options)
-    except (ConnectionError, RuntimeError, ValueError) as e:
-        where = address or "a local Ray"
-        raise BackendUnavailableError(f"cannot start or reach Ray at {where}: {e}") from None
-    return ray
-
-
-def _check_reachable(address: str, timeout_s: float = 5.0) -> None:
-    """Fail fast on a cluster address nothing listens at: ``ray.init`` would retry for minutes.
-
-    ``auto`` and ``local`` are Ray's own words (no host to try); ``ray://host:port`` is Ray
-    Client's form of ``host:port``.
-    """
-    if address in ("auto", "local"):
-        return
-    host, sep, port = address.removeprefix("ray://").rpartition(":")
-    if not sep or not (port.isascii() and port.isdigit()) or not host:
-        raise BackendUnavailableError(
-            f"address={address!r} is not a Ray cluster address: give HOST:PORT (e.g. "
-            "127.0.0.1:6379), ray://HOST:PORT or auto"
-        )
-    try:
-        socket.create_connection((host.strip("[]"), int(port)), timeout=timeout_s).close()
-    except OSError as e:
-        raise BackendUnavailableError(
-            f"cannot reach the Ray cluster at {address}: {e.strerror or e} (is `ray start "
-            "--head` running there? see --address and RAY_ADDRESS)"
-        ) from None
-
-
-def _run_ray(
-    fn: Callable[[Any], Any], todo: Sequence[tuple[int, Any]], backend: Backend
-) -> Iterator[tuple[int, Any]]:
-    if not todo:
-        return
-    ray = _connect(backend)
-    task = ray.remote(_call).options(
-        num_cpus=backend.cpus_per_task,
-        max_retries=backend.max_retries,
-        retry_exceptions=False,  # a unit's own exception is a result, not a lost worker
-    )
-    queue = iter(todo)
-    in_flight: dict[Any, int] = {}
-
-    def submit() -> None:
-        for i, unit in queue:
-            in_flight[task.remote(fn, unit, backend.cpus_per_task)] = i
-            return
-
-    try:
-        for _ in range(_IN_FLIGHT_PER_SLOT * backend.slots()):
-            submit()
-        while in_flight:
-            ready, _ = ray.wait(list(in_flight), num_returns=1)
-            i = in_flight.pop(ready[0])
-            try:
-                result = ray.get(ready[0])
-            except ray.exceptions.RayTaskError as e:
-                cause = getattr(e, "cause", None)
-                raise (cause if isinstance(cause, BaseException) else e) from None
-            except (ray.exceptions.WorkerCrashedError, ray.exceptions.NodeDiedError) as e:
-                raise WorkerLostError(
-                    f"unit {i}'s worker died {backend.max_retries + 1} times: {e}"
-                ) from None
-            # The next unit goes out before this result is handed on (the cluster stays busy
-            # while the caller keeps it), but a submission that fails (the cluster lost) must
-            # not lose the unit just finished: it is handed on first, then the error raised.
-            try:
-                submit()
-            except BaseException:
-                yield i, result
-                raise
-            yield i, result
-    finally:
-        for ref in in_flight:
-            ray.cancel(ref, force=True)
+            # be broken or still busy with units nobody waits for, so it is not kept, and its
+            # workers are ended now rather than when they finish.
+            processes = _drop((workers, cpus), pool)
+            if lost is not None and isinstance(pool, _Pool):
+                lost.update(pool.units_of_dead_workers(processes))

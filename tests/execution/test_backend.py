@@ -258,12 +258,12 @@ def test_a_unit_finished_as_the_pool_breaks_is_neither_lost_nor_run_twice(monkey
     class BreaksOnSubmit:  # runs units at once; its 5th submission finds the pool broken
         submitted = 0
 
-        def submit(self, fn, unit):
+        def submit(self, fn, *args):
             BreaksOnSubmit.submitted += 1
             if BreaksOnSubmit.submitted == 5:
                 raise BrokenProcessPool("a worker died")
             future: Future = Future()
-            future.set_result(fn(unit))
+            future.set_result(fn(*args))
             return future
 
         def shutdown(self, wait: bool = True, cancel_futures: bool = False) -> None:

@@ -1,0 +1,149 @@
+"""What the backends share: the layer's errors, and what runs in a worker process (a pool's
+or Ray's) around each unit: its threads pinned, its exception made fit to travel back.
+"""
+
+from __future__ import annotations
+
+import os
+import pickle
+import sys
+import threading
+import time
+import traceback
+from collections.abc import Callable
+from typing import Any
+
+__all__ = ["BackendUnavailableError", "UnitError", "WorkerLostError", "pin_threads"]
+
+#: Units kept in flight per slot: enough that a slot never waits for the driver, few enough
+#: that a long grid is not all queued (and pickled) at once.
+_IN_FLIGHT_PER_SLOT = 2
+
+
+class BackendUnavailableError(RuntimeError):
+    """The backend cannot run here (Ray not installed, cluster unreachable); says what to do."""
+
+
+class WorkerLostError(RuntimeError):
+    """Workers kept dying: a unit was retried ``max_retries`` times and its worker died again."""
+
+
+class UnitError(RuntimeError):
+    """A unit raised an exception that cannot cross a process boundary (it does not survive
+    pickling: an ``__init__`` whose arguments are not its ``args``, a lock or a file inside).
+
+    Raised in its place by a pool or Ray worker, so that the caller still learns what failed
+    (a pool would otherwise report a broken pool and retry the unit as if its worker had died;
+    Ray an ``UnserializableException``).
+
+    :ivar type_name: the original exception's qualified name (``module.Class``).
+    :ivar message: its ``str()``.
+    :ivar traceback_text: its traceback, formatted in the worker.
+    """
+
+    def __init__(self, type_name: str, message: str, traceback_text: str) -> None:
+        super().__init__(
+            f"{type_name}: {message}\n(re-raised as UnitError: the exception could not be "
+            f"pickled back from its worker; its traceback there:)\n{traceback_text}"
+        )
+        self.type_name = type_name
+        self.message = message
+        self.traceback_text = traceback_text
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        # The three fields, not the composed message: unpickling calls __init__ with these.
+        return (UnitError, (self.type_name, self.message, self.traceback_text))
+
+
+def pin_threads(cpus: int) -> None:
+    """Limit this process's numba, torch and OpenMP/BLAS threads to ``cpus``.
+
+    Runs at the start of every task: Ray sets ``OMP_NUM_THREADS=1`` only for tasks without
+    ``num_cpus``, and numba sizes its pool from the machine, so without this two tasks on a
+    2-core machine would each start two busy threads (STACK.md, Ray).
+    """
+    for var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
+        os.environ[var] = str(cpus)
+    if "numba" in sys.modules:
+        import numba
+
+        numba.set_num_threads(max(1, min(cpus, numba.config.NUMBA_NUM_THREADS)))
+    else:
+        # Read when numba is first imported; changing it afterwards is refused by numba.
+        os.environ["NUMBA_NUM_THREADS"] = str(cpus)
+    if "torch" in sys.modules:
+        import torch
+
+        torch.set_num_threads(cpus)
+
+
+#: In a pool worker: its pool's shared array of [pid, unit index running or -1] per worker,
+#: and the offset of this worker's pair in it (see :class:`execution.backend._Pool`).
+_SLOTS: Any = None
+_SLOT = -1
+
+
+def _run_unit(fn: Callable[[Any], Any], unit: Any, index: int = -1) -> Any:
+    """``fn(unit)`` in a worker, its exception made fit to travel back to the caller.
+
+    In a pool worker, the unit's ``index`` is in the worker's slot while it runs: if the
+    worker dies, the caller knows which unit it died running.
+
+    An exception that does not survive pickling cannot be sent back: a pool would report its
+    worker as broken (and the unit be retried as if it had died), Ray an
+    ``UnserializableException``. Such an exception is replaced by a :class:`UnitError` naming
+    it; any other goes back as raised.
+    """
+    if _SLOTS is not None:
+        _SLOTS[_SLOT + 1] = index
+    try:
+        return fn(unit)
+    except BaseException as e:
+        try:
+            pickle.loads(pickle.dumps(e))
+        except Exception:
+            name = f"{type(e).__module__}.{type(e).__qualname__}"
+            text = "".join(traceback.format_exception(e))
+            # from None: the original stays out of the chain, which would be pickled with it
+            # by anything that pickles __cause__ or __context__.
+            raise UnitError(name, str(e), text) from None
+        raise
+    finally:
+        if _SLOTS is not None:
+            _SLOTS[_SLOT + 1] = -1
+
+
+def _call(fn: Callable[[Any], Any], unit: Any, cpus: int) -> Any:
+    """A Ray task: pin the worker's threads (it may have run other tasks), then the unit."""
+    pin_threads(cpus)
+    return _run_unit(fn, unit)
+
+
+#: How often a pool worker checks that the process that started it is alive (s).
+_PARENT_POLL_S = 1.0
+
+
+def _start_worker(cpus: int, parent: int, slots: Any) -> None:
+    """A pool worker's initializer: pin its threads, take a slot in ``slots`` (the units it
+    runs are written there), and exit when ``parent`` has gone.
+
+    Without the watch, a worker whose parent was killed (SIGKILL, out of memory) would finish
+    its unit, and then wait for more forever, holding its memory. A thread polling the parent's
+    pid, not Linux's PR_SET_PDEATHSIG: that fires when the *thread* that started the worker
+    exits, and a pool started by one thread of the caller is kept for calls from others.
+    """
+    pin_threads(cpus)
+    global _SLOTS, _SLOT
+    with slots.get_lock():
+        for k in range(0, len(slots), 2):
+            if slots[k] == 0:  # free: a pool's workers are never replaced, one each suffices
+                slots[k], slots[k + 1] = os.getpid(), -1
+                _SLOTS, _SLOT = slots, k
+                break
+
+    def watch() -> None:
+        while os.getppid() == parent:
+            time.sleep(_PARENT_POLL_S)
+        os._exit(1)  # the parent is gone: nobody waits for this worker's results
+
+    threading.Thread(target=watch, name="watch-parent", daemon=True).start()
