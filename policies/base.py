@@ -124,7 +124,7 @@ def validate_obs_row(obs: ArrayLike) -> np.ndarray:
 
     :raises ValueError: on a wrong shape or a NaN/inf entry.
     """
-    arr = _real(obs)
+    arr = real_obs(obs)
     if arr.ndim != 1 or arr.shape[0] not in OBS_SIZES:
         raise ValueError(f"obs must have shape {_SHAPES}, got shape {arr.shape}")
     if not np.all(np.isfinite(arr)):
@@ -132,16 +132,27 @@ def validate_obs_row(obs: ArrayLike) -> np.ndarray:
     return arr
 
 
-def _real(obs: ArrayLike) -> np.ndarray:
-    """``obs`` as float64 if it holds real numbers only (:func:`follow_env.sim.checks.real_array`:
-    strings would be parsed and complex numbers cut to their real part, silently).
+def real_obs(obs: ArrayLike) -> np.ndarray:
+    """``obs`` as float64 if it holds real numbers only: bools, integers, floats, or an object
+    array of such numbers (:func:`follow_env.sim.checks.real_array`); ``np.asarray(obs,
+    dtype=np.float64)`` alone would parse strings and cut complex numbers to their real part,
+    silently. Every policy's check of an observation starts here.
 
-    :raises ValueError: if it holds anything else.
+    :raises ValueError: naming the dtype (and an object array's first item that is no number).
     """
     arr = real_array(obs)
-    if arr is None:
-        raise ValueError(f"obs must be real numbers, got {obs!r}")
-    return arr
+    if arr is not None:
+        return arr
+    try:
+        given = np.asarray(obs)
+    except (TypeError, ValueError) as e:  # a ragged list
+        raise ValueError(f"obs must be real numbers in an array ({e})") from None
+    held = ""
+    if given.dtype.kind == "O":  # name the first item that is no real number
+        odd = [x for x in given.flat if real_array(x) is None][:1]
+        if odd:
+            held = f" holding {odd[0]!r} ({type(odd[0]).__name__})"
+    raise ValueError(f"obs must be real numbers, got dtype {given.dtype}{held}")
 
 
 def validate_obs_batch(obs: ArrayLike) -> np.ndarray:
@@ -149,7 +160,7 @@ def validate_obs_batch(obs: ArrayLike) -> np.ndarray:
 
     :raises ValueError: on a wrong shape or a NaN/inf entry (naming the lanes).
     """
-    arr = _real(obs)
+    arr = real_obs(obs)
     if arr.ndim != 2 or arr.shape[1] not in OBS_SIZES:
         raise ValueError(f"obs must have shape (n, k): rows of {_SHAPES}, got shape {arr.shape}")
     bad = ~np.isfinite(arr).all(axis=1)

@@ -16,9 +16,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from follow_env.sim.checks import real_array
 from follow_env.tasks.line_trace.spec import SPEC, cell_offsets
-from policies.base import LaneMemory
+from policies.base import LaneMemory, real_obs
 
 __all__ = ["CELL_XY", "LINE_OBS_SIZE", "LineLaw", "validate_readings"]
 
@@ -32,9 +31,7 @@ def validate_readings(obs: ArrayLike, batch: bool = False) -> np.ndarray:
     """The readings as float64 ``(25,)`` (``batch``: ``(n, 25)``, every row checked before
     any lane acts); ``ValueError`` on another shape, a NaN/inf or entries that are not real
     numbers (strings would be parsed, silently)."""
-    arr = real_array(obs)
-    if arr is None:
-        raise ValueError(f"obs must be real numbers: the grid's readings, got {obs!r}")
+    arr = real_obs(obs)
     shape = (arr.shape[0], LINE_OBS_SIZE) if batch and arr.ndim == 2 else (LINE_OBS_SIZE,)
     if arr.shape != shape:
         rows = "(n, 25): rows of" if batch else f"({LINE_OBS_SIZE},):"

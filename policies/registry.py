@@ -230,14 +230,19 @@ class PolicyRegistry:
 
 
 def _check_task(task: str) -> None:
-    """Refuse a ``task`` that is not a task package's name (``person_follow``, ``line_trace``).
+    """Refuse a ``task`` that is not a task package's name (``person_follow``, ``line_trace``):
+    one with a spec, ``follow_env.tasks.<task>.spec``, which is all a policy reads of a task.
 
-    :raises ValueError: naming the value and the known tasks.
+    :raises ValueError: naming the value and the tasks policies are registered for.
     """
-    from follow_env.tasks import available_tasks
+    import importlib.util
 
-    known = available_tasks()
-    if task not in known:
+    try:
+        found = importlib.util.find_spec(f"follow_env.tasks.{task}.spec") is not None
+    except (ImportError, ValueError):  # "a.b" past the package, or an empty name
+        found = False
+    if not isinstance(task, str) or not task.isidentifier() or not found:
+        known = sorted({DEFAULT_TASK, *(t for by in REGISTRY._factories.values() for t in by)})
         raise ValueError(f"task={task!r} is out of range: must be one of {known}")
 
 
@@ -331,5 +336,15 @@ for _folder, (_name, _task) in ppo.SHIPPED.items():
 # A folder with an ensemble.yaml (a seed study's) is the mean of its members' actions.
 register_resolver(ensemble.resolve_path)
 register_resolver(ppo.resolve_path)
+
+
 # A learned agent's view may hold a law's command (policies.learned.hint), built by name here.
-hint.use_laws(make_policy)
+def _guidance_laws() -> list[str]:
+    """PersonFollow's registered policies that are guidance laws: every one but the learned
+    agents (a learned policy registered by a user under another name is refused when built,
+    as no :class:`~policies.base.LaneActing`)."""
+    learned = {name for name, _ in ppo.SHIPPED.values()}
+    return [n for n in REGISTRY.names("person_follow") if n not in learned]
+
+
+hint.use_laws(make_policy, _guidance_laws)

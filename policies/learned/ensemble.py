@@ -9,6 +9,10 @@ folders relative to itself (the study writes it; any folder with such a file is 
     # runs/ppo-study/ensemble.yaml
     members: [seed-0, seed-1, seed-2, seed-3, seed-4]
 
+Each member is a lone agent, listed once: the ensemble's own folder, another ensemble, or one
+agent under two spellings (``seed-0`` and ``./seed-0``, told apart by the model file they load)
+is refused.
+
 The members must see the env alike: the same observation and action boxes, platform and
 feature steps (``vec_env_wrapper`` without the training-only reward shaping, which may differ,
 and ``frame_stack``), so one feature pipeline serves all of them and the command in force (the
@@ -33,7 +37,14 @@ import yaml
 from follow_env.sim.checks import load_yaml, utf8_problem, yaml_problem
 from policies.learned.features import Pipeline
 from policies.learned.networks import Memory
-from policies.learned.ppo import AGENTS, AgentLoadError, PPOPolicy, _Loaded, load_shipped
+from policies.learned.ppo import (
+    AGENTS,
+    AgentLoadError,
+    PPOPolicy,
+    _Loaded,
+    agent_files,
+    load_shipped,
+)
 
 __all__ = ["ENSEMBLE", "EnsemblePolicy", "is_learned", "member_folders", "resolve_path", "shipped"]
 
@@ -45,7 +56,9 @@ _Views = tuple[Pipeline, list[Pipeline], list[Memory | None]]
 
 
 def member_folders(path: Path) -> list[Path]:
-    """The member folders listed in ``path`` (an ``ensemble.yaml``), checked."""
+    """The member folders listed in ``path`` (an ``ensemble.yaml``), checked: each a lone agent
+    (not the ensemble's own folder, nor another ensemble), none the same agent as another under
+    another spelling (``seed-0``, ``./seed-0``, ``seed-0/model.zip``)."""
     try:
         data = load_yaml(path.read_text(encoding="utf-8"))
     except OSError as e:
@@ -61,9 +74,36 @@ def member_folders(path: Path) -> list[Path]:
         )
     if not all(isinstance(m, str) and m for m in members):
         raise AgentLoadError(f"{path}: every member must be a run folder's path, got {members!r}")
-    if len(set(members)) != len(members):
-        raise AgentLoadError(f"{path}: a member is listed twice: {members!r}")
-    return [path.parent / m for m in members]
+    folders = [path.parent / m for m in members]
+    home = path.parent.resolve()
+    seen: dict[Path, str] = {}
+    for member, folder in zip(members, folders, strict=True):
+        if folder.resolve() == home:
+            raise AgentLoadError(
+                f"{path}: member {member!r} is the ensemble's own folder; list its run folders"
+            )
+        if (folder / ENSEMBLE).exists() or folder.name == ENSEMBLE:
+            raise AgentLoadError(
+                f"{path}: member {member!r} is itself an ensemble ({ENSEMBLE}); list its run "
+                "folders instead"
+            )
+        model = _model_of(folder)
+        if model in seen:
+            raise AgentLoadError(
+                f"{path}: a member is listed twice: {seen[model]!r} and {member!r} are the "
+                f"same agent ({model})"
+            )
+        seen[model] = member
+    return folders
+
+
+def _model_of(folder: Path) -> Path:
+    """The model file a member loads, resolved: what makes two spellings one member. A member
+    whose files cannot be found is left to its loading, which names the missing file."""
+    try:
+        return agent_files(folder).model.resolve()
+    except AgentLoadError:
+        return folder.resolve()
 
 
 class EnsemblePolicy:
@@ -149,7 +189,8 @@ class EnsemblePolicy:
         """The mean of the members' actions for one observation, in SI (the platform's
         :attr:`action_names`).
 
-        :raises ValueError: if ``obs`` is not a finite array of the agents' observation shape.
+        :raises ValueError: if ``obs`` is not a finite array of real numbers
+            (:func:`policies.base.real_obs`) of the agents' observation shape.
         """
         row = self._rows(obs, batch=False)
         start = self._single is None

@@ -17,17 +17,25 @@ from policies.base import LaneActing
 from policies.learned.boxes import Box, per_entry
 from policies.learned.feature import Feature, append_entries
 
-__all__ = ["LawHint", "use_laws"]
+__all__ = ["LawHint", "guidance_laws", "use_laws"]
 
-# How a law's name becomes a law: the registry, which imports this module (through the learned
-# agents' loaders), hands in its make_policy when it is imported (policies.registry).
+# How a law's name becomes a law, and which names are guidance laws: the registry, which
+# imports this module (through the learned agents' loaders), hands them in when it is imported
+# (policies.registry), so this module imports neither the registry nor the learned agents.
 _make_law: Callable[[str], Any] | None = None
+_law_names: Callable[[], list[str]] | None = None
 
 
-def use_laws(make: Callable[[str], Any]) -> None:
-    """Set how :class:`LawHint` builds its law from a name (:func:`policies.make_policy`)."""
-    global _make_law
-    _make_law = make
+def use_laws(make: Callable[[str], Any], names: Callable[[], list[str]]) -> None:
+    """Set how :class:`LawHint` builds its law from a name (:func:`policies.make_policy`), and
+    the names it takes (``names()``: the registered guidance laws, no learned agent)."""
+    global _make_law, _law_names
+    _make_law, _law_names = make, names
+
+
+def guidance_laws() -> list[str]:
+    """The names :class:`LawHint` takes: the registered guidance laws, sorted."""
+    return sorted(_law_names()) if _law_names is not None else []
 
 
 class LawHint(Feature):
@@ -38,7 +46,8 @@ class LawHint(Feature):
     law reads what the agent reads; before :class:`ScaleObservation`, so it reads metres and
     pixels), one copy of its memory per lane, reset with the lane's episode.
 
-    :param law: a guidance law's name (:func:`policies.make_policy`), e.g. ``"pn:thesis"``.
+    :param law: a registered guidance law's name (:func:`guidance_laws`), e.g.
+        ``"pn:thesis"``; a learned agent (``ppo``, a run folder) is refused.
     :param units: one value per action entry: the law's command that reads as 1 (SI, in the
         entry's unit; the agent's ranges of ``RescaleAction``, e.g. ``[1.484375, 2.0]``).
     """
@@ -51,14 +60,20 @@ class LawHint(Feature):
         if _make_law is None:  # importing the package imports the registry, which sets it
             raise RuntimeError("policies.registry has not handed LawHint its laws")
         units = per_entry(f"{self.owner}.units", self.given_units, act)
-        try:
-            law = _make_law(self.law_name)
-        except ValueError as err:
-            raise ValueError(f"{self.owner}.law={self.law_name!r}: {err}") from None
+        # Decided on the name, before anything is built: a learned agent as the law would load
+        # an agent while this one loads (its own path once hung for ever), and an agent's view
+        # holds a guidance law's command, not another agent's.
+        laws = guidance_laws()
+        if self.law_name not in laws:
+            raise ValueError(
+                f"{self.owner}.law={self.law_name!r} is out of range: must be a guidance law, "
+                f"not a learned agent or a path (registered guidance laws: {', '.join(laws)})"
+            )
+        law = _make_law(self.law_name)
         if not isinstance(law, LaneActing) or tuple(law.action_names) != act.entry_names():
             raise ValueError(
                 f"{self.owner}.law={self.law_name!r} is out of range: must be a guidance law "
-                f"commanding [{', '.join(act.entry_names())}]"
+                f"commanding [{', '.join(act.entry_names())}], not a learned agent"
             )
         self.law, self.units, self.n = law, units, n
         ones = np.ones(act.shape[0])

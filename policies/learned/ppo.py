@@ -11,6 +11,12 @@ agent is three files:
 - ``config.yaml``: the run's resolved configuration, whose ``algo``, ``vec_env_wrapper`` list,
   ``frame_stack`` and env spaces say how the agent sees the env (no ``algo``: PPO).
 
+Loading checks them against each other and against the tasks, and refuses a folder that would
+act wrongly without a word (:class:`AgentLoadError`, naming the file): an ``env_id`` of no
+task, an observation or action box with a NaN bound or low > high, statistics whose
+``norm_obs`` the configuration contradicts, or whose mean, variance, ``epsilon`` or
+``clip_obs`` are unusable (NaN, negative variances).
+
 The policy rebuilds the agent's view from the configuration with the feature pipeline that
 training wraps (:mod:`policies.learned.features`): extra observation features, normalisation
 with the saved statistics (frozen), stacked frames. So the agent gets exactly the input it was
@@ -49,7 +55,13 @@ import yaml
 
 from follow_env.sim.checks import load_yaml, utf8_problem, yaml_problem
 from follow_env.tasks.person_follow.spec import AHEAD, AHEAD_SETTINGS, SPEC
-from policies.base import OBS_SIZES, validate_obs_batch, validate_obs_row
+from policies.base import OBS_SIZES, real_obs, validate_obs_batch, validate_obs_row
+from policies.learned.checks import (
+    ENV_IDS,
+    box_problem,
+    normalized_observations,
+    statistics_problem,
+)
 from policies.learned.feature import wrapper_entries
 from policies.learned.features import Box, Feature, FrameStack, NormalizeObservation, Pipeline
 from policies.learned.networks import ALGOS, Memory, load_network
@@ -168,10 +180,16 @@ def _wrapper_entries(value: Any, where: Path) -> list[tuple[str, dict[str, Any]]
 
 
 def _box(spaces: dict[str, Any], key: str, where: Path) -> Box:
+    """``env_spaces.<key>`` as a :class:`Box`, checked (:func:`~.checks.check_box`)."""
     try:
-        return Box(spaces[key]["low"], spaces[key]["high"], spaces[key].get("names"))
+        low, high = spaces[key]["low"], spaces[key]["high"]
+        box = Box(low, high, spaces[key].get("names"))
     except (KeyError, TypeError, ValueError, AttributeError) as e:
         raise AgentLoadError(f"{where}: env_spaces.{key} is not a box ({e})") from None
+    problem = box_problem(box, low, high)
+    if problem is not None:
+        raise AgentLoadError(f"{where}: env_spaces.{key} {problem}")
+    return box
 
 
 class _Loaded:
@@ -208,6 +226,11 @@ class _Loaded:
         env_kwargs = hp.get("env_kwargs") or {}
         self.perception = env_kwargs.get("perception") if isinstance(env_kwargs, dict) else None
         self.env_id = config.get("env_id", SPEC.env_id)
+        if self.env_id not in ENV_IDS:
+            raise AgentLoadError(
+                f"{where}: env_id={self.env_id!r} is out of range: must be one of "
+                + ", ".join(map(repr, ENV_IDS))
+            )
         self.wrappers = _wrapper_entries(hp.get("vec_env_wrapper"), where)
         self.frame_stack = hp.get("frame_stack", 1)
         if (
@@ -225,8 +248,12 @@ class _Loaded:
         except (ValueError, TypeError) as e:
             raise AgentLoadError(f"{where}: the agent's view cannot be built: {e}") from None
         self.normalization = None
-        if hp.get("normalize"):
-            self.normalization = self._load_normalization(files.normalization)
+        try:
+            norm_obs = normalized_observations(hp.get("normalize"))
+        except ValueError as e:
+            raise AgentLoadError(f"{where}: {e}") from None
+        if norm_obs is not None:
+            self.normalization = self._load_normalization(files.normalization, norm_obs, where)
         self.files = files
         #: The learner (``config.yaml``'s ``algo``; runs saved before there was one are PPO's).
         self.algo = config.get("algo", "ppo")
@@ -235,7 +262,24 @@ class _Loaded:
         self.model = load_network(files.model, self.algo, hp.get("policy"), AgentLoadError)
 
     @staticmethod
-    def _load_normalization(path: Path) -> Any:
+    def _load_normalization(path: Path, norm_obs: bool, config: Path) -> _Statistics:
+        """The statistics in ``path``, checked against the configuration's ``norm_obs``
+        (``config``): statistics of another run would normalise what this agent saw raw, or
+        leave raw what it saw normalised, and damaged ones give NaN actions."""
+        stats = _Loaded._read_normalization(path)
+        if stats.norm_obs != norm_obs:
+            raise AgentLoadError(
+                f"{path}: norm_obs={stats.norm_obs} but {config} says the agent was trained "
+                f"with norm_obs={norm_obs}: the statistics are not this agent's"
+            )
+        problem = statistics_problem(stats)
+        if problem is not None:
+            raise AgentLoadError(f"{path}: damaged normalisation statistics: {problem}")
+        return stats
+
+    @staticmethod
+    def _read_normalization(path: Path) -> _Statistics:
+        """The fields inference needs of the ``VecNormalize`` pickled in ``path``, unchecked."""
         import pickle
 
         if not path.exists():
@@ -279,7 +323,14 @@ class _Loaded:
 
 
 _CACHE: dict[tuple, _Loaded] = {}
+#: Guards :data:`_CACHE` only, never held while an agent loads: a load may build other policies
+#: (a law for :class:`~policies.learned.hint.LawHint`, an ensemble's members), and holding one
+#: lock across it hung for ever whenever a load needed another agent. Two threads loading the
+#: same agent at once both read it; the first to finish is kept.
 _CACHE_LOCK = threading.Lock()
+#: The agents this thread is loading: an agent whose loading needs itself (a cycle through
+#: names) is refused, where it would recurse until the stack ran out.
+_LOADING = threading.local()
 
 
 def _loaded(files: AgentFiles) -> _Loaded:
@@ -288,9 +339,23 @@ def _loaded(files: AgentFiles) -> _Loaded:
         for p in (files.model, files.normalization, files.config)
     )
     with _CACHE_LOCK:
-        if key not in _CACHE:
-            _CACHE[key] = _Loaded(files)
-        return _CACHE[key]
+        found = _CACHE.get(key)
+    if found is not None:
+        return found
+    loading: set[tuple] | None = getattr(_LOADING, "keys", None)
+    if loading is None:
+        loading = _LOADING.keys = set()
+    if key in loading:
+        raise AgentLoadError(
+            f"{files.config}: loading this agent needs the agent itself (its view names it)"
+        )
+    loading.add(key)
+    try:
+        agent = _Loaded(files)
+    finally:
+        loading.discard(key)
+    with _CACHE_LOCK:
+        return _CACHE.setdefault(key, agent)
 
 
 class PPOPolicy:
@@ -360,6 +425,7 @@ class PPOPolicy:
         """Observations as float32 rows, checked: PersonFollow's by its own rules (an agent
         trained without the reading ahead reads the first two entries of an observation that
         has it), another task's by the saved observation size."""
+        obs = real_obs(obs)
         if self._follows:
             arr = validate_obs_batch(obs) if batch else validate_obs_row(obs)[None]
             if arr.shape[1] < self._obs_size:
@@ -388,7 +454,8 @@ class PPOPolicy:
         action, :attr:`action_names` (``[v_mps, w_radps]`` on the differential drive),
         deterministically.
 
-        :raises ValueError: if ``obs`` is not a finite array of the agent's observation shape.
+        :raises ValueError: if ``obs`` is not a finite array of real numbers
+            (:func:`policies.base.real_obs`) of the agent's observation shape.
         """
         row = self._rows(obs, batch=False)
         if not self._started or self._view is None:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import pickle
+import re
 import shutil
 from pathlib import Path
 
@@ -209,3 +210,52 @@ def test_members_that_read_ahead_make_an_ensemble_that_reads_ahead(tmp_path: Pat
     write(tmp_path, ["seed-0", "plain"])
     with pytest.raises(AgentLoadError, match=r"plain does not see the env.*reading ahead"):
         make_policy(str(tmp_path))
+
+
+@pytest.mark.parametrize("twice", ["./seed-0", "seed-0/", "seed-0/model.zip", "../{home}/seed-0"])
+def test_a_member_listed_twice_under_two_spellings_is_refused(pair: Path, twice: str) -> None:
+    """``[seed-0, ./seed-0]`` loaded, and acted as seed-0 alone."""
+    write(pair, ["seed-0", twice.format(home=pair.name)])
+    with pytest.raises(AgentLoadError, match="a member is listed twice") as error:
+        make_policy(str(pair))
+    assert str(error.value).startswith(f"{pair / ENSEMBLE}: ")
+    assert str((pair / "seed-0" / "model.zip").resolve()) in str(error.value)
+
+
+def test_a_member_file_linked_from_elsewhere_is_the_same_member(pair: Path) -> None:
+    (pair / "alias").symlink_to(pair / "seed-1", target_is_directory=True)
+    write(pair, ["seed-0", "seed-1", "alias"])
+    with pytest.raises(AgentLoadError, match="'seed-1' and 'alias' are the same agent"):
+        make_policy(str(pair))
+
+
+@pytest.mark.parametrize(
+    ("member", "message"),
+    [
+        (".", "member '.' is the ensemble's own folder"),
+        ("../{home}", "is the ensemble's own folder"),
+        ("inner", "member 'inner' is itself an ensemble"),
+        ("inner/ensemble.yaml", "member 'inner/ensemble.yaml' is itself an ensemble"),
+        (str(DEFAULT_AGENT.parent / "ppo_ensemble"), "is itself an ensemble"),
+    ],
+)
+def test_the_ensembles_own_folder_or_another_ensemble_is_refused_as_a_member(
+    pair: Path, member: str, message: str
+) -> None:
+    """They failed with a misleading 'model.zip: model file not found'."""
+    inner = pair / "inner"
+    inner.mkdir()
+    write(inner, ["../seed-0", "../seed-1"])
+    write(pair, ["seed-0", member.format(home=pair.name)])
+    with pytest.raises(AgentLoadError, match=re.escape(message)) as error:
+        make_policy(str(pair))
+    assert str(error.value).startswith(f"{pair / ENSEMBLE}: ")
+
+
+def test_an_ensemble_refuses_observations_that_are_not_real_numbers(pair: Path) -> None:
+    policy = make_policy(str(pair))
+    with pytest.raises(ValueError, match="dtype <U"):
+        policy.act(np.array(["1.4", "30"]))
+    policy.reset_batch(1)
+    with pytest.raises(ValueError, match="dtype complex128"):
+        policy.act_batch(np.array([[1.4 + 0j, 30]]))

@@ -3,16 +3,20 @@
 from __future__ import annotations
 
 import re
+import shutil
+import threading
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from policies import make_policy
+from policies.learned import hint
 from policies.learned.boxes import Box
 from policies.learned.features import IncrementalAction, Pipeline
 from policies.learned.hint import LawHint
-from policies.learned.ppo import PPOPolicy
+from policies.learned.ppo import AGENTS, AgentLoadError, PPOPolicy
+from policies.registry import REGISTRY
 
 ACT = Box(np.array([-1.0, -1.0]), np.array([1.0, 1.0]), ("v_mps", "w_radps"))
 OBS = Box(np.array([0.0, -320.0, 0.0]), np.array([10.0, 319.0, 10.0]))
@@ -81,7 +85,7 @@ def test_the_terminal_view_leaves_the_memory_alone() -> None:
     [
         ({"units": [1.5]}, "LawHint.units=[1.5] is out of range: must be 2 positive numbers"),
         ({"units": [1.5, 0.0]}, "LawHint.units=[1.5, 0.0] is out of range"),
-        ({"law": "nope"}, "LawHint.law='nope': unknown policy"),
+        ({"law": "nope"}, "LawHint.law='nope' is out of range: must be a guidance law"),
         ({"law": "ppo"}, "LawHint.law='ppo' is out of range: must be a guidance law"),
     ],
 )
@@ -173,3 +177,88 @@ def test_an_agent_trained_with_a_laws_command_loads_with_the_law_in_its_view(
     action = agent.act(obs[0])
     assert action.shape == (2,)
     assert np.all(np.isfinite(action))
+
+
+def _law_agent(folder: Path, law: str) -> Path:
+    """A copy of the shipped ``ppo_law`` whose LawHint reads ``law`` in place of pn:thesis."""
+    folder.mkdir()
+    for name in ("model.zip", "vecnormalize.pkl", "config.yaml"):
+        shutil.copy(AGENTS / "ppo_law" / name, folder / name)
+    config = folder / "config.yaml"
+    text = config.read_text(encoding="utf-8")
+    assert "law: pn:thesis" in text
+    config.write_text(text.replace("law: pn:thesis", f"law: {law!r}"), encoding="utf-8")
+    return folder
+
+
+def _load_in_thread(path: Path, seconds: float = 60.0) -> object:
+    """``make_policy(path)``'s policy or error, from a daemon thread: a load that hangs fails
+    this test rather than the whole suite."""
+    result: list[object] = []
+
+    def load() -> None:
+        try:
+            result.append(make_policy(str(path)))
+        except Exception as e:  # the error is the result
+            result.append(e)
+
+    thread = threading.Thread(target=load, daemon=True)
+    thread.start()
+    thread.join(seconds)
+    assert not thread.is_alive(), f"loading {path} hung"
+    return result[0]
+
+
+@pytest.mark.parametrize("law", ["ppo", "ppo_ensemble", "self", "shipped path"])
+def test_an_agent_whose_law_is_a_learned_agent_is_refused_naming_its_config(
+    tmp_path: Path, law: str
+) -> None:
+    """It hung for ever: the loader held its lock while the law, an agent, loaded."""
+    folder = tmp_path / "agent"
+    given = {"self": str(folder), "shipped path": str(AGENTS / "ppo")}.get(law, law)
+    _law_agent(folder, given)
+    error = _load_in_thread(folder)
+    assert isinstance(error, AgentLoadError)
+    assert str(folder / "config.yaml") in str(error)
+    assert "must be a guidance law, not a learned agent" in str(error)
+
+
+def test_an_agent_whose_law_name_builds_the_agent_itself_is_refused(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A name registered for the agent itself passes the name check: the loader refuses the
+    cycle (one lock held across a load hung on it for ever)."""
+    folder = _law_agent(tmp_path / "agent", "selfie")
+    factories = {"person_follow": lambda: PPOPolicy(folder)}
+    monkeypatch.setitem(REGISTRY._factories, "selfie", factories)
+    error = _load_in_thread(folder)
+    assert isinstance(error, AgentLoadError)
+    assert str(folder / "config.yaml") in str(error)
+    assert "needs the agent itself" in str(error)
+    # the failed load leaves nothing behind: the agent with a law loads afterwards
+    (folder / "config.yaml").write_text(
+        (AGENTS / "ppo_law" / "config.yaml").read_text(encoding="utf-8"), encoding="utf-8"
+    )
+    assert isinstance(_load_in_thread(folder), PPOPolicy)
+
+
+@pytest.mark.parametrize("law", ["ppo", "ppo_law", "runs/ppo-1", "model.zip", str(AGENTS / "ppo")])
+def test_a_learned_agent_is_refused_as_the_law_before_anything_is_built(
+    law: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    def build(name: str) -> None:
+        raise AssertionError(f"{name} was built")
+
+    monkeypatch.setattr(hint, "_make_law", build)
+    with pytest.raises(ValueError, match=re.escape(f"LawHint.law={law!r} is out of range")):
+        LawHint(law=law).bind(OBS, ACT, 1)
+
+
+def test_a_learned_agent_registered_under_another_name_is_refused_as_the_law(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    monkeypatch.setitem(
+        REGISTRY._factories, "my_law", {"person_follow": lambda: make_policy("ppo")}
+    )
+    with pytest.raises(ValueError, match=r"LawHint\.law='my_law' .* not a learned agent"):
+        LawHint(law="my_law").bind(OBS, ACT, 1)

@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import pickle
+import re
 import shutil
 import zipfile
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -308,3 +310,128 @@ def test_each_policy_kind_takes_the_mean_path_to_sb3s_predict_bit_for_bit(kwargs
     rows = np.random.default_rng(7).uniform(-5, 5, (40, 6)).astype(np.float32)
     theirs = np.concatenate([policy.predict(row[None], deterministic=True)[0] for row in rows])
     np.testing.assert_array_equal(network.act(rows), theirs)
+
+
+def _normalising(folder: Path, config_norm_obs: bool = True, **fields: object) -> Path:
+    """``folder``'s agent with observation statistics ``fields`` (over VecNormalize's saved
+    fields: norm_obs, obs_rms's mean and var, epsilon, clip_obs), its config.yaml saying
+    ``norm_obs: config_norm_obs``."""
+    size = PPOPolicy(DEFAULT_AGENT)._agent.pipeline(1).observation_box.shape[0]
+    saved = {"norm_obs": True, "mean": np.zeros(size), "var": np.ones(size)}
+    saved |= {"epsilon": 1e-8, "clip_obs": 10.0, **fields}
+    rms = SimpleNamespace(mean=saved.pop("mean"), var=saved.pop("var"))
+    with (folder / "vecnormalize.pkl").open("wb") as f:
+        pickle.dump(SimpleNamespace(obs_rms=rms, **saved), f)
+    config = folder / "config.yaml"
+    text = config.read_text(encoding="utf-8")
+    assert "norm_obs: false" in text
+    config.write_text(text.replace("norm_obs: false", f"norm_obs: {config_norm_obs}".lower()))
+    return folder
+
+
+def test_sound_statistics_normalise_the_observation(agent_copy: Path) -> None:
+    policy = make_policy(str(_normalising(agent_copy, var=np.full(20, 4.0))))
+    action = policy.act(obs(1.4, 30.0))
+    assert np.all(np.isfinite(action))
+
+
+@pytest.mark.parametrize(
+    ("fields", "message"),
+    [
+        ({"var": np.full(20, np.nan)}, "not finite"),
+        ({"var": np.full(20, np.inf)}, "not finite"),
+        ({"mean": np.full(20, np.nan)}, "not finite"),
+        ({"var": np.r_[np.ones(19), -5.0]}, r"negative variances \(entries \[19\]\)"),
+        ({"var": "ones"}, "a mean and a variance of the same flat shape"),
+        ({"epsilon": 0.0}, "epsilon=0.0 must be a finite number > 0"),
+        ({"epsilon": float("nan")}, "epsilon=nan"),
+        ({"clip_obs": 0.0}, "clip_obs=0.0 must be > 0"),
+        ({"clip_obs": float("nan")}, "clip_obs=nan"),
+    ],
+)
+def test_damaged_statistics_are_refused_naming_them(
+    agent_copy: Path, fields: dict, message: str
+) -> None:
+    """They gave NaN actions, with nothing but numpy's warning."""
+    with pytest.raises(AgentLoadError, match=message) as error:
+        make_policy(str(_normalising(agent_copy, **fields)))
+    assert str(error.value).startswith(f"{agent_copy / 'vecnormalize.pkl'}: ")
+
+
+@pytest.mark.parametrize("config_norm_obs", [False, True])
+def test_statistics_whose_norm_obs_the_config_contradicts_are_refused(
+    agent_copy: Path, config_norm_obs: bool
+) -> None:
+    """Foreign statistics normalised what the agent had seen raw (it drove backwards)."""
+    _normalising(agent_copy, config_norm_obs, norm_obs=not config_norm_obs)
+    with pytest.raises(AgentLoadError, match=f"norm_obs={not config_norm_obs} but ") as error:
+        make_policy(str(agent_copy))
+    assert str(error.value).startswith(f"{agent_copy / 'vecnormalize.pkl'}: ")
+    assert str(agent_copy / "config.yaml") in str(error.value)
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "message"),
+    [
+        (
+            "\nenv_id: PersonFollow-v0",
+            "\nenv_id: CartPole-v1",
+            "env_id='CartPole-v1' is out of range",
+        ),
+        ("\nenv_id: PersonFollow-v0", "\nenv_id: 5", "env_id=5 is out of range"),
+        (
+            "low: [0.0, -320.0]",
+            "low: [20.0, -320.0]",
+            r"observation has low > high in entries \[0\]",
+        ),
+        ("high: [10.0, 319.0]", "high: [.nan, 319.0]", "observation has a NaN bound"),
+        ("high: [10.0, 319.0]", "high: ['10', 319.0]", "observation is not a box .* numbers"),
+        ("low: [-1.484375, -7.421875]", "low: [2.0, -7.421875]", "action has low > high"),
+    ],
+)
+def test_an_unknown_env_or_a_malformed_box_is_refused_naming_the_config(
+    agent_copy: Path, old: str, new: str, message: str
+) -> None:
+    config = agent_copy / "config.yaml"
+    text = config.read_text(encoding="utf-8")
+    assert text.count(old) == 1
+    config.write_text(text.replace(old, new), encoding="utf-8")
+    with pytest.raises(AgentLoadError, match=message) as error:
+        make_policy(str(agent_copy))
+    assert str(error.value).startswith(f"{config}: ")
+
+
+@pytest.mark.parametrize(
+    ("name", "task", "size"),
+    [("ppo", None, 2), ("ppo", "line_trace", 25), ("ppo_ensemble", None, 3)],
+)
+def test_observations_that_are_not_real_numbers_are_refused_naming_the_dtype(
+    name: str, task: str | None, size: int
+) -> None:
+    """Strings were parsed ("2" read as 2.0) and complex numbers cut to their real part."""
+    policy = make_policy(name, task)
+    row = np.linspace(0.5, 1.0, size)
+    for bad, dtype in (
+        (row.astype(str), "dtype <U"),
+        (row.astype(complex), "dtype complex128"),
+        ([*row.tolist()[:-1], "1"], "dtype <U"),
+        (np.array([*row[:-1], "1"], dtype=object), "dtype object holding '1' (str)"),
+        (np.array([*row[:-1], None], dtype=object), "dtype object holding None"),
+    ):
+        policy.reset()
+        with pytest.raises(ValueError, match=re.escape(dtype)):
+            policy.act(bad)
+        policy.reset_batch(2)
+        with pytest.raises(ValueError, match=re.escape(dtype)):
+            policy.act_batch(np.stack([np.asarray(bad)] * 2))
+    # numbers of any real kind act as their float values do
+    policy.reset()
+    want = policy.act(row.astype(np.float32))
+    for same in (row.astype(np.float32).astype(object), row.astype(np.float32).tolist()):
+        policy.reset()
+        np.testing.assert_array_equal(policy.act(same), want)
+    flags = (row > 0.7).astype(bool)
+    policy.reset()
+    want = policy.act(flags.astype(np.float32))
+    policy.reset()
+    np.testing.assert_array_equal(policy.act(flags), want)
