@@ -462,6 +462,7 @@ def wrapper_specs(value: Any, *, where: str = "vec_env_wrapper") -> list[tuple[s
             raise ConfigError(f"{where}: vec_env_wrapper {name!r} does not import: {e}") from None
         if not (isinstance(cls, type) and issubclass(cls, VecEnvWrapper)):
             raise ConfigError(f"{where}: vec_env_wrapper {name!r} is not an SB3 VecEnvWrapper")
+        _check_loadable(where, name, cls)
         accepted = _accepted_arguments(cls) - {"venv"}
         for key in kwargs:
             if key not in accepted:
@@ -471,6 +472,29 @@ def wrapper_specs(value: Any, *, where: str = "vec_env_wrapper") -> list[tuple[s
                 )
         specs.append((name, dict(kwargs)))
     return specs
+
+
+def _check_loadable(where: str, name: str, cls: type) -> None:
+    """A wrapper a trained agent loads with: a step of the view (:data:`FEATURES
+    <policies.learned.features.FEATURES>`, rebuilt by name) or a training-only one. Any other
+    trains, and then ``make_policy``, ``follow-eval`` and ``follow-robot`` refuse the agent."""
+    from policies.learned.features import FEATURES, Pipeline
+
+    if not Pipeline.view_entries([(name, {})]):
+        return  # training-only: not part of the agent's view
+    step = name.rsplit(".", 1)[-1].removeprefix("Vec")
+    known = ", ".join(f"train.wrappers.Vec{k}" for k in FEATURES)
+    if step not in FEATURES:
+        raise ConfigError(
+            f"{where}: vec_env_wrapper {name!r} is not a step a trained agent can be loaded "
+            f"with (its view is rebuilt without SB3 from: {known})"
+        )
+    if not cls.__module__.startswith("train."):  # loaded by its name, as the project's step
+        raise ConfigError(
+            f"{where}: vec_env_wrapper {name!r} is named as the step Vec{step} but is another "
+            f"class ({cls.__module__}.{cls.__qualname__}); a trained agent loads "
+            f"train.wrappers.Vec{step} by that name"
+        )
 
 
 def _refuse_double_stack(where: str, frame_stack: int, specs: list[tuple[str, dict]]) -> None:

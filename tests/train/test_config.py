@@ -7,6 +7,7 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 import pytest
+from stable_baselines3.common.vec_env import VecEnvWrapper
 
 from follow_env.tasks.person_follow import ENV_ID
 from train.config import (
@@ -82,11 +83,23 @@ def test_missing_file_is_named(tmp_path: Path) -> None:
         (
             {
                 "frame_stack": 2,
+                "vec_env_wrapper": [{"train.wrappers.VecStackFrames": {"n_stack": 4}}],
+            },
+            "frame_stack=2 is out of range beside the wrapper train.wrappers.VecStackFrames",
+        ),
+        # An SB3 wrapper the agent's view cannot be rebuilt with: it trained for its whole
+        # budget, and then the agent could not be loaded
+        (
+            {"vec_env_wrapper": [{"stable_baselines3.common.vec_env.VecCheckNan": None}]},
+            "'stable_baselines3.common.vec_env.VecCheckNan' is not a step a trained agent can",
+        ),
+        (
+            {
                 "vec_env_wrapper": [
                     {"stable_baselines3.common.vec_env.VecFrameStack": {"n_stack": 4}}
-                ],
+                ]
             },
-            "frame_stack=2 is out of range beside the wrapper stable_baselines3",
+            "'stable_baselines3.common.vec_env.VecFrameStack' is not a step a trained agent",
         ),
     ],
 )
@@ -491,3 +504,24 @@ def test_a_file_that_is_not_utf8_is_named(tmp_path: Path) -> None:
     path.write_bytes(b"\xff\xfe" + f"{ENV_ID}: {{}}\n".encode())
     with pytest.raises(ConfigError, match=r"ppo\.yaml: not a UTF-8 text file"):
         load_hyperparams(path, ENV_ID)
+
+
+class VecScaleObservation(VecEnvWrapper):
+    """Named as the project's step, but another class (a user's own)."""
+
+    def __init__(self, venv: object, scale: float = 1.0) -> None:
+        super().__init__(venv)  # type: ignore[arg-type]
+
+    def reset(self) -> object:
+        return self.venv.reset()
+
+    def step_wait(self) -> object:
+        return self.venv.step_wait()
+
+
+def test_a_wrapper_named_as_a_step_but_of_another_class_is_refused() -> None:
+    # the agent's view is rebuilt by the step's name: train.wrappers.VecScaleObservation's
+    # arithmetic would silently stand in for this class's at inference
+    name = f"{__name__}.VecScaleObservation"
+    with pytest.raises(ConfigError, match="is named as the step VecScaleObservation but is"):
+        parse_hyperparams(MINIMAL | {"vec_env_wrapper": [{name: {"scale": 2.0}}]})
