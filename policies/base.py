@@ -169,6 +169,21 @@ def validate_obs_batch(obs: ArrayLike) -> np.ndarray:
     return arr
 
 
+def lane_flags(lanes: ArrayLike, n: int | None, pending: np.ndarray | None = None) -> np.ndarray:
+    """``lanes`` (a bool per lane, for ``reset_lanes``) checked against the ``n`` lanes of
+    ``reset_batch``, added to the lanes already ``pending`` a restart.
+
+    :raises ValueError: before ``reset_batch``, or for flags of another length.
+    """
+    flags = np.asarray(lanes, dtype=bool)
+    if n is None or flags.shape != (n,):
+        raise ValueError(
+            f"reset_lanes got flags of shape {flags.shape}: call reset_batch(n) first and give "
+            "one flag per lane"
+        )
+    return flags if pending is None else pending | flags
+
+
 def clip_to(value: np.ndarray, limit: float | None) -> np.ndarray:
     """``value`` clipped to ``±limit`` (float64, elementwise), or as it is when ``limit`` is
     None."""

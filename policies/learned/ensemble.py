@@ -35,6 +35,7 @@ import numpy as np
 import yaml
 
 from follow_env.sim.checks import load_yaml, utf8_problem, yaml_problem
+from policies.base import lane_flags
 from policies.learned.features import Pipeline
 from policies.learned.networks import Memory
 from policies.learned.ppo import (
@@ -171,12 +172,15 @@ class EnsemblePolicy:
         ]
         return shared, tails, [agent.model.memory(n) for agent in self._agents]
 
-    def _act(self, views: _Views, obs: np.ndarray, start: bool) -> np.ndarray:
-        """The ensemble's SI actions for ``obs`` (``start``: the lanes' first step)."""
+    def _act(
+        self, views: _Views, obs: np.ndarray, start: bool, done: np.ndarray | None = None
+    ) -> np.ndarray:
+        """The ensemble's SI actions for ``obs`` (``start``: the lanes' first step; ``done``:
+        the lanes whose episodes start again now, :meth:`reset_lanes`)."""
         shared, tails, memories = views
-        seen = shared.start(obs) if start else shared.observe(obs)
+        seen = shared.start(obs) if start else shared.observe(obs, done)
         total = sum(
-            agent.model.act(tail.start(seen) if start else tail.observe(seen), memory)
+            agent.model.act(tail.start(seen) if start else tail.observe(seen, done), memory)
             for agent, tail, memory in zip(self._agents, tails, memories, strict=True)
         )
         return shared.act(total / len(self._agents)).astype(np.float32)
@@ -202,6 +206,16 @@ class EnsemblePolicy:
         """Start ``n`` lanes' episodes."""
         self._batch = None
         self._batch_n = n
+        self._restart = np.zeros(n, dtype=bool)
+
+    def reset_lanes(self, lanes: np.ndarray) -> None:
+        """Start new episodes in the lanes flagged in ``lanes`` (bool, one per lane), every
+        member's memory of them too; the others' kept (:meth:`PPOPolicy.reset_lanes`)."""
+        self._restart = lane_flags(lanes, self._batch_n, getattr(self, "_restart", None))
+        if self._batch is not None:
+            for memory in self._batch[2]:
+                if memory is not None:
+                    memory.restart(self._restart)
 
     def act_batch(self, obs: np.ndarray) -> np.ndarray:
         """Actions ``(n, m)`` for observations ``(n, k)``, each lane as :meth:`act` gives it."""
@@ -213,7 +227,9 @@ class EnsemblePolicy:
         start = self._batch is None
         if start:
             self._batch = self._views(len(rows))
-        return self._act(self._batch, rows, start)
+        actions = self._act(self._batch, rows, start, self._restart)
+        self._restart = np.zeros(len(rows), dtype=bool)
+        return actions
 
     def __reduce__(self) -> tuple[Any, ...]:
         # Rebuilt from its files in a worker process, as a lone agent is.

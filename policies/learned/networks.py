@@ -50,6 +50,14 @@ class Memory:
         self.states: list[tuple[Any, Any]] = [(zeros, zeros) for _ in range(n)]
         self.starts = np.ones(n, dtype=bool)
 
+    def restart(self, lanes: np.ndarray) -> None:
+        """Start the flagged ``lanes`` (bool per lane) afresh: their state zero, their next
+        step an episode's first (SB3's ``episode_starts``)."""
+        for i in np.flatnonzero(lanes):
+            hidden, cell = self.states[i]
+            self.states[i] = (hidden * 0, cell * 0)
+        self.starts[lanes] = True
+
 
 class Network:
     """A loaded feed-forward policy network (PPO's or SAC's), acting deterministically on agent

@@ -55,7 +55,7 @@ import yaml
 
 from follow_env.sim.checks import load_yaml, utf8_problem, yaml_problem
 from follow_env.tasks.person_follow.spec import AHEAD, AHEAD_SETTINGS, SPEC
-from policies.base import OBS_SIZES, real_obs, validate_obs_batch, validate_obs_row
+from policies.base import OBS_SIZES, lane_flags, real_obs, validate_obs_batch, validate_obs_row
 from policies.learned.checks import (
     ENV_IDS,
     box_problem,
@@ -472,6 +472,18 @@ class PPOPolicy:
         """Start ``n`` lanes' episodes."""
         self._batch = None
         self._batch_n = n
+        self._restart = np.zeros(n, dtype=bool)
+
+    def reset_lanes(self, lanes: np.ndarray) -> None:
+        """Start new episodes in the lanes flagged in ``lanes`` (bool, one per lane of
+        :meth:`reset_batch`), the others' memory kept: what an auto-resetting vector env needs.
+        The next :meth:`act_batch` gives a flagged lane the view of a new episode, as
+        training's autoreset did (:meth:`~policies.learned.features.Pipeline.observe`)."""
+        self._restart = lane_flags(
+            lanes, getattr(self, "_batch_n", None), getattr(self, "_restart", None)
+        )
+        if self._batch is not None and self._batch_memory is not None:
+            self._batch_memory.restart(self._restart)
 
     def act_batch(self, obs: np.ndarray) -> np.ndarray:
         """Actions ``(n, m)`` for observations ``(n, 2)``, each lane as :meth:`act` would give
@@ -486,7 +498,8 @@ class PPOPolicy:
             self._batch_memory = self._agent.model.memory(len(rows))
             agent_obs = self._batch.start(rows)
         else:
-            agent_obs = self._batch.observe(rows)
+            agent_obs = self._batch.observe(rows, self._restart)
+        self._restart = np.zeros(len(rows), dtype=bool)
         actions = self._agent.model.act(agent_obs, self._batch_memory)
         return self._batch.act(actions).astype(np.float32)
 

@@ -69,3 +69,33 @@ def test_batched_episodes_are_the_lone_ones() -> None:
         np.testing.assert_array_equal(
             episode.log["action_w_radps"].to_numpy(), alone.log["action_w_radps"].to_numpy()
         )
+
+
+@pytest.mark.parametrize("name", ["ppo", "ppo_law", "ppo_ensemble"])
+def test_reset_lanes_restarts_only_the_flagged_lanes(name: str) -> None:
+    """An auto-resetting vector env ends one lane's episode: that lane starts afresh (its frame
+    stack, command in force, age, gate and law memory), the others go on as they were."""
+    rng = np.random.default_rng(0)
+    width = 3 if name != "ppo" else 2
+
+    def obs() -> np.ndarray:
+        rows = np.column_stack([rng.uniform(0.5, 3.0, 2), rng.uniform(-300, 300, 2)])
+        return rows if width == 2 else np.column_stack([rows, rng.uniform(0.5, 5.0, 2)])
+
+    batch = make_policy(name)
+    lanes = [make_policy(name), make_policy(name)]
+    batch.reset_batch(2)
+    first = [obs() for _ in range(4)]
+    for step in first:
+        got = batch.act_batch(step)
+        want = [lanes[k].act(step[k]) for k in range(2)]
+        np.testing.assert_array_equal(got, np.array(want))
+    batch.reset_lanes(np.array([True, False]))
+    lanes[0].reset()  # lane 0's new episode; lane 1's goes on
+    for _ in range(4):
+        step = obs()
+        got = batch.act_batch(step)
+        want = [lanes[k].act(step[k]) for k in range(2)]
+        np.testing.assert_array_equal(got, np.array(want))
+    with pytest.raises(ValueError, match="one flag per lane"):
+        batch.reset_lanes(np.array([True]))
