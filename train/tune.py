@@ -45,6 +45,7 @@ from eval.tuning.folders import (
     check_storage,
     journal_check,
     open_search,
+    refuse_empty,
     refuse_repeats,
     text_check,
 )
@@ -199,10 +200,7 @@ def run(args: argparse.Namespace) -> int:
     """Search, then write ``OUT/result.json`` and print the best trial's hyperparameters."""
     from follow_env.tasks import get_task
 
-    for option in ("storage", "study", "address"):
-        value = getattr(args, option)
-        if value is not None and not value.strip():
-            raise UsageError(f"--{option} is empty")
+    refuse_empty(args, ("storage", "study", "address"))
     # an empty --scenarios '' is a mistake to name, not a request for the defaults
     given = args.scenarios
     variants = (

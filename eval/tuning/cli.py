@@ -31,6 +31,7 @@ from eval.tuning.folders import (
     check_storage,
     journal_check,
     open_search,
+    refuse_empty,
     refuse_repeats,
     text_check,
 )
@@ -127,12 +128,8 @@ def _check(args: argparse.Namespace) -> dict[str, Any]:
         law = tunable_law(args.law)
     except ValueError as e:
         raise UsageError(str(e)) from None
-    # An empty value must not fall back to the default: `--scenarios ''` once ran a full tune.
-    # (The list options are refused by `_names`, which they now reach when given.)
-    for option in ("task", "config", "storage", "study", "address"):
-        value = getattr(args, option)
-        if value is not None and not value.strip():
-            raise UsageError(f"--{option} is empty")
+    # (The list options are refused by `_names`, which they reach when given.)
+    refuse_empty(args, ("task", "config", "storage", "study", "address"))
     task = args.task or law.task
     if task != law.task:
         raise UsageError(f"--task {task}: {args.law!r} is a law of the {law.task} task")

@@ -30,10 +30,24 @@ __all__ = [
     "check_storage",
     "journal_check",
     "open_search",
+    "refuse_empty",
     "refuse_repeats",
     "sqlite_file",
     "text_check",
 ]
+
+
+def refuse_empty(args: Any, options: tuple[str, ...]) -> None:
+    """Refuse an option of ``options`` (attributes of ``args``) given as empty text: it must
+    not fall back to its default (``--storage ''`` would write the default journal, and
+    ``--scenarios ''`` once ran a full tune).
+
+    :raises UsageError: naming the option.
+    """
+    for option in options:
+        value = getattr(args, option)
+        if value is not None and not value.strip():
+            raise UsageError(f"--{option.replace('_', '-')} is empty")
 
 
 def refuse_repeats(text: str | None, option: str) -> None:
@@ -48,8 +62,9 @@ def refuse_repeats(text: str | None, option: str) -> None:
 
 
 def check_storage(storage: str | None, out: Path) -> tuple[str, Path | None]:
-    """``--storage`` (None: ``OUT/study.journal``) checked: a journal path in an existing
-    folder that is new, empty or a journal, or a database URL that keeps its data.
+    """``--storage`` (None: ``OUT/study.journal``; an empty one is :func:`refuse_empty`'s)
+    checked: a journal path in an existing folder that is new, empty or a journal, or a
+    database URL that keeps its data.
 
     :returns: the storage to open, and the database file of a ``sqlite:`` URL (else None).
     """
@@ -57,8 +72,6 @@ def check_storage(storage: str | None, out: Path) -> tuple[str, Path | None]:
 
     if storage is None:
         return str(out / "study.journal"), None
-    if not storage.strip():
-        raise UsageError("--storage is empty")
     if not is_url(storage):
         check_journal_path(Path(storage))
     return storage, sqlite_file(storage)
