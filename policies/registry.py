@@ -119,7 +119,7 @@ class PolicyRegistry:
             )
         if not callable(factory):
             raise TypeError(f"the factory for {name!r} must be callable, got {factory!r}")
-        _check_task(task)
+        self._check_task(task)
         if task in self._factories.get(name, {}):
             raise ValueError(f"policy name {name!r} is already registered for {task}")
         self._factories.setdefault(name, {})[task] = factory
@@ -192,9 +192,8 @@ class PolicyRegistry:
             raise TypeError(f"a policy name is text, such as 'pn:thesis'; got {name!r}")
         if not name.strip():  # else a path resolver would look for a model in the current folder
             raise ValueError(f"the policy name is empty; known names: {', '.join(self.names())}")
-        tasks = sorted({DEFAULT_TASK, *(t for by in self._factories.values() for t in by)})
-        if task is not None and task not in tasks:
-            raise ValueError(f"task={task!r} is out of range: must be one of {tasks}")
+        if task is not None and task not in self.tasks():
+            raise ValueError(f"task={task!r} is out of range: must be one of {self.tasks()}")
         by_task = self._factories.get(name, {})
         factory = by_task.get(task or DEFAULT_TASK) or (
             next(iter(by_task.values())) if len(by_task) == 1 else None
@@ -219,31 +218,34 @@ class PolicyRegistry:
         :raises ValueError: if ``task`` is not a task.
         """
         if task is not None:
-            _check_task(task)
+            self._check_task(task)
         return sorted(n for n, tasks in self._factories.items() if task is None or task in tasks)
+
+    def tasks(self) -> list[str]:
+        """The tasks policies are registered for (PersonFollow's always), sorted."""
+        return sorted({DEFAULT_TASK, *(t for by in self._factories.values() for t in by)})
+
+    def _check_task(self, task: str) -> None:
+        """Refuse a ``task`` that is not a task package's name (``person_follow``,
+        ``line_trace``): one with a spec, ``follow_env.tasks.<task>.spec``, which is all a
+        policy reads of a task.
+
+        :raises ValueError: naming the value and the tasks policies are registered for.
+        """
+        import importlib.util
+
+        try:
+            found = importlib.util.find_spec(f"follow_env.tasks.{task}.spec") is not None
+        except (ImportError, ValueError):  # "a.b" past the package, or an empty name
+            found = False
+        if not isinstance(task, str) or not task.isidentifier() or not found:
+            raise ValueError(f"task={task!r} is out of range: must be one of {self.tasks()}")
 
     def task_of(self, name: str) -> str:
         """The task a registered name's policy is for: PersonFollow's for a name several tasks
         have, and for a resolved name (a model path)."""
         tasks = self._factories.get(name, {})
         return next(iter(tasks)) if len(tasks) == 1 else DEFAULT_TASK
-
-
-def _check_task(task: str) -> None:
-    """Refuse a ``task`` that is not a task package's name (``person_follow``, ``line_trace``):
-    one with a spec, ``follow_env.tasks.<task>.spec``, which is all a policy reads of a task.
-
-    :raises ValueError: naming the value and the tasks policies are registered for.
-    """
-    import importlib.util
-
-    try:
-        found = importlib.util.find_spec(f"follow_env.tasks.{task}.spec") is not None
-    except (ImportError, ValueError):  # "a.b" past the package, or an empty name
-        found = False
-    if not isinstance(task, str) or not task.isidentifier() or not found:
-        known = sorted({DEFAULT_TASK, *(t for by in REGISTRY._factories.values() for t in by)})
-        raise ValueError(f"task={task!r} is out of range: must be one of {known}")
 
 
 REGISTRY = PolicyRegistry()
