@@ -49,6 +49,13 @@ def _address_problem(address: object) -> str | None:
     return None
 
 
+def _endpoint(address: str) -> tuple[str, str]:
+    """``(host, port)`` of a ``[ray://]HOST:PORT`` address, an IPv6 host without its brackets
+    (the form sockets take)."""
+    host, _, port = address.removeprefix("ray://").rpartition(":")
+    return host.strip("[]"), port
+
+
 def _import_ray() -> Any:
     try:
         import ray
@@ -133,8 +140,7 @@ def _same_endpoint(a: str, b: str, own: set[str]) -> bool:
     """Whether HOST:PORT ``a`` and ``b`` are the same port of the same machine (``localhost``
     and this machine's own addresses, ``own`` among them, count as one machine: a head node
     started here reports its own IP, a user may name it ``localhost``)."""
-    host_a, _, port_a = a.rpartition(":")
-    host_b, _, port_b = b.rpartition(":")
+    (host_a, port_a), (host_b, port_b) = _endpoint(a), _endpoint(b)
     if port_a != port_b:
         return False
     ips_a, ips_b = _addresses(host_a), _addresses(host_b)
@@ -150,7 +156,7 @@ _LOOPBACK = {"127.0.0.1", "::1"}
 def _addresses(host: str) -> set[str]:
     """The IP addresses ``host`` resolves to (none if it does not)."""
     try:
-        infos = socket.getaddrinfo(host.strip("[]"), None)
+        infos = socket.getaddrinfo(host, None)
     except (OSError, UnicodeError):
         return set()
     return {str(info[4][0]) for info in infos}
@@ -170,9 +176,9 @@ def _check_reachable(address: str, timeout_s: float = 5.0) -> None:
         raise BackendUnavailableError(
             f"address={address!r} is not a Ray cluster address: {problem}"
         )
-    host, _, port = address.removeprefix("ray://").rpartition(":")
+    host, port = _endpoint(address)
     try:
-        socket.create_connection((host.strip("[]"), int(port)), timeout=timeout_s).close()
+        socket.create_connection((host, int(port)), timeout=timeout_s).close()
     except OSError as e:
         raise BackendUnavailableError(
             f"cannot reach the Ray cluster at {address}: {e.strerror or e} (is `ray start "
