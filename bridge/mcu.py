@@ -191,6 +191,8 @@ class EmulatedMCU:
             self.watchdog_stopped = True
             self.duty = [0.0, 0.0]
             self.target = [0.0, 0.0]
+            # the integrators too: a stale integral would kick the wheels at the next command
+            self._pid = [[0.0, 0.0, 0.0], [0.0, 0.0, 0.0]]
         speed_mode = fixed and self.mode == CommandKind.SPEED_MM_S and not self.watchdog_stopped
         for k in (0, 1):
             if speed_mode:

@@ -98,6 +98,26 @@ def test_fixed_firmware_watchdog_stops_the_motors() -> None:
     assert _linear_speed(mcu) < 0.05  # coasted to (nearly) a stop
 
 
+def test_a_speed_command_after_a_watchdog_stop_starts_from_a_clean_pid() -> None:
+    # The PID ran, then the commands stopped: the next command must drive the wheels as it
+    # would from a fresh start (the integral, last error and derivative were kept: +37 % duty).
+    speed = WheelCommand(300, 300, CommandKind.SPEED_MM_S)
+    mcu = EmulatedMCU(firmware="fixed", framing="robust")
+    mcu.command(speed, 0.0)
+    mcu.advance(0.05)
+    mcu.advance(3.0)  # the watchdog stops the motors at 0.1 s; they coast to rest
+    assert mcu.watchdog_stopped
+    fresh = EmulatedMCU(firmware="fixed", framing="robust")
+    for m in (mcu, fresh):
+        m.omega = [0.0, 0.0]
+        m.meas = [0.0, 0.0]
+    mcu.command(speed, 3.0)
+    fresh.command(speed, 3.0)
+    mcu.advance(3.01)
+    fresh.advance(3.01)
+    assert mcu.duty == fresh.duty
+
+
 def test_speed_commands_run_the_simulators_own_wheel_pid() -> None:
     # The fixed firmware's PID is the simulator's: one control step of the diff-drive kernel and
     # 10 ticks of the emulated MCU under the same wheel targets end on the same wheel speeds.

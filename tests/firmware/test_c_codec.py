@@ -21,6 +21,7 @@ from cobs import cobs
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from bridge.mcu import EmulatedMCU
 from bridge.protocol import (
     Feedback,
     Hello,
@@ -352,18 +353,24 @@ int32_t encoder_count_left(void);
 void motor_set_duty_centi(int16_t right, int16_t left);
 void pid_set_targets_mm_s(int16_t right, int16_t left);
 void motor_stop(void);
-void update_speeds_and_pid(void);
+void update_speeds(void);
+void pid_update(void);
+void pid_reset(void);
 int16_t speed_right_mm_s(void);
 int16_t speed_left_mm_s(void);
 """
 
 
-def test_readme_stm32_outline_compiles(build_dir: Path) -> None:
+def _readme_outline() -> str:
     readme = (FIRMWARE / "README.md").read_text()
     blocks = [b.split("```", 1)[0] for b in readme.split("```c\n")[1:]]
     assert len(blocks) >= 3, "the README lost its C snippets"
+    return "\n".join(blocks)
+
+
+def test_readme_stm32_outline_compiles(build_dir: Path) -> None:
     source = build_dir / "readme_outline.c"
-    source.write_text(HAL_STUB + "\n".join(blocks))
+    source.write_text(HAL_STUB + _readme_outline())
     cmd = [
         _compiler(),
         *CFLAGS,
@@ -376,3 +383,146 @@ def test_readme_stm32_outline_compiles(build_dir: Path) -> None:
     ]
     result = subprocess.run(cmd, capture_output=True, text=True, check=False)
     assert result.returncode == 0, result.stderr
+
+
+# A board around the outline: the HAL and the user's motor and PID functions as stubs, a clock
+# of 1 ms per pass of the main loop, the 10 ms timer interrupt, and bytes fed to the UART's
+# receive interrupt. It prints what the UART sent (hex) and, per scenario, what the motors did.
+HARNESS = r"""
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+UART_HandleTypeDef huart2 = {HAL_UART_STATE_READY};
+TIM_HandleTypeDef htim6;
+IWDG_HandleTypeDef hiwdg;
+static uint32_t now_ms;
+static int16_t target[2], duty[2];
+static int pass, passes, stopped_and_driving, driven;
+static uint8_t cmd_wire[PF_MAX_WIRE];
+static size_t cmd_len;
+
+HAL_StatusTypeDef HAL_UART_Receive_IT(UART_HandleTypeDef *h, uint8_t *p, uint16_t n)
+{ (void)h; (void)p; (void)n; return HAL_OK; }
+HAL_StatusTypeDef HAL_UART_Transmit_DMA(UART_HandleTypeDef *h, const uint8_t *p, uint16_t n)
+{
+    uint16_t i;
+    for (i = 0; i < n; ++i) printf("%02x", p[i]);
+    h->gState = (HAL_UART_StateTypeDef)0x21; /* busy until the board says the DMA is done */
+    return HAL_OK;
+}
+HAL_StatusTypeDef HAL_TIM_Base_Start_IT(TIM_HandleTypeDef *h) { (void)h; return HAL_OK; }
+uint32_t HAL_GetTick(void) { return now_ms; }
+int32_t encoder_count_right(void) { return 0; }
+int32_t encoder_count_left(void) { return 0; }
+void motor_set_duty_centi(int16_t r, int16_t l) { duty[0] = r; duty[1] = l; }
+void pid_set_targets_mm_s(int16_t r, int16_t l) { target[0] = r; target[1] = l; }
+void motor_stop(void) { duty[0] = duty[1] = 0; }
+void update_speeds(void) {}
+void pid_update(void) { duty[0] = target[0]; duty[1] = target[1]; } /* drives to the target */
+void pid_reset(void) { target[0] = target[1] = 0; }
+int16_t speed_right_mm_s(void) { return 0; }
+int16_t speed_left_mm_s(void) { return 0; }
+
+static void receive(const uint8_t *bytes, size_t n)
+{
+    size_t i;
+    for (i = 0; i < n; ++i) {
+        rx_byte = bytes[i];
+        HAL_UART_RxCpltCallback(&huart2);
+    }
+}
+
+/* the end of a pass of the main loop: the clock, the DMA, the timer, what the motors do */
+HAL_StatusTypeDef HAL_IWDG_Refresh(IWDG_HandleTypeDef *h)
+{
+    (void)h;
+    if ((status_bits & PF_STATUS_WATCHDOG_STOP) && (duty[0] || duty[1])) stopped_and_driving++;
+    if (duty[0] || duty[1]) driven++;
+    if (++pass == passes) {
+        printf("\n%d %d\n", driven, stopped_and_driving);
+        exit(0);
+    }
+    huart2.gState = HAL_UART_STATE_READY;
+    now_ms++;
+    if (now_ms % 10u == 0u) HAL_TIM_PeriodElapsedCallback(&htim6);
+    return HAL_OK;
+}
+
+int main(int argc, char **argv)
+{
+    static uint8_t buf[PF_MAX_WIRE];
+    if (strcmp(argv[1], "gap") == 0) { /* the UART still busy at the second of three ticks */
+        send_feedback(100, 100);
+        send_feedback(110, 110);
+        huart2.gState = HAL_UART_STATE_READY;
+        send_feedback(120, 120);
+        printf("\n");
+    } else if (strcmp(argv[1], "hello") == 0) { /* the PC says hello */
+        pf_hello pc = {PF_ROLE_PC, 0, 0, 0, 0, 0};
+        pf_decoder_init(&dec, dec_buf, sizeof dec_buf);
+        receive(buf, pf_encode_hello(&pc, 0, buf, sizeof buf));
+        (void)argc;
+        passes = 1;
+        outline_main();
+    } else { /* one speed command, then silence for 300 ms */
+        pf_wheel_command cmd = {PF_KIND_SPEED_MM_S, 500, -500};
+        cmd_len = pf_encode_wheel_command(&cmd, 0, cmd_wire, sizeof cmd_wire);
+        receive(cmd_wire, cmd_len);
+        passes = 300;
+        outline_main();
+    }
+    return 0;
+}
+"""
+
+
+@pytest.fixture(scope="module")
+def readme_board(build_dir: Path) -> Path:
+    source = build_dir / "readme_board.c"
+    source.write_text(
+        HAL_STUB + "#define main outline_main\n" + _readme_outline() + "\n#undef main\n" + HARNESS
+    )
+    exe = build_dir / "readme_board"
+    cmd = [_compiler(), "-std=c99", "-O1", "-I", str(FIRMWARE), str(FIRMWARE / "pf_link.c")]
+    result = subprocess.run(
+        [*cmd, str(source), "-o", str(exe)], capture_output=True, text=True, check=False
+    )
+    assert result.returncode == 0, result.stderr
+    return exe
+
+
+def _on_board(exe: Path, scenario: str) -> list[str]:
+    result = subprocess.run([str(exe), scenario], capture_output=True, text=True, check=True)
+    return result.stdout.split("\n")
+
+
+def test_the_readme_outlines_hello_announces_what_the_emulated_firmware_does(
+    readme_board: Path,
+) -> None:
+    # The PC's --command auto picks speed commands only when the hello announces them: a robot
+    # built from the outline must be driven as the emulator's fixed firmware is.
+    wire, _ = _on_board(readme_board, "hello")[:2]
+    (hello,) = RobustDecoder().feed(bytes.fromhex(wire))
+    emulated = EmulatedMCU(firmware="fixed", framing="robust").hello()
+    assert hello.capabilities == emulated.capabilities
+    assert hello.feedback_period_ms == emulated.feedback_period_ms
+
+
+def test_the_readme_outline_spends_the_sequence_number_of_a_skipped_feedback(
+    readme_board: Path,
+) -> None:
+    decoder = RobustDecoder()
+    sent = decoder.feed(bytes.fromhex(_on_board(readme_board, "gap")[0]))
+    assert [m.right_mm_s for m in sent] == [100, 120]
+    assert (decoder.stats.seq_gaps, decoder.stats.frames_lost) == (1, 1)
+
+
+def test_the_readme_outlines_watchdog_keeps_the_pid_from_driving_again(readme_board: Path) -> None:
+    wire, counts = _on_board(readme_board, "watchdog")[:2]
+    driven, stopped_and_driving = (int(v) for v in counts.split())
+    assert 90 <= driven <= 110  # the PID drove the wheels until the 100 ms watchdog stopped them
+    assert stopped_and_driving == 0
+    statuses = [m.status for m in RobustDecoder().feed(bytes.fromhex(wire))]
+    assert (len(statuses), statuses[0]) == (29, 0)
+    assert statuses[-1] == Feedback.STATUS_WATCHDOG_STOP
