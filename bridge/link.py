@@ -17,6 +17,7 @@ allows it); the link is not meant to be shared otherwise.
 
 from __future__ import annotations
 
+import math
 import socket
 import time
 from collections import deque
@@ -36,6 +37,14 @@ from .protocol import (
     VersionMismatch,
     make_codec,
 )
+
+try:  # pyserial's POSIX port drains with termios.tcdrain, whose error is not an OSError
+    from termios import error as termios_error
+except ImportError:  # Windows
+    termios_error = OSError
+
+_PORT_ERRORS = (serial.SerialException, OSError, termios_error)
+"""What a port that fails or disappears raises from pyserial's read, write and flush."""
 
 REFERENCE_BAUD = 115200
 """The reference robot's serial speed, baud (reference §1)."""
@@ -101,10 +110,10 @@ class SerialLink:
         codec: Codec | None = None,
         **codec_options: object,
     ) -> None:
-        if idle_flush_s is not None and idle_flush_s <= 0:
-            raise ValueError(f"idle_flush_s={idle_flush_s} must be > 0 s or None")
-        if write_timeout_s <= 0:
-            raise ValueError(f"write_timeout_s={write_timeout_s} must be > 0 s")
+        if idle_flush_s is not None and not _positive(idle_flush_s):
+            raise ValueError(f"idle_flush_s={idle_flush_s} must be a finite number > 0 s or None")
+        if not _positive(write_timeout_s):
+            raise ValueError(f"write_timeout_s={write_timeout_s} must be a finite number > 0 s")
         self.url = url
         self.codec: Codec = (
             codec if codec is not None else make_codec(framing, role, **codec_options)
@@ -159,7 +168,7 @@ class SerialLink:
         try:
             written = self._port.write(data)
             self._port.flush()
-        except serial.SerialException as exc:
+        except _PORT_ERRORS as exc:
             raise LinkError(f"{self.url}: write failed: {exc}") from exc
         if written != len(data):
             raise LinkError(f"{self.url}: wrote {written} of {len(data)} bytes")
@@ -178,8 +187,7 @@ class SerialLink:
             stay queued for the next).
         :raises LinkError: the port failed or the peer closed the connection.
         """
-        if timeout_s < 0:
-            raise ValueError(f"timeout_s={timeout_s} must be >= 0 s")
+        _check_timeout(timeout_s)
         if not self._inbox:
             self._inbox.extend(self._read(timeout_s))
         out: list[Message] = []
@@ -204,13 +212,16 @@ class SerialLink:
         """
         if isinstance(self.codec, ReferenceCodec):
             raise LinkError(f"{self.url}: the reference framing has no hello (reference §1)")
+        _check_timeout(timeout_s)
         self.send(hello)
         deadline = time.monotonic() + timeout_s
         others: list[Message] = []
         try:
             while True:
-                for message in self.receive(max(0.0, deadline - time.monotonic())):
+                batch = self.receive(max(0.0, deadline - time.monotonic()))
+                for k, message in enumerate(batch):
                     if isinstance(message, Hello):
+                        others.extend(batch[k + 1 :])  # what came after it in the same read
                         return message
                     others.append(message)
                 if time.monotonic() >= deadline:
@@ -257,8 +268,18 @@ class SerialLink:
             if not first:
                 return b""
             return bytes(first) + bytes(port.read(_READ_CHUNK))
-        except serial.SerialException as exc:
+        except _PORT_ERRORS as exc:
             raise LinkError(f"{self.url}: read failed: {exc}") from exc
+
+
+def _positive(value: float) -> bool:
+    return isinstance(value, (int, float)) and math.isfinite(value) and value > 0
+
+
+def _check_timeout(timeout_s: float) -> None:
+    # NaN passes a `< 0` test and then never reaches the deadline: a read that spins for ever
+    if not (isinstance(timeout_s, (int, float)) and math.isfinite(timeout_s) and timeout_s >= 0):
+        raise ValueError(f"timeout_s={timeout_s} must be a finite number >= 0 s")
 
 
 def _no_nagle(port: Any) -> None:

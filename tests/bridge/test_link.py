@@ -2,10 +2,14 @@
 
 from __future__ import annotations
 
+import contextlib
+import os
+import pty
 import socket
 import socketserver
 import threading
 import time
+import tty
 from collections.abc import Iterator
 
 import pytest
@@ -218,6 +222,64 @@ def test_handshake_keeps_the_messages_that_arrived_before_the_hello() -> None:
         # loop:// echoes: the hello that comes back is our own, after the feedback.
         assert link.handshake(Hello(PeerRole.PC), timeout_s=0.5).role == PeerRole.PC
         assert link.receive() == [Feedback(1, 2, 3, 4, 5, 0)]
+
+
+@pytest.fixture
+def pty_port() -> Iterator[tuple[int, str]]:
+    """A pseudo-terminal pair in raw mode: (the peer's end, the device path a link opens)."""
+    peer, device = pty.openpty()
+    tty.setraw(peer)
+    tty.setraw(device)
+    yield peer, os.ttyname(device)
+    for fd in (peer, device):
+        with contextlib.suppress(OSError):
+            os.close(fd)
+
+
+def test_handshake_keeps_the_messages_that_came_in_the_same_read_after_the_hello(
+    pty_port: tuple[int, str],
+) -> None:
+    # A USB-serial adapter hands over what arrived in its latency window at once: the MCU's
+    # hello and its first feedback 10 ms later come in one read.
+    peer, path = pty_port
+    mcu = make_codec("robust", role="mcu")
+    feedback = Feedback(100, 100, 1, 1, 10, 0)
+    with SerialLink(path, "robust") as link:  # opening empties the port's input
+        os.write(peer, mcu.encode(Hello(PeerRole.MCU, 0x0F, 10, (1, 0, 0))) + mcu.encode(feedback))
+        assert link.handshake(Hello(PeerRole.PC), timeout_s=0.5).role == PeerRole.MCU
+        assert link.receive(timeout_s=0.5) == [feedback]
+
+
+def test_a_port_that_disappears_while_its_bytes_drain_is_a_link_error(
+    pty_port: tuple[int, str],
+) -> None:
+    # pyserial's flush is termios.tcdrain, whose error is neither an OSError nor pyserial's own
+    peer, path = pty_port
+    with SerialLink(path, "robust") as link:
+        write = link._port.write
+
+        def write_then_unplug(data: bytes) -> int | None:
+            written = write(data)
+            os.close(peer)  # the adapter is pulled out while the bytes go out
+            return written
+
+        link._port.write = write_then_unplug
+        with pytest.raises(LinkError, match=rf"{path}: write failed"):
+            link.send(WheelCommand(0, 0, CommandKind.DUTY_CENTI_PERCENT))
+
+
+@pytest.mark.parametrize("value", [float("nan"), float("inf"), -1.0])
+def test_timeouts_that_are_not_finite_are_refused_naming_them(value: float) -> None:
+    # a NaN timeout used to spin a read for ever, an infinite one to raise OverflowError
+    with SerialLink("loop://", "robust") as link:
+        with pytest.raises(ValueError, match=rf"timeout_s={value} must be a finite number >= 0 s"):
+            link.receive(timeout_s=value)
+        with pytest.raises(ValueError, match=rf"timeout_s={value} must be a finite number"):
+            link.handshake(Hello(PeerRole.PC), timeout_s=value)
+        assert link.stats.frames_sent == 0  # the hello was not sent
+    for field in ("idle_flush_s", "write_timeout_s"):
+        with pytest.raises(ValueError, match=rf"{field}={value} must be a finite number > 0 s"):
+            SerialLink("loop://", "robust", **{field: value})
 
 
 def test_peer_closing_the_connection_is_a_link_error() -> None:
