@@ -211,7 +211,7 @@ class Sections:
         new: dict[str, Any] = {}
         for name in cls.section_names():
             current = getattr(base, name)
-            for change in changes.get(name, ()):
+            for change in _merged(changes.get(name, ())):
                 current = _apply(cls, name, current, change)
             new[name] = current
         return cls(**new)
@@ -229,6 +229,28 @@ class Sections:
         return out
 
 
+class _Changes(list[tuple[str, Any]]):
+    """The items of several mappings of one section, in the order given (keys may repeat)."""
+
+    def items(self) -> _Changes:
+        return self
+
+
+def _merged(changes: list[Any]) -> list[Any]:
+    """A section's changes with each run of mappings made one: the section is then checked
+    once, on all of its new values, so a check across fields (a gap smaller than the tile)
+    does not depend on the order the fields were given in, nor name a field not given."""
+    out: list[Any] = []
+    for change in changes:
+        if not isinstance(change, Mapping):
+            out.append(change)  # a whole section object, or a value _apply refuses
+        elif out and isinstance(out[-1], _Changes):
+            out[-1].extend(change.items())
+        else:
+            out.append(_Changes(change.items()))
+    return out
+
+
 def _apply(cls: type, name: str, current: Any, change: Any) -> Any:
     """Section ``name`` (now ``current``) after one change: a whole section object, or a
     mapping of its fields (of its sections, for a nested tree; keys may be dotted)."""
@@ -236,7 +258,7 @@ def _apply(cls: type, name: str, current: Any, change: Any) -> Any:
     if isinstance(change, kind):
         return change
     where = f"{cls.__name__}.{name}"
-    if not isinstance(change, Mapping):
+    if not isinstance(change, (Mapping, _Changes)):
         what = "sections" if isinstance(current, Sections) else "fields"
         raise out_of_range(where, change, f"a {kind.__name__} or a mapping of its {what}")
     if isinstance(current, Sections):

@@ -39,6 +39,7 @@ __all__ = [
     "TaskPlatforms",
     "config_from_text",
     "named_platform",
+    "names_platform",
     "resolve_config",
     "section_or_name",
 ]
@@ -64,35 +65,48 @@ class TaskConfig(Sections):
     @classmethod
     def from_overrides(cls, base: Any, overrides: Mapping[str, Any]) -> Any:
         """As :meth:`Sections.from_overrides`; the platform may also be named: ``"platform":
-        "mecanum"`` (its default configuration), ``"platform": {"name": "mecanum", "motor":
-        {...}}`` (the form ``to_dict`` writes) or ``"platform.name": "mecanum"``. A named
-        platform replaces the current one where it appears, so later keys may use its
-        sections (``{"platform": "mecanum", "floor": {...}}``)."""
+        "mecanum"``, ``"platform": {"name": "mecanum", "motor": {...}}`` (the form ``to_dict``
+        writes) or ``"platform.name": "mecanum"``. A named platform replaces the current one
+        where it appears, so later keys may use its sections (``{"platform": "mecanum",
+        "floor": {...}}``); naming the platform the configuration already has keeps its
+        settings (a preset's, such as ``ideal``'s spreads of 0)."""
         cfg, pending = base, {}
         for key, value in overrides.items():
-            platform = named_platform(key, value)
-            if platform is None:
+            if not names_platform(key, value):
                 pending[key] = value
                 continue
             cfg = super().from_overrides(cfg, pending) if pending else cfg
+            platform = named_platform(key, value, cfg.platform)
             cfg, pending = super().from_overrides(cfg, {"platform": platform}), {}
         return super().from_overrides(cfg, pending)
 
 
-def named_platform(key: str, value: Any) -> PlatformConfig | None:
-    """The platform config a ``platform`` override names, or None if it names none."""
-    if key == "platform.name" or (key == "platform" and isinstance(value, str)):
-        if not isinstance(value, str):
-            raise ValueError(f"platform name {value!r} is out of range: must be a string")
-        return get_platform(value).config()
-    if key == "platform" and isinstance(value, Mapping) and "name" in value:
-        name = value["name"]
-        if not isinstance(name, str):
-            raise ValueError(f"platform name {name!r} is out of range: must be a string")
-        default = get_platform(name).config()
-        rest = {k: v for k, v in value.items() if k != "name"}
-        return type(default).from_overrides(default, rest) if rest else default
-    return None
+def names_platform(key: str, value: Any) -> bool:
+    """Whether a ``platform`` override names a platform (rather than setting its sections)."""
+    return (
+        key == "platform.name"
+        or (key == "platform" and isinstance(value, str))
+        or (key == "platform" and isinstance(value, Mapping) and "name" in value)
+    )
+
+
+def named_platform(
+    key: str, value: Any, current: PlatformConfig | None = None
+) -> PlatformConfig | None:
+    """The platform config a ``platform`` override names, or None if it names none: the
+    platform's default configuration, or ``current`` when that is already of the named
+    platform (a name alone must not undo a preset's settings of it), with the mapping's
+    sections applied on top."""
+    if not names_platform(key, value):
+        return None
+    name, rest = value, {}
+    if isinstance(value, Mapping):
+        name, rest = value["name"], {k: v for k, v in value.items() if k != "name"}
+    if not isinstance(name, str):
+        raise ValueError(f"platform name {name!r} is out of range: must be a string")
+    kind = get_platform(name).config
+    base = current if type(current) is kind else kind()
+    return type(base).from_overrides(base, rest) if rest else base
 
 
 def resolve_config(
@@ -118,7 +132,7 @@ def resolve_config(
         ``{"scenario.name": "curve"}``); ``None`` values are left out.
     :param overrides: sections (``sensor={...}``) or ``section__field=value`` pairs.
     """
-    chosen = _platform(platform)
+    _platform(platform)  # refused before anything else when it names no platform
     if config is None:
         cfg = default
     elif isinstance(config, cls):
@@ -132,18 +146,18 @@ def resolve_config(
             )
         cfg = presets[config]
     elif isinstance(config, dict):
-        if chosen is not None:
-            named = [k for k, v in config.items() if named_platform(k, v) is not None]
+        if platform is not None:
+            named = [k for k, v in config.items() if names_platform(k, v)]
             if named:
                 raise ValueError(
                     f"the platform is given twice: platform= and config[{named[0]!r}]; give one"
                 )
-            default, chosen = cls.from_overrides(default, {"platform": chosen}), None
+            default, platform = cls.from_overrides(default, {"platform": platform}), None
         cfg = cls.from_overrides(default, config)
     else:
         raise out_of_range("config", config, f"a preset name, {_a(cls.__name__)} or a dict")
-    if chosen is not None:  # first, so that the overrides below may use its sections
-        cfg = cls.from_overrides(cfg, {"platform": chosen})
+    if platform is not None:  # first, so that the overrides below may use its sections
+        cfg = cls.from_overrides(cfg, {"platform": platform})
     flat: dict[str, Any] = {}
     for key, value in (overrides or {}).items():
         flat[key.replace("__", ".")] = value
