@@ -5,6 +5,7 @@ moved page shows here rather than as a dead link."""
 
 from __future__ import annotations
 
+import importlib
 import re
 from pathlib import Path
 
@@ -65,3 +66,32 @@ def test_every_relative_link_resolves(page: Path) -> None:
         elif anchor and file.suffix == ".md" and anchor not in anchors(file):
             broken.append(f"{target}: no heading #{anchor} in {file.relative_to(ROOT)}")
     assert not broken, f"{page.relative_to(ROOT)}: " + "; ".join(broken)
+
+
+# Names of the project's modules, classes and functions written in backticks: a module moved
+# or a function renamed shows here rather than as an ImportError in a reader's session.
+PROJECT_NAME = re.compile(
+    r"`((?:follow_env|policies|eval|train|bridge|execution|bench)(?:\.[A-Za-z_]\w*)+)"
+)
+
+
+def _resolves(name: str) -> bool:
+    parts = name.split(".")
+    for cut in range(len(parts), 0, -1):
+        try:
+            obj = importlib.import_module(".".join(parts[:cut]))
+        except ImportError:
+            continue
+        for attr in parts[cut:]:
+            if not hasattr(obj, attr):
+                return False
+            obj = getattr(obj, attr)
+        return True
+    return False
+
+
+def test_the_project_names_the_pages_give_exist() -> None:
+    names = {(m, page.name) for page in PAGES for m in PROJECT_NAME.findall(page.read_text())}
+    assert len(names) > 20, "the pattern no longer finds the pages' names"
+    missing = sorted(f"{name} ({page})" for name, page in names if not _resolves(name))
+    assert not missing, missing
