@@ -203,9 +203,11 @@ def drive_pc(
     PC every ``reader`` s (or at once). The motors and the pose are integrated between events.
     """
     dt = prm.dt
-    t0 = step * dt
+    # ``step`` counts this control step from 1 (the runner advances the episode first), so
+    # the step spans [(step - 1) dt, step dt]
+    t0 = (step - 1) * dt
     t1 = t0 + dt
-    if step == 0:  # the PC starts its timer, and the reader, with the episode
+    if step == 1:  # the PC starts its timer, and the reader, with the episode
         st.t_apply = -1.0
         st.t_tick = prm.dt_in
         st.t_pid_prev = -prm.pc_period

@@ -83,3 +83,23 @@ def test_presets_and_their_checks() -> None:
         ChainConfig(pid_on="gpu")
     with pytest.raises(ValueError, match=r"ChainConfig\.pc_pid_period_s=0 is out of range"):
         ChainConfig(pc_pid_period_s=0)
+
+
+@pytest.mark.parametrize("preset", [AS_BUILT, AS_LISTED])
+def test_every_control_step_of_the_chain_lasts_one_control_period(preset: object) -> None:
+    # Idle wheels and a push of 0.3 m/s at every step: the push moves the body 0.3 m/s times
+    # the time each step integrates. The first step once ran over 0.2 s: the chain's start-up
+    # waited for a step 0, and the runner counts steps from 1.
+    cfg = preset.replace(  # type: ignore[attr-defined]
+        pid={"kp": 0.0, "ki": 0.0, "kd": 0.0},
+        randomization={"push_prob": 1.0, "push_speed_mps": 0.3},
+    )
+    env = PersonFollowEnv(config=cfg, scenario="straight")
+    env.reset(seed=0)
+    body = env.unwrapped.sim.state["body"]
+    before = np.array([body["x"][0], body["y"][0]])
+    for _ in range(3):
+        _, _, _, _, info = env.step(np.array([0.0, 0.0]))
+        after = np.array([body["x"][0], body["y"][0]])
+        assert np.hypot(*(after - before)) == pytest.approx(0.3 * 0.1, rel=1e-9)
+        before = after
