@@ -212,12 +212,19 @@ def cruise_speeds(rng: LaneRandom, cfg: EnvConfig) -> np.ndarray:
 
 def person_ahead(cfg: EnvConfig, pose: np.ndarray) -> np.ndarray:
     """Where the thesis puts the person: ``start_distance_m`` from the camera to the front of
-    the body, on the camera's axis (centred in the image). ``pose`` (n, 3) -> (n, 2)."""
+    the body, on the camera's axis (centred in the image; a camera turned by ``yaw_deg`` looks
+    at them, not straight ahead). ``pose`` (n, 3) -> (n, 2)."""
     c = cfg.camera
     ahead = c.mount_x_m + cfg.scenario.start_distance_m + 0.5 * cfg.person.depth_m
     cos, sin = np.cos(pose[:, 2]), np.sin(pose[:, 2])
     x = pose[:, 0] + ahead * cos - c.mount_y_m * sin
     y = pose[:, 1] + ahead * sin + c.mount_y_m * cos
+    # Turned by the camera's yaw about the camera. Written as a correction so that with no yaw
+    # it adds exactly 0 and every start stays bit for bit what it was.
+    look = cfg.scenario.start_distance_m + 0.5 * cfg.person.depth_m
+    yawed = pose[:, 2] + np.radians(c.yaw_deg)
+    x = x + look * (np.cos(yawed) - cos)
+    y = y + look * (np.sin(yawed) - sin)
     return np.stack([x, y], axis=-1)
 
 

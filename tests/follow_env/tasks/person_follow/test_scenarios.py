@@ -9,6 +9,7 @@ import pytest
 
 from follow_env.sim.rng import episode_keys
 from follow_env.tasks.person_follow.config import THESIS
+from follow_env.tasks.person_follow.env import PersonFollowEnv
 from follow_env.tasks.person_follow.scenarios import (
     PW,
     SCENARIOS,
@@ -37,6 +38,19 @@ def test_the_thesis_scenarios_start_the_person_1_m_ahead_of_the_camera(name: str
     ahead = start[:, 0] - cam_x - 0.5 * THESIS.person.depth_m
     assert np.allclose(ahead, 1.0)
     assert np.allclose(start[:, 1], b.robot_pose[:, 1])  # on the camera axis: centred
+
+
+@pytest.mark.parametrize("yaw_deg", [-30.0, 20.0, 40.0])
+def test_a_camera_turned_by_its_yaw_starts_with_the_person_centred_in_its_image(
+    yaw_deg: float,
+) -> None:
+    # the person was put straight ahead of the robot: at 40 deg out of the image from the start
+    env = PersonFollowEnv(config="ideal", camera={"yaw_deg": yaw_deg}, scenario="straight")
+    obs, info = env.reset(seed=0)
+    assert info["in_frame"]
+    assert abs(info["true_offset_px"]) < 1.0
+    assert info["true_distance_m"] == pytest.approx(THESIS.scenario.start_distance_m, abs=1e-6)
+    assert abs(obs[1]) < 10.0  # what the detector reports: centred
 
 
 @pytest.mark.parametrize("name", ["straight", "curve"])
