@@ -87,7 +87,10 @@ def step(prm: np.void, st: np.void, world: tuple, i: int, keys: np.ndarray) -> N
     elif ts.lost_t > tp.lost_timeout + 1e-9:
         reason, term, end = REASON_LOST, 1.0, 1
     elif ts.s >= ts.length - tp.finish_margin:
-        reason, trunc, end = REASON_TRACK_END, 1.0, 3
+        # The track's end is the task's goal (reference §2: trace the line to its end), paid
+        # by finish_bonus: Gymnasium's terminated, so a learner does not bootstrap past it as
+        # it does past the time limit.
+        reason, term, end = REASON_TRACK_END, 1.0, 3
     elif ep.step >= tp.max_steps:
         reason, trunc = REASON_TIME_LIMIT, 1.0
     ep.reward = tracing_reward(tp.reward, ts, body, ts.s - s_before, tp.dt, end)

@@ -218,17 +218,16 @@ class LineTraceTask(TaskPlatforms):
         return self._fixed[key]
 
     def check(self, cfg: LineTraceConfig) -> None:
-        """Refuse an unknown track, and a start beyond a fixed track's end."""
+        """Refuse an unknown track, and a start beyond a fixed track's end or beyond the end of
+        the shortest track a random one may lay (when it says how short that is)."""
         track = self.fixed_track(cfg)
-        if (
-            track is not None
-            and cfg.start.distance_m >= track.length_m - cfg.episode.finish_margin_m
-        ):
-            raise ValueError(
-                f"StartConfig.distance_m={cfg.start.distance_m!r} is out of range: must be "
-                f"< the {track.name!r} track's length less finish_margin_m "
-                f"({track.length_m - cfg.episode.finish_margin_m:.3f} m)"
-            )
+        if track is not None:
+            _check_start(cfg, track.length_m, f"the {track.name!r} track's length")
+            return
+        spec = self.track_spec(cfg)
+        if spec.shortest is not None:
+            shortest = spec.shortest(cfg)
+            _check_start(cfg, shortest, f"the shortest {spec.name!r} track's length")
 
     # -- the runner's side -----------------------------------------------------------------------
 
@@ -263,6 +262,8 @@ class LineTraceTask(TaskPlatforms):
                     f"track {track.name!r} has {n} segments, more than it registered "
                     f"({segs.shape[1]})"
                 )
+            # A random track too short for the start (one registered without `shortest`).
+            _check_start(cfg, track.length_m, f"the length of the {track.name!r} track laid")
             flat[lane] = 0.0
             flat[lane, :n] = track.segments
             ts["n_seg"][lane] = n
@@ -357,6 +358,18 @@ class LineTraceTask(TaskPlatforms):
     def termination(self, sim: BatchedSim, lane: int) -> str:
         """Why lane ``lane``'s episode ended (``""`` while it runs)."""
         return SPEC.terminations[int(sim.episode["reason"][lane])]
+
+
+def _check_start(cfg: LineTraceConfig, length_m: float, what: str) -> None:
+    """``ValueError`` naming ``start.distance_m`` unless the start lies before the end of a line
+    ``length_m`` long (less ``finish_margin_m``, where the episode would end at once)."""
+    end = length_m - cfg.episode.finish_margin_m
+    if cfg.start.distance_m >= end:
+        raise ValueError(
+            f"StartConfig.distance_m={cfg.start.distance_m!r} is out of range: must be < {what} "
+            f"less finish_margin_m ({length_m:.3f} - {cfg.episode.finish_margin_m:g} = "
+            f"{end:.3f} m)"
+        )
 
 
 def point_along(segments: np.ndarray, s_m: float) -> tuple[float, float, float]:

@@ -32,6 +32,7 @@ from follow_env.tasks.line_trace.tracks.registry import (
     lay,
     register_track,
     tile_cells,
+    tile_length,
 )
 
 __all__ = [
@@ -46,4 +47,5 @@ __all__ = [
     "lay",
     "register_track",
     "tile_cells",
+    "tile_length",
 ]

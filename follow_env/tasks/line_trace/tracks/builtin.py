@@ -14,9 +14,9 @@ from typing import Any
 import numpy as np
 
 from follow_env.sim.rng import LaneRandom
-from follow_env.tasks.line_trace.tracks.registry import TrackLayout, register_track
+from follow_env.tasks.line_trace.tracks.registry import TrackLayout, register_track, tile_length
 
-__all__ = ["FIXED_PROGRAMS", "random_program"]
+__all__ = ["FIXED_PROGRAMS", "random_program", "shortest_random_length"]
 
 FIXED_PROGRAMS: dict[str, str] = {
     "straight": "SSSSSS",
@@ -109,7 +109,21 @@ def _walk(rng: LaneRandom, n: int, cols: int, rows: int, row0: int) -> list[str]
     return moves if extend(0, row0, 0) else None
 
 
-@register_track("random", max_tiles=lambda cfg: cfg.track.random_tiles, random=True)
+def shortest_random_length(cfg: Any) -> float:
+    """The shortest line (m) a ``random`` track can have under ``cfg``: its first and last tiles
+    straight, every other one the shortest tile it may be (a curve's chords when curves may be
+    drawn, else a tile's length: a corner, a gap or a straight)."""
+    tc = cfg.track
+    inner = min(tile_length(k, cfg) for k in ("S", "l" if tc.random_curve_prob > 0.0 else "L"))
+    return 2 * tile_length("S", cfg) + (tc.random_tiles - 2) * inner
+
+
+@register_track(
+    "random",
+    max_tiles=lambda cfg: cfg.track.random_tiles,
+    random=True,
+    shortest=shortest_random_length,
+)
 def random_track(rng: LaneRandom, cfg: Any) -> TrackLayout:
     """A new course per episode (:func:`random_program`)."""
     return TrackLayout(random_program(rng, cfg))

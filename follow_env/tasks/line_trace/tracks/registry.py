@@ -43,6 +43,7 @@ __all__ = [
     "get_track",
     "register_track",
     "tile_cells",
+    "tile_length",
 ]
 
 TILE_LETTERS = "SGZLRlr"
@@ -92,12 +93,16 @@ class TrackSpec:
     :param max_tiles: most tiles it lays (sizes the lanes' segment arrays); an int or a function
         of the configuration.
     :param random: it draws (a new track per episode); a fixed track is laid once and shared.
+    :param shortest: a random track's shortest possible line (m) as a function of the
+        configuration, or None when unknown: a start further along than that is refused when
+        the env is made (else when a track too short for it is laid).
     """
 
     name: str
     fn: TrackFn
     max_tiles: int | Callable[[LineTraceConfig], int]
     random: bool
+    shortest: Callable[[LineTraceConfig], float] | None = None
 
     def tiles_for(self, cfg: LineTraceConfig) -> int:
         """Most tiles under ``cfg``."""
@@ -114,14 +119,18 @@ TRACKS: dict[str, TrackSpec] = {}
 
 
 def register_track(
-    name: str, *, max_tiles: int | Callable[[LineTraceConfig], int], random: bool = False
+    name: str,
+    *,
+    max_tiles: int | Callable[[LineTraceConfig], int],
+    random: bool = False,
+    shortest: Callable[[LineTraceConfig], float] | None = None,
 ) -> Callable[[TrackFn], TrackFn]:
     """Register ``fn`` as track ``name`` (see :class:`TrackSpec`)."""
 
     def deco(fn: TrackFn) -> TrackFn:
         if name in TRACKS:
             raise ValueError(f"track {name!r} is registered already")
-        TRACKS[name] = TrackSpec(name, fn, max_tiles, random)
+        TRACKS[name] = TrackSpec(name, fn, max_tiles, random, shortest)
         return fn
 
     return deco
@@ -182,6 +191,14 @@ def _tile_line(letter: str, cfg: Any) -> tuple[np.ndarray, np.ndarray]:
     pts = arc_points(-half, sign * half, half, -sign * math.pi / 2, 0.0)
     pts[:, 0] = np.where(np.abs(pts[:, 0]) < 1e-12, 0.0, pts[:, 0])
     return pts, np.ones(len(pts) - 1)
+
+
+def tile_length(letter: str, cfg: Any) -> float:
+    """The length (m) of the line over one tile ``letter`` under ``cfg`` (gaps included)."""
+    if letter not in _TURN:
+        raise ValueError(f"tile letter {letter!r} is not one of {TILE_LETTERS}")
+    pts, _ = _tile_line(letter, cfg)
+    return float(np.hypot(*np.diff(pts, axis=0).T).sum())
 
 
 def build_track(name: str, layout: TrackLayout, cfg: Any) -> Track:

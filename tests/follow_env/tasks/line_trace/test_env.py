@@ -140,18 +140,33 @@ def test_leaving_the_field_terminates() -> None:
     assert info["robot_y_m"] > 0.9  # the field is three tiles wide
 
 
-def test_reaching_the_end_truncates_with_the_bonus() -> None:
+def test_reaching_the_end_terminates_with_the_bonus() -> None:
+    # The track's end is the goal, paid by the finish bonus: terminated, not truncated (a
+    # learner bootstraps past a truncation as past a time limit).
     env = gym.make("LineTrace-v0", track="straight", config="ideal", platform="diff_drive")
     env.reset(seed=0)
     for _ in range(3000):
         _, reward, terminated, truncated, info = env.step(np.array([0.3, 0.0], np.float32))
         if terminated or truncated:
             break
-    assert truncated
-    assert not terminated
+    assert terminated
+    assert not truncated
     assert info["termination"] == "track_end"
     assert info["progress_m"] >= info["track_length_m"] - 0.02
     assert reward > 40.0
+
+
+def test_the_sb3_adapter_does_not_mark_the_tracks_end_as_a_time_limit() -> None:
+    venv = make_sb3_vec_env(1, track="straight", config="ideal", platform="diff_drive")
+    venv.seed(0)
+    venv.reset()
+    for _ in range(3000):
+        _, reward, done, infos = venv.step(np.array([[0.3, 0.0]], np.float32))
+        if done[0]:
+            break
+    assert infos[0]["termination"] == "track_end"
+    assert infos[0]["TimeLimit.truncated"] is False
+    assert reward[0] > 40.0
 
 
 def test_the_time_limit_truncates() -> None:

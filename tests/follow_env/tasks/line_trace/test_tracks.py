@@ -116,3 +116,55 @@ def test_a_registered_track_runs_in_the_env() -> None:
     env = gym.make("LineTrace-v0", track="hook_test")
     _, info = env.reset(seed=0)
     assert info["track_length_m"] == pytest.approx(3 * T + 2 * math.pi * T / 4, rel=1e-3)
+
+
+def test_a_start_past_the_shortest_random_track_is_refused_when_the_env_is_made() -> None:
+    # Two tiles make a 0.6 m line whatever is drawn: a start 1 m along it used to be accepted,
+    # reported progress 1.0 at reset and paid the finish bonus on the first step.
+    with pytest.raises(
+        ValueError,
+        match=r"StartConfig\.distance_m=1\.0 is out of range: must be < the shortest 'random' "
+        r"track's length less finish_margin_m \(0\.600 - 0\.02 = 0\.580 m\)",
+    ):
+        gym.make("LineTrace-v0", track={"name": "random", "random_tiles": 2}, start__distance_m=1.0)
+    env = gym.make(
+        "LineTrace-v0", track={"name": "random", "random_tiles": 2}, start__distance_m=0.5
+    )
+    _, info = env.reset(seed=0)
+    assert info["progress_m"] == pytest.approx(0.5)
+    assert info["track_length_m"] == pytest.approx(0.6)
+
+
+@pytest.mark.parametrize("curve_prob", [0.0, 0.5, 1.0])
+def test_the_shortest_random_track_bounds_every_random_track(curve_prob: float) -> None:
+    cfg = PAPER.replace(track={"random_tiles": 6, "random_curve_prob": curve_prob})
+    shortest = get_track("random").shortest(cfg)
+    lengths = [lay(get_track("random"), np.array([k], np.uint64), cfg).length_m for k in range(40)]
+    assert min(lengths) >= shortest - 1e-12
+    straight = cfg.replace(track={"random_tiles": 2})
+    assert get_track("random").shortest(straight) == pytest.approx(2 * T)
+
+
+def test_a_random_track_laid_shorter_than_the_start_is_refused_at_reset() -> None:
+    # A track of one's own that does not say how short it may be: refused when laid.
+    if "short_or_long_test" not in TRACKS:
+
+        def short_or_long(rng, cfg):
+            return TrackLayout("SS" if rng.uniform()[0] < 0.5 else "SSSS")
+
+        register_track("short_or_long_test", max_tiles=4, random=True)(short_or_long)
+    env = gym.make("LineTrace-v0", track="short_or_long_test", start__distance_m=0.9)
+    refusals, lengths = [], set()
+    for seed in range(12):
+        try:
+            _, info = env.reset(seed=seed)
+        except ValueError as err:
+            refusals.append(str(err))
+        else:
+            assert info["progress_m"] < info["track_length_m"]
+            lengths.add(round(info["track_length_m"], 6))
+    assert refusals  # met both kinds of track
+    assert lengths == {1.2}
+    for message in refusals:
+        assert "StartConfig.distance_m=0.9 is out of range" in message
+        assert "the length of the 'short_or_long_test' track laid" in message
