@@ -27,7 +27,7 @@ from follow_env.sim.config import Validated, param
 from follow_env.sim.jit import njit
 from follow_env.sim.rng import LaneRandom
 from follow_env.sim.schema import Block, f8
-from follow_env.world.sight import list_occluders, list_people, sight_blocked
+from follow_env.world.sight import list_occluders, list_people, sight_blocked, sight_blocked_by_any
 
 __all__ = [
     "NEAR_PLANE_M",
@@ -399,7 +399,8 @@ def sight_box(
     :param clipped: that box clipped to the image (px).
     :param pose: ``(rx, ry, cos th, sin th, ox, oy)``: the robot and the camera's origin (m).
     :param body: ``(width, depth, height)`` of every body (m).
-    :param cand: caller-owned int64 room for the occluder list.
+    :param cand: caller-owned int64 room for the occluder list; when more occluders are near
+        than it holds, every wall and person is tested instead (slower, as exact).
     :return: ``(visible share, u1, v1, u2, v2)``.
     """
     u1, v1, u2, v2 = box
@@ -417,6 +418,8 @@ def sight_box(
     n_cand = list_people(ox, oy, px, py, reach + half_w, p, people, n_people, cand, n_cand)
     if n_cand == 0:
         return frac, c1, c2, c3, c4
+    # More occluders than ``cand`` holds (a wall of many short sides, a crowd): test every one.
+    overflow = n_cand > cand.shape[0]
     ux, uy = dx / dist, dy / dist
     nx, ny = px - ux * 0.5 * depth, py - uy * 0.5 * depth  # near face
     oz = cam.T[2]
@@ -436,7 +439,12 @@ def sight_box(
             if su < 0.0 or su >= W or sv < 0.0 or sv >= H:
                 continue
             n_img += 1
-            if sight_blocked(ox, oy, oz, sx, sy, sz, cand, n_cand, walls, people, half_w, height):
+            if overflow:
+                if sight_blocked_by_any(
+                    ox, oy, oz, sx, sy, sz, walls, n_walls, people, n_people, p, half_w, height
+                ):
+                    continue
+            elif sight_blocked(ox, oy, oz, sx, sy, sz, cand, n_cand, walls, people, half_w, height):
                 continue
             n_vis += 1
             su1, sv1, su2, sv2 = min(su1, su), min(sv1, sv), max(su2, su), max(sv2, sv)

@@ -54,7 +54,9 @@ __all__ = [
 ROWS = COLS = 5
 CELLS = ROWS * COLS
 NEAR_MAX = 48
-"""Most line segments near the grid taken into account in one step (scratch size)."""
+"""Line segments near the grid the scratch list holds (far more than the default grid meets on
+the built-in tracks). With more near (small tiles under a wide grid), :func:`read` scans every
+segment of the line instead: slower, and as exact."""
 SPOT_SAMPLES = 24
 _GOLDEN_ANGLE = math.pi * (3.0 - math.sqrt(5.0))
 # Equal-area points of the unit disc (Vogel's sunflower): point k at radius sqrt((k + 0.5) / n).
@@ -242,9 +244,13 @@ def read(
         seg = segs[k]
         dx, dy = seg.mx - gx, seg.my - gy
         lim = 0.5 * seg.length + reach
-        if dx * dx + dy * dy <= lim * lim and n_near < NEAR_MAX:
-            st.near[n_near] = k
+        if dx * dx + dy * dy <= lim * lim:
+            if n_near < NEAR_MAX:
+                st.near[n_near] = k
             n_near += 1
+    # More pieces near than the scratch list holds: scan the whole line (NEAR_MAX's note).
+    every = n_near > NEAR_MAX
+    n_scan = n_seg if every else n_near
     key = keys[_LIGHT]
     base = step * _STRIDE
     amb = prm.ambient * (1.0 + prm.flicker * normal_at(key, base + CELLS))
@@ -258,8 +264,8 @@ def read(
         px, py = x + c * bx - s * by, y + s * bx + c * by
         st.cx[j], st.cy[j] = px, py
         d_all, d_ink = np.inf, np.inf
-        for m in range(n_near):
-            seg = segs[int(st.near[m])]
+        for m in range(n_scan):
+            seg = segs[m if every else int(st.near[m])]
             d = segment_distance(seg, px, py)
             d_all = min(d_all, d)
             if seg.ink > 0.0:
@@ -275,8 +281,8 @@ def read(
             for q in range(SPOT_SAMPLES):
                 qx = px + r_spot * _SPOT[q, 0]
                 qy = py + r_spot * _SPOT[q, 1]
-                for m in range(n_near):
-                    seg = segs[int(st.near[m])]
+                for m in range(n_scan):
+                    seg = segs[m if every else int(st.near[m])]
                     if seg.ink > 0.0 and segment_distance(seg, qx, qy) <= half_w:
                         hits += 1
                         break

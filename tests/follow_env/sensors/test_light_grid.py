@@ -8,7 +8,8 @@ import pytest
 from follow_env.sensors import light_grid
 from follow_env.sensors.light_grid import LightGridConfig, cell_positions
 from follow_env.tasks.line_trace.config import IDEAL, PAPER
-from follow_env.world.floor_line import LINE_SEGMENT, line_segments
+from follow_env.tasks.line_trace.task import TASK, point_along
+from follow_env.world.floor_line import LINE_SEGMENT, SEG, line_segments
 
 HALF_W = 0.0095
 
@@ -85,3 +86,47 @@ def test_cell_positions_follow_the_spec_order() -> None:
 def test_black_must_be_darker_than_white() -> None:
     with pytest.raises(ValueError, match=r"LightGridConfig\.black_reflectance=0\.9"):
         LightGridConfig(black_reflectance=0.9)
+
+
+def test_more_segments_near_the_grid_than_its_scratch_list_holds_are_all_read() -> None:
+    # 60 short pieces 44 mm to the left (near the grid, touching no spot) come first in the
+    # line, then the line under the middle column: it must still be read.
+    decoys = _line([(x, 0.044) for x in np.linspace(-0.01, 0.01, 61)])
+    line = _line([(-1.0, 0.0), (1.0, 0.0)])
+    assert len(decoys) > light_grid.NEAR_MAX
+    crowded = _read(IDEAL, np.concatenate([decoys, line]))
+    alone = _read(IDEAL, line)
+    assert np.array_equal(crowded["cover"], alone["cover"])
+    assert np.all(crowded["cover"].reshape(5, 5)[:, 2] == 1.0)
+    assert crowded["active"] == 5
+
+
+def test_small_tiles_under_a_wide_grid_read_every_cell_on_the_line() -> None:
+    # The extreme accepted settings (10 cm tiles, a 10 cm pitch): over a hundred segments of
+    # the curves track lie near the grid; every cell whose spot lies wholly on the line reads 1.
+    cfg = IDEAL.replace(track={"name": "curves", "tile_m": 0.1, "gap_m": 0.05})
+    cfg = cfg.replace(sensor={"pitch_m": 0.1})
+    track = TASK.fixed_track(cfg)
+    segs = track.segments.view(LINE_SEGMENT.dtype)[:, 0]
+    half_w, r_spot = 0.5 * cfg.track.line_width_m, 0.5 * cfg.sensor.spot_diameter_m
+    most_near, wrong = 0, 0
+    for s in np.arange(0.05, track.length_m - 0.1, 0.05):
+        x, y, th = point_along(track.segments, s)
+        st = _read(cfg, segs, x, y, th)
+        centres = np.stack([st["cx"], st["cy"]], axis=1)
+        d = _distances(centres, track.segments)
+        wrong += int(np.sum((d + r_spot <= half_w - 1e-9) & (st["cover"] < 1.0)))
+        reach = 2 * np.sqrt(2) * 0.1 + half_w + r_spot
+        near = np.hypot(track.segments[:, SEG.mx] - x, track.segments[:, SEG.my] - y)
+        most_near = max(most_near, int(np.sum(near <= 0.5 * track.segments[:, SEG.length] + reach)))
+    assert most_near > light_grid.NEAR_MAX  # the case this is about
+    assert wrong == 0
+
+
+def _distances(points: np.ndarray, segments: np.ndarray) -> np.ndarray:
+    """Each point's distance (m) to the nearest segment of the line (brute force)."""
+    a = segments[:, [SEG.x1, SEG.y1]]
+    d = segments[:, [SEG.x2, SEG.y2]] - a
+    p = points[:, None, :]
+    t = np.clip(((p - a) * d).sum(-1) / (d * d).sum(-1), 0.0, 1.0)
+    return np.linalg.norm(a + t[..., None] * d - p, axis=-1).min(axis=1)
