@@ -20,7 +20,7 @@ from gymnasium.vector.utils import batch_space
 from follow_env.sim.checks import REAL_KINDS, is_integer, out_of_range, real_array
 from follow_env.sim.runner import BatchedSim
 
-__all__ = ["TaskEnv", "TaskVectorEnv", "action_array", "lane_seeds"]
+__all__ = ["TaskEnv", "TaskVectorEnv", "action_array", "lane_seeds", "render_fps"]
 
 RENDER_MODES = ["rgb_array", "human"]
 
@@ -67,6 +67,13 @@ def action_array(action: Any, shape: tuple[int, ...], names: str) -> np.ndarray:
     return arr
 
 
+def render_fps(config: Any) -> int:
+    """Frames a second that play an episode in real time: one frame a control step, so
+    ``round(1 / control_dt_s)`` (10 for PersonFollow's 0.1 s, 50 for LineTrace's 0.02 s), at
+    least 1. The human window keeps to it and Gymnasium's ``RecordVideo`` writes it."""
+    return max(1, round(1.0 / float(config.control_dt_s)))
+
+
 def _check_render_mode(cls: type, render_mode: str | None) -> None:
     if render_mode is not None and render_mode not in cls.metadata["render_modes"]:
         raise out_of_range(
@@ -85,11 +92,13 @@ class TaskEnv(gym.Env[np.ndarray, np.ndarray]):
     """
 
     task: ClassVar[Any]
+    # The class's frame rate is PersonFollow's 0.1 s step; each env sets its own (render_fps).
     metadata: ClassVar[dict[str, Any]] = {"render_modes": RENDER_MODES, "render_fps": 10}
 
     def __init__(self, config: Any = None, render_mode: str | None = None, **kwargs: Any) -> None:
         self.config = self.task.resolve_config(config, **kwargs)
         _check_render_mode(type(self), render_mode)
+        self.metadata = {**type(self).metadata, "render_fps": render_fps(self.config)}
         self.render_mode = render_mode
         self.sim = BatchedSim(self.task, self.config, 1)
         self.observation_space, self.action_space = self.task.spaces(self.config, self.sim.platform)
@@ -231,7 +240,11 @@ class TaskVectorEnv(VectorEnv):
         self.num_envs = int(num_envs)
         self.render_mode = render_mode
         self.autoreset_mode = mode
-        self.metadata = {"render_modes": ["rgb_array"], "render_fps": 10, "autoreset_mode": mode}
+        self.metadata = {
+            "render_modes": ["rgb_array"],
+            "render_fps": render_fps(self.config),
+            "autoreset_mode": mode,
+        }
         self.sim = BatchedSim(self.task, self.config, self.num_envs)
         self.single_observation_space, self.single_action_space = self.task.spaces(
             self.config, self.sim.platform

@@ -211,3 +211,60 @@ def test_scenario_may_be_given_as_a_section(scenario: object) -> None:
 def test_track_may_be_given_as_a_section() -> None:
     cfg = gym.make("LineTrace-v0", track={"name": "gaps", "gap_m": 0.1}).unwrapped.config
     assert (cfg.track.name, cfg.track.gap_m) == ("gaps", 0.1)
+
+
+# -- frame rate --------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("env_id", "kwargs", "fps"),
+    [
+        ("PersonFollow-v0", {}, 10),  # 0.1 s steps
+        ("LineTrace-v0", {}, 50),  # 0.02 s steps
+        ("LineTrace-v0", {"episode__control_dt_s": 0.04}, 25),
+        ("PersonFollow-v0", {"episode__control_dt_s": 0.2}, 5),
+    ],
+)
+def test_the_frame_rate_plays_an_episode_in_real_time(
+    env_id: str, kwargs: dict[str, Any], fps: int
+) -> None:
+    # One frame a control step: the human window and RecordVideo's videos keep real time.
+    env = gym.make(env_id, render_mode="rgb_array", **kwargs)
+    assert env.metadata["render_fps"] == fps
+    assert env.unwrapped.metadata["render_fps"] == fps
+    vec = gym.make_vec(env_id, num_envs=2, vectorization_mode="vector_entry_point", **kwargs)
+    assert vec.metadata["render_fps"] == fps
+    assert round(1.0 / env.unwrapped.config.control_dt_s) == fps
+
+
+def test_recorded_videos_play_at_the_envs_frame_rate(tmp_path: Any) -> None:
+    pytest.importorskip("moviepy")
+    env = gym.make("LineTrace-v0", track="straight", render_mode="rgb_array")
+    video = gym.wrappers.RecordVideo(
+        env, str(tmp_path / "videos"), episode_trigger=lambda k: k == 0
+    )
+    assert video.frames_per_sec == 50
+    video.close()
+
+
+def test_the_human_window_keeps_to_the_envs_frame_rate(monkeypatch: pytest.MonkeyPatch) -> None:
+    import follow_env.sim.window as window
+
+    shown: list[float] = []
+
+    class Recorder:
+        def __init__(self, title: str, width: int, height: int) -> None:
+            pass
+
+        def show(self, frame: np.ndarray, fps: float) -> None:
+            shown.append(fps)
+
+        def close(self) -> None:
+            pass
+
+    monkeypatch.setattr(window, "Window", Recorder)
+    env = gym.make("LineTrace-v0", track="straight", render_mode="human")
+    env.reset(seed=0)
+    env.step(np.zeros(3, np.float32))
+    env.close()
+    assert shown == [50, 50]  # reset and step: 50 frames a second for 0.02 s steps
