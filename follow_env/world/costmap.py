@@ -19,6 +19,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 from scipy import ndimage
 
+from follow_env.sim.checks import check_number, is_real, out_of_range, real_array
 from follow_env.sim.jit import njit
 
 __all__ = [
@@ -61,16 +62,10 @@ class CostMap:
             )
         if not np.all(np.isfinite(cost)) or np.any(cost < 0.0):
             raise ValueError("CostMap.cost is out of range: every cell must be finite and >= 0")
-        for name in ("x0_m", "y0_m", "resolution_m"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int | float | np.floating):
-                raise ValueError(f"CostMap.{name}={value!r} is out of range: must be a number")
-            if not math.isfinite(value):
-                raise ValueError(f"CostMap.{name}={value!r} is out of range: must be finite")
-        if self.resolution_m <= 0.0:
-            raise ValueError(
-                f"CostMap.resolution_m={self.resolution_m!r} is out of range: must be > 0 m"
-            )
+        # Python or numpy numbers, as everywhere (follow_env.sim.checks); not bools.
+        check_number("CostMap.x0_m", self.x0_m, unit="m")
+        check_number("CostMap.y0_m", self.y0_m, unit="m")
+        check_number("CostMap.resolution_m", self.resolution_m, 0.0, None, unit="m", lo_open=True)
         cost.flags.writeable = False
         occupied.flags.writeable = False
         object.__setattr__(self, "cost", cost)
@@ -113,7 +108,12 @@ def _as_rows(values: ArrayLike | None, widths: tuple[int, ...], name: str) -> np
     """``values`` as a float (n, w) array with w one of ``widths``; None or empty -> (0, w)."""
     if values is None:
         return np.zeros((0, widths[-1]))
-    a = np.asarray(values, dtype=np.float64)
+    a = real_array(values)  # strings, None and ragged rows are no coordinates
+    if a is None:
+        raise ValueError(
+            f"{name}={values!r} is out of range: must be real numbers in rows of "
+            f"{' or '.join(map(str, widths))} (m)"
+        )
     if a.size == 0:
         return np.zeros((0, widths[-1]))
     if a.ndim == 1:
@@ -161,22 +161,23 @@ def cost_map_from_obstacles(
         to be wider than about 2 x (0.25 + half the wall) + a cell to stay open.
     :param length_scale_m: distance over which the cost falls by a factor e (m).
     """
-    xmin, ymin, xmax, ymax = (float(v) for v in bounds)
-    if not all(math.isfinite(v) for v in (xmin, ymin, xmax, ymax)) or xmax <= xmin or ymax <= ymin:
-        raise ValueError(
-            f"bounds={tuple(bounds)!r} is out of range: must be finite (xmin, ymin, xmax, ymax) "
-            "with xmax > xmin and ymax > ymin (m)"
-        )
+    rule = "four finite numbers (xmin, ymin, xmax, ymax) with xmax > xmin and ymax > ymin (m)"
+    try:
+        corners = tuple(bounds)
+    except TypeError:  # not a sequence at all
+        raise out_of_range("bounds", bounds, rule) from None
+    if len(corners) != 4 or not all(is_real(v) and math.isfinite(v) for v in corners):
+        raise out_of_range("bounds", bounds, rule)
+    xmin, ymin, xmax, ymax = (float(v) for v in corners)
+    if xmax <= xmin or ymax <= ymin:
+        raise out_of_range("bounds", bounds, rule)
     for name, value, strict in (
         ("resolution_m", resolution_m, True),
         ("wall_thickness_m", wall_thickness_m, False),
         ("body_radius_m", body_radius_m, False),
         ("length_scale_m", length_scale_m, True),
     ):
-        if not math.isfinite(value) or value < 0.0 or (strict and value == 0.0):
-            raise ValueError(
-                f"{name}={value!r} is out of range: must be {'>' if strict else '>='} 0 m"
-            )
+        check_number(name, value, 0.0, None, unit="m", lo_open=strict)
     wall_rows = _as_rows(walls, (4,), "walls")
     box_rows = _as_rows(boxes, (4, 5), "boxes")
     if box_rows.shape[1] == 4:
