@@ -99,7 +99,7 @@ def test_every_control_step_of_the_chain_lasts_one_control_period(preset: object
     body = env.unwrapped.sim.state["body"]
     before = np.array([body["x"][0], body["y"][0]])
     for _ in range(3):
-        _, _, _, _, info = env.step(np.array([0.0, 0.0]))
+        env.step(np.array([0.0, 0.0]))
         after = np.array([body["x"][0], body["y"][0]])
         assert np.hypot(*(after - before)) == pytest.approx(0.3 * 0.1, rel=1e-9)
         before = after

@@ -168,3 +168,14 @@ def test_a_random_track_laid_shorter_than_the_start_is_refused_at_reset() -> Non
     for message in refusals:
         assert "StartConfig.distance_m=0.9 is out of range" in message
         assert "the length of the 'short_or_long_test' track laid" in message
+
+
+def test_a_random_field_fuller_than_three_quarters_is_refused_and_the_fullest_lays_fast() -> None:
+    # A full 20 x 3 field took 22 s a reset and then found no track; a full 8 x 6 one 2-12 s.
+    with pytest.raises(
+        ValueError, match=r"TrackConfig.random_tiles=60 is out of range: must be <= 3/4 of"
+    ):
+        PAPER.replace(track={"random_tiles": 60, "random_cols": 20, "random_rows": 3})
+    cfg = PAPER.replace(track={"random_tiles": 45, "random_cols": 20, "random_rows": 3})
+    for key in range(3):
+        assert len(lay(get_track("random"), np.array([key], np.uint64), cfg).program) == 45
