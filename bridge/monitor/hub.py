@@ -1,17 +1,21 @@
 """The meeting point of the robot's driver and the web monitor's clients (thread-safe).
 
 The driver (the runner's control loop, or :class:`~bridge.monitor.sim.SimDriver`) calls
-:meth:`MonitorHub.publish` once per control step and reads :attr:`MonitorHub.mode` and
+:meth:`MonitorHub.publish` once per control step, sets :attr:`MonitorHub.scene` when the world
+changes (each episode's walls) and reads :attr:`MonitorHub.mode` and
 :meth:`MonitorHub.manual_command`; the WebSocket handlers read :meth:`MonitorHub.latest` and
-call :meth:`MonitorHub.set_mode` and :meth:`MonitorHub.set_manual`.
+:meth:`MonitorHub.scene_message` and call :meth:`MonitorHub.set_mode` and
+:meth:`MonitorHub.set_manual`, naming the client (its connection) so that manual commands are
+taken only from the page that selected ``manual``.
 """
 
 from __future__ import annotations
 
 import math
+import secrets
 import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Hashable, Sequence
 from typing import Any
 
 __all__ = ["LABELS", "MANUAL_LIMITS", "MODES", "MonitorHub", "monitor_modes"]
@@ -53,8 +57,8 @@ class MonitorHub:
     :param mode: the starting mode (one of ``modes``, or a policy name the driver runs).
     :param manual_timeout_s: a manual command older than this reads as zero, s (a browser that
         stops sending must not leave the robot driving).
-    :param scene: static drawing data sent to every client on connect (e.g. ``{"walls":
-        [[x1, y1, x2, y2], ...]}`` in m).
+    :param scene: drawing data sent to every client on connect and again whenever it changes
+        (e.g. ``{"walls": [[x1, y1, x2, y2], ...]}`` in m; :attr:`scene`).
     :param modes: the modes a browser may select, in the page's order (default: :data:`MODES`,
         as :func:`monitor_modes` orders them; it also adds policies). ``stop`` must be one.
     """
@@ -74,7 +78,12 @@ class MonitorHub:
         self.manual_timeout_s = manual_timeout_s
         self._state: dict[str, Any] | None = None
         self._seq = 0
-        self.scene: dict[str, Any] = dict(scene or {})
+        self._scene: dict[str, Any] = dict(scene or {})
+        self.scene_version = 0
+        """Counts the changes of :attr:`scene` (each is sent to every connected client)."""
+        self.session = secrets.token_hex(8)
+        """This hub's id: a page left open across two robot sessions tells them apart by it."""
+        self._manual_owner: Hashable | None = None
         self.mode_changes = 0
         self._notice = ""
         self.refusals = 0
@@ -94,13 +103,42 @@ class MonitorHub:
         self._modes = modes
 
     @property
+    def scene(self) -> dict[str, Any]:
+        """The drawing data (walls, m); setting a different one counts :attr:`scene_version`
+        up, and every connected client is sent it (the driver sets it per episode)."""
+        with self._lock:
+            return dict(self._scene)
+
+    @scene.setter
+    def scene(self, scene: dict[str, Any]) -> None:
+        scene = dict(scene)
+        with self._lock:
+            if scene != self._scene:
+                self._scene = scene
+                self.scene_version += 1
+
+    def scene_message(self) -> tuple[int, dict[str, Any]]:
+        """``(scene_version, message)``: the ``scene`` message a client is sent (the drawing
+        data, the mode buttons and the session id), with the version it shows."""
+        with self._lock:
+            version, scene = self.scene_version, dict(self._scene)
+        return version, {
+            "type": "scene",
+            **scene,
+            "modes": self.buttons(),
+            "session": self.session,
+            "version": version,
+        }
+
+    @property
     def mode(self) -> str:
         """The current mode."""
         with self._lock:
             return self._mode
 
-    def set_mode(self, mode: str) -> None:
-        """Select a mode (``ValueError`` for one not in :attr:`modes`)."""
+    def set_mode(self, mode: str, client: Hashable | None = None) -> None:
+        """Select a mode (``ValueError`` for one not in :attr:`modes`); ``client`` (a
+        connection's id) selecting ``manual`` becomes the one whose manual commands are taken."""
         if mode not in self.modes:
             raise ValueError(
                 f"mode={mode!r} is out of range: must be one of {', '.join(self.modes)}"
@@ -109,8 +147,11 @@ class MonitorHub:
             if mode != self._mode:
                 self.mode_changes += 1
             self._mode = mode
-            if mode != "manual":
+            if mode == "manual":
+                self._manual_owner = client
+            else:
                 self._manual, self._manual_at = (0.0, 0.0), -math.inf
+                self._manual_owner = None
 
     def refuse(self, mode: str, back_to: str, reason: str) -> None:
         """The driver cannot run ``mode`` (say, an agent that needs a reading the robot's
@@ -133,8 +174,14 @@ class MonitorHub:
         """``[[mode, label], ...]``: the page's mode buttons, in order (:data:`LABELS`)."""
         return [[m, LABELS.get(m, m)] for m in self.modes]
 
-    def set_manual(self, v_mps: float, w_radps: float) -> None:
-        """A manual command (used while the mode is ``manual``)."""
+    def set_manual(self, v_mps: float, w_radps: float, client: Hashable | None = None) -> None:
+        """A manual command, m/s and rad/s (used while the mode is ``manual``).
+
+        :param client: the connection it came from: taken only from the one that selected
+            ``manual`` last (``None``: the driver's own process, always taken).
+        :raises ValueError: a value out of range, or a client other than that one (another
+            page left open must not drive, nor fight the one that does).
+        """
         v_max, w_max = MANUAL_LIMITS
         for name, value, limit in (("v_mps", v_mps, v_max), ("w_radps", w_radps, w_max)):
             if not (math.isfinite(value) and abs(value) <= limit):
@@ -142,6 +189,11 @@ class MonitorHub:
                     f"{name}={value!r} is out of range: must be in [-{limit}, {limit}]"
                 )
         with self._lock:
+            if client is not None and (self._mode != "manual" or client != self._manual_owner):
+                raise ValueError(
+                    "manual commands are taken only from the page that selected manual last "
+                    "(select manual on this page to drive from it)"
+                )
             self._manual, self._manual_at = (float(v_mps), float(w_radps)), time.monotonic()
 
     def manual_command(self) -> tuple[float, float]:
@@ -152,7 +204,8 @@ class MonitorHub:
             return self._manual
 
     def publish(self, state: dict[str, Any]) -> None:
-        """The driver's newest state (JSON-ready values); stamped with ``seq`` and ``t_wall``."""
+        """The driver's newest state (JSON-ready values); stamped with ``seq``, ``t_wall`` and
+        ``manual_by`` (the id of the client whose manual commands are taken, or ``None``)."""
         with self._lock:
             self._seq += 1
             self._state = {
@@ -160,6 +213,7 @@ class MonitorHub:
                 **state,
                 "notice": self._notice,
                 "refusals": self.refusals,
+                "manual_by": self._manual_owner if self._mode == "manual" else None,
                 "seq": self._seq,
                 "t_wall": time.time(),
             }

@@ -2,15 +2,31 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
+import socket
 import time
+import urllib.error
+import urllib.request
+from collections.abc import Iterator
 from urllib.parse import quote
 
 import pytest
 from fastapi.testclient import TestClient
 from starlette.testclient import WebSocketDenialResponse
+from websockets.exceptions import ConnectionClosed, InvalidStatus
+from websockets.sync.client import connect
 
-from bridge.monitor.app import MAX_MESSAGE_BYTES, WS_MAX_BYTES, create_app, serve
+from bridge.monitor.app import (
+    MAX_CLIENTS,
+    MAX_CONNECTIONS,
+    MAX_MESSAGE_BYTES,
+    RATE_LIMIT_PER_S,
+    WS_MAX_BYTES,
+    Server,
+    create_app,
+    serve,
+)
 from bridge.monitor.hub import MODES, MonitorHub, monitor_modes
 from bridge.monitor.sim import SimDriver
 from policies import make_policy
@@ -66,6 +82,18 @@ def hub() -> MonitorHub:
     return h
 
 
+@pytest.fixture
+def served(hub: MonitorHub) -> Iterator[Server]:
+    """The monitor over ``hub`` on a real uvicorn server (loopback, a free port)."""
+    server = Server(create_app(hub, rate_hz=50), "127.0.0.1", 0).start()
+    yield server
+    server.stop()
+
+
+def _ws_url(server: Server, host: str = "127.0.0.1") -> str:
+    return f"ws://{host}:{server.port}/ws"
+
+
 def test_the_page_and_its_script_are_served(hub: MonitorHub) -> None:
     client = TestClient(create_app(hub))
     page = client.get("/")
@@ -79,7 +107,14 @@ def test_the_page_and_its_script_are_served(hub: MonitorHub) -> None:
 def test_states_stream_and_modes_change(hub: MonitorHub) -> None:
     client = TestClient(create_app(hub, rate_hz=50))
     with client.websocket_connect("/ws") as ws:
-        assert ws.receive_json() == {"type": "scene", "walls": [[0, 0, 1, 0]], "modes": BUTTONS}
+        assert ws.receive_json() == {
+            "type": "scene",
+            "walls": [[0, 0, 1, 0]],
+            "modes": BUTTONS,
+            "session": hub.session,
+            "version": 0,
+            "client": 1,
+        }
         first = _next(ws, "state")
         assert first["obs"] == [1.0, 12.0]
         _state(hub, 0.1)
@@ -107,6 +142,10 @@ def test_states_stream_and_modes_change(hub: MonitorHub) -> None:
         ('{"type": "manual", "v_mps": "fast", "w_radps": 0}', "v_mps"),
         ('{"type": "manual", "v_mps": 0, "w_radps": 0, "x": 1}', "x"),
         ("[1, 2]", "object"),
+        ('{"type": "manual", "v_mps": true, "w_radps": 0}', "manual.v_mps: input should be"),
+        ('{"type": "manual", "v_mps": 0, "w_radps": false}', "manual.w_radps: input should be"),
+        ('{"type": "manual", "v_mps": "0.5", "w_radps": 0}', "manual.v_mps: input should be"),
+        ('{"type": "ping", "t": true}', "ping.t: input should be"),
         ('{"type": "ping", "t": NaN}', "ping.t: input should be a finite number"),
         ('{"type": "ping", "t": -Infinity}', "ping.t: input should be a finite number"),
         ('{"type": "ping", "t": "' + "x" * 5000 + '"}', "4096 bytes"),
@@ -427,3 +466,329 @@ def test_a_shipped_agent_that_does_not_load_is_not_offered_and_said_why(
     assert "ppo_ahead" not in agents
     assert "ppo_mecanum" in agents
     assert broken == ["ppo_ahead (policies/agents/ppo_ahead/model.zip: model file not found)"]
+
+
+# ---- manual commands: numbers only, from the page that selected manual ---------------------
+
+
+def test_manual_commands_take_whole_and_decimal_numbers(hub: MonitorHub) -> None:
+    client = TestClient(create_app(hub))
+    with client.websocket_connect("/ws") as ws:
+        ws.send_json({"type": "mode", "mode": "manual"})
+        _next(ws, "ack")
+        ws.send_text('{"type": "manual", "v_mps": 1, "w_radps": -0.5}')
+        assert _next(ws, "ack")["manual"] == [1.0, -0.5]
+        ws.send_text('{"type": "ping", "t": 3}')
+        assert _next(ws, "pong")["t"] == 3.0
+    assert hub.manual_command() == (1.0, -0.5)
+
+
+def test_manual_commands_are_taken_only_from_the_client_that_selected_manual(
+    hub: MonitorHub,
+) -> None:
+    client = TestClient(create_app(hub, rate_hz=50))
+    with client.websocket_connect("/ws") as operator, client.websocket_connect("/ws") as watcher:
+        me = _next(operator, "scene").get("client")  # each connection's id
+        other = _next(watcher, "scene").get("client")
+        operator.send_json({"type": "mode", "mode": "manual"})
+        _next(operator, "ack")
+        operator.send_json({"type": "manual", "v_mps": 0.5, "w_radps": 0.0})
+        _next(operator, "ack")
+        # a second page left open, its sliders at zero: its commands are refused, not mixed in
+        watcher.send_json({"type": "manual", "v_mps": 0.0, "w_radps": 0.0})
+        assert "only from the page that selected manual" in _next(watcher, "error")["error"]
+        assert hub.manual_command() == (0.5, 0.0)
+        _state(hub, 0.1)
+        assert _next(operator, "state")["manual_by"] == me  # the page knows it drives
+        assert me is not None
+        assert other not in (None, me)
+        # the last page to select manual drives; the first one's commands are refused now
+        watcher.send_json({"type": "mode", "mode": "manual"})
+        _next(watcher, "ack")
+        watcher.send_json({"type": "manual", "v_mps": -0.2, "w_radps": 0.1})
+        _next(watcher, "ack")
+        operator.send_json({"type": "manual", "v_mps": 0.5, "w_radps": 0.0})
+        assert "selected manual" in _next(operator, "error")["error"]
+        assert hub.manual_command() == (-0.2, 0.1)
+        # out of manual, nobody's manual command is taken
+        operator.send_json({"type": "mode", "mode": "stop"})
+        _next(operator, "ack")
+        watcher.send_json({"type": "manual", "v_mps": 0.3, "w_radps": 0.0})
+        _next(watcher, "error")
+    assert hub.manual_command() == (0.0, 0.0)
+
+
+# ---- the scene: sent again when it changes, with the session's id ----------------------------
+
+
+def test_a_changed_scene_reaches_a_client_connected_before_it() -> None:
+    hub = MonitorHub("stop")  # no walls yet: the driver sets them when its world is built
+    _state(hub)
+    server = Server(create_app(hub), "127.0.0.1", 0).start()
+    try:
+        with connect(_ws_url(server), open_timeout=5) as ws:
+            first = _next_raw(ws, "scene")
+            assert "walls" not in first
+            hub.scene = {"walls": [[0, 0, 1, 0]]}
+            second = _next_raw(ws, "scene")
+            assert second["walls"] == [[0, 0, 1, 0]]
+            assert second["version"] == first["version"] + 1
+            assert second["session"] == first["session"] == hub.session
+            hub.scene = {"walls": [[0, 0, 1, 0]]}  # the same walls: not sent again
+            hub.scene = {"walls": [[0, 0, 2, 0]]}
+            third = _next_raw(ws, "scene")
+            assert third["walls"] == [[0, 0, 2, 0]]
+            assert third["version"] == second["version"] + 1
+    finally:
+        server.stop()
+
+
+def test_each_episodes_walls_reach_a_connected_client_of_the_sim_driver() -> None:
+    hub = MonitorHub("gsmpn")
+    driver = SimDriver(hub, make_policy, scenario="random_world", speed=100.0)
+    driver.env.reset(seed=0)  # compiled (after an edit of the simulator) before the clock runs
+    server = Server(create_app(hub, rate_hz=50), "127.0.0.1", 0).start()
+    try:
+        with connect(_ws_url(server), open_timeout=5) as ws:
+            driver.start()
+            walls, episodes = [], set()
+            deadline = time.monotonic() + 30.0
+            while len(episodes) < 2 and time.monotonic() < deadline:
+                message = json.loads(ws.recv(timeout=10))
+                if message["type"] == "scene" and "walls" in message:
+                    walls.append(message["walls"])
+                elif message["type"] == "state":
+                    episodes.add(message["episode"])
+                    current = hub.scene["walls"]
+        assert len(episodes) >= 2
+        assert len(walls) >= 2  # one per episode: random_world's walls differ by seed
+        assert walls[0] != walls[-1]
+        assert walls[-1] == current  # the page draws the walls of the episode it shows
+    finally:
+        server.stop()
+        driver.stop()
+
+
+def test_every_hub_has_a_session_id_of_its_own() -> None:
+    first, second = MonitorHub(), MonitorHub()
+    assert first.session != second.session
+    version, scene = first.scene_message()
+    assert (version, scene["session"], scene["version"]) == (0, first.session, 0)
+
+
+# ---- what one client may cost the robot's process ------------------------------------------
+
+
+def _fds() -> int:
+    """This process's open file descriptors (the server runs in it, in a thread)."""
+    import os
+
+    return len(os.listdir("/proc/self/fd"))
+
+
+@pytest.mark.skipif(not __import__("os").path.isdir("/proc/self/fd"), reason="no /proc")
+def test_idle_connections_beyond_the_cap_are_answered_and_closed_as_they_come(
+    served: Server,
+) -> None:
+    extra = 30
+    before = _fds()
+    held: list[socket.socket] = []
+    try:
+        for _ in range(MAX_CONNECTIONS + extra):  # no request, no handshake: idle
+            held.append(socket.create_connection(("127.0.0.1", served.port), timeout=5))
+        time.sleep(0.5)
+        answered = []
+        for sock in held:
+            sock.setblocking(False)
+            with contextlib.suppress(BlockingIOError):  # held open, unread: the first ones
+                answered.append(sock.recv(4096))
+        assert len(answered) == extra
+        for reply in answered:
+            assert reply.startswith(b"HTTP/1.1 503 Service Unavailable\r\n"), reply
+            assert reply.endswith(f"holds {MAX_CONNECTIONS} connections at most".encode())
+        # the server holds no descriptor for the connections it refused: ours, and its cap's
+        assert _fds() - before <= len(held) + MAX_CONNECTIONS + 2
+    finally:
+        for sock in held:
+            sock.close()
+    time.sleep(0.3)
+    with urllib.request.urlopen(f"http://127.0.0.1:{served.port}/state", timeout=5) as reply:
+        assert json.loads(reply.read())["type"] == "state"  # the server goes on
+
+
+def test_a_connection_that_sends_no_whole_request_head_is_closed_in_time(hub: MonitorHub) -> None:
+    server = Server(create_app(hub), "127.0.0.1", 0, header_timeout_s=0.5).start()
+    try:
+        idle = socket.create_connection(("127.0.0.1", server.port), timeout=5)
+        slow = socket.create_connection(("127.0.0.1", server.port), timeout=5)
+        slow.sendall(b"GET /state HTTP/1.1\r\nHost: 127.0.0.1\r\n")  # and never the end
+        with connect(_ws_url(server), open_timeout=5) as ws:
+            time.sleep(1.2)
+            for sock in (idle, slow):
+                assert sock.recv(4096).startswith(b"HTTP/1.1 408 Request Timeout\r\n")
+                assert sock.recv(4096) == b""  # closed
+                sock.close()
+            ws.send('{"type": "ping", "t": 1}')  # a WebSocket lives on past the deadline
+            assert _next_raw(ws, "pong")["t"] == 1.0
+    finally:
+        server.stop()
+
+
+def test_a_websocket_client_beyond_the_cap_is_refused_saying_why(served: Server) -> None:
+    with contextlib.ExitStack() as held:
+        clients = [
+            held.enter_context(connect(_ws_url(served), open_timeout=5)) for _ in range(MAX_CLIENTS)
+        ]
+        with pytest.raises(InvalidStatus) as refused, connect(_ws_url(served), open_timeout=5):
+            pass
+        assert refused.value.response.status_code == 503
+        assert refused.value.response.body == (
+            f"the monitor serves {MAX_CLIENTS} clients at most: close one".encode()
+        )
+        clients[0].close()
+        time.sleep(0.3)
+        with connect(_ws_url(served), open_timeout=5) as ws:  # one left: room for one more
+            assert _next_raw(ws, "scene")["type"] == "scene"
+
+
+def _replies(ws, quiet_s: float = 0.5) -> list[dict]:  # type: ignore[no-untyped-def]
+    """The replies (not the streamed scene and states) until none came for ``quiet_s``."""
+    replies = []
+    while True:
+        try:
+            message = json.loads(ws.recv(timeout=quiet_s))
+        except TimeoutError:
+            return replies
+        if message["type"] not in ("scene", "state"):
+            replies.append(message)
+
+
+def test_a_client_over_the_message_rate_gets_one_error_and_the_rest_are_dropped(
+    served: Server,
+) -> None:
+    with connect(_ws_url(served), open_timeout=5) as ws:
+        for k in range(RATE_LIMIT_PER_S + 10):
+            ws.send(json.dumps({"type": "ping", "t": k}))
+        replies = _replies(ws)
+        assert [r["type"] for r in replies] == ["pong"] * RATE_LIMIT_PER_S + ["error"]
+        assert [r["t"] for r in replies[:-1]] == list(range(RATE_LIMIT_PER_S))
+        assert replies[-1]["error"].startswith(f"over {RATE_LIMIT_PER_S} messages a second")
+        time.sleep(1.0)  # the next second: answered again
+        ws.send('{"type": "ping", "t": 99}')
+        assert _next_raw(ws, "pong")["t"] == 99.0
+
+
+def _flood(url: str, n: int) -> tuple[int, ConnectionClosed]:
+    """Send ``n`` pings as fast as a client can (reading the replies as they come, as the
+    reviewer's flood did); how many replies came before the connection closed, and how."""
+    import asyncio
+
+    from websockets.asyncio.client import connect as connect_async
+
+    async def flood() -> tuple[int, ConnectionClosed]:
+        async with connect_async(url, open_timeout=5) as ws:
+            replies = 0
+
+            async def read() -> None:
+                nonlocal replies
+                async for message in ws:
+                    replies += json.loads(message)["type"] in ("pong", "error")
+
+            reader = asyncio.create_task(read())
+            try:
+                for k in range(n):
+                    await ws.send('{"type": "ping", "t": 1}')
+                    if k % 50 == 0:
+                        await asyncio.sleep(0)
+                await asyncio.wait_for(reader, 10)
+            except ConnectionClosed as closed:
+                return replies, closed
+        raise AssertionError("the server did not close the flooding client")
+
+    return asyncio.run(flood())
+
+
+def test_a_flooding_client_is_closed_with_1008_and_the_server_goes_on(served: Server) -> None:
+    replies, closed = _flood(_ws_url(served), 5000)
+    assert closed.rcvd is not None
+    assert closed.rcvd.code == 1008
+    assert closed.rcvd.reason == f"over {RATE_LIMIT_PER_S} messages a second"
+    assert replies == RATE_LIMIT_PER_S + 1  # its first second's pongs and one error: no more
+    with connect(_ws_url(served), open_timeout=5) as ws:
+        ws.send('{"type": "ping", "t": 2}')
+        assert _next_raw(ws, "pong")["t"] == 2.0
+
+
+# ---- other sites' pages ---------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "origin",
+    ["https://evil.example", "http://localhost:1", "http://127.0.0.1:1", "null", "file://"],
+)
+def test_a_websocket_from_a_page_of_another_origin_is_refused(
+    served: Server, hub: MonitorHub, origin: str
+) -> None:
+    with (
+        pytest.raises(InvalidStatus) as refused,
+        connect(_ws_url(served), origin=origin, open_timeout=5),  # type: ignore[arg-type]
+    ):
+        pass
+    assert refused.value.response.status_code == 403
+    assert (
+        refused.value.response.body
+        == f"Origin {origin!r} is not this monitor's page: refused".encode()
+    )
+    assert hub.mode == "stop"
+
+
+def test_the_monitors_own_page_and_a_script_connect(served: Server) -> None:
+    own = f"http://127.0.0.1:{served.port}"
+    for url, origin in (
+        (_ws_url(served), own),
+        (_ws_url(served, "localhost"), f"http://localhost:{served.port}"),
+        (_ws_url(served), None),  # a script sends no Origin
+    ):
+        with connect(url, origin=origin, open_timeout=5) as ws:  # type: ignore[arg-type]
+            ws.send('{"type": "mode", "mode": "pn"}')
+            assert _next_raw(ws, "ack")["mode"] == "pn"
+
+
+def test_a_request_for_another_host_is_refused(served: Server) -> None:
+    # a DNS-rebinding page: its own name, resolved to this machine
+    request = urllib.request.Request(
+        f"http://127.0.0.1:{served.port}/state", headers={"Host": f"evil.example:{served.port}"}
+    )
+    with pytest.raises(urllib.error.HTTPError) as refused:
+        urllib.request.urlopen(request, timeout=5)
+    assert refused.value.code == 400
+    assert (
+        refused.value.read()
+        == f"Host 'evil.example:{served.port}' is not this monitor's address".encode()
+    )
+    with socket.create_connection(("127.0.0.1", served.port), timeout=5) as sock:
+        sock.sendall(
+            b"GET /ws HTTP/1.1\r\nHost: evil.example\r\nUpgrade: websocket\r\n"
+            b"Connection: Upgrade\r\nSec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\n"
+            b"Sec-WebSocket-Version: 13\r\nOrigin: http://evil.example\r\n\r\n"
+        )
+        assert sock.recv(4096).startswith(b"HTTP/1.1 400 ")
+    with urllib.request.urlopen(f"http://localhost:{served.port}/", timeout=5) as page:
+        assert page.status == 200  # the loopback names are all this monitor's
+
+
+def test_a_client_over_the_rate_three_seconds_running_is_closed() -> None:
+    from bridge.monitor.app import _Rate
+
+    rate = _Rate(20)
+    seconds = [[rate.take(t + k / 100) for k in range(25)] for t in (0.0, 1.0, 2.0)]
+    for verdicts in seconds[:2]:  # over it: one error reply, the rest dropped
+        assert verdicts == ["ok"] * 20 + ["over"] + ["drop"] * 4
+    assert seconds[2] == ["ok"] * 20 + ["close"] * 5  # the third second running
+    rate = _Rate(20)
+    over = [rate.take(0.0) for _ in range(25)]
+    assert [rate.take(2.5) for _ in range(21)] == ["ok"] * 20 + ["over"]  # a quiet second between
+    assert over[-1] == "drop"
+    assert _Rate(20).take(0.0) == "ok"
+    flood = _Rate(20)
+    assert [flood.take(0.0) for _ in range(101)][-2:] == ["drop", "close"]  # five times over

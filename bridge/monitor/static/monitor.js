@@ -2,7 +2,8 @@
 // No framework and no network beyond this server: the page works beside the robot, offline.
 "use strict";
 
-const stats = { frames: 0, lastSeq: 0, latencyMs: [], mode: null, acks: 0, errors: 0, draws: 0, notice: "", refusals: 0 };
+const stats = { frames: 0, lastSeq: 0, latencyMs: [], mode: null, acks: 0, errors: 0, draws: 0, notice: "", refusals: 0,
+  session: null, client: null, manualBy: null, scenes: 0, manualSent: 0 };
 window.monitorStats = stats;  // read by the browser test and the latency benchmark
 
 const view = document.getElementById("view").getContext("2d");
@@ -12,6 +13,7 @@ let scene = { walls: [] };
 let trail = { robot: [], person: [] };
 let offsets = [];  // [time_s, offset_px]
 let lastTime = -1;
+let baseline = true;  // the next state's refusal count is this page's starting point
 
 const token = new URLSearchParams(location.search).get("token");
 const wsUrl = (location.protocol === "https:" ? "wss://" : "ws://") + location.host + "/ws" +
@@ -28,13 +30,36 @@ function connect() {
   ws.onmessage = (event) => {
     const msg = JSON.parse(event.data);
     if (msg.type === "state") onState(msg);
-    else if (msg.type === "scene") { scene = msg; scene.walls = scene.walls || []; showModes(msg.modes || []); }
+    else if (msg.type === "scene") onScene(msg);
     else if (msg.type === "ack") { stats.acks += 1; $("msg").textContent = "ok"; }
     else if (msg.type === "error") { stats.errors += 1; $("msg").textContent = "error: " + msg.error; }
   };
 }
 
 function send(obj) { if (ws && ws.readyState === WebSocket.OPEN) ws.send(JSON.stringify(obj)); }
+
+// The scene comes on every (re)connection and again whenever it changes (each episode's walls).
+// A new session (the robot's command started again, the page left open) starts afresh: its
+// refusals are counted from zero, so none of them is compared with the last session's count.
+function onScene(msg) {
+  stats.scenes += 1;
+  stats.client = msg.client;
+  if (stats.session !== null && msg.session !== stats.session) {
+    stats.refusals = 0; stats.notice = ""; baseline = false;
+    trail = { robot: [], person: [] }; offsets = []; lastTime = -1;
+  }
+  stats.session = msg.session;
+  scene = msg; scene.walls = scene.walls || [];
+  showModes(msg.modes || []);
+}
+
+// This page drives in manual only once its user selected manual here: the server names the
+// connection whose manual commands it takes (manual_by), and another page's sliders stay idle.
+const driving = () => stats.mode === "manual" && stats.manualBy !== null && stats.manualBy === stats.client;
+function sendManual() {
+  stats.manualSent += 1;
+  send({ type: "manual", v_mps: Number($("v").value), w_radps: Number($("w").value) });
+}
 
 // The robot says which modes it offers ([[mode, label], ...]: the laws, its agents, manual,
 // stop); a button per mode, rebuilt on every (re)connection.
@@ -53,12 +78,12 @@ function showModes(modes) {
 for (const id of ["v", "w"]) {
   $(id).addEventListener("input", () => {
     $(id + "val").textContent = Number($(id).value).toFixed(id === "v" ? 2 : 1);
+    if (driving()) sendManual();
+    else $("msg").textContent = "select manual on this page to drive from it";
   });
 }
-// While in manual mode, the sliders are sent five times a second (the server zeroes a stale one).
-setInterval(() => {
-  if (stats.mode === "manual") send({ type: "manual", v_mps: Number($("v").value), w_radps: Number($("w").value) });
-}, 200);
+// While this page drives, its sliders are sent five times a second (the server zeroes a stale one).
+setInterval(() => { if (driving()) sendManual(); }, 200);
 
 const fmt = (x, d) => (x === null || x === undefined ? "-" : Number(x).toFixed(d));
 
@@ -66,6 +91,7 @@ function onState(s) {
   stats.frames += 1;
   stats.lastSeq = s.seq;
   stats.mode = s.mode;
+  stats.manualBy = s.manual_by === undefined ? null : s.manual_by;
   // The page's wall clock to a fraction of a millisecond, as the server's t_wall: Date.now()
   // counts whole milliseconds, so a state that arrived within the millisecond it was
   // stamped in read as up to 1 ms in the past.
@@ -83,7 +109,7 @@ function onState(s) {
   for (const b of document.querySelectorAll("#modes button")) {
     b.classList.toggle("active", b.dataset.mode === s.mode);
   }
-  if (stats.frames === 1) stats.refusals = s.refusals || 0;  // refusals before this page: not news
+  if (baseline) { stats.refusals = s.refusals || 0; baseline = false; }  // before this page: not news
   if (s.refusals > stats.refusals) { stats.refusals = s.refusals; stats.notice = s.notice; $("msg").textContent = "refused: " + s.notice; }
   // a chosen agent is built beside the control loop; the robot runs the old mode meanwhile
   $("mode").textContent = s.mode + (s.loading && s.loading.length ? " (loading " + s.loading.join(", ") + ")" : "");
