@@ -13,8 +13,10 @@
 
 (also ``python -m bridge ...``). ``URL`` is anything pyserial opens: ``/dev/ttyUSB0``,
 ``socket://127.0.0.1:5760`` (the emulator), ``loop://``. The monitor serves
-``http://127.0.0.1:8000/`` by default; any other host needs ``--token``, which the page's
-URL then carries (``/?token=...``). Bad arguments give one line on stderr and exit status 2.
+``http://127.0.0.1:8000/`` by default; any other host needs ``--token`` (or the environment
+variable ``PERSONFOLLOW_MONITOR_TOKEN``, which ``ps`` does not show), which the page's URL then
+carries (``/?token=...``). Bad arguments give one line on stderr and exit status 2. A robot
+session raises its limit of open files to the hard one (:func:`_raise_file_limit`).
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import dataclasses
+import os
 import signal
 import sys
 import time
@@ -45,6 +48,7 @@ COMMANDS = ("auto", "duty", "speed")  # bridge.runner.COMMAND_MODES, without num
 # has no use for (refused there); --seed, --config, --http and --token serve both.
 ROBOT_DEFAULTS = {"framing": "reference", "perception": "sim", "command": "auto"}
 SIM_UNUSED = ("port", "framing", "perception", "command", "duration", "log")
+TOKEN_ENV = "PERSONFOLLOW_MONITOR_TOKEN"  # --token when none is given: ps shows arguments, not it
 
 
 class UsageError(Exception):
@@ -127,7 +131,12 @@ def _parser() -> _Parser:
         p.add_argument("--seed", type=_seed, default=None, help="reset the sim world to it")
         p.add_argument("--config", type=_config, default="thesis", help="robot preset or JSON")
         p.add_argument("--http", type=_http, default=("127.0.0.1", 8000), help="monitor address")
-        p.add_argument("--token", default=None, help="required by the monitor off loopback")
+        p.add_argument(
+            "--token",
+            default=None,
+            help=f"required by the monitor off loopback; default: ${TOKEN_ENV} (which, unlike "
+            "an argument, ps does not show others)",
+        )
 
     run = sub.add_parser("run", help="drive a robot with a policy")
     robot_options(run)
@@ -169,17 +178,20 @@ def _dispatch(args: argparse.Namespace) -> int:
     signal.signal(signal.SIGTERM, _interrupt)  # `kill` stops as cleanly as Ctrl-C
     if args.subcommand != "emulate":
         host, _ = args.http
+        given = "--token"
+        if args.token is None and os.environ.get(TOKEN_ENV):
+            args.token, given = os.environ[TOKEN_ENV], TOKEN_ENV
         if host not in LOOPBACK_HOSTS and not args.token:
             raise UsageError(
-                f"--http {_host(host)}: not loopback; give --token so that only you can drive "
-                "the robot"
+                f"--http {_host(host)}: not loopback; give --token (or set {TOKEN_ENV}) so that "
+                "only you can drive the robot"
             )
         if args.token is not None:
             try:  # bytes that are not UTF-8 arrive as lone surrogates: no page could send them
                 args.token.encode("utf-8")
             except UnicodeEncodeError:
                 raise UsageError(
-                    f"--token {args.token!r} is out of range: must be text (its bytes are not "
+                    f"{given} {args.token!r} is out of range: must be text (its bytes are not "
                     "UTF-8)"
                 ) from None
     if args.subcommand == "emulate":
@@ -227,6 +239,21 @@ def _check_listen(url: str) -> None:
         raise UsageError(f"--listen {exc}") from None  # the message starts with the URL
     if port == 65535:  # the camera listens on PORT + 1
         raise UsageError(f"--listen {url!r}: port 65535 leaves no PORT + 1 for the camera")
+
+
+def _raise_file_limit() -> None:
+    """Raise this process's soft limit of open files to its hard one: a robot session holds
+    the serial port, the camera, its log and the monitor's connections, and the common soft
+    limit (1024) is often far below the hard one. Where it cannot, it stays as it was."""
+    try:
+        import resource
+    except ImportError:  # not a POSIX system: no such limit to raise
+        return
+    soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
+    target = hard if hard != resource.RLIM_INFINITY else max(soft, 1 << 16)
+    if soft != resource.RLIM_INFINITY and soft < target:
+        with contextlib.suppress(ValueError, OSError):  # (macOS caps it below its hard limit)
+            resource.setrlimit(resource.RLIMIT_NOFILE, (target, hard))
 
 
 def _emulate(args: argparse.Namespace) -> int:
@@ -337,6 +364,7 @@ def _monitor_sim(args: argparse.Namespace) -> int:
             f"({is_} for run and monitor --port)"
         )
     start = args.policy or "stop"
+    _raise_file_limit()
     # checked before the simulator is imported, the agents load and the server starts
     config = _env_config(args, args.scenario, check=True)
     from bridge.monitor.hub import MonitorHub
@@ -380,6 +408,7 @@ def _run(args: argparse.Namespace, monitor: bool) -> int:
     from bridge.runlog import check_log_path
     from bridge.runner import PolicyError, Runner, RunnerConfig
 
+    _raise_file_limit()  # before the serial port, the camera and the monitor open any
     if args.framing == "reference" and args.command == "speed":
         # the reference firmware reads the wire's two values as percent duty (reference §1)
         raise UsageError(

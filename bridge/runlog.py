@@ -1,10 +1,18 @@
 """The runner's step log on disk: where it may go (checked before a session starts) and how it
 is written (a temporary file renamed into place, or, if that fails at the end, a copy saved
 elsewhere, so that a session's data is never lost to a bad path).
+
+With the monitor, what drives may change mid-session (a mode chosen in the browser, manual,
+stop), and no step is credited to a policy that did not drive it (:func:`label_rows`): the
+``policy`` column, which ``follow-eval metrics`` reads as the session's label (from the first
+row), names the one policy only when it drove every step, else ``mixed:`` and every name that
+drove, in the order they first did (``mixed:gsmpn:tuned,manual,stop``); the robot's own
+``driver`` column (:data:`DRIVER_COLUMN`) says which of those names drove each step.
 """
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import errno
 import os
@@ -17,10 +25,24 @@ from typing import Any
 from follow_env.sim.atomic import atomic_path, longest_name, try_new_file
 from follow_env.tasks.person_follow.steplog import log_columns
 
-__all__ = ["LOG_COLUMNS", "check_log_path", "save_rows", "write_rows"]
+__all__ = [
+    "DRIVER_COLUMN",
+    "LOG_COLUMNS",
+    "check_log_path",
+    "label_rows",
+    "save_rows",
+    "spare_folder",
+    "write_rows",
+]
 
-LOG_COLUMNS = log_columns(ahead=True)
-"""The robot's step log: the simulator's columns and the reading ahead's place, in order."""
+DRIVER_COLUMN = "driver"
+"""Which name of the ``policy`` column drove the step: 0 for its first (the only one when one
+policy drove the whole session), 1 for the next, ... A number, so that every reader of step
+logs (``follow-eval metrics``) reads it as any other column it does not score."""
+_SIM_COLUMNS = log_columns(ahead=True)
+LOG_COLUMNS = (*_SIM_COLUMNS[:3], DRIVER_COLUMN, *_SIM_COLUMNS[3:])
+"""The robot's step log: the simulator's columns (the reading ahead's place too) and
+:data:`DRIVER_COLUMN` after the policy, scenario and seed, in order."""
 
 
 def check_log_path(path: str | Path) -> Path:
@@ -81,13 +103,46 @@ def write_rows(rows: list[dict[str, Any]], path: Path, errors: str = "strict") -
     return path
 
 
-def save_rows(rows: list[dict[str, Any]], path: Path) -> tuple[Path | None, str]:
+def label_rows(rows: list[dict[str, Any]], drivers: list[str], named: bool = True) -> None:
+    """Set every row's ``policy`` to the label of what drove the session (module docstring).
+
+    :param rows: the rows, each with its :data:`DRIVER_COLUMN`: an index into ``drivers``.
+    :param drivers: the names of what drove (a policy, a mode, ``manual``, ``stop``), in the
+        order each first drove.
+    :param named: the rows already name the policy (the label then replaces it); if not, a
+        session one policy drove gets no label, as before.
+    """
+    if len(drivers) > 1:
+        label = "mixed:" + ",".join(drivers)
+    elif drivers and named:
+        label = drivers[0]
+    else:
+        return
+    for row in rows:
+        row["policy"] = label
+
+
+def spare_folder() -> Path | None:
+    """The folder :func:`save_rows` saves a log it could not write where asked: the system's
+    temporary folder, found now (finding it creates a file, which a process out of file
+    descriptors cannot: decide it before the session); ``None`` if there is none usable."""
+    try:
+        return Path(tempfile.gettempdir())
+    except Exception:  # any: no folder, said by save_rows, is no reason to stop a session
+        return None
+
+
+def save_rows(
+    rows: list[dict[str, Any]], path: Path, spare: Path | None = None
+) -> tuple[Path | None, str]:
     """Write the rows to ``path``; if that fails, whatever the reason (the folder went away
     during the session, the disk filled up, a value is not UTF-8 text), to a file of its own in
-    the system's temporary folder instead, where text that is not UTF-8 is written as
-    backslash escapes (``\\udcff``) rather than lose the rows. Never raises: it runs at the end
-    of a session, whose summary must still be said.
+    the ``spare`` folder instead, where text that is not UTF-8 is written as backslash escapes
+    (``\\udcff``) rather than lose the rows. Never raises: it runs at the end of a session,
+    whose summary must still be said.
 
+    :param spare: the spare file's folder, decided before the session (:func:`spare_folder`);
+        ``None``: found now, which fails in a process out of file descriptors.
     :returns: ``(where the log is, "")``, or ``(the fallback file, why path failed)``, or
         ``(None, why both failed)``: the reason is one line naming ``--log`` and the path.
     """
@@ -95,18 +150,23 @@ def save_rows(rows: list[dict[str, Any]], path: Path) -> tuple[Path | None, str]
         return write_rows(rows, path), ""
     except Exception as exc:  # any: the rows go to the spare file whatever stopped them here
         why = f"--log {path}: the step log could not be written ({_why(exc)})"
+    folder = spare if spare is not None else spare_folder()
+    if folder is None:
+        return None, f"{why}, nor could a temporary folder be found to save it in: lost"
     stamp = time.strftime("%Y%m%d-%H%M%S")
-    spare: Path | None = None
+    saved: Path | None = None
     try:
-        fd, name = tempfile.mkstemp(prefix=f"follow-robot-{stamp}-", suffix=".csv")
+        fd, name = tempfile.mkstemp(prefix=f"follow-robot-{stamp}-", suffix=".csv", dir=folder)
         os.close(fd)  # a name of our own; write_rows renames its own temporary file onto it
-        spare = Path(name)
-        saved = write_rows(rows, spare, errors="backslashreplace")
-        return saved, f"{why}; saved to {spare} instead"
+        saved = Path(name)
+        return write_rows(
+            rows, saved, errors="backslashreplace"
+        ), f"{why}; saved to {saved} instead"
     except Exception as exc:  # any: said in the one line, not a traceback that hides the summary
-        if spare is not None:
-            spare.unlink(missing_ok=True)  # no empty file left for a log that is not there
-        return None, f"{why}, nor in {tempfile.gettempdir()} ({_why(exc)}): lost"
+        if saved is not None:
+            with contextlib.suppress(OSError):  # no empty file left for a log that is not there
+                saved.unlink(missing_ok=True)
+        return None, f"{why}, nor in {folder} ({_why(exc)}): lost"
 
 
 def _why(exc: Exception) -> str:

@@ -18,10 +18,10 @@ On Ctrl-C, at the end of the perception (the world's episode, the replay), after
 ``duration_s``, on a link, perception or policy error (whatever the perception's read or the
 policy's ``act`` raised), or when the wheel loop fails, the wheels are commanded to zero before
 the link closes; a second Ctrl-C during that shutdown is deferred
-(:class:`bridge.interrupts.InterruptGuard`). The step log (the evaluation's layout,
-:mod:`follow_env.tasks.person_follow.steplog`) is written to a temporary file and renamed into
-place, so ``follow-eval metrics`` scores a real run like a simulated one.
-"""
+(:class:`bridge.interrupts.InterruptGuard`). The step log (:mod:`bridge.runlog`: the
+evaluation's layout) is written to a temporary file and renamed into place, so ``follow-eval
+metrics`` scores a real run like a simulated one, crediting no step to a policy that did not
+drive it."""
 
 from __future__ import annotations
 
@@ -34,6 +34,7 @@ from typing import Any
 
 import numpy as np
 
+from bridge import runlog
 from bridge.fit import check_ahead, check_command, check_platform
 from bridge.interrupts import InterruptGuard
 from bridge.link import LinkError, SerialLink
@@ -92,7 +93,8 @@ class Runner:
         to is refused here (:func:`bridge.runlog.check_log_path`, ``ValueError``). Should the
         writing still fail at the end, the log goes to a spare file and ``RunResult.log_error``
         says where.
-    :param meta: the step log's ``policy``, ``scenario`` and ``seed`` values.
+    :param meta: the step log's ``policy`` (``policy``'s name, as typed), ``scenario`` and
+        ``seed`` values; the ``policy`` column is the label of what drove (module docstring).
     :param monitor: a :class:`bridge.monitor.hub.MonitorHub` to publish to and take modes from;
         its starting mode, unless ``stop`` or ``manual``, is taken to name ``policy``.
     :param policy_factory: builds the policy of a mode the monitor selects (``pn``, ...), in
@@ -129,6 +131,9 @@ class Runner:
         self._rows: list[dict[str, Any]] = []
         self._policies: dict[str, Any] = {}
         self._mode = getattr(policy, "name", "policy")
+        self._drivers: dict[str, int] = {}  # what drove steps, numbered as each first did
+        self._driver: int | None = None  # which of them drove the newest step
+        self._waiting: str | None = None  # the mode chosen, whose policy is being built
         # a mode chosen in the browser is built beside the control loop (bridge/loader.py)
         self._loader = (
             PolicyLoader(policy_factory, self._runnable) if policy_factory is not None else None
@@ -140,6 +145,7 @@ class Runner:
             self._policies[self._mode] = policy
         if self.log is not None:  # refused now, not after the session it would have kept
             self.log = check_log_path(self.log)
+        self._spare = runlog.spare_folder() if self.log else None  # now: fds may run out
 
     # ---- command mode -------------------------------------------------------------------
 
@@ -370,12 +376,8 @@ class Runner:
             except KeyboardInterrupt:
                 result.reason = "interrupted (Ctrl-C)"
             except (LinkError, PerceptionError, PolicyError) as exc:
-                if isinstance(exc, LinkError):
-                    kind = "link"
-                elif isinstance(exc, PolicyError):
-                    kind = "policy"
-                else:
-                    kind = "perception"
+                kinds = ((LinkError, "link"), (PolicyError, "policy"), (Exception, "perception"))
+                kind = next(k for t, k in kinds if isinstance(exc, t))
                 result.reason = f"{kind} error: {exc}"
                 exc.result = result  # type: ignore[attr-defined]  # filled in below
                 raise
@@ -407,7 +409,8 @@ class Runner:
         result.feedback_frames = self._wheels.frames
         result.wheel_lateness_ms = self._wheels.lateness_ms
         if self.log is not None:
-            result.log, result.log_error = save_rows(self._rows, self.log)
+            runlog.label_rows(self._rows, list(self._drivers), "policy" in self.meta)
+            result.log, result.log_error = save_rows(self._rows, self.log, self._spare)
 
     def _read(self) -> Frame:
         """The perception's next frame; whatever its read raises ends the session as a
@@ -424,6 +427,7 @@ class Runner:
 
     def _act(self, frame: Frame) -> tuple[float, float]:
         policy = self._current_policy()
+        self._drove(policy)
         if policy == "stop":
             v, w = 0.0, 0.0
         elif policy == "manual":
@@ -450,7 +454,15 @@ class Runner:
             self._wheels.target = [w_r * r, w_l * r]
         return v, w
 
+    def _drove(self, policy: Any) -> None:
+        """Note what drives this step: ``stop``, ``manual``, a mode's or the starting policy."""
+        if policy is self.policy:
+            policy = str(self.meta.get("policy") or getattr(policy, "name", "policy"))
+        name = policy if isinstance(policy, str) else self._mode
+        self._driver = self._drivers.setdefault(name, len(self._drivers))
+
     def _current_policy(self) -> Any:
+        self._waiting = None
         if self.monitor is None:
             return self.policy
         mode = self.monitor.mode
@@ -469,6 +481,7 @@ class Runner:
                         self.monitor.refuse(mode, self._mode, str(exc))
                         return self._running()
                     if built is None:  # still being built: keep doing what it did meanwhile
+                        self._waiting = mode
                         return self._running()
                     self._policies[mode] = built
             self._policies[mode].reset()
@@ -497,6 +510,7 @@ class Runner:
         speed = 0.5 * (measured[0] + measured[1])
         row: dict[str, Any] = {
             **self.meta,
+            runlog.DRIVER_COLUMN: self._driver,  # the final row (no action): the last step's
             "step": step,
             "time_s": round(t, 9),
             "obs_distance_m": frame.distance_m,
@@ -524,7 +538,8 @@ class Runner:
                 {
                     "time_s": t,
                     "mode": self._mode,
-                    "loading": [] if self._loader is None else self._loader.pending,
+                    # the mode it waits for, not one given up (STOP before it was built)
+                    "loading": [] if self._waiting is None else [self._waiting],
                     "obs": frame.observation(),
                     "detected": frame.detected,
                     "command": [v, w],

@@ -3,12 +3,14 @@ is wrong, exit status 2, before any long work starts, and leaves no file behind.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
 import socket
 import stat
 import sys
 import tempfile
+import time
 from pathlib import Path
 from typing import Any
 
@@ -653,3 +655,129 @@ def test_a_log_path_that_is_not_utf8_is_printed_as_typed_under_a_strict_stdout(
     assert b"Traceback" not in done.stderr
     assert os.fsencode(log) in done.stdout  # the bytes as typed
     assert log.is_file()
+
+
+# ---- the monitor's token from the environment, and the session's file limit ----------------
+
+
+def test_the_token_may_come_from_the_environment_where_ps_does_not_show_it(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    env = "PERSONFOLLOW_MONITOR_TOKEN"  # bridge.cli.TOKEN_ENV
+    seen: list[str | None] = []
+    monkeypatch.setattr("bridge.cli._run", lambda args, monitor: seen.append(args.token) or 0)
+    off_loopback = ["run", "--port", "loop://", "--policy", "pn", "--http", "0.0.0.0:0"]
+    monkeypatch.setenv(env, "s3cret")
+    assert main(off_loopback) == 0
+    assert main([*off_loopback, "--token", "given"]) == 0  # the option, when given, wins
+    assert seen == ["s3cret", "given"]
+    monkeypatch.delenv(env)
+    assert main(off_loopback) == 2
+    _one_line(capsys, "not loopback; give --token (or set PERSONFOLLOW_MONITOR_TOKEN)")
+    monkeypatch.setenv(env, "\udcff")  # bytes that are not UTF-8
+    assert main(off_loopback) == 2
+    _one_line(capsys, "PERSONFOLLOW_MONITOR_TOKEN '\\udcff' is out of range: must be text")
+    with pytest.raises(SystemExit):
+        main(["run", "--help"])
+    assert "$PERSONFOLLOW_MONITOR_TOKEN" in capsys.readouterr().out
+
+
+def _replay_of(tmp_path: Path, seconds: float) -> Path:
+    """A replay of ``seconds`` of a person standing 1 m ahead."""
+    rows = [f"{k / 10:.1f},1.0,{k % 7},1" for k in range(round(seconds * 10))]
+    replay = tmp_path / "long.csv"
+    replay.write_text("time_s,obs_distance_m,obs_offset_px,detected\n" + "\n".join(rows) + "\n")
+    return replay
+
+
+def _limit_files(soft: int, hard: int | None = None) -> Any:
+    """A ``preexec_fn`` setting the child's limit of open files (``hard``: as it is)."""
+
+    def limit() -> None:
+        import resource
+
+        _, old_hard = resource.getrlimit(resource.RLIMIT_NOFILE)
+        resource.setrlimit(resource.RLIMIT_NOFILE, (soft, old_hard if hard is None else hard))
+
+    return limit
+
+
+def _soft_files_limit(pid: int) -> int | None:
+    with contextlib.suppress(OSError):
+        for line in Path(f"/proc/{pid}/limits").read_text().splitlines():
+            if line.startswith("Max open files"):
+                return int(line.split()[3])
+    return None
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="/proc/PID/limits is Linux's")
+def test_a_robot_session_raises_its_file_limit_to_the_hard_one(tmp_path: Path) -> None:
+    import resource
+    import subprocess
+
+    _, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
+    if hard == resource.RLIM_INFINITY or hard <= 256:
+        pytest.skip(f"the hard limit of open files is {hard}: nothing to raise it to")
+    argv = [*RUN[:-1], "4", "--perception", f"replay:{_replay_of(tmp_path, 10)}"]
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "bridge", *argv],
+        cwd=Path(__file__).resolve().parents[2],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        preexec_fn=_limit_files(256),
+    )
+    seen = set()
+    try:
+        while proc.poll() is None:
+            if (soft := _soft_files_limit(proc.pid)) is not None:
+                seen.add(soft)
+            time.sleep(0.02)
+    finally:
+        _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 0, err.decode()
+    assert hard in seen, seen  # raised for the session (the serial port, log and monitor)
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(sys.platform == "win32", reason="POSIX file-descriptor limits")
+def test_idle_connections_to_the_monitor_do_not_lose_the_step_log(tmp_path: Path) -> None:
+    # The reviewer's: a client holds hundreds of idle TCP connections to the monitor (no
+    # request, no token) as the session ends. Its limit of open files cannot be raised here:
+    # the monitor holds at most MAX_CONNECTIONS of them and accepts a few at a time, so the
+    # session keeps the descriptors for its log.
+    import subprocess
+
+    from eval.steplog import read_step_log
+
+    log = tmp_path / "run.csv"
+    replay = _replay_of(tmp_path, 20)
+    argv = [*RUN[:-1], "5", "--perception", f"replay:{replay}", "--log", str(log)]
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "bridge", *argv, "--monitor", "--http", "127.0.0.1:0"],
+        cwd=Path(__file__).resolve().parents[2],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        preexec_fn=_limit_files(160, 160),
+    )
+    held: list[socket.socket] = []
+    try:
+        assert proc.stdout is not None
+        proc.stdout.readline()  # the modes offered
+        served = proc.stdout.readline()
+        port = int(served.rsplit(":", 1)[1].strip(" /\n"))
+        while proc.poll() is None and len(held) < 400:
+            with contextlib.suppress(OSError):
+                held.append(socket.create_connection(("127.0.0.1", port), timeout=2))
+        out, err = proc.communicate(timeout=60)  # the connections held to the end
+    finally:
+        for sock in held:
+            sock.close()
+        if proc.poll() is None:
+            proc.kill()
+    assert len(held) > 64  # more than the monitor holds (the old one took all, and ran out)
+    assert proc.returncode == 0, err
+    assert "Traceback" not in err
+    assert f"log: {log}" in out
+    assert len(read_step_log(log)) >= 40
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["long.csv", "run.csv"]

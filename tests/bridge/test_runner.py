@@ -317,6 +317,115 @@ def test_a_mode_is_built_beside_the_control_loop_which_runs_the_old_one_meanwhil
     np.testing.assert_allclose(got, expected, rtol=1e-6)
 
 
+class _Recording:
+    """A monitor hub that keeps every state published, and a browser that chooses modes at
+    given times of the session (seconds after its first state)."""
+
+    def __init__(self, start: str, choices: list[tuple[float, str]], modes: Any = None) -> None:
+        from bridge.monitor.hub import MonitorHub, monitor_modes
+
+        states: list[dict[str, Any]] = []
+
+        class Hub(MonitorHub):
+            def publish(self, state: dict[str, Any]) -> None:
+                states.append(state)
+                super().publish(state)
+
+        self.hub = Hub(start, modes=modes or monitor_modes())
+        self.states = states
+        self._choices = choices
+        threading.Thread(target=self._browse, daemon=True).start()
+
+    def _browse(self) -> None:
+        while not self.states:
+            time.sleep(0.005)
+        begun = time.monotonic()
+        for at, mode in self._choices:
+            time.sleep(max(0.0, begun + at - time.monotonic()))
+            self.hub.set_mode(mode)
+            if mode == "manual":
+                self.hub.set_manual(0.2, 0.1)
+
+
+def test_a_mode_given_up_before_it_was_built_is_not_shown_loading(tmp_path: Path) -> None:
+    # mpn takes 1 s to build; STOP is pressed before it is ready. The build finishes unused,
+    # and from STOP on the page is told nothing is loading.
+    def slow(mode: str) -> Any:
+        time.sleep(1.0)
+        return make_policy(mode)
+
+    browser = _Recording("pn", [(0.3, "mpn"), (0.6, "stop")])
+    with SerialLink("loop://", "reference") as link:
+        runner = Runner(
+            link,
+            make_policy("pn"),
+            Replay(_curve(tmp_path)),
+            config=RunnerConfig(duration_s=2.5),
+            monitor=browser.hub,
+            policy_factory=slow,
+        )
+        runner.run()
+    stopped = [s for s in browser.states if s["mode"] == "stop"]
+    assert any(s["loading"] == ["mpn"] for s in browser.states if s["mode"] == "pn")
+    assert len(stopped) >= 10  # well past the moment mpn was built (1.3 s)
+    assert [s["loading"] for s in stopped] == [[]] * len(stopped)
+
+
+def test_a_step_the_monitor_drove_is_not_credited_to_the_starting_policy(tmp_path: Path) -> None:
+    # run --policy gsmpn:tuned --monitor: the browser chooses manual, then mpn. follow-eval
+    # metrics reads the policy column as the session's label: it names every driver.
+    from bridge.monitor.hub import monitor_modes
+    from eval.scoring import read_episodes
+
+    browser = _Recording(
+        "gsmpn:tuned", [(0.5, "manual"), (1.0, "mpn")], modes=monitor_modes(["gsmpn:tuned"])
+    )
+    log = tmp_path / "run.csv"
+    meta = {"policy": "gsmpn:tuned", "scenario": "robot:replay", "seed": None}
+    with SerialLink("loop://", "reference") as link:
+        runner = Runner(
+            link,
+            make_policy("gsmpn:tuned"),
+            Replay(_curve(tmp_path)),
+            config=RunnerConfig(duration_s=2.0),
+            log=log,
+            meta=meta,
+            monitor=browser.hub,
+            policy_factory=make_policy,
+        )
+        runner.run()
+    rows = read_step_log(log)
+    names = ["gsmpn:tuned", "manual", "mpn"]
+    assert set(rows["policy"]) == {"mixed:gsmpn:tuned,manual,mpn"}
+    acted = [s for s in browser.states if s["command"][0] is not None]
+    drove = [names[int(k)] for k in rows["driver"][: len(acted)]]
+    assert drove == [s["mode"] for s in acted]  # each step, by what drove it
+    assert drove[0] == "gsmpn:tuned"
+    assert {"manual", "mpn"} <= set(drove)
+    assert rows["driver"].iloc[-1] == rows["driver"].iloc[-2]  # the final row: the last step's
+    (episode,) = read_episodes([log], task="person_follow")
+    assert episode.policy == "mixed:gsmpn:tuned,manual,mpn"  # not scored as gsmpn:tuned
+
+
+def test_a_session_one_policy_drove_is_credited_to_it(tmp_path: Path) -> None:
+    log = tmp_path / "run.csv"
+    meta = {"policy": "pn", "scenario": "robot:replay", "seed": None}
+    browser = _Recording("pn", [])
+    with SerialLink("loop://", "reference") as link:
+        Runner(
+            link,
+            make_policy("pn"),
+            Replay(_curve(tmp_path)),
+            config=RunnerConfig(duration_s=1.0),
+            log=log,
+            meta=meta,
+            monitor=browser.hub,
+        ).run()
+    rows = read_step_log(log)
+    assert set(rows["policy"]) == {"pn"}
+    assert set(rows["driver"]) == {0.0}
+
+
 @pytest.mark.slow
 def test_the_robots_monitor_refuses_an_agent_its_camera_cannot_feed(
     emulator_process: Start,
