@@ -53,8 +53,9 @@ class PolicyLoader:
 
     @property
     def pending(self) -> list[str]:
-        """The modes being built, in the order they were asked for."""
-        return list(self._pending)
+        """The modes being built, in the order they were asked for (not those built and not
+        yet claimed: a mode given up before it was built is no longer being built)."""
+        return [mode for mode, future in self._pending.items() if not future.done()]
 
     def close(self) -> None:
         """Forget the modes not started yet; those being built finish in their threads, unused."""

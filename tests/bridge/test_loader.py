@@ -41,6 +41,26 @@ def test_a_policy_is_none_while_it_is_built_then_handed_over_once() -> None:
     loader.close()
 
 
+def test_a_mode_built_and_not_claimed_is_no_longer_pending() -> None:
+    # the robot's monitor shows the pending modes: one given up (STOP) showed "loading" for ever
+    gate = threading.Event()
+
+    def factory(mode: str) -> str:
+        gate.wait(10.0)
+        return f"policy {mode}"
+
+    loader = PolicyLoader(factory, lambda p: p)
+    assert loader.get("mpn") is None
+    assert loader.pending == ["mpn"]
+    gate.set()
+    deadline = time.monotonic() + 10.0
+    while loader.pending and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert loader.pending == []
+    assert loader.get("mpn") == "policy mpn"  # still handed over when asked for
+    loader.close()
+
+
 def test_a_policy_the_check_refuses_raises_once_when_built() -> None:
     def check(policy: str) -> str:
         raise ValueError(f"{policy} needs what this robot lacks")
