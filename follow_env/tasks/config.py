@@ -99,14 +99,20 @@ def named_platform(
     sections applied on top."""
     if not names_platform(key, value):
         return None
+    name, rest = _name_and_sections(value)
+    kind = get_platform(name).config
+    base = current if type(current) is kind else kind()
+    return type(base).from_overrides(base, rest) if rest else base
+
+
+def _name_and_sections(value: Any) -> tuple[str, dict[str, Any]]:
+    """A platform override's name (checked to be text) and its section overrides."""
     name, rest = value, {}
     if isinstance(value, Mapping):
         name, rest = value["name"], {k: v for k, v in value.items() if k != "name"}
     if not isinstance(name, str):
         raise ValueError(f"platform name {name!r} is out of range: must be a string")
-    kind = get_platform(name).config
-    base = current if type(current) is kind else kind()
-    return type(base).from_overrides(base, rest) if rest else base
+    return name, rest
 
 
 def resolve_config(
@@ -132,7 +138,7 @@ def resolve_config(
         ``{"scenario.name": "curve"}``); ``None`` values are left out.
     :param overrides: sections (``sensor={...}``) or ``section__field=value`` pairs.
     """
-    _platform(platform)  # refused before anything else when it names no platform
+    _check_platform(platform)  # refused before anything else when it names no platform
     if config is None:
         cfg = default
     elif isinstance(config, cls):
@@ -176,19 +182,20 @@ def section_or_name(section: str, value: Any) -> dict[str, Any]:
     return {section: value}
 
 
-def _platform(platform: str | PlatformConfig | Mapping[str, Any] | None) -> PlatformConfig | None:
-    """``gym.make``'s ``platform=``: a name, a config object, or a mapping with a ``name``."""
+def _check_platform(platform: str | PlatformConfig | Mapping[str, Any] | None) -> None:
+    """Refuse a ``gym.make`` ``platform=`` that is not a name, a config object or a mapping
+    with a ``name``, or that names no registered platform (the config is built later, where it
+    is put in: on the configuration's own platform when it names that one)."""
     if platform is None or isinstance(platform, PlatformConfig):
-        return platform
-    chosen = named_platform("platform", platform)
-    if chosen is None:
+        return
+    if not names_platform("platform", platform):
         raise out_of_range(
             "platform",
             platform,
             "a platform's name, a platform config, or a mapping with its 'name' and section "
             "overrides",
         )
-    return chosen
+    get_platform(_name_and_sections(platform)[0])
 
 
 def _a(noun: str) -> str:
