@@ -17,14 +17,13 @@ allows it); the link is not meant to be shared otherwise.
 
 from __future__ import annotations
 
+import math
 import socket
 import time
 from collections import deque
 from typing import Any
 
 import serial
-
-from follow_env.sim.checks import check_number
 
 from .protocol import (
     Codec,
@@ -111,8 +110,10 @@ class SerialLink:
         codec: Codec | None = None,
         **codec_options: object,
     ) -> None:
-        check_number("idle_flush_s", idle_flush_s, 0.0, lo_open=True, unit="s", optional=True)
-        check_number("write_timeout_s", write_timeout_s, 0.0, lo_open=True, unit="s")
+        if idle_flush_s is not None and not _positive(idle_flush_s):
+            raise ValueError(f"idle_flush_s={idle_flush_s} must be a finite number > 0 s or None")
+        if not _positive(write_timeout_s):
+            raise ValueError(f"write_timeout_s={write_timeout_s} must be a finite number > 0 s")
         self.url = url
         self.codec: Codec = (
             codec if codec is not None else make_codec(framing, role, **codec_options)
@@ -186,8 +187,7 @@ class SerialLink:
             stay queued for the next).
         :raises LinkError: the port failed or the peer closed the connection.
         """
-        # NaN would pass a `< 0` test and then never reach the deadline: a read spinning for ever
-        check_number("timeout_s", timeout_s, 0.0, unit="s")
+        _check_timeout(timeout_s)
         if not self._inbox:
             self._inbox.extend(self._read(timeout_s))
         out: list[Message] = []
@@ -212,7 +212,7 @@ class SerialLink:
         """
         if isinstance(self.codec, ReferenceCodec):
             raise LinkError(f"{self.url}: the reference framing has no hello (reference §1)")
-        check_number("timeout_s", timeout_s, 0.0, unit="s")
+        _check_timeout(timeout_s)
         self.send(hello)
         deadline = time.monotonic() + timeout_s
         others: list[Message] = []
@@ -270,6 +270,16 @@ class SerialLink:
             return bytes(first) + bytes(port.read(_READ_CHUNK))
         except _PORT_ERRORS as exc:
             raise LinkError(f"{self.url}: read failed: {exc}") from exc
+
+
+def _positive(value: float) -> bool:
+    return isinstance(value, (int, float)) and math.isfinite(value) and value > 0
+
+
+def _check_timeout(timeout_s: float) -> None:
+    # NaN passes a `< 0` test and then never reaches the deadline: a read that spins for ever
+    if not (isinstance(timeout_s, (int, float)) and math.isfinite(timeout_s) and timeout_s >= 0):
+        raise ValueError(f"timeout_s={timeout_s} must be a finite number >= 0 s")
 
 
 def _no_nagle(port: Any) -> None:

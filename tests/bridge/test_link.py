@@ -272,14 +272,13 @@ def test_a_port_that_disappears_while_its_bytes_drain_is_a_link_error(
 def test_timeouts_that_are_not_finite_are_refused_naming_them(value: float) -> None:
     # a NaN timeout used to spin a read for ever, an infinite one to raise OverflowError
     with SerialLink("loop://", "robust") as link:
-        refused = rf"^timeout_s={value} is out of range: must be >= 0 s$"
-        with pytest.raises(ValueError, match=refused):
+        with pytest.raises(ValueError, match=rf"timeout_s={value} must be a finite number >= 0 s"):
             link.receive(timeout_s=value)
-        with pytest.raises(ValueError, match=refused):
+        with pytest.raises(ValueError, match=rf"timeout_s={value} must be a finite number"):
             link.handshake(Hello(PeerRole.PC), timeout_s=value)
         assert link.stats.frames_sent == 0  # the hello was not sent
-    for field, rule in (("idle_flush_s", "None or > 0 s"), ("write_timeout_s", "> 0 s")):
-        with pytest.raises(ValueError, match=rf"^{field}={value} is out of range: must be {rule}$"):
+    for field in ("idle_flush_s", "write_timeout_s"):
+        with pytest.raises(ValueError, match=rf"{field}={value} must be a finite number > 0 s"):
             SerialLink("loop://", "robust", **{field: value})
 
 
