@@ -45,19 +45,26 @@ _REGISTRY: dict[str, Metric] = {}
 FAILURE_ENDINGS = frozenset({"lost", "left_field"})
 
 
-def line_metric(name: str, unit: str, label: str) -> Callable[[Callable], Callable]:
-    """Register a line-tracing metric function under ``name``."""
+def line_metric(
+    name: str, unit: str, label: str, *, binary: bool = False
+) -> Callable[[Callable], Callable]:
+    """Register a line-tracing metric function under ``name`` (``binary``: each episode's
+    value is 0 or 100, as :class:`~eval.metrics.Metric` says)."""
 
     def register(fn: Callable[[pd.DataFrame], float]) -> Callable[[pd.DataFrame], float]:
         if name in _REGISTRY:
             raise ValueError(f"line metric {name!r} is already registered")
-        _REGISTRY[name] = Metric(name, unit, label, fn)
+        _REGISTRY[name] = Metric(name, unit, label, fn, binary=binary)
         return fn
 
     return register
 
 
-def _ending(log: pd.DataFrame) -> str:
+def _ending(log: pd.DataFrame) -> str | None:
+    """The episode's ending (its last non-blank termination; "" for none), or None when the
+    log has no termination column (a robot's log: the ending is unknown)."""
+    if "termination" not in log:
+        return None
     endings = [str(e) for e in log["termination"] if isinstance(e, str) and e]
     return endings[-1] if endings else ""
 
@@ -112,10 +119,12 @@ def line_lost_count(log: pd.DataFrame) -> float:
     return float(np.count_nonzero(seen[:-1] & ~seen[1:]))
 
 
-@line_metric("failed_pct", "%", "failed (%)")
+@line_metric("failed_pct", "%", "failed (%)", binary=True)
 def failed_pct(log: pd.DataFrame) -> float:
-    """100 if the episode ended with the line lost or the field left, else 0."""
-    return 100.0 * (_ending(log) in FAILURE_ENDINGS)
+    """100 if the episode ended with the line lost or the field left, else 0; NaN when the log
+    has no termination column."""
+    ending = _ending(log)
+    return float("nan") if ending is None else 100.0 * (ending in FAILURE_ENDINGS)
 
 
 @line_metric("mean_speed_mps", "m/s", "speed along the line (m/s)")

@@ -31,9 +31,11 @@ reference, reference §1.5; true distance when logged, else the published one wh
 so their mean over episodes is a rate), ``target_swap_rate_pct``, the social-navigation
 benchmarks' ``success_pct`` (neither collided nor lost; 100 or 0 per episode) and
 ``following_rate_pct`` (steps within 0.5-1.5 m of the person and facing them), and
-``path_length_ratio``.
+``path_length_ratio``. The three rates of episodes (lost, collision, success) are registered
+``binary=True``: their intervals are Wilson score intervals (:func:`eval.stats.summarize`).
 
-A metric whose columns a log lacks is NaN for that log. Adding a metric is one decorated
+A metric whose columns a log lacks is NaN for that log: the three endings (lost, collision,
+success) without a ``termination`` column, as in a robot's log. Adding a metric is one decorated
 function here::
 
     @metric("max_offset_px", "px", "max |offset| (px)")
@@ -81,6 +83,10 @@ class Metric:
     :param label: short human label for plots and tables.
     :param fn: the function over a step log.
     :param thesis: one of the thesis's five metrics (reference §1.6).
+    :param binary: every episode's value is 0 or 100 (or NaN), so the mean over episodes is a
+        rate in %: its interval is then the Wilson score interval of the proportion
+        (:func:`eval.stats.summarize`), not a bootstrap's, which collapses to [0, 0] when no
+        episode had the event.
     """
 
     name: str
@@ -88,15 +94,17 @@ class Metric:
     label: str
     fn: MetricFn
     thesis: bool = False
+    binary: bool = False
 
 
 _REGISTRY: dict[str, Metric] = {}
 
 
 def metric(
-    name: str, unit: str, label: str, *, thesis: bool = False
+    name: str, unit: str, label: str, *, thesis: bool = False, binary: bool = False
 ) -> Callable[[MetricFn], MetricFn]:
-    """Register a metric function under ``name`` (module docstring has an example).
+    """Register a metric function under ``name`` (module docstring has an example); ``thesis``
+    and ``binary`` as :class:`Metric`'s.
 
     :raises ValueError: if the name is taken.
     """
@@ -104,7 +112,7 @@ def metric(
     def register(fn: MetricFn) -> MetricFn:
         if name in _REGISTRY:
             raise ValueError(f"metric {name!r} is already registered")
-        _REGISTRY[name] = Metric(name, unit, label, fn, thesis)
+        _REGISTRY[name] = Metric(name, unit, label, fn, thesis, binary)
         return fn
 
     return register
@@ -265,7 +273,7 @@ def _ending(log: pd.DataFrame) -> str | None:
     return ""
 
 
-@metric("lost_rate_pct", "%", "lost person (%)")
+@metric("lost_rate_pct", "%", "lost person (%)", binary=True)
 def lost_rate_pct(log: pd.DataFrame) -> float:
     """100 if the episode ended because the person was lost (``termination == "lost"``), else 0.
 
@@ -275,7 +283,7 @@ def lost_rate_pct(log: pd.DataFrame) -> float:
     return float("nan") if ending is None else 100.0 * (ending == LOST_ENDING)
 
 
-@metric("collision_rate_pct", "%", "collision (%)")
+@metric("collision_rate_pct", "%", "collision (%)", binary=True)
 def collision_rate_pct(log: pd.DataFrame) -> float:
     """100 if the episode ended in a collision (a wall or obstacle, the person, a bystander),
     else 0.
@@ -303,7 +311,7 @@ def target_swap_rate_pct(log: pd.DataFrame) -> float:
 FOLLOW_BAND_M = (0.5, 1.5)
 
 
-@metric("success_pct", "%", "success (%)")
+@metric("success_pct", "%", "success (%)", binary=True)
 def success_pct(log: pd.DataFrame) -> float:
     """100 if the episode ended with neither a collision nor the person lost, else 0: the
     social-navigation benchmarks' success. Averaged over episodes it is the success rate in %.

@@ -30,7 +30,7 @@ from eval.metrics import (
     metric_label,
 )
 from eval.rollout import Episode
-from eval.stats import variant_column
+from eval.stats import ALPHA, SMALL_CELL, PairedTest, pairing_notes, variant_column
 from follow_env.sim.atomic import atomic_path, atomic_write_text
 
 __all__ = [
@@ -51,6 +51,14 @@ __all__ = [
 
 #: The leading columns of summary.csv, fixed by the evaluation issue (thesis metrics first).
 SUMMARY_LEADING = ("policy", "scenario", "episodes", *THESIS_METRICS)
+#: Marks a significant paired difference in the Markdown comparisons.
+SIGNIFICANT_MARK = "*"
+#: How the Markdown comparisons read, said under them.
+COMPARISON_NOTE = (
+    f"n: seeds both ran. p: two-sided paired sign-flip permutation test of the mean difference "
+    f"(comparisons.csv also has the Wilcoxon p). {SIGNIFICANT_MARK}: significant, the 95 % CI "
+    f"excludes zero and p < {ALPHA:g}."
+)
 
 
 @dataclass(frozen=True)
@@ -84,23 +92,65 @@ def _fmt(value: float, digits: int) -> str:
     return "n/a" if not np.isfinite(value) else f"{value:.{digits}f}"
 
 
-def _with_ci(summary: pd.DataFrame, name: str) -> pd.Series:
-    d = metric_digits(name)
-    return pd.Series(
-        [
-            f"{_fmt(m, d)} [{_fmt(lo, d)}, {_fmt(hi, d)}]" if np.isfinite(lo) else _fmt(m, d)
-            for m, lo, hi in zip(
-                summary[name], summary[f"{name}_ci_low"], summary[f"{name}_ci_high"], strict=True
-            )
-        ],
-        index=summary.index,
+#: Marks an interval from fewer than :data:`eval.stats.SMALL_CELL` values (footnoted).
+SMALL_MARK = "†"
+
+
+def _small_note(what: str) -> str:
+    """The footnote of :data:`SMALL_MARK` in a table of ``what``."""
+    return (
+        f"{SMALL_MARK} n<{SMALL_CELL}: {what} from fewer than {SMALL_CELL} episodes, and rough: "
+        "a bootstrap interval of so few covers less than 95 % (about 80 % at 5)."
     )
+
+
+def _with_ci(summary: pd.DataFrame, name: str) -> pd.Series:
+    """``mean [low, high]`` per row; ``(n=k)`` after it where the metric has a value on fewer
+    episodes than the cell holds (``<name>_n``), and :data:`SMALL_MARK` after an interval of
+    fewer than :data:`eval.stats.SMALL_CELL` values."""
+    d = metric_digits(name)
+    episodes = summary["episodes"].to_numpy()
+    counts = summary[f"{name}_n"].to_numpy() if f"{name}_n" in summary else episodes
+    cells = []
+    for m, lo, hi, n, total in zip(
+        summary[name],
+        summary[f"{name}_ci_low"],
+        summary[f"{name}_ci_high"],
+        counts,
+        episodes,
+        strict=True,
+    ):
+        text = f"{_fmt(m, d)} [{_fmt(lo, d)}, {_fmt(hi, d)}]" if np.isfinite(lo) else _fmt(m, d)
+        if np.isfinite(lo) and n < SMALL_CELL:
+            text += SMALL_MARK
+        if 0 < n < total:
+            text += f" (n={int(n)})"
+        cells.append(text)
+    return pd.Series(cells, index=summary.index)
+
+
+def _metric_table(
+    summary: pd.DataFrame, names: Sequence[str], tables: Tables
+) -> tuple[pd.DataFrame, bool]:
+    """The columns ``policy, scenario, episodes`` and a ``mean [95 % CI]`` column per metric;
+    and whether some interval is marked :data:`SMALL_MARK`."""
+    table = summary[["policy", variant_column(summary), "episodes"]].copy()
+    for name in names:
+        table[metric_label(name, tables.metrics)] = _with_ci(summary, name)
+    marked = any(
+        bool(np.any(np.isfinite(summary[f"{m}_ci_low"]) & (summary[f"{m}_n"] < SMALL_CELL)))
+        for m in names
+        if f"{m}_n" in summary
+    )
+    return table, marked
 
 
 def summary_markdown(
     summary: pd.DataFrame, *, extras: bool = False, tables: Tables = PERSON_FOLLOW_TABLES
 ) -> str:
-    """The summary as a Markdown table: mean [95 % CI] per cell.
+    """The summary as a Markdown table: mean [95 % CI] per cell, ``(n=k)`` where a metric has
+    a value on k of the cell's episodes only, and a footnoted :data:`SMALL_MARK` on intervals
+    of fewer than :data:`eval.stats.SMALL_CELL` values.
 
     :param summary: from :func:`eval.stats.summarize`.
     :param extras: the further metrics instead of the headline ones (the thesis's five, then
@@ -108,11 +158,9 @@ def summary_markdown(
     :param tables: the task's metrics (default PersonFollow's).
     """
     wanted = [m for m in tables.metrics if m not in tables.headline] if extras else tables.headline
-    names = [m for m in wanted if m in summary]
-    table = summary[["policy", variant_column(summary), "episodes"]].copy()
-    for name in names:
-        table[metric_label(name, tables.metrics)] = _with_ci(summary, name)
-    return table.to_markdown(index=False, disable_numparse=True)
+    table, marked = _metric_table(summary, [m for m in wanted if m in summary], tables)
+    text = table.to_markdown(index=False, disable_numparse=True)
+    return text + ("\n\n" + _small_note("the interval is") if marked else "")
 
 
 def comparison_markdown(
@@ -121,7 +169,10 @@ def comparison_markdown(
     *,
     tables: Tables = PERSON_FOLLOW_TABLES,
 ) -> str:
-    """Paired differences A - B on the same seeds: ``diff [95 % CI] (p = Wilcoxon)``; the
+    """Paired differences A - B on the same seeds, a row per scenario and pair: ``n`` (the
+    seeds both ran), then per metric ``diff [95 % CI] p=<sign-flip permutation p>``, with
+    :data:`SIGNIFICANT_MARK` where the difference is significant (:class:`eval.stats.PairedTest`)
+    and ``(n=k)`` where the metric has a value on both sides for k of those seeds only; the
     headline metrics unless ``metrics`` names others."""
     metrics = tables.headline if metrics is None else metrics
     variant = variant_column(comparisons)
@@ -129,22 +180,43 @@ def comparison_markdown(
     for (scenario, a, b), group in comparisons.groupby(
         [variant, "policy_a", "policy_b"], sort=False
     ):
-        row = {variant: scenario, "A - B": f"{a} - {b}"}
         by_metric = group.set_index("metric")
+        paired = int(group["seeds_both"].iloc[0]) if "seeds_both" in group else None
+        row = {variant: scenario, "A - B": f"{a} - {b}", "n": "" if paired is None else paired}
         for name in metrics:
             if name not in by_metric.index:
                 continue
             r = by_metric.loc[name]
             d = metric_digits(name)
-            p = "n/a" if not np.isfinite(r["wilcoxon_p"]) else f"{r['wilcoxon_p']:.2g}"
+            p = r["perm_p"] if "perm_p" in r else r["wilcoxon_p"]
+            test = PairedTest(r["mean_diff"], r["diff_ci_low"], r["diff_ci_high"], p)
             ci = (
                 f" [{_fmt(r['diff_ci_low'], d)}, {_fmt(r['diff_ci_high'], d)}]"
                 if np.isfinite(r["diff_ci_low"])
                 else ""
             )
-            row[metric_label(name, tables.metrics)] = f"{_fmt(r['mean_diff'], d)}{ci} p={p}"
+            mark = SIGNIFICANT_MARK if "perm_p" in r and test.direction else ""
+            fewer = f" (n={int(r['n'])})" if paired is not None and 0 < r["n"] < paired else ""
+            p_text = "n/a" if not np.isfinite(p) else f"{p:.2g}"
+            row[metric_label(name, tables.metrics)] = (
+                f"{_fmt(r['mean_diff'], d)}{ci}{mark} p={p_text}{fewer}"
+            )
         rows.append(row)
     return pd.DataFrame(rows).to_markdown(index=False, disable_numparse=True) if rows else ""
+
+
+def _ci_note(tables: Tables) -> str:
+    """What the summary's intervals are, said under its tables."""
+    rates = [m.label for m in tables.metrics.values() if m.binary]
+    wilson = (
+        f"; for the rates of episodes ({', '.join(rates)}) the Wilson score interval"
+        if rates
+        else ""
+    )
+    return (
+        f"Intervals: BCa bootstrap of the mean{wilson}. (n=k): the metric has a value on k of "
+        "the episodes."
+    )
 
 
 def markdown_report(
@@ -153,27 +225,35 @@ def markdown_report(
     *,
     tables: Tables = PERSON_FOLLOW_TABLES,
 ) -> str:
-    """The headline table, the further metrics and (if given) the paired comparisons."""
+    """The headline table, the further metrics and (if given) the paired comparisons, with a
+    note for each pair of policies that ran different seeds (:func:`eval.stats.pairing_notes`).
+    """
     parts = [
-        f"## {tables.title}: mean [95 % bootstrap CI] over episodes\n",
+        f"## {tables.title}: mean [95 % CI] over episodes\n",
         summary_markdown(summary, tables=tables),
     ]
     if any(m in summary and m not in tables.headline for m in tables.metrics):
         parts += ["\n\n## Further metrics\n", summary_markdown(summary, extras=True, tables=tables)]
+    parts.append("\n\n" + _ci_note(tables))
     if comparisons is not None and not comparisons.empty:
         parts += [
-            "\n\n## Paired differences on the same seeds: A - B [95 % CI], Wilcoxon p\n",
+            "\n\n## Paired differences on the seeds both ran: A - B [95 % CI], permutation p\n",
             comparison_markdown(comparisons, tables=tables),
+            "\n\n" + COMPARISON_NOTE,
         ]
+        notes = pairing_notes(comparisons)
+        if notes:
+            parts.append(
+                "\n\n**Different seeds.** Each comparison pairs only the seeds both policies "
+                "ran:\n\n" + "\n".join(f"- {note}" for note in notes)
+            )
     return "".join(parts) + "\n"
 
 
 def summary_latex(summary: pd.DataFrame, *, tables: Tables = PERSON_FOLLOW_TABLES) -> str:
-    """The headline table as a LaTeX ``tabular`` (booktabs): mean [95 % CI] per cell."""
-    table = summary[["policy", variant_column(summary), "episodes"]].copy()
-    for name in tables.headline:
-        if name in summary:
-            table[metric_label(name, tables.metrics)] = _with_ci(summary, name)
+    """The headline table as a LaTeX ``tabular`` (booktabs): mean [95 % CI] per cell, marked as
+    in :func:`summary_markdown`."""
+    table, _ = _metric_table(summary, [m for m in tables.headline if m in summary], tables)
     return table.to_latex(index=False, escape=True, column_format="ll" + "r" * (table.shape[1] - 2))
 
 

@@ -21,6 +21,7 @@ scoring: about 4 ms a simulated log).
 from __future__ import annotations
 
 import csv
+import sys
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from decimal import Decimal
@@ -30,7 +31,7 @@ import pandas as pd
 
 from eval.metrics import Metric
 from eval.rollout import Episode
-from eval.stats import EpisodeRow, compare, episode_table, summarize
+from eval.stats import EpisodeRow, binary_metrics, compare, episode_table, pairing_notes, summarize
 from eval.steplog import StepLogError, read_step_log, step_log_text
 from execution.backend import Backend, execute
 
@@ -71,7 +72,7 @@ def _score_scenario(unit: _Scenario) -> tuple[list[str], pd.DataFrame, pd.DataFr
     texts = [step_log_text(ep.log) for ep in unit.episodes] if unit.logs else []  # type: ignore[union-attr]
     table = episode_table(unit.episodes, metrics=unit.metrics, variant=unit.variant)
     names = list(unit.metrics)
-    summary = summarize(table, metrics=names)
+    summary = summarize(table, metrics=names, rates=binary_metrics(unit.metrics))
     comparisons = compare(table, metrics=names, policies=unit.policies)
     return texts, table, summary, comparisons
 
@@ -95,14 +96,17 @@ def score(
     :param backend: where the units run (default: this process).
     :returns: the tables, as :func:`eval.stats.episode_table`, :func:`eval.stats.summarize` and
         :func:`eval.stats.compare` give them for all of ``episodes`` at once (the bootstrap's
-        default seed).
+        default seed). Where two policies ran different seeds of a scenario, one warning line
+        on stderr names the pairs (:func:`eval.stats.pairing_notes`): their comparisons use
+        only the seeds both ran, or none.
     """
     names = list(metrics)
     if log_path is not None and any(isinstance(ep, EpisodeRow) for ep in episodes):
         raise ValueError("log_path is given, but some episodes were reduced to rows: no step log")
     if not episodes:
         table = episode_table([], metrics=metrics, variant=variant)
-        return Scored(table, summarize(table, metrics=names), compare(table, metrics=names))
+        summary = summarize(table, metrics=names, rates=binary_metrics(metrics))
+        return Scored(table, summary, compare(table, metrics=names))
     policies = tuple(dict.fromkeys(ep.policy for ep in episodes))
     rows: dict[str, list[int]] = {}  # scenario -> its episodes' positions, in first-seen order
     for k, ep in enumerate(episodes):
@@ -133,6 +137,13 @@ def score(
     cells = table[["policy", variant]].drop_duplicates()
     summary = cells.merge(summary, on=["policy", variant], how="left", validate="one_to_one")
     comparisons = pd.concat([part[3] for part in parts], ignore_index=True)
+    notes = pairing_notes(comparisons)
+    if notes:  # the report says so too (eval.report.markdown_report); this is the one line
+        print(
+            "follow-eval: warning: policies that ran different seeds are compared on the seeds "
+            "both ran only: " + "; ".join(notes),
+            file=sys.stderr,
+        )
     return Scored(table, summary, comparisons)
 
 
@@ -159,8 +170,8 @@ def _read_files(unit: _Files) -> tuple[list[Episode], StepLogError | None]:
         policy = _first_text(log, "policy") or unit.labels[0]
         variant = _first_text(log, unit.variant) or unit.labels[1]
         seed = _seed(path, float(log["seed"].iloc[0])) if _has_seeds(log) else i
-        if "termination" not in log:
-            log = log.assign(termination="")
+        # A log without a termination column keeps none: its ending is unknown, so the
+        # metrics of endings (collision, lost, success) are NaN, not a clean run's 0 / 100.
         episodes.append(Episode(policy, variant, seed, log))
     return episodes, None
 
@@ -202,8 +213,8 @@ def read_episodes(
 
     An episode's policy and variant are its log's ``policy`` and ``variant`` columns (the first
     non-blank cell), else ``policy`` and ``label``; its seed the ``seed`` column where every row
-    has one, else the file's position in ``files``. A log without ``termination`` gets a blank
-    one.
+    has one, else the file's position in ``files``. A log without ``termination`` is kept without
+    one: its ending is unknown, and the metrics of endings are NaN for it.
 
     :param task: the task whose layout the logs follow (``person_follow``, ``line_trace``).
     :param variant: the name of the task's variant column (``"track"`` for LineTrace).

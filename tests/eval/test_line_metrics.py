@@ -50,3 +50,23 @@ def test_a_lost_episode_counts_its_losses_and_the_share_it_covered() -> None:
 
 def test_the_headline_metrics_are_registered_in_table_order() -> None:
     assert list(LINE_METRICS)[: len(LINE_HEADLINE_METRICS)] == list(LINE_HEADLINE_METRICS)
+
+
+def test_a_log_without_its_ending_has_no_failure_value() -> None:
+    # A robot's log may carry no termination column: its ending is unknown, not a success.
+    m = line_episode_metrics(LOST.drop(columns="termination"))
+    assert math.isnan(m["failed_pct"])
+    assert math.isnan(m["lap_time_s"])
+    assert m["completion_pct"] == pytest.approx(100.0 * 0.45 / 2.0)
+
+
+def test_the_failure_rate_is_a_rate_of_episodes_with_a_wilson_interval() -> None:
+    from eval.stats import binary_metrics, summarize
+
+    assert binary_metrics(LINE_METRICS) == {"failed_pct"}
+    table = pd.DataFrame(
+        {"policy": "p", "track": "course", "seed": range(20), "failed_pct": [0.0] * 20}
+    )
+    row = summarize(table, metrics=["failed_pct"], rates=binary_metrics(LINE_METRICS)).iloc[0]
+    assert row["failed_pct_ci_low"] == 0.0
+    assert row["failed_pct_ci_high"] == pytest.approx(16.1, abs=0.05)  # not [0, 0]

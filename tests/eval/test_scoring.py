@@ -14,7 +14,7 @@ from eval.line_metrics import LINE_METRICS
 from eval.metrics import METRICS
 from eval.rollout import Episode, rollout
 from eval.scoring import read_episodes, score
-from eval.stats import compare, episode_table, summarize
+from eval.stats import binary_metrics, compare, episode_table, summarize
 from eval.steplog import StepLogError, read_step_log, write_step_log
 from execution.backend import Backend
 
@@ -28,7 +28,8 @@ def episodes() -> list[Episode]:
 def _serial(episodes: list[Episode], metrics: dict, variant: str = "scenario") -> tuple:
     table = episode_table(episodes, metrics=metrics, variant=variant)
     names = list(metrics)
-    return table, summarize(table, metrics=names), compare(table, metrics=names)
+    summary = summarize(table, metrics=names, rates=binary_metrics(metrics))
+    return table, summary, compare(table, metrics=names)
 
 
 def _check_equal(got: object, want: tuple) -> None:
@@ -131,7 +132,62 @@ def test_a_log_without_labels_gets_the_given_ones_and_its_position_as_seed(tmp_p
         ("gsmpn-real", "hall", 0),
         ("gsmpn-real", "hall", 1),
     ]
-    assert read[0].log["termination"].tolist() == ["", ""]
+    assert "termination" not in read[0].log  # unknown, not a blank (clean) ending
+
+
+def test_a_log_without_termination_scores_its_endings_as_unknown(
+    tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
+    """A robot's log records no ending: collision, lost and success are NaN (n/a), not the 0 %,
+    0 % and 100 % of an episode known to have ended well; the other metrics are scored."""
+    logs = [tmp_path / "a.csv", tmp_path / "b.csv"]
+    for log in logs:
+        log.write_text("time_s,obs_distance_m,obs_offset_px,accel_mps2\n0,1,0,0\n0.1,1,2,0\n")
+    scored = score(read_episodes(logs, task="person_follow"), metrics=METRICS)
+    endings = ["collision_rate_pct", "lost_rate_pct", "success_pct"]
+    assert scored.table[endings].isna().all().all()
+    assert scored.table["termination"].tolist() == ["", ""]
+    [row] = scored.summary.to_dict("records")
+    assert all(pd.isna(row[m]) and row[f"{m}_n"] == 0 for m in endings)
+    assert row["mean_offset_px"] == pytest.approx(1.0)  # (0 + 2) / 2 on each log
+    assert capsys.readouterr().err == ""  # one policy: no pairing to warn about
+
+
+def test_policies_on_different_seeds_are_said_to_be_paired_on_the_common_ones(
+    tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
+    """Logs of two policies on seeds 0-3 and 2-5 are compared on 2-3, and logs numbered by
+    their position (no seed column) share none: each pair keeps its rows (n = 0 when nothing
+    is shared), and one warning line on stderr says so."""
+    logs = []
+    for policy, seeds in (("pn", range(4)), ("gsmpn", range(2, 6))):
+        for seed in seeds:
+            logs.append(tmp_path / f"{policy}-{seed}.csv")
+            logs[-1].write_text(
+                "policy,scenario,seed,time_s,obs_distance_m,obs_offset_px,accel_mps2,termination\n"
+                f"{policy},hall,{seed},0,1,0,0,\n{policy},hall,{seed},0.1,1,{seed},0,walk_over\n"
+            )
+    scored = score(read_episodes(logs, task="person_follow"), metrics=METRICS)
+    [pairing] = scored.comparisons[["seeds_a", "seeds_b", "seeds_both"]].drop_duplicates().values
+    assert pairing.tolist() == [4, 4, 2]
+    err = capsys.readouterr().err.splitlines()
+    assert err == [
+        "follow-eval: warning: policies that ran different seeds are compared on the seeds both "
+        "ran only: scenario hall: pn ran 4 seeds and gsmpn 4; compared on the 2 both ran"
+    ]
+    unnumbered = []
+    for path in logs[:2] + logs[4:6]:  # without the policy, scenario and seed columns
+        unnumbered.append(tmp_path / f"bare-{path.name}")
+        unnumbered[-1].write_text(
+            "time_s,obs_distance_m,obs_offset_px,accel_mps2\n0,1,0,0\n0.1,1,2,0\n"
+        )
+    a = read_episodes(unnumbered[:2], task="person_follow", policy="a")
+    b = read_episodes(unnumbered, task="person_follow", policy="b")[2:]  # seeds 2, 3
+    scored = score([*a, *b], metrics=METRICS)
+    assert len(scored.comparisons) == len(METRICS)  # the pair is there, not dropped
+    assert (scored.comparisons["n"] == 0).all()
+    assert scored.comparisons["mean_diff"].isna().all()
+    assert "they share none: not compared" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize("workers", [1, 2])

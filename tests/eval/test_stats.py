@@ -4,7 +4,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from eval.stats import compare, summarize
+from eval.stats import PairedTest, compare, pairing_notes, summarize
 
 
 def table(values: dict[str, list[float]], metric: str = "mean_offset_px") -> pd.DataFrame:
@@ -109,3 +109,86 @@ def test_resampling_in_batches_gives_the_intervals_of_all_at_once(
     at_once = (summarize(t), compare(t))
     for got, expected in zip(batched, at_once, strict=True):
         pd.testing.assert_frame_equal(got, expected)
+
+
+@pytest.mark.parametrize("n", [2, 5, 13, 30])
+def test_the_sign_flip_test_gives_scipys_permutation_p(n: int) -> None:
+    """Exact (all 2**n flips) up to 13 pairs, as scipy's permutation_test with
+    permutation_type="samples" on one sample is; drawn flips above that, within their noise."""
+    from scipy import stats
+
+    import eval.stats
+
+    rng = np.random.default_rng(n)
+    diff = np.where(rng.random(n) < 0.3, rng.normal(2.0, 3.0, n), 0.0)
+    diff[0] = 1.5
+    got = eval.stats.paired_test(diff, 0, "x").p
+    want = stats.permutation_test(
+        (diff,), np.mean, permutation_type="samples", n_resamples=9999, random_state=1
+    ).pvalue
+    if 2**n <= eval.stats.N_SIGN_FLIPS:
+        assert got == pytest.approx(want, rel=1e-12)
+    else:
+        assert abs(got - want) < 0.02
+    assert eval.stats.paired_test(diff, 0, "x") == eval.stats.paired_test(diff, 0, "x")
+
+
+def test_a_difference_is_significant_only_if_the_ci_and_the_permutation_test_say_so() -> None:
+    from eval.report import comparison_markdown
+
+    # +1 on each of 5 seeds: the CI is the point [1, 1], but of the 32 sign flips two are as
+    # far from 0 (all + and all -): p = 0.0625, not significant; on 6 seeds p = 0.031 is.
+    for n, expected in ((5, 0), (6, 1)):
+        [row] = compare(table({"a": [2.0] * n, "b": [1.0] * n})).to_dict("records")
+        assert (row["diff_ci_low"], row["diff_ci_high"]) == (1.0, 1.0)
+        assert row["perm_p"] == pytest.approx(2 / 2**n)
+        test = PairedTest(row["mean_diff"], row["diff_ci_low"], row["diff_ci_high"], row["perm_p"])
+        assert test.direction == expected
+        shown = comparison_markdown(compare(table({"a": [2.0] * n, "b": [1.0] * n})))
+        assert ("1.0 [1.0, 1.0]* p=" in shown) == bool(expected)  # starred when significant
+    [row] = compare(table({"a": [1.0, 2.0, 3.0], "b": [1.0, 2.0, 3.0]})).to_dict("records")
+    assert row["perm_p"] == 1.0  # identical on every seed
+
+
+def test_rates_of_episodes_get_a_wilson_interval_that_does_not_collapse() -> None:
+    """No collision in 20 episodes is not a rate known to be 0: [0, 16.1] %, not [0, 0]."""
+    t = table({"pn": [0.0] * 20, "mpn": [100.0] * 19 + [0.0]}, "collision_rate_pct")
+    rows = summarize(t).set_index("policy")
+    assert rows.loc["pn", "collision_rate_pct_ci_low"] == 0.0
+    assert rows.loc["pn", "collision_rate_pct_ci_high"] == pytest.approx(16.11, abs=0.01)
+    assert rows.loc["mpn", "collision_rate_pct_ci_low"] == pytest.approx(76.39, abs=0.01)
+    # decided by the metric's registration, not the data: a 0/100 column of a metric that is
+    # no rate of episodes keeps its bootstrap interval
+    t = table({"pn": [0.0] * 20}, "in_frame_rate_pct")
+    assert summarize(t).iloc[0]["in_frame_rate_pct_ci_high"] == 0.0
+
+
+def test_the_summary_counts_each_metrics_episodes_and_the_report_shows_them() -> None:
+    from eval.report import summary_markdown
+
+    reacquire = [1.0, np.nan, 3.0] * 4  # a value on 8 of 12 episodes
+    t = table({"pn": reacquire, "mpn": [2.0] * 3}, "reacquire_time_s")
+    summary = summarize(t)
+    assert summary["reacquire_time_s_n"].tolist() == [8, 3]
+    text = summary_markdown(summary, extras=True)
+    pn, mpn = (line for line in text.splitlines() if line.startswith(("| pn", "| mpn")))
+    assert pn.split("|")[4].strip().endswith("]† (n=8)")  # 8 values (< 10: marked) of 12
+    assert mpn.split("|")[4].strip() == "2.000 [2.000, 2.000]†"  # all 3, but fewer than 10
+    assert text.endswith("(about 80 % at 5).")  # the footnote says what the mark means
+
+
+def test_pairs_on_different_seeds_are_noted() -> None:
+    from eval.report import markdown_report
+
+    t = pd.concat([table({"a": [1.0] * 6, "b": [2.0] * 4}), table({"c": [1.0]}).assign(seed=9)])
+    pairs = compare(t).set_index("policy_b")
+    assert pairs.loc["b", ["n", "seeds_a", "seeds_b", "seeds_both"]].tolist() == [4, 6, 4, 4]
+    assert pairs.loc["c", "n"].tolist() == [0, 0]  # a - c and b - c kept, nothing paired
+    assert pairing_notes(compare(t)) == [
+        "scenario straight: a ran 6 seeds and b 4; compared on the 4 both ran",
+        "scenario straight: a ran 6 seeds and c 1; they share none: not compared",
+        "scenario straight: b ran 4 seeds and c 1; they share none: not compared",
+    ]
+    report = markdown_report(summarize(t), compare(t))
+    assert "**Different seeds.**" in report
+    assert "- scenario straight: a ran 6 seeds and c 1; they share none: not compared" in report
