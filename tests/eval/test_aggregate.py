@@ -12,7 +12,8 @@ import pytest
 from eval.aggregate import (
     LearnerRuns,
     _by_split,
-    _resample,
+    _cube,
+    _resample_cube,
     learner_runs,
     normalised_scores,
     scenario_split,
@@ -23,18 +24,64 @@ from eval.cli import main
 AGENT = Path(__file__).parents[2] / "policies" / "agents" / "ppo"
 
 
-def test_the_bootstrap_resamples_runs_within_each_task() -> None:
-    matrix = np.array([[0.0, 10.0], [1.0, 11.0], [2.0, 12.0]])
-    sample = _resample(matrix, np.random.default_rng(0))
-    assert set(sample[:, 0]) <= {0.0, 1.0, 2.0}
-    assert set(sample[:, 1]) <= {10.0, 11.0, 12.0}
+def test_the_bootstrap_resamples_runs_within_each_task_then_their_episodes() -> None:
+    # cube[run, task, episode] = 100 * task + 10 * run + episode
+    cube = np.fromfunction(lambda r, t, e: 100 * t + 10 * r + e, (3, 2, 4))
+    episodes = np.array([[0, 0, 0, 0], [3, 3, 3, 3]])  # task 0 draws episode 0, task 1 episode 3
+    sample = _resample_cube(cube, episodes, np.random.default_rng(0))
+    assert sample.shape == (3, 2)
+    assert set(sample[:, 0]) <= {0.0, 10.0, 20.0}  # a run of task 0, its episode 0
+    assert set(sample[:, 1]) <= {103.0, 113.0, 123.0}  # a run of task 1, its episode 3
 
 
 def test_a_ci_holds_its_estimate_and_is_reproducible() -> None:
-    matrix = np.random.default_rng(1).random((30, 3))
-    got = stratified_ci(np.mean, [matrix], reps=300, seed=4)
+    cube = np.random.default_rng(1).random((5, 3, 10))
+    got = stratified_ci(np.mean, [cube], reps=300, seed=4)
     assert got[1] <= got[0] <= got[2]
-    assert got == stratified_ci(np.mean, [matrix], reps=300, seed=4)
+    assert got[0] == pytest.approx(cube.mean())
+    assert got == stratified_ci(np.mean, [cube], reps=300, seed=4)
+
+
+def test_a_run_is_a_training_seed_so_the_ci_covers_a_learners_mean() -> None:
+    # Five agents, each better or worse by its own draw (sd 0.10), ten noisy episodes each
+    # (sd 0.05): the intervals must hold the learners' true mean about as often as they say.
+    # Counting every (seed, episode) as a run, as an earlier version did, they held it in
+    # fewer than half of the studies.
+    rng = np.random.default_rng(0)
+    studies, held, held_flat = 60, 0, 0
+    for k in range(studies):
+        cube = 0.6 + rng.normal(0, 0.10, (5, 3, 1)) + rng.normal(0, 0.05, (5, 3, 10))
+        _, low, high = stratified_ci(np.mean, [cube], reps=300, seed=k)
+        held += low <= 0.6 <= high
+        flat = cube.transpose(0, 2, 1).reshape(50, 3)  # (seed x episode, task)
+        _, low, high = stratified_ci(np.mean, [flat], reps=300, seed=k)
+        held_flat += low <= 0.6 <= high
+    assert held / studies >= 0.8
+    assert held_flat / studies <= 0.6
+
+
+def test_the_episodes_are_drawn_alike_for_every_controller() -> None:
+    # Two controllers whose every episode differs by exactly 0.1 on the same seeds: a paired
+    # draw keeps the difference at 0.1 in every resample, an unpaired one would spread it.
+    law = np.random.default_rng(2).random((1, 2, 20))
+    learner = law + 0.1
+    got = stratified_ci(lambda a, b: float(np.mean(a) - np.mean(b)), [learner, law], reps=200)
+    assert got == pytest.approx((0.1, 0.1, 0.1))
+
+
+def test_the_cube_is_ordered_by_run_scenario_and_seed() -> None:
+    scores = pd.DataFrame(
+        {
+            "run": [1, 0, 1, 0, 1, 0, 1, 0],
+            "scenario": ["b", "b", "a", "a", "b", "b", "a", "a"],
+            "seed": [8, 8, 8, 8, 7, 7, 7, 7],
+            "normalised": np.arange(8.0),
+        }
+    )
+    cube = _cube(scores, ["a", "b"])
+    assert cube.shape == (2, 2, 2)
+    assert cube[1, 0].tolist() == [6.0, 2.0]  # run 1, scenario a, seeds 7 and 8
+    assert cube[0, 1].tolist() == [5.0, 1.0]  # run 0, scenario b, seeds 7 and 8
 
 
 def test_scores_are_normalised_per_scenario_by_the_episodes_seen() -> None:
