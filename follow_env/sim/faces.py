@@ -9,18 +9,29 @@ task model supplies the configuration, the spaces, the observations, the info an
 
 from __future__ import annotations
 
+import sys
 from typing import Any, ClassVar
 
 import gymnasium as gym
 import numpy as np
 from gymnasium.error import ResetNeeded
+from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
+from gymnasium.wrappers import TimeLimit
 
 from follow_env.sim.checks import REAL_KINDS, is_integer, out_of_range, real_array
 from follow_env.sim.runner import BatchedSim
 
-__all__ = ["TaskEnv", "TaskVectorEnv", "action_array", "lane_seeds", "render_fps"]
+__all__ = [
+    "TaskEnv",
+    "TaskVectorEnv",
+    "action_array",
+    "lane_seeds",
+    "longer_episodes",
+    "max_episode_steps_error",
+    "render_fps",
+]
 
 RENDER_MODES = ["rgb_array", "human"]
 
@@ -74,6 +85,54 @@ def render_fps(config: Any) -> int:
     return max(1, round(1.0 / float(config.control_dt_s)))
 
 
+def step_cap(sim: BatchedSim) -> int:
+    """The step at which the task's kernel truncates an episode itself (its ``max_steps``
+    parameter: ``episode.max_steps``, or ``episode.max_time_s`` in control steps)."""
+    return int(sim.base_params["task"]["max_steps"])
+
+
+def longer_episodes(config: Any, steps: int) -> str:
+    """The config argument that makes episodes ``steps`` control steps long, as ``gym.make``
+    takes it: ``episode__max_steps=...``, or ``episode__max_time_s=...`` for a task whose cap is
+    a time."""
+    episode = config.episode
+    if hasattr(episode, "max_time_s") and not hasattr(episode, "max_steps"):
+        return f"episode__max_time_s={steps * float(config.control_dt_s):g}"
+    return f"episode__max_steps={steps}"
+
+
+def max_episode_steps_error(config: Any, value: Any, what: str) -> ValueError:
+    """The refusal of ``max_episode_steps=value`` by ``what`` (no ``TimeLimit`` wraps its
+    lanes): the episode length is the config's."""
+    hint = longer_episodes(config, value) if is_integer(value) and value > 0 else ""
+    return out_of_range(
+        "max_episode_steps",
+        value,
+        f"None: {what} ends episodes itself (no TimeLimit wraps its lanes); set the episode "
+        f"length in the config" + (f", e.g. {hint}" if hint else " (episode section)"),
+    )
+
+
+def _time_limit_over(env: gym.Env) -> TimeLimit | None:
+    """The ``TimeLimit`` wrapper of ``env`` whose ``reset`` is calling ``env.reset`` now, if
+    any: the env itself is never told of the wrappers ``gym.make`` puts around it (its
+    ``spec.max_episode_steps`` is None), so the reset looks up the calling frames (a few
+    microseconds a reset)."""
+    try:
+        frame = sys._getframe(3)  # 0: here, 1: _check_time_limit, 2: reset, 3: its caller
+    except ValueError:  # called from a stack shallower than that (no Python caller)
+        return None
+    for _ in range(64):  # gym.make's stack is about 8 frames deep; a user's wrappers add more
+        if frame is None:
+            return None
+        if frame.f_code.co_name == "reset":
+            caller = frame.f_locals.get("self")
+            if isinstance(caller, TimeLimit) and caller.unwrapped is env:
+                return caller
+        frame = frame.f_back
+    return None
+
+
 def _check_render_mode(cls: type, render_mode: str | None) -> None:
     if render_mode is not None and render_mode not in cls.metadata["render_modes"]:
         raise out_of_range(
@@ -117,6 +176,7 @@ class TaskEnv(gym.Env[np.ndarray, np.ndarray]):
     ) -> tuple[np.ndarray, dict[str, Any]]:
         """Start an episode. ``seed`` seeds the episode streams; later resets without a seed
         continue from it (each episode spawns the next child ``SeedSequence``)."""
+        self._check_time_limit()
         super().reset(seed=seed)
         if options:
             raise ValueError(f"options={options!r} is out of range: this env takes no options")
@@ -182,6 +242,23 @@ class TaskEnv(gym.Env[np.ndarray, np.ndarray]):
 
     # -- helpers --------------------------------------------------------------------------------
 
+    def _check_time_limit(self) -> None:
+        """``ValueError`` if a ``TimeLimit`` over this env (``gym.make(...,
+        max_episode_steps=n)``) allows more steps than the env's own cap: the env would
+        truncate first, while ``env.spec.max_episode_steps`` says ``n``."""
+        wrapper = _time_limit_over(self)
+        if wrapper is None:
+            return
+        limit, cap = wrapper._max_episode_steps, step_cap(self.sim)
+        if limit > cap:
+            raise out_of_range(
+                "max_episode_steps",
+                limit,
+                f"<= {cap}, the step at which {type(self).__name__} truncates its episodes "
+                f"itself; for longer episodes give gym.make({longer_episodes(self.config, limit)})"
+                " instead (a smaller max_episode_steps truncates earlier, through TimeLimit)",
+            )
+
     def _ensure_renderer(self) -> Any:
         if self._renderer is None:
             self._renderer = self.task.renderer(self.config)
@@ -210,8 +287,12 @@ class TaskVectorEnv(VectorEnv):
     * ``DISABLED``: ended lanes must be reset with ``reset(options={"reset_mask": mask})``.
 
     Seeding: ``reset(seed=s)`` gives lane ``i`` the seed stream of ``s + i`` (a list gives one
-    seed per lane), so lane ``i`` replays the single env reset with ``seed=s + i``. ``info`` is
-    Gymnasium's dict of arrays with ``_key`` masks.
+    seed per lane), so lane ``i`` replays the single env reset with ``seed=s + i``; an int
+    ``s`` also seeds ``np_random`` (``np_random_seed == s``), as Gymnasium's ``VectorEnv`` does
+    (the lanes never draw from it). ``info`` is Gymnasium's dict of arrays with ``_key`` masks;
+    where a mask is False (``final_info`` of lanes that did not end, the info of a masked
+    reset) an entry is 0 (False) or None, as in ``SyncVectorEnv``. ``max_episode_steps`` is
+    refused (``ValueError``): the lanes end their episodes themselves (``episode__max_steps``).
     """
 
     task: ClassVar[Any]
@@ -222,6 +303,7 @@ class TaskVectorEnv(VectorEnv):
         config: Any = None,
         render_mode: str | None = None,
         autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
+        max_episode_steps: int | None = None,
         **kwargs: Any,
     ) -> None:
         if not is_integer(num_envs) or num_envs < 1:
@@ -237,6 +319,8 @@ class TaskVectorEnv(VectorEnv):
         if render_mode not in (None, "rgb_array"):
             raise out_of_range("render_mode", render_mode, "None or 'rgb_array'")
         self.config = self.task.resolve_config(config, **kwargs)
+        if max_episode_steps is not None:  # gym.make_vec passes it here
+            raise max_episode_steps_error(self.config, max_episode_steps, "the vector env")
         self.num_envs = int(num_envs)
         self.render_mode = render_mode
         self.autoreset_mode = mode
@@ -284,14 +368,13 @@ class TaskVectorEnv(VectorEnv):
         lanes = np.flatnonzero(mask)
         seeds = None if seed is None else [lane_seeds(self.num_envs, seed)[i] for i in lanes]
         self._reset_lanes(lanes, seeds)
+        if is_integer(seed) or (isinstance(seed, np.ndarray) and seed.ndim == 0):
+            # As VectorEnv.reset does; the lanes' streams come from their own seeds.
+            self._np_random, self._np_random_seed = seeding.np_random(int(seed))  # type: ignore[arg-type]
         self._autoreset[lanes] = False
         self._started[lanes] = True
-        info = self._info()
-        if not mask.all():
-            # Only the reset lanes report an info, as in SyncVectorEnv.
-            for key in list(info):
-                if not key.startswith("_"):
-                    info["_" + key] = mask
+        # Only the reset lanes report an info, as in SyncVectorEnv.
+        info = self._info() if mask.all() else self._info(mask=mask)
         return self.task.observations(self.sim), info
 
     def step(
@@ -379,11 +462,23 @@ class TaskVectorEnv(VectorEnv):
                 self._renderers[i].record(self.sim.lane(int(i)))
 
     def _info(self, mask: np.ndarray | None = None) -> dict[str, Any]:
-        """Dict-of-arrays info for all lanes, with ``_key`` masks (``mask`` or all lanes)."""
-        info: dict[str, Any] = self.task.batch_info(self.sim)
-        m = self._mask if mask is None else mask
-        for key in list(info):
-            info["_" + key] = m
+        """Dict-of-arrays info with ``_key`` masks: of all lanes, or of the lanes in ``mask``
+        only, the others' entries 0 (False) or None as ``SyncVectorEnv`` leaves them."""
+        if mask is None:
+            info: dict[str, Any] = self.task.batch_info(self.sim)
+            for key in list(info):
+                info["_" + key] = self._mask
+            return info
+        lanes = np.flatnonzero(mask)
+        info = {}
+        for key, values in self.task.batch_info(self.sim, lanes).items():
+            if values.dtype == object:
+                full = np.full(self.num_envs, None, dtype=object)
+            else:
+                full = np.zeros(self.num_envs, dtype=values.dtype)
+            full[lanes] = values
+            info[key] = full
+            info["_" + key] = mask
         return info
 
     def _ensure_renderers(self) -> None:

@@ -47,7 +47,9 @@ def register_envs() -> None:
     for env_id, (_, kwargs) in _envs().items():
         if env_id not in gymnasium.registry:
             # No max_episode_steps: the kernel ends episodes itself, so the single env and
-            # the batched core truncate at exactly the same step.
+            # the batched core truncate at exactly the same step. gym.make(...,
+            # max_episode_steps=n) still wraps TimeLimit; an n past the env's own cap is
+            # refused at the first reset (follow_env.sim.faces.TaskEnv._check_time_limit).
             gymnasium.register(id=env_id, **kwargs)
 
 

@@ -457,9 +457,18 @@ def randomize(
 
 
 def action_high(cfg: Any) -> np.ndarray:
-    """Symmetric action bounds ``[v_max m/s, v_max m/s, w_max rad/s]``."""
+    """Symmetric action bounds ``[v_max m/s, v_max m/s, w_max rad/s]``, each rounded up to the
+    nearest float32 at or above it: the action space is float32, and a bound rounded down
+    (1.3470588 m/s to 1.34705877) would sit below the kernel's clip (:func:`command`), so an
+    action clipped to the space (``ClipAction``) would drive slower than the same action past
+    the bound. Rounded up, clipping to the space and then the kernel's clip give the kernel's
+    bound either way, and no action within the bounds changes."""
     p = cfg.platform
-    return np.array([p.max_speed_mps, p.max_speed_mps, p.max_turn_rate_radps])
+    high = np.array([p.max_speed_mps, p.max_speed_mps, p.max_turn_rate_radps])
+    high32 = high.astype(np.float32)
+    below = high32.astype(np.float64) < high
+    high32[below] = np.nextafter(high32[below], np.float32(np.inf))
+    return high32.astype(np.float64)
 
 
 def wheel_outlines(cfg: Any) -> np.ndarray:

@@ -148,6 +148,8 @@ class LineTraceEnv(TaskEnv):
     """
 
     task: ClassVar[Any] = TASK
+    # One frame a 0.02 s control step (each env sets its own from its config: render_fps).
+    metadata: ClassVar[dict[str, Any]] = {**TaskEnv.metadata, "render_fps": 50}
 
 
 class LineTraceVectorEnv(TaskVectorEnv):

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -246,3 +248,33 @@ def test_the_frame_draws_four_wheels() -> None:
     assert set(renderer.wheels[:, 4]) == {-1.0, 1.0}  # rollers drawn in both directions
     assert frame.shape == (480, 1280, 3)
     env.close()
+
+
+@pytest.mark.parametrize("env_id", ["PersonFollow-v0", "LineTrace-v0"])
+def test_an_action_past_the_bounds_drives_as_the_action_clipped_to_the_space(env_id: str) -> None:
+    env = gym.make(env_id, platform="mecanum")
+    high = env.action_space.high
+    p = env.unwrapped.config.platform
+    limits = np.array([p.max_speed_mps, p.max_speed_mps, p.max_turn_rate_radps])
+    # float32 bounds at or above the kernel's float64 clip, the nearest such: they were rounded
+    # below it (1.34705877 < 1.3470588 m/s), so ClipAction drove slower than the action past it.
+    assert (high.astype(np.float64) >= limits).all()
+    assert (np.nextafter(high, np.float32(0)).astype(np.float64) < limits).all()
+    clipped = gym.wrappers.ClipAction(env)
+
+    def run(step: Callable[[np.ndarray], tuple], action: np.ndarray) -> np.ndarray:
+        """Observations and rewards of 10 steps of ``action`` from the reset with seed 0."""
+        env.reset(seed=0)
+        rows = []
+        for _ in range(10):
+            obs, reward, *_ = step(action)
+            rows.append(np.r_[obs, reward])
+        return np.array(rows)
+
+    for k in range(3):
+        past = np.zeros(3, np.float32)
+        past[k] = 2 * high[k]
+        np.testing.assert_array_equal(run(clipped.step, past), run(env.step, past))
+        at = np.zeros(3, np.float32)
+        at[k] = high[k]
+        np.testing.assert_array_equal(run(env.step, at), run(env.step, past))

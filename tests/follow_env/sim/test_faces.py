@@ -268,3 +268,70 @@ def test_the_human_window_keeps_to_the_envs_frame_rate(monkeypatch: pytest.Monke
     env.step(np.zeros(3, np.float32))
     env.close()
     assert shown == [50, 50]  # reset and step: 50 frames a second for 0.02 s steps
+
+
+@pytest.mark.parametrize("env_id", list(TASKS))
+def test_the_class_frame_rate_is_the_default_envs(env_id: str) -> None:
+    env = gym.make(env_id)
+    # LineTraceEnv.metadata said 10 (PersonFollow's), its envs 50.
+    assert type(env.unwrapped).metadata["render_fps"] == env.unwrapped.metadata["render_fps"]
+    assert type(env.unwrapped).metadata["render_modes"] == ["rgb_array", "human"]
+
+
+# -- the vector env's info where a mask is False, and its np_random -----------------------------
+
+
+def _assert_info_as_sync(ours: dict[str, Any], sync: dict[str, Any]) -> None:
+    """Every entry, masked or not, as SyncVectorEnv gives it (0 / False / None where the
+    key's mask is False), with the same dtype."""
+    assert set(ours) == set(sync)
+    for key, values in sync.items():
+        assert ours[key].dtype == values.dtype, key
+        if values.dtype == object:
+            assert ours[key].tolist() == values.tolist(), key
+        else:
+            np.testing.assert_array_equal(ours[key], values, err_msg=key)
+
+
+def test_masked_entries_of_final_info_and_a_masked_reset_are_zero_or_none_as_in_sync() -> None:
+    from gymnasium.vector import AutoresetMode, SyncVectorEnv
+
+    kwargs: dict[str, Any] = {"scenario": "random", "episode__max_steps": 3}
+    ours = follow_env.PersonFollowVectorEnv(3, autoreset_mode=AutoresetMode.SAME_STEP, **kwargs)
+    sync = SyncVectorEnv(
+        [lambda: gym.make("PersonFollow-v0", **kwargs) for _ in range(3)],
+        autoreset_mode=AutoresetMode.SAME_STEP,
+    )
+    a = np.tile(_action(ours.single_action_space), (3, 1))
+    for env in (ours, sync):
+        env.reset(seed=0)
+        env.step(a)
+    # Lane 1 starts again: it held the live lanes' values (step [1, 0, 1], not [0, 0, 0]).
+    mask = np.array([False, True, False])
+    (_, mine), (_, theirs) = (e.reset(seed=5, options={"reset_mask": mask}) for e in (ours, sync))
+    _assert_info_as_sync(mine, theirs)
+    assert mine["step"].tolist() == [0, 0, 0]
+    assert mine["termination"].tolist() == [None, "", None]
+    for env in (ours, sync):
+        env.step(a)
+    # Lanes 0 and 2 end at step 3 and lane 1 runs on: final_info held lane 1's live values.
+    (*_, mine), (*_, theirs) = (e.step(a) for e in (ours, sync))
+    assert mine["_final_info"].tolist() == [True, False, True]
+    _assert_info_as_sync(mine["final_info"], theirs["final_info"])
+    assert mine["final_info"]["step"].tolist() == [3, 0, 3]
+    assert mine["final_info"]["termination"].tolist() == ["step_limit", None, "step_limit"]
+
+
+def test_reset_with_an_int_seed_seeds_np_random_and_nothing_else() -> None:
+    a, b = (follow_env.PersonFollowVectorEnv(2, scenario="random") for _ in range(2))
+    obs_a, _ = a.reset(seed=3)
+    obs_b, _ = b.reset(seed=3)
+    # np_random kept its fresh entropy: np_random_seed was a random 128-bit number.
+    assert a.np_random_seed == b.np_random_seed == 3
+    assert a.np_random.random() == b.np_random.random()
+    # the lanes' own streams do not come from it: lane 1 is still the single env seeded 4
+    single, _ = gym.make("PersonFollow-v0", scenario="random").reset(seed=4)
+    np.testing.assert_array_equal(obs_a[1], single)
+    np.testing.assert_array_equal(obs_a, obs_b)
+    a.reset(seed=[7, 8])  # a list seeds the lanes only, as Gymnasium's VectorEnv has no rule
+    assert a.np_random_seed == 3
