@@ -30,6 +30,7 @@ __all__ = [
     "lane_seeds",
     "longer_episodes",
     "max_episode_steps_error",
+    "options_error",
     "render_fps",
 ]
 
@@ -83,6 +84,11 @@ def render_fps(config: Any) -> int:
     ``round(1 / control_dt_s)`` (10 for PersonFollow's 0.1 s, 50 for LineTrace's 0.02 s), at
     least 1. The human window keeps to it and Gymnasium's ``RecordVideo`` writes it."""
     return max(1, round(1.0 / float(config.control_dt_s)))
+
+
+def options_error(options: Any) -> ValueError:
+    """The refusal of reset ``options``: no task env takes any."""
+    return ValueError(f"options={options!r} is out of range: this env takes no options")
 
 
 def step_cap(sim: BatchedSim) -> int:
@@ -179,7 +185,7 @@ class TaskEnv(gym.Env[np.ndarray, np.ndarray]):
         self._check_time_limit()
         super().reset(seed=seed)
         if options:
-            raise ValueError(f"options={options!r} is out of range: this env takes no options")
+            raise options_error(options)
         self.sim.reset_lanes(self._lane, None if seed is None else [seed])
         self._needs_reset = False
         if self.render_mode is not None:

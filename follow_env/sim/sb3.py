@@ -28,7 +28,7 @@ from stable_baselines3.common.vec_env import VecEnv
 from stable_baselines3.common.vec_env.base_vec_env import VecEnvIndices, VecEnvStepReturn
 
 from follow_env.sim.checks import is_integer, out_of_range
-from follow_env.sim.faces import action_array, max_episode_steps_error
+from follow_env.sim.faces import action_array, max_episode_steps_error, options_error
 from follow_env.sim.runner import BatchedSim
 
 __all__ = ["TaskSB3VecEnv"]
@@ -89,7 +89,7 @@ class TaskSB3VecEnv(VecEnv):
         given = [options for options in self._options if options]
         if given:
             self._reset_options()
-            raise ValueError(f"options={given[0]!r} is out of range: this env takes no options")
+            raise options_error(given[0])
         seeded = [i for i, seed in enumerate(self._seeds) if seed is not None]
         if seeded:
             self.sim.seeds.seed(np.array(seeded), [self._seeds[i] for i in seeded])
@@ -133,12 +133,8 @@ class TaskSB3VecEnv(VecEnv):
                 infos[i]["TimeLimit.truncated"] = bool(truncated[i] and not terminated[i])
             self.sim.reset_lanes(lanes)
             obs = self.task.observations(self.sim)
-            if self.full_info or self.info_keys:
-                for i, info in zip(lanes.tolist(), self._infos(lanes), strict=True):
-                    self.reset_infos[i] = info
-            else:  # a lane just reset has no termination: nothing to build
-                for i in lanes.tolist():
-                    self.reset_infos[i] = {}
+            for i, info in zip(lanes.tolist(), self._infos(lanes), strict=True):
+                self.reset_infos[i] = info
         return obs, rewards, dones, infos
 
     def close(self) -> None:
@@ -231,7 +227,7 @@ class TaskSB3VecEnv(VecEnv):
                 f"does (got {args!r}, {kwargs!r})"
             )
         if options:
-            raise ValueError(f"options={options!r} is out of range: this env takes no options")
+            raise options_error(options)
         chosen = np.array(sorted(set(lanes)), dtype=np.int64)
         self.sim.reset_lanes(chosen, None if seed is None else [seed] * len(chosen))
         self._started[chosen] = True
