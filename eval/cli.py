@@ -19,12 +19,17 @@
     plots/thesis_metrics.png offsets_seed<k>.png trajectories_seed<k>.png
     videos/<policy>_<scenario>_seed<k>.mp4           with --video
     meta.json                                        command, grid, gains, model digests,
-                                                     versions, timing
+                                                     versions, code revision, timing
 
 With ``--task line_trace`` (LineTrace-v0) the grid's variants are tracks (``--tracks``), the
 tables hold the line metrics (:mod:`eval.line_metrics`), the logs sit in
 ``logs/<policy>/<track>/`` and the plots are ``line_metrics.png``, ``cross_track_seed<k>.png``
 and ``paths_seed<k>.png`` (:mod:`eval.line_report`); everything else is the same.
+
+``meta.json``'s ``code`` is the code that made the episodes (:mod:`eval.provenance`):
+``sources_sha256`` over the ``.py`` files of ``follow_env`` and ``policies``, ``git`` (the HEAD
+commit, or null outside a git checkout) and ``git_dirty`` (those packages edited since it);
+``dominance`` notes runs pooled from different or unrecorded code.
 
 The folder appears whole when the run succeeds, or not at all. Each finished work unit is kept
 in ``.<out>.units/`` beside it (:mod:`eval.journal`) until then, so a run stopped by Ctrl-C or a

@@ -10,7 +10,10 @@ after checking that they can be: each run made alike (task, configuration, ideal
 the same gains or model under each label, from ``meta.json``: a learned policy's model by the
 SHA-256 of its files where both runs record one, else by its ``repr``), each holding the same
 scenarios and every learner and law judged, and no episode (policy, scenario, seed) in two of
-them. The pooled table keeps a ``run`` column naming each episode's run.
+them. The pooled table keeps a ``run`` column naming each episode's run. Runs made from other
+simulator, policy or evaluation code (``meta.json``'s ``code``, :mod:`eval.provenance`), or
+recording none, are pooled with a warning and a note under the report's opening line, not
+refused: rollouts can survive a refactor.
 """
 
 from __future__ import annotations
@@ -19,6 +22,7 @@ import argparse
 import contextlib
 import csv
 import json
+import sys
 from array import array
 from collections.abc import Sequence
 from decimal import Decimal, InvalidOperation
@@ -27,7 +31,7 @@ from typing import Any, NoReturn
 
 import numpy as np
 
-from eval.cli_base import MAX_SEED, UsageError, _names
+from eval.cli_base import MAX_SEED, PROG, UsageError, _names
 from follow_env.sim.checks import one_line
 
 __all__ = ["check_covered", "cmd_dominance", "pooled_table", "read_episode_table"]
@@ -82,7 +86,7 @@ def cmd_dominance(args: argparse.Namespace) -> int:
         laws = given or [p for p in default_laws(table, learner) if p not in learners]
         check_covered(table, [learner, *laws])
         judged.append((learner, laws, dominance(table, learner, laws)))
-    pooled = _pooled_note(runs, table) if len(runs) > 1 else ""
+    pooled = _pooled_note(runs, table, _code_notes(runs)) if len(runs) > 1 else ""
     calibrated: dict[tuple[str, ...], Any] = {}
     files: dict[str, str] = {}  # file name -> text, written together at the end
     written: list[str] = []
@@ -432,16 +436,29 @@ def _meta(run: Path) -> dict[str, Any]:
     return meta
 
 
-def _pooled_note(runs: list[Path], table: Any) -> str:
-    """The line that opens a pooled report: which runs, how many episodes a cell."""
+def _code_notes(runs: list[Path]) -> list[str]:
+    """What the pooled report notes about the runs' code (:func:`eval.provenance.code_notes`),
+    each note also warned of on stderr."""
+    from eval.provenance import code_notes
+
+    notes = code_notes(runs, [_meta(run) for run in runs])
+    for note in notes:
+        print(f"{PROG}: warning: {note}", file=sys.stderr)
+    return notes
+
+
+def _pooled_note(runs: list[Path], table: Any, notes: Sequence[str] = ()) -> str:
+    """The line that opens a pooled report: which runs, how many episodes a cell; then each of
+    ``notes`` (on the runs' code) as a paragraph of its own."""
     from eval.stats import variant_column
 
     cells = table.groupby(["policy", variant_column(table)]).size()
     per = f"{cells.min():,}" if cells.min() == cells.max() else f"{cells.min():,}-{cells.max():,}"
-    return (
+    head = (
         f"Pooled from {len(runs)} runs ({', '.join(str(r) for r in runs)}): {per} episodes "
         "per policy and scenario.\n\n"
     )
+    return head + "".join(f"Note: {note}.\n\n" for note in notes)
 
 
 def _learners_table(judged: list[tuple[str, list[str], Any]]) -> str:

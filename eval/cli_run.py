@@ -175,6 +175,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     """``follow-eval run``: see the module docstring."""
     from eval.grid import model_digest
     from eval.journal import UnitJournal, journal_folder
+    from eval.provenance import code_revision
     from eval.report import markdown_report, safe_name, write_tables, write_video
     from eval.rollout import Episode, chunk_size, rollout
     from eval.scoring import score
@@ -198,6 +199,9 @@ def cmd_run(args: argparse.Namespace) -> int:
     # between an interrupted run and its resume is another run, not mixed into this one.
     digests = {label: d for label, p in built if (d := model_digest(p)) is not None}
     run |= {"model_sha256": digests} if digests else {}
+    # The code the episodes run, read once before any of them, as the models are: pooling
+    # runs (`follow-eval dominance`) compares it.
+    code = code_revision()
     # Without step logs a unit keeps rows, not episodes: its journal is of another run. It
     # keeps the plot seed's episodes whole, so another --plot-seed is another run too (a run
     # with logs keeps every episode, and its journal stays as it was).
@@ -302,6 +306,7 @@ def cmd_run(args: argparse.Namespace) -> int:
             "ideal_baseline": bool(args.ideal_baseline),
             "step_logs": not args.no_logs,
             "versions": _versions(),
+            "code": code,  # eval.provenance: sources digest, git commit and whether edited
         }
         write_tables(tmp, summary, table, comparisons, meta, tables=task.tables)
         atomic_write_text(tmp / "meta.json", json.dumps(meta, indent=2) + "\n")

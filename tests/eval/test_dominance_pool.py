@@ -19,6 +19,7 @@ META = {
     "config": "thesis",
     "ideal_baseline": False,
     "policies": {"ppo": "PPOPolicy(name='ppo')", "pn:tuned": "PNParams(kv=5)"},
+    "code": {"sources_sha256": "c0de" * 16, "git": "1234567890ab" * 3 + "cdef", "git_dirty": False},
 }
 
 
@@ -265,3 +266,45 @@ def test_two_runs_of_one_agent_path_holding_two_models_are_not_pooled(
     assert err.count("\n") == 1
     assert f"{runs[1]}: the model under agent is not the one in {runs[0]}" in err
     assert not out.exists()
+
+
+def _code(digest: str | None, git: str | None) -> dict:
+    """:data:`META` made by other code (``digest``), or by code it does not record (None)."""
+    meta = json.loads(json.dumps(META))
+    if digest is None:
+        del meta["code"]
+    else:
+        meta["code"] = {"sources_sha256": digest, "git": git, "git_dirty": git is not None}
+    return meta
+
+
+def test_runs_of_the_same_code_pool_without_a_note(tmp_path: Path, capsys) -> None:
+    a, b = _run(tmp_path / "a", 0, 4), _run(tmp_path / "b", 10, 4)
+    out = tmp_path / "pooled"
+    assert main(["dominance", str(a), str(b), "--learner", "ppo", "--out", str(out)]) == 0
+    assert capsys.readouterr().err == ""
+    assert "Note:" not in (out / "dominance-ppo.md").read_text()
+
+
+def test_runs_of_other_code_are_pooled_with_a_warning_and_a_note(tmp_path: Path, capsys) -> None:
+    a = _run(tmp_path / "a", 0, 4)
+    b = _run(tmp_path / "b", 10, 4, meta=_code("beef" * 16, "fedcba987654" * 3 + "3210"))
+    out = tmp_path / "pooled"
+    assert main(["dominance", str(a), str(b), "--learner", "ppo", "--out", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1
+    assert err.startswith("follow-eval: warning: ")
+    assert f"{a} (git 1234567890ab, sources c0dec0dec0de)" in err
+    assert f"{b} (git fedcba987654 + uncommitted edits, sources beefbeefbeef)" in err
+    report = (out / "dominance-ppo.md").read_text().split("\n\n")
+    assert report[0].startswith("Pooled from 2 runs")
+    assert report[1].startswith("Note: the runs were made from different simulator, policy")
+
+
+def test_a_run_that_records_no_code_is_noted_as_unknown(tmp_path: Path, capsys) -> None:
+    a, b = _run(tmp_path / "a", 0, 4), _run(tmp_path / "b", 10, 4, meta=_code(None, None))
+    out = tmp_path / "pooled"
+    assert main(["dominance", str(a), str(b), "--learner", "ppo", "--out", str(out)]) == 0
+    assert f"warning: {b}: its code revision is unknown" in capsys.readouterr().err
+    report = (out / "dominance-ppo.md").read_text().split("\n\n")
+    assert report[1].startswith(f"Note: {b}: its code revision is unknown")
