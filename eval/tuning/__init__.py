@@ -17,8 +17,9 @@ PersonFollow, ``coordinate`` and ``pid`` on LineTrace. It replaces the grids of 
    ``OUT/study.journal``), or an RDB URL for several machines. The same command on the same
    storage resumes the study and runs only the trials still missing.
 4. **Held-out check** (:mod:`eval.tuning.holdout`): the top trials and the current preset
-   re-scored on held-out seeds 2000 + k, with bootstrap CIs, and one chosen by the
-   one-standard-error rule, replacing the preset only on evidence.
+   re-scored on held-out seeds 2000 + k, with bootstrap CIs and paired permutation tests,
+   and one chosen by the one-standard-error rule, replacing the preset only on evidence (a
+   difference significant by the evaluation's rule, or as good and smoother).
 5. **Output** (:mod:`eval.tuning.report`): ``OUT/result.json`` and ``OUT/preset.txt`` (written
    atomically), and the table on stdout.
 """

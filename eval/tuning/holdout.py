@@ -4,7 +4,8 @@ The search's best score is biased upwards (the best of many noisy means), so it 
 alone. The top trials (distinct parameters, by search score) and the law's current preset run
 again on held-out seeds (2000 + k: neither tuning nor evaluation seeds), all on the same
 episodes, and each gets its mean reward per episode with a 95 % bootstrap CI and its paired
-difference from the current preset with a CI (:func:`eval.stats.mean_ci`).
+difference from the current preset with a CI and a sign-flip permutation p-value
+(:func:`eval.stats.paired_test`).
 
 The choice (:func:`choose`) is the one-standard-error rule, as the grid search before it made
 it, with one addition: every candidate whose paired shortfall against the held-out top scorer is
@@ -13,10 +14,12 @@ collided) in no more episodes than the top scorer, is "as good" (``within_1se``)
 one that turns most smoothly (lowest mean turn accel RMS) is ``chosen``. (Without the failure
 clause a candidate could pass *because* of a failure: its one very bad episode widens the very
 standard error it is measured against.) The current preset is a candidate,
-and a trial replaces it only with evidence: a held-out mean above the preset's (the paired
-difference's CI above 0), or within one standard error of the best and a smoother turn than the
-preset's. So the preset stays unless a trial scored better, or as well and more smoothly, on
-episodes none of them was tuned on; :func:`verdict` says which.
+and a trial replaces it only with evidence: a held-out mean significantly above the preset's
+by the evaluation's rule (:data:`eval.dominance.RULE`: the paired difference's 95 % CI above 0
+*and* its permutation p < 0.05, :attr:`eval.stats.PairedTest.direction`), or within one
+standard error of the best and a smoother turn than the preset's. So the preset stays unless a
+trial scored better, or as well and more smoothly, on episodes none of them was tuned on;
+:func:`verdict` says which.
 """
 
 from __future__ import annotations
@@ -29,7 +32,7 @@ import numpy as np
 import optuna
 from optuna.trial import TrialState
 
-from eval.stats import mean_ci
+from eval.stats import ALPHA, PairedTest, mean_ci, paired_test
 from eval.tuning.objective import LawObjective
 
 __all__ = ["Candidate", "choose", "holdout_candidates", "reevaluate", "rounded", "verdict"]
@@ -109,8 +112,9 @@ def choose(
     :param episodes: per candidate, per-episode arrays on the same episodes in the same order:
         ``score`` (summed reward), ``turn_accel_rms_rad_s2`` and ``failed`` (0/1).
     :returns: per candidate: ``label, trial, search_score, holdout_mean, ci_low, ci_high,
-        diff_vs_current, diff_ci_low, diff_ci_high, se_gap, within_1se, turn_accel_rms_rad_s2,
-        failed, chosen, values``.
+        diff_vs_current, diff_ci_low, diff_ci_high, diff_perm_p, se_gap, within_1se,
+        turn_accel_rms_rad_s2, failed, chosen, values`` (the current preset's difference is
+        the point 0 with p = 1).
     """
     if not candidates or len(candidates) != len(episodes):
         raise ValueError("give one set of episodes per candidate, at least one candidate")
@@ -129,10 +133,11 @@ def choose(
     for i, (c, e) in enumerate(zip(candidates, episodes, strict=True)):
         low, high = mean_ci(scores[i], BOOTSTRAP_SEED, c.label, "holdout")
         diff = scores[i] - current
-        d_low, d_high = (
-            (0.0, 0.0)
+        # paired_test draws its CI from the stream mean_ci drew it from: the intervals as before
+        test = (
+            PairedTest(0.0, 0.0, 0.0, 1.0)
             if i == len(candidates) - 1
-            else mean_ci(diff, BOOTSTRAP_SEED, c.label, candidates[-1].label, "diff")
+            else paired_test(diff, BOOTSTRAP_SEED, c.label, candidates[-1].label, "diff")
         )
         rows.append(
             {
@@ -143,8 +148,9 @@ def choose(
                 "ci_low": low,
                 "ci_high": high,
                 "diff_vs_current": float(diff.mean()),
-                "diff_ci_low": d_low,
-                "diff_ci_high": d_high,
+                "diff_ci_low": test.low,
+                "diff_ci_high": test.high,
+                "diff_perm_p": test.p,
                 "se_gap": float(se[i]),
                 "within_1se": bool(within[i]),
                 "turn_accel_rms_rad_s2": float(np.nanmean(e["turn_accel_rms_rad_s2"])),
@@ -158,15 +164,24 @@ def choose(
     best = min(
         pool, key=lambda r: (r["turn_accel_rms_rad_s2"], r["trial"] is not None, -r["holdout_mean"])
     )
-    # Only evidence replaces the current preset: a held-out score better than its (the paired
-    # difference's CI above 0), or one as good and a smoother turn.
+    # Only evidence replaces the current preset: a held-out score significantly better than
+    # the preset's by the evaluation's rule (CI above 0 and permutation p < ALPHA: the CI
+    # alone calls too many differences significant on paired seeds, eval.stats), or one as
+    # good and a smoother turn.
     now = rows[-1]
-    if not (
-        best["diff_ci_low"] > 0 or best["turn_accel_rms_rad_s2"] < now["turn_accel_rms_rad_s2"]
-    ):
+    if not (_better(best) or best["turn_accel_rms_rad_s2"] < now["turn_accel_rms_rad_s2"]):
         best = now
     best["chosen"] = True
     return rows
+
+
+def _better(row: Mapping[str, Any]) -> bool:
+    """Whether a held-out row's paired difference from the current preset is significantly
+    above 0 by the evaluation's rule (:attr:`eval.stats.PairedTest.direction`)."""
+    test = PairedTest(
+        row["diff_vs_current"], row["diff_ci_low"], row["diff_ci_high"], row["diff_perm_p"]
+    )
+    return test.direction > 0
 
 
 def verdict(rows: Sequence[Mapping[str, Any]]) -> str:
@@ -176,8 +191,11 @@ def verdict(rows: Sequence[Mapping[str, Any]]) -> str:
     if chosen is current:
         return f"keep {current['label']}: no trial is better on the held-out seeds by the rule"
     low, high = chosen["diff_ci_low"], chosen["diff_ci_high"]
-    if low > 0:
-        how = "better than the current preset (its paired difference's CI is above 0)"
+    if _better(chosen):
+        how = (
+            "better than the current preset (its paired difference's 95 % CI is above 0 and "
+            f"the permutation test's p < {ALPHA:g})"
+        )
     else:
         where = "also within it" if current["within_1se"] else "below it"
         how = (
@@ -186,5 +204,6 @@ def verdict(rows: Sequence[Mapping[str, Any]]) -> str:
         )
     return (
         f"replace {current['label']} by {chosen['label']}: {how}; paired difference "
-        f"{chosen['diff_vs_current']:+.2f} [{low:+.2f}, {high:+.2f}] per episode"
+        f"{chosen['diff_vs_current']:+.2f} [{low:+.2f}, {high:+.2f}] per episode, "
+        f"p {chosen['diff_perm_p']:.2g}"
     )

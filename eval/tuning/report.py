@@ -16,8 +16,10 @@ def _fmt(value: float) -> str:
 
 def table_text(rows: Sequence[Mapping[str, Any]], summary: Mapping[str, Any]) -> str:
     """The held-out table (Markdown): per candidate its values, search score, held-out mean
-    reward per episode [95 % CI], paired difference from the current preset [CI], the
-    one-standard-error flag, turn accel RMS and failures; then the verdict."""
+    reward per episode [95 % CI], paired difference from the current preset [CI] and its
+    permutation p, the one-standard-error flag, turn accel RMS and failures; then the verdict
+    (a trial is better by the rule of :func:`eval.tuning.holdout.choose`: CI above 0 and p <
+    0.05)."""
     a, b = summary["holdout_seeds"]
     n_variants = len(summary["holdout_variants"])
     head = (
@@ -28,9 +30,9 @@ def table_text(rows: Sequence[Mapping[str, Any]], summary: Mapping[str, Any]) ->
     lines = [
         head,
         "",
-        "| candidate | values | search | held-out | vs current | within 1 SE | turn accel RMS "
+        "| candidate | values | search | held-out | vs current | p | within 1 SE | turn accel RMS "
         "(rad/s²) | failed | chosen |",
-        "|---|---|---:|---:|---:|:---:|---:|---:|:---:|",
+        "|---|---|---:|---:|---:|---:|:---:|---:|---:|:---:|",
     ]
     for r in rows:
         values = ", ".join(f"{k}={_fmt(v)}" for k, v in r["values"].items())
@@ -38,7 +40,7 @@ def table_text(rows: Sequence[Mapping[str, Any]], summary: Mapping[str, Any]) ->
         held = f"{r['holdout_mean']:.2f} [{r['ci_low']:.2f}, {r['ci_high']:.2f}]"
         diff = f"{r['diff_vs_current']:+.2f} [{r['diff_ci_low']:+.2f}, {r['diff_ci_high']:+.2f}]"
         lines.append(
-            f"| {r['label']} | {values} | {search} | {held} | {diff} | "
+            f"| {r['label']} | {values} | {search} | {held} | {diff} | {r['diff_perm_p']:.2g} | "
             f"{'yes' if r['within_1se'] else 'no'} | {r['turn_accel_rms_rad_s2']:.3f} | "
             f"{r['failed']} | {'**yes**' if r['chosen'] else ''} |"
         )

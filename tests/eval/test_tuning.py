@@ -10,7 +10,16 @@ import optuna
 import pytest
 from optuna.trial import TrialState
 
-from eval.tuning import Candidate, LawObjective, SearchConfig, choose, open_study, run_search, rungs
+from eval.tuning import (
+    Candidate,
+    LawObjective,
+    SearchConfig,
+    choose,
+    open_study,
+    run_search,
+    rungs,
+    verdict,
+)
 from eval.tuning.cli import main
 from eval.tuning.objective import EVAL_SEEDS, HOLDOUT_SEED0, TUNE_SEED0
 from execution import Backend
@@ -149,6 +158,43 @@ def test_choose_replaces_the_preset_only_on_evidence() -> None:
     smoother = rows(0.0, trial_turn=0.5)  # as good, smoother: replaced
     assert smoother[0]["chosen"]
     assert smoother[1]["within_1se"]
+
+
+def _two(trial_score: np.ndarray, preset_score: np.ndarray) -> list[dict]:
+    """The held-out rows of a rougher trial against the preset, on the same episodes."""
+    n = len(preset_score)
+    episodes = [
+        {"score": trial_score, "turn_accel_rms_rad_s2": np.full(n, 2.0), "failed": np.zeros(n)},
+        {"score": preset_score, "turn_accel_rms_rad_s2": np.full(n, 1.0), "failed": np.zeros(n)},
+    ]
+    return choose([Candidate("trial 1", {"x": 1.0}, trial=1), Candidate("pn:tuned", {})], episodes)
+
+
+def test_a_ci_above_zero_is_not_enough_without_the_permutation_test() -> None:
+    """Five of 40 paired episodes 10 better, the rest alike: the bootstrap CI lies above 0, but
+    the sign-flip test of those five gives p = 2/32; by the evaluation's rule that is a tie, and
+    a rougher trial does not replace the preset on it."""
+    preset = np.random.default_rng(1).normal(100.0, 1.0, 40)
+    jumps = np.zeros(40)
+    jumps[[3, 11, 19, 27, 35]] = 10.0
+    rows = _two(preset + jumps, preset)
+    assert rows[0]["diff_ci_low"] > 0
+    assert 0.05 <= rows[0]["diff_perm_p"] < 0.08
+    assert rows[0]["within_1se"]  # the top scorer: only the rule keeps it out
+    assert rows[1]["chosen"]
+    assert verdict(rows) == "keep pn:tuned: no trial is better on the held-out seeds by the rule"
+
+
+def test_a_trial_better_by_the_rule_replaces_the_preset_and_the_verdict_says_so() -> None:
+    rng = np.random.default_rng(2)
+    preset = rng.normal(100.0, 1.0, 40)
+    rows = _two(preset + 2.0 + rng.normal(0.0, 0.5, 40), preset)
+    assert rows[0]["chosen"]
+    assert rows[0]["diff_perm_p"] < 0.05 < rows[1]["diff_perm_p"]
+    said = verdict(rows)
+    assert said.startswith("replace pn:tuned by trial 1: better than the current preset (its")
+    assert "95 % CI is above 0 and the permutation test's p < 0.05" in said
+    assert said.endswith(f"per episode, p {rows[0]['diff_perm_p']:.2g}")
 
 
 def test_a_candidate_that_failed_more_often_than_the_top_is_not_as_good() -> None:
