@@ -30,7 +30,7 @@ from eval.metrics import (
     metric_label,
 )
 from eval.rollout import Episode
-from eval.stats import ALPHA, SMALL_CELL, PairedTest, pairing_notes, variant_column
+from eval.stats import ALPHA, SMALL_CELL, PairedTest, error_bars, pairing_notes, variant_column
 from follow_env.sim.atomic import atomic_path, atomic_write_text
 
 __all__ = [
@@ -104,14 +104,16 @@ def _small_note(what: str) -> str:
     )
 
 
-def _with_ci(summary: pd.DataFrame, name: str) -> pd.Series:
+def _with_ci(summary: pd.DataFrame, name: str) -> tuple[pd.Series, bool]:
     """``mean [low, high]`` per row; ``(n=k)`` after it where the metric has a value on fewer
     episodes than the cell holds (``<name>_n``), and :data:`SMALL_MARK` after an interval of
-    fewer than :data:`eval.stats.SMALL_CELL` values."""
+    fewer than :data:`eval.stats.SMALL_CELL` values; and whether some interval is so marked
+    (decided here only, so the footnote goes with the marks)."""
     d = metric_digits(name)
     episodes = summary["episodes"].to_numpy()
     counts = summary[f"{name}_n"].to_numpy() if f"{name}_n" in summary else episodes
     cells = []
+    marked = False
     for m, lo, hi, n, total in zip(
         summary[name],
         summary[f"{name}_ci_low"],
@@ -123,10 +125,11 @@ def _with_ci(summary: pd.DataFrame, name: str) -> pd.Series:
         text = f"{_fmt(m, d)} [{_fmt(lo, d)}, {_fmt(hi, d)}]" if np.isfinite(lo) else _fmt(m, d)
         if np.isfinite(lo) and n < SMALL_CELL:
             text += SMALL_MARK
+            marked = True
         if 0 < n < total:
             text += f" (n={int(n)})"
         cells.append(text)
-    return pd.Series(cells, index=summary.index)
+    return pd.Series(cells, index=summary.index), marked
 
 
 def _metric_table(
@@ -135,13 +138,10 @@ def _metric_table(
     """The columns ``policy, scenario, episodes`` and a ``mean [95 % CI]`` column per metric;
     and whether some interval is marked :data:`SMALL_MARK`."""
     table = summary[["policy", variant_column(summary), "episodes"]].copy()
+    marked = False
     for name in names:
-        table[metric_label(name, tables.metrics)] = _with_ci(summary, name)
-    marked = any(
-        bool(np.any(np.isfinite(summary[f"{m}_ci_low"]) & (summary[f"{m}_n"] < SMALL_CELL)))
-        for m in names
-        if f"{m}_n" in summary
-    )
+        table[metric_label(name, tables.metrics)], small = _with_ci(summary, name)
+        marked |= small
     return table, marked
 
 
@@ -363,8 +363,7 @@ def plot_metric_bars(
             mean = rows[name].to_numpy(dtype=float)
             low = rows[f"{name}_ci_low"].to_numpy(dtype=float)
             high = rows[f"{name}_ci_high"].to_numpy(dtype=float)
-            err = np.vstack([mean - low, high - mean])
-            err = np.where(np.isfinite(err), err, 0.0)
+            err = error_bars(mean, low, high)
             ax.bar(
                 x + (i - (len(policies) - 1) / 2) * width,
                 mean,

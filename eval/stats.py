@@ -60,6 +60,7 @@ __all__ = [
     "binary_metrics",
     "compare",
     "episode_table",
+    "error_bars",
     "mean_ci",
     "metric_columns",
     "paired_test",
@@ -330,6 +331,17 @@ def paired_test(diff: np.ndarray, seed: int, *names: str) -> PairedTest:
     low, high = _ci(diff, _stream(seed, *names))
     p = _sign_flip_p(diff, _stream(seed, *names, _SIGN_FLIP))
     return PairedTest(float(diff.mean()) if diff.size else np.nan, low, high, p)
+
+
+def error_bars(mean: np.ndarray, low: np.ndarray, high: np.ndarray) -> np.ndarray:
+    """The ``(2, n)`` distances from each mean down to its interval's low end and up to its
+    high end, as matplotlib's ``yerr`` takes them: 0 where an interval is missing (NaN), and 0
+    where the mean lies outside its interval. That happens: ``np.mean`` of identical values
+    can differ from them in the last bit (the interval is then the value itself), and a BCa
+    interval of skewed values can exclude their mean; matplotlib refuses negative lengths."""
+    mean = np.asarray(mean, dtype=np.float64)
+    err = np.vstack([mean - np.asarray(low, np.float64), np.asarray(high, np.float64) - mean])
+    return np.where(np.isfinite(err), np.maximum(err, 0.0), 0.0)
 
 
 def mean_ci(values: np.ndarray, seed: int, *names: str) -> tuple[float, float]:

@@ -34,7 +34,7 @@ import pandas as pd
 from scipy import stats as scipy_stats
 
 from eval.rollout import rollout
-from eval.stats import episode_table, summarize
+from eval.stats import episode_table, error_bars, summarize
 from follow_env.sim.atomic import atomic_path, atomic_write_text
 
 __all__ = [
@@ -224,7 +224,7 @@ def _plots(table: pd.DataFrame, folder: Path) -> None:
             part = table[(table["metric"] == metric) & (table["chain"] == chain)]
             x = np.arange(len(part)) + (k - 1) * 0.25
             mean = part["mean"].to_numpy()
-            err = [mean - part["ci_low"].to_numpy(), part["ci_high"].to_numpy() - mean]
+            err = error_bars(mean, part["ci_low"].to_numpy(), part["ci_high"].to_numpy())
             bars = ax.errorbar(x, mean, yerr=err, fmt="o", capsize=3, label=f"simulation, {chain}")
             colour = bars.lines[0].get_color()
             ax.vlines(
