@@ -31,6 +31,7 @@ from follow_env.sim.checks import one_line
 from train.rules import (
     Check,
     ConfigError,
+    decimal,
     fail,
     flag,
     integer,
@@ -176,11 +177,9 @@ def _ent_coef(where: str, key: str, value: Any) -> Any:
     if value == "auto":
         return value
     if isinstance(value, str) and value.startswith("auto_"):
-        try:
-            if float(value[5:]) > 0:
-                return value
-        except ValueError:
-            pass
+        start = decimal(value[5:])  # SB3 reads value.split("_")[1]: "auto_1_0" would be 1
+        if start is not None and 0 < start < float("inf"):
+            return value
     raise fail(where, key, value, "a number >= 0, 'auto', or 'auto_<x>' with x > 0")
 
 

@@ -66,6 +66,8 @@ from train.rules import (
     fail,
     flag,
     integer,
+    net_arch,
+    normalize_gamma,
     number,
     schedule,
     unsupported,
@@ -99,6 +101,16 @@ ZOO_KEYS = (
     "vec_env_wrapper",
     "env_kwargs",
 )
+# Keys rl-zoo3 reads that follow-train does not, and why (refused by name, not as "not PPO
+# arguments": the file is rl-zoo3's format, and its reader should learn what to do instead).
+_ZOO_KEYS_REFUSED = {
+    "env_wrapper": "the lanes are one batched env, not Gymnasium envs to wrap one by one; list "
+    "VecEnvWrappers under vec_env_wrapper",
+    "callback": "follow-train sets its own callbacks (checkpoints, the held-out evaluation)",
+    "monitor_kwargs": "the VecMonitor below the wrappers logs the env's own returns",
+    "noise_type": "action noise cannot be set (SAC explores by its entropy)",
+    "noise_std": "action noise cannot be set (SAC explores by its entropy)",
+}
 # gym.make keyword arguments follow-train sets itself (--scenarios, --env-config; no rendering).
 _ENV_KWARGS_OWN = ("scenario", "config", "render_mode")
 
@@ -225,15 +237,24 @@ def parse_hyperparams(
     hp.setdefault("policy", learner.policies[0])
     policy = policy_class(hp["policy"], where=where, algo=learner.name)
     hp["normalize"] = _check_normalize(where, hp.setdefault("normalize", False))
+    normalize_gamma(where, hp)
     frames = hp.setdefault("frame_stack", 1)
     hp["frame_stack"] = integer(where, "frame_stack", frames, 1, MAX_FRAME_STACK)
-    _check_policy_kwargs(where, learner, policy, hp.setdefault("policy_kwargs", {}))
+    if hp.setdefault("policy_kwargs", {}) is None:  # SB3's and rl-zoo3's "none given"
+        hp["policy_kwargs"] = {}
+    _check_policy_kwargs(where, learner, policy, hp["policy_kwargs"])
     specs = wrapper_specs(hp.setdefault("vec_env_wrapper", []), where=where)
     _refuse_double_stack(where, hp["frame_stack"], specs)
     _check_privileged(where, hp, specs)
     if "env_kwargs" in hp:
         hp["env_kwargs"] = _check_env_kwargs(where, hp["env_kwargs"])
     unknown = sorted(set(hp) - set(ZOO_KEYS) - {"policy_kwargs"} - set(learner.rules))
+    for key in unknown:
+        if key in _ZOO_KEYS_REFUSED:
+            raise ConfigError(
+                f"{where}: {key}={hp[key]!r} is an rl-zoo3 key follow-train does not take: "
+                f"{_ZOO_KEYS_REFUSED[key]}; leave it out"
+            )
     if unknown:
         raise ConfigError(
             f"{where}: unknown key(s) {', '.join(unknown)} (not {learner.label} arguments)"
@@ -361,7 +382,12 @@ def _accepted_arguments(cls: type) -> set[str]:
 
 def _check_policy_kwargs(where: str, learner: Algo, policy: Any, kwargs: Any) -> None:
     if not isinstance(kwargs, Mapping):
-        raise ConfigError(f"{where}: policy_kwargs must be a mapping (strings are not evaluated)")
+        raise fail(
+            where,
+            "policy_kwargs",
+            kwargs,
+            "a mapping of the policy's arguments (strings are not evaluated)",
+        )
     cls = learner.base_policy() if isinstance(policy, str) else policy
     accepted = _accepted_arguments(cls) - set(_SET_BY_ALGO)
     for key, value in kwargs.items():
@@ -372,7 +398,7 @@ def _check_policy_kwargs(where: str, learner: Algo, policy: Any, kwargs: Any) ->
                 f"(accepted: {', '.join(sorted(accepted))})"
             )
         if key == "net_arch":
-            _check_net_arch(where, value, learner.net_arch_keys)
+            net_arch(where, value, learner.net_arch_keys)
         elif key in learner.policy_rules:
             learner.policy_rules[key](where, field, value)
         elif key in _CLASS_ARGUMENTS:
@@ -383,30 +409,6 @@ def _check_policy_kwargs(where: str, learner: Algo, policy: Any, kwargs: Any) ->
             number(where, field, value, -math.inf)
         elif key.endswith("_kwargs") and not isinstance(value, Mapping | None):
             raise fail(where, field, value, "a mapping")
-
-
-def _check_net_arch(where: str, value: Any, keys: tuple[str, str] = ("pi", "vf")) -> None:
-    """A list of layer sizes, or a mapping of them with the actor's and critic's ``keys``."""
-
-    def layers(item: Any) -> bool:
-        return isinstance(item, list) and all(
-            isinstance(n, int) and not isinstance(n, bool) and n >= 1 for n in item
-        )
-
-    if isinstance(value, Mapping):
-        ok = set(value) <= set(keys) and all(layers(v) for v in value.values())
-    else:
-        ok = layers(value)
-    if not ok:
-        raise fail(
-            where,
-            "policy_kwargs.net_arch",
-            value,
-            "a list of layer sizes (integers >= 1), or "
-            + "{"
-            + ", ".join(f"{key}: [...]" for key in keys)
-            + "}",
-        )
 
 
 def policy_class(name: str, *, where: str = "policy", algo: str = DEFAULT_ALGO) -> Any:

@@ -87,7 +87,9 @@ def agent_env(
             venv = VecNormalize.load(str(normalization), venv)
         else:
             kwargs = dict(hp["normalize"]) if isinstance(hp["normalize"], dict) else {}
-            kwargs.setdefault("gamma", hp.get("gamma", 0.99))  # rl-zoo3 does the same
+            # rl-zoo3 does the same: the algorithm's gamma (a normalize.gamma that differs from
+            # it is refused, train.config), else VecNormalize's default
+            kwargs.setdefault("gamma", hp.get("gamma", 0.99))
             venv = VecNormalize(venv, **kwargs)
         if mode != "train":
             venv.training = False

@@ -10,17 +10,21 @@ tables built from these checks.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+import re
+from collections.abc import Callable, Mapping
 from typing import Any
 
 __all__ = [
     "Check",
     "ConfigError",
+    "decimal",
     "fail",
     "finite",
     "flag",
     "integer",
     "is_number",
+    "net_arch",
+    "normalize_gamma",
     "number",
     "optional",
     "positive_schedule",
@@ -90,6 +94,42 @@ def flag(where: str, key: str, value: Any) -> bool:
     return value
 
 
+def net_arch(where: str, value: Any, keys: tuple[str, ...] = ("pi", "vf")) -> None:
+    """A list of layer sizes, or a mapping of them with the actor's and critic's ``keys``."""
+
+    def layers(item: Any) -> bool:
+        return isinstance(item, list) and all(
+            isinstance(n, int) and not isinstance(n, bool) and n >= 1 for n in item
+        )
+
+    if isinstance(value, Mapping):
+        ok = set(value) <= set(keys) and all(layers(v) for v in value.values())
+    else:
+        ok = layers(value)
+    if not ok:
+        raise fail(
+            where,
+            "policy_kwargs.net_arch",
+            value,
+            "a list of layer sizes (integers >= 1), or "
+            + "{"
+            + ", ".join(f"{key}: [...]" for key in keys)
+            + "}",
+        )
+
+
+def normalize_gamma(where: str, hp: Mapping[str, Any]) -> None:
+    """A ``normalize.gamma`` other than the algorithm's ``gamma`` is refused: rl-zoo3 replaces
+    it by that ``gamma``, so the same file would train differently there and here."""
+    norm = hp["normalize"]
+    given = isinstance(norm, Mapping) and "gamma" in norm and "gamma" in hp
+    if given and norm["gamma"] != hp["gamma"]:
+        raise ConfigError(
+            f"{where}: normalize.gamma={norm['gamma']!r} differs from gamma={hp['gamma']!r}: "
+            "rl-zoo3 replaces it by the algorithm's gamma; leave normalize.gamma out"
+        )
+
+
 def positive_schedule(where: str, key: str, value: Any) -> Any:
     """A number > 0 or ``lin_<x>`` (:func:`schedule`), stored as written."""
     schedule(value, where=f"{where}: {key}")
@@ -115,6 +155,17 @@ def unsupported(where: str, key: str, value: Any) -> Any:
     return value
 
 
+#: A decimal number as rl-zoo3's files write one (``3e-4``, ``0.0003``, ``.5``): no sign, no
+#: spaces, no ``_`` (Python's ``float`` reads ``"1_0"`` as 10, which rl-zoo3 refuses).
+_DECIMAL = re.compile(r"(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][-+]?[0-9]+)?")
+
+
+def decimal(text: str) -> float | None:
+    """``text`` as a number if it is a plain decimal literal (:data:`_DECIMAL`), else None: the
+    ``<x>`` of ``lin_<x>`` and of SAC's ``auto_<x>``."""
+    return float(text) if _DECIMAL.fullmatch(text) else None
+
+
 def schedule(value: Any, *, where: str = "schedule") -> float | Callable[[float], float]:
     """A number > 0, or rl-zoo3's ``"lin_<x>"`` (x > 0): ``x`` times SB3's progress_remaining
     (1 at the start of training, 0 at the end).
@@ -125,10 +176,7 @@ def schedule(value: Any, *, where: str = "schedule") -> float | Callable[[float]
     if is_number(value):
         start = float(value) if finite(value) else None
     elif isinstance(value, str) and value.startswith("lin_"):
-        try:
-            start = float(value[4:])
-        except ValueError:
-            start = None
+        start = decimal(value[4:])
     if start is None or not (math.isfinite(start) and start > 0):
         raise ConfigError(
             f"{where}={value!r} is out of range: must be a number > 0, or 'lin_<number>' with "

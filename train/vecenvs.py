@@ -52,6 +52,13 @@ class ConcatVecEnv(VecEnv):
     the other each step (a core's kernel is fast enough that threads would not pay off at a few
     lanes per scenario).
 
+    SB3's VecEnv conventions hold for the whole as for each part: ``reset_infos`` is the
+    parts' ``reset_infos`` in lane order (after ``reset()``, and for a lane its part reset in
+    ``step_wait``), a finished lane's info keeps its part's ``terminal_observation`` and
+    ``TimeLimit.truncated``, and ``seed``, ``set_options``, ``get_attr``, ``set_attr``,
+    ``env_method`` and ``close`` reach the parts (lane ``j`` of the whole is lane ``j - start``
+    of its part).
+
     :param venvs: the sub-envs; their observation and action spaces must be equal, and so
         their platforms and action entries (:func:`env_platform`, :func:`env_action_names`),
         which it reports as its own ``platform_name`` and ``action_names``.
@@ -91,8 +98,27 @@ class ConcatVecEnv(VecEnv):
         self._reset_seeds()
         return seeds
 
+    def set_options(self, options: list[dict] | dict | None = None) -> None:
+        """Options for the next reset, passed on to the sub-envs (SB3's convention: one dict
+        for every lane, or a list of one per lane of the whole; a sub-env that takes no options
+        refuses them at its reset, as it would alone)."""
+        if options is None or isinstance(options, dict):
+            for venv in self.venvs:
+                venv.set_options(options)
+            return
+        if len(options) != self.num_envs:
+            raise ValueError(
+                f"set_options: {len(options)} option dicts for {self.num_envs} lanes; give "
+                "one per lane, or one dict for all"
+            )
+        for venv, part in zip(self.venvs, self._slices(), strict=True):
+            venv.set_options(list(options[part]))
+
     def reset(self) -> VecEnvObs:
-        return np.concatenate([v.reset() for v in self.venvs])
+        """Reset every sub-env; ``reset_infos`` is then their ``reset_infos`` in lane order."""
+        obs = np.concatenate([v.reset() for v in self.venvs])
+        self.reset_infos = [info for v in self.venvs for info in v.reset_infos]
+        return obs
 
     def step_async(self, actions: np.ndarray) -> None:
         for venv, part in zip(self.venvs, self._slices(), strict=True):
@@ -104,6 +130,11 @@ class ConcatVecEnv(VecEnv):
         rewards = np.concatenate([r[1] for r in results])
         dones = np.concatenate([r[2] for r in results])
         infos = [info for r in results for info in r[3]]
+        # A lane that ended was reset by its sub-env (SB3's same-step autoreset): its new
+        # episode's reset info is in the sub-env's reset_infos, as DummyVecEnv keeps it.
+        for j in np.flatnonzero(dones).tolist():
+            k = int(np.searchsorted(self._bounds, j, side="right")) - 1
+            self.reset_infos[j] = self.venvs[k].reset_infos[j - int(self._bounds[k])]
         return obs, rewards, dones, infos
 
     def close(self) -> None:
@@ -111,9 +142,19 @@ class ConcatVecEnv(VecEnv):
             venv.close()
 
     def _split(self, indices: VecEnvIndices) -> list[tuple[VecEnv, list[int]]]:
-        """Group global lane indices by sub-env, as local indices."""
+        """Group global lane indices by sub-env, as local indices.
+
+        :raises ValueError: for an index outside ``[0, num_envs)`` (it would name a lane of
+            another part, or none).
+        """
         groups: list[tuple[VecEnv, list[int]]] = []
         for j in self._get_indices(indices):
+            if isinstance(j, bool) or not isinstance(j, int | np.integer):
+                raise ValueError(f"indices={indices!r}: {j!r} is not a lane number")
+            if not 0 <= j < self.num_envs:
+                raise ValueError(
+                    f"indices={indices!r} is out of range: must be lanes in [0, {self.num_envs})"
+                )
             k = int(np.searchsorted(self._bounds, j, side="right")) - 1
             local = j - int(self._bounds[k])
             if groups and groups[-1][0] is self.venvs[k]:

@@ -96,6 +96,9 @@ def test_the_mirror_policy_is_ppos_only(name: str) -> None:
         ("sac", {"train_freq": [1, "epoch"]}, r"train_freq=\[1, 'epoch'\] is out of range"),
         ("sac", {"gradient_steps": 0}, r"gradient_steps=0 is out of range: .* or -1"),
         ("sac", {"ent_coef": "auto_0"}, r"ent_coef='auto_0' is out of range"),
+        # SB3 reads auto_<x> as value.split("_")[1]: "auto_1_0" would start at 1, not 10
+        ("sac", {"ent_coef": "auto_1_0"}, r"ent_coef='auto_1_0' is out of range"),
+        ("sac", {"ent_coef": "auto_1e400"}, r"ent_coef='auto_1e400' is out of range"),
         ("sac", {"ent_coef": -0.1}, r"ent_coef=-0\.1 is out of range"),
         ("sac", {"target_entropy": "high"}, r"target_entropy='high' is out of range"),
         ("sac", {"learning_rate": 0}, r"learning_rate=0 is out of range"),

@@ -108,6 +108,33 @@ def test_bad_values_are_rejected_naming_the_key(override: dict, message: str) ->
         parse_hyperparams(MINIMAL | override)
 
 
+@pytest.mark.parametrize(
+    ("override", "message"),
+    [
+        (
+            {"policy_kwargs": "dict(net_arch=[64])"},
+            r"policy_kwargs='dict\(net_arch=\[64\]\)' is out of range: must be a mapping",
+        ),
+        ({"policy_kwargs": [64, 64]}, r"policy_kwargs=\[64, 64\] is out of range"),
+        # rl-zoo3's own keys are named as such, with what to do instead
+        (
+            {"env_wrapper": "gymnasium.wrappers.TimeLimit"},
+            r"env_wrapper='gymnasium.wrappers.TimeLimit' is an rl-zoo3 key follow-train does "
+            r"not take: .* vec_env_wrapper",
+        ),
+        ({"callback": "my.Callback"}, r"callback='my.Callback' is an rl-zoo3 key"),
+        ({"monitor_kwargs": {}}, r"monitor_kwargs=\{\} is an rl-zoo3 key"),
+    ],
+)
+def test_rl_zoo3_forms_are_refused_naming_the_value(override: dict, message: str) -> None:
+    with pytest.raises(ConfigError, match=message):
+        parse_hyperparams(MINIMAL | override)
+
+
+def test_policy_kwargs_null_is_none_given_as_for_sb3_and_rl_zoo3() -> None:
+    assert parse_hyperparams(MINIMAL | {"policy_kwargs": None})["policy_kwargs"] == {}
+
+
 def test_one_frame_history_is_accepted() -> None:
     """The stacking wrapper with frame_stack 1 (ppo_fast.yaml's way), or frame_stack alone."""
     wrapper = [{"train.wrappers.VecStackFrames": {"n_stack": 4}}]
@@ -225,6 +252,19 @@ def test_integral_floats_become_ints_as_yaml_writes_them() -> None:
 def test_schedule_rejects_anything_but_a_positive_number_or_lin(value: object) -> None:
     with pytest.raises(ConfigError, match="is out of range: must be a number > 0"):
         schedule(value)
+
+
+# Python's float() reads "1_0" as 10 and " 3e-4" as 3e-4; rl-zoo3 refuses the first, and a
+# file that means 1.0 or has a stray character must not train at another rate.
+@pytest.mark.parametrize("value", ["lin_1_0", "lin_ 3e-4", "lin_3e-4 ", "lin_1e400", "lin_+1"])
+def test_lin_takes_a_plain_decimal_number_only(value: str) -> None:
+    with pytest.raises(ConfigError, match="'lin_<number>' with the number > 0"):
+        schedule(value)
+
+
+@pytest.mark.parametrize("value", ["lin_3e-4", "lin_0.0003", "lin_.0003", "lin_3E-4"])
+def test_lin_reads_every_way_of_writing_a_decimal(value: str) -> None:
+    assert schedule(value)(1.0) == pytest.approx(3e-4)
 
 
 def test_lin_schedule_decays_linearly_to_zero() -> None:
@@ -525,3 +565,12 @@ def test_a_wrapper_named_as_a_step_but_of_another_class_is_refused() -> None:
     name = f"{__name__}.VecScaleObservation"
     with pytest.raises(ConfigError, match="is named as the step VecScaleObservation but is"):
         parse_hyperparams(MINIMAL | {"vec_env_wrapper": [{name: {"scale": 2.0}}]})
+
+
+def test_a_normalize_gamma_other_than_the_algorithms_is_refused() -> None:
+    """rl-zoo3 replaces normalize.gamma by the algorithm's gamma: the same file must not train
+    with another discount here."""
+    with pytest.raises(ConfigError, match=r"normalize.gamma=0.9 differs from gamma=0.99"):
+        parse_hyperparams(MINIMAL | {"gamma": 0.99, "normalize": {"gamma": 0.9}})
+    same = parse_hyperparams(MINIMAL | {"gamma": 0.99, "normalize": {"gamma": 0.99}})
+    assert same["normalize"]["gamma"] == 0.99
