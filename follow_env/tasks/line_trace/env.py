@@ -88,6 +88,12 @@ class LineTraceEnv(TaskEnv):
     Truncated: ``max_time_s`` (60 s) passed (``time_limit``). ``info["termination"]`` names
     the reason.
 
+    The env ends its episodes itself, so its spec has no ``max_episode_steps``. To cut them
+    shorter, give ``gym.make(..., max_episode_steps=n)`` (a ``TimeLimit``; ``n`` up to
+    ``max_time_s / control_dt_s``, 3,000 steps) or ``episode__max_time_s``; a ``TimeLimit``
+    longer than that is refused at the first reset, naming ``episode__max_time_s``. The vector
+    env and the SB3 adapter take only ``episode__max_time_s``.
+
     ## Arguments
 
     ``gym.make("LineTrace-v0", platform="mecanum", track="course", config="paper",

@@ -89,6 +89,12 @@ class PersonFollowEnv(TaskEnv):
     ``info["termination"]`` names the reason (``collision_wall``, ``collision_person``,
     ``collision_bystander``, ``lost``, ``walk_over``, ``step_limit``).
 
+    The env ends its episodes itself, so its spec has no ``max_episode_steps``. To cut them
+    shorter, give ``gym.make(..., max_episode_steps=n)`` (a ``TimeLimit``; ``n`` up to
+    ``max_steps``) or ``episode__max_steps=n``; a ``TimeLimit`` longer than ``max_steps`` is
+    refused at the first reset, naming ``episode__max_steps``, since the env would truncate
+    first. The vector env and the SB3 adapter take only ``episode__max_steps``.
+
     ## Arguments
 
     ``gym.make("PersonFollow-v0", scenario="curve", config="noisy", render_mode="rgb_array",
