@@ -4,7 +4,8 @@ Two loops, as on the reference robot (reference §1: a guidance node at 10 Hz, a
 the serial nodes below it):
 
 * the **control loop** (this thread) wakes on a monotonic schedule every ``control_dt_s``
-  (0.1 s), reads the perception, asks the policy for ``(v, w)``, clips it to the platform's
+  (0.1 s), reads the perception, asks the policy for ``(v, w)`` (a law that differentiates
+  does so over that period: :func:`policies.adapt.at_period`), clips it to the platform's
   bounds, turns it into wheel speed targets with the platform's inverse kinematics (reference
   §1.1) and writes one step-log row; how late each wake-up was is recorded (p50 / p99);
 * the **wheel loop** (a thread) runs every ``wheel_dt_s`` (10 ms): it reads the MCU's feedback,
@@ -17,11 +18,10 @@ the serial nodes below it):
 On Ctrl-C, at the end of the perception (the world's episode, the replay), after
 ``duration_s``, on a link, perception or policy error (whatever the perception's read or the
 policy's ``act`` raised), or when the wheel loop fails, the wheels are commanded to zero before
-the link closes; a second Ctrl-C during that shutdown is deferred
-(:class:`bridge.interrupts.InterruptGuard`). The step log (:mod:`bridge.runlog`: the
-evaluation's layout) is written to a temporary file and renamed into place, so ``follow-eval
-metrics`` scores a real run like a simulated one, crediting no step to a policy that did not
-drive it."""
+the link closes; a second Ctrl-C then is deferred (:class:`bridge.interrupts.InterruptGuard`).
+The step log (:mod:`bridge.runlog`: the evaluation's layout) is written to a temporary file and
+renamed into place, so ``follow-eval metrics`` scores a real run like a simulated one, crediting
+no step to a policy that did not drive it."""
 
 from __future__ import annotations
 
@@ -47,6 +47,7 @@ from follow_env.platforms.diff_drive import DiffDriveConfig, diff_drive_ik
 from follow_env.platforms.wheels import pid_step
 from follow_env.sim.checks import out_of_range
 from follow_env.tasks.person_follow.steplog import AHEAD_COLUMN
+from policies.adapt import at_period
 
 __all__ = ["COMMAND_MODES", "PolicyError", "RunResult", "Runner", "RunnerConfig"]
 
@@ -115,13 +116,13 @@ class Runner:
         policy_factory: Callable[[str], Any] | None = None,
     ) -> None:
         self.link = link
-        self.policy = policy
         self.perception = perception
         self.platform = platform if platform is not None else DiffDriveConfig()
         self.config = config if config is not None else RunnerConfig()
         # refused now, not as a crash of the wheel loop or the control loop mid-session
         check_platform(self.platform)
-        check_command(policy)
+        check_command(policy := at_period(policy, self.config.control_dt_s))  # module docstring
+        self.policy = policy
         self._framing_command()
         self.log = Path(log) if log is not None else None
         self.meta = dict(meta or {})
@@ -135,9 +136,7 @@ class Runner:
         self._driver: int | None = None  # which of them drove the newest step
         self._waiting: str | None = None  # the mode chosen, whose policy is being built
         # a mode chosen in the browser is built beside the control loop (bridge/loader.py)
-        self._loader = (
-            PolicyLoader(policy_factory, self._runnable) if policy_factory is not None else None
-        )
+        self._loader = PolicyLoader(policy_factory, self._runnable) if policy_factory else None
         if monitor is not None and monitor.mode not in ("stop", "manual"):
             # the mode the browser shows is the name the policy was built from ("gsmpn"), not
             # its full name ("gsmpn:tuned"): the same policy, not a second one built for it
@@ -495,9 +494,9 @@ class Runner:
         return self._policies.setdefault(self._mode, self.policy)
 
     def _runnable(self, policy: Any) -> Any:
-        """``policy``, if this robot can run it (:func:`check_command`, :func:`check_ahead`);
-        ``ValueError`` or ``PerceptionError`` if not."""
-        check_command(policy)
+        """``policy`` at the robot's period (module docstring) if this robot can run it
+        (:func:`check_command`, :func:`check_ahead`); else ValueError or PerceptionError."""
+        check_command(policy := at_period(policy, self.config.control_dt_s))
         check_ahead(policy, self.perception)
         return policy
 

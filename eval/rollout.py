@@ -40,7 +40,7 @@ from execution import Backend, execute
 from follow_env.platforms.base import Platform
 from follow_env.sim.runner import BatchedSim
 from follow_env.tasks import get_task
-from policies import Policy, for_platform, make_policy
+from policies import Policy, at_period, for_platform, make_policy
 from policies.lanes import Lanes
 from policies.learned.ensemble import is_learned
 
@@ -237,7 +237,8 @@ def run_episode(
     built = _policy(spec, task)
     env = _env(scenario, config, on_frame is not None, platform, t, _needs(built))
     layout = _layout(env.unwrapped.sim.platform, t, env.observation_space.shape[0])
-    law = for_platform(built, layout.actions)
+    # a law differentiates over the env's control period, whatever it was built with
+    law = for_platform(at_period(built, env.unwrapped.config.episode.control_dt_s), layout.actions)
     try:
         obs, info = env.reset(seed=int(seed))
         law.reset()
@@ -291,11 +292,15 @@ def run_batch(
     built = _policy(spec, task)
     variant = {model.variant_key: scenario}
     cfg = model.resolve_config(config, platform=platform, **variant, **_needs(built))
+    period = cfg.episode.control_dt_s  # a law differentiates over it (policies.at_period)
+    built = at_period(built, period)
     sim = BatchedSim(model, cfg, n)
     layout = _layout(sim.platform, t, model.observations(sim).shape[1])
     try:
         sim.reset_lanes(np.arange(n), [int(s) for s in seeds])
-        fresh = (lambda: make_policy(spec, task)) if isinstance(spec, str) else None
+        fresh = (
+            (lambda: at_period(make_policy(spec, task), period)) if isinstance(spec, str) else None
+        )
         actor = Lanes(built, n, layout.actions, fresh)
         active = np.ones(n, dtype=bool)
         ended_at = np.zeros(n, dtype=np.int64)  # the step each lane's episode ended at

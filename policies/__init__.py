@@ -15,7 +15,7 @@ names its action's entries (``action_names``); :func:`for_platform` fits it to a
 action by name (PN on the mecanum base: ``vy = 0``).
 """
 
-from policies.adapt import PlatformAction, for_platform
+from policies.adapt import PlatformAction, at_period, for_platform
 from policies.base import (
     BatchPolicy,
     GuidanceLaw,
@@ -67,6 +67,7 @@ __all__ = [
     "Policy",
     "PolicyRegistry",
     "SearchSpace",
+    "at_period",
     "available_policies",
     "for_platform",
     "make_policy",

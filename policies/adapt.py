@@ -15,10 +15,17 @@ is refused on the differential drive and a differential-drive agent on the mecan
 
 The adapter keeps the policy's name, memory and batching (``act_batch``), so evaluation runs it
 exactly as the policy itself.
+
+A law that differentiates also needs the control period its observations arrive at: the
+reference's ``dt`` is that period (SPEC §1.5: ``rate = (o - o_prev) / dt``), so
+:func:`at_period` sets a law's ``dt_s`` to the env's (or the robot's) period wherever the harness
+knows it. Run at 0.05 s, a law left at 0.1 s would read every offset rate at half its size.
 """
 
 from __future__ import annotations
 
+import copy
+import dataclasses
 from collections.abc import Sequence
 from typing import Any
 
@@ -26,7 +33,7 @@ import numpy as np
 
 from policies.base import LAW_ACTION_NAMES, BatchPolicy, Policy
 
-__all__ = ["BatchPlatformAction", "PlatformAction", "action_names", "for_platform"]
+__all__ = ["BatchPlatformAction", "PlatformAction", "action_names", "at_period", "for_platform"]
 
 
 def action_names(policy: Policy) -> tuple[str, ...]:
@@ -107,3 +114,29 @@ def for_platform(policy: Policy, names: Sequence[str]) -> Policy:
         return policy
     cls = BatchPlatformAction if isinstance(policy, BatchPolicy) else PlatformAction
     return cls(policy, names)  # type: ignore[return-value]
+
+
+def at_period(policy: Policy, dt_s: float) -> Policy:
+    """``policy`` as it should run when its observations arrive every ``dt_s`` seconds.
+
+    A law whose parameters hold a period of their own (``params.dt_s``: MPN's and GS-MPN's
+    offset rate, the line PID's integral and derivative) gets a copy with ``dt_s`` set to the
+    period, memory fresh and name kept; every other policy (a memoryless law, a learned agent,
+    a law already at that period) is returned as it is. The period is the loop's, not the
+    law's tuning (module docstring).
+
+    :raises ValueError: if ``dt_s`` is outside the law's range for ``dt_s`` (its params check it).
+    """
+    params = getattr(policy, "params", None)
+    if not dataclasses.is_dataclass(params) or "dt_s" not in {
+        f.name for f in dataclasses.fields(params)
+    }:
+        return policy
+    if params.dt_s == dt_s:  # type: ignore[union-attr]
+        return policy
+    # A shallow copy shares the memory arrays; reset() and reset_batch() replace them, and the
+    # harness calls one of them before the first step.
+    adapted = copy.copy(policy)
+    adapted.params = dataclasses.replace(params, dt_s=float(dt_s))  # type: ignore[arg-type,attr-defined]
+    adapted.reset()
+    return adapted

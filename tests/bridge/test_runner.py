@@ -701,3 +701,23 @@ def test_bad_arguments_give_one_line_and_exit_2(
     assert err.startswith("follow-robot: error:")
     assert message in err
     assert "\n" not in err
+
+
+def test_the_runner_runs_a_law_at_its_control_period(tmp_path: Path) -> None:
+    """A law differentiates over the robot's period (RunnerConfig.control_dt_s), the starting
+    policy and a mode the monitor selects alike; before, a 20 Hz loop ran gsmpn:thesis's rate
+    over 0.1 s, at half its size."""
+    replay = tmp_path / "obs.csv"
+    replay.write_text("time_s,obs_distance_m,obs_offset_px,detected\n0,1.5,10,1\n0.05,1.5,12,1\n")
+    with SerialLink("loop://", "reference") as link:
+        runner = Runner(
+            link,
+            make_policy("gsmpn:thesis"),
+            Replay(replay),
+            config=RunnerConfig(control_dt_s=0.05),
+        )
+        assert runner.policy.params.dt_s == 0.05
+        assert runner.policy.name == "gsmpn:thesis"
+        assert runner._runnable(make_policy("mpn:thesis")).params.dt_s == 0.05
+        pn = make_policy("pn")
+        assert runner._runnable(pn) is pn  # PN keeps no rate
