@@ -75,9 +75,10 @@ from eval.cli_base import (  # noqa: F401  (the limits, read here)
     _workers,
 )
 from eval.cli_dominance import cmd_dominance
+from eval.cli_errors import KNOWN_ERRORS, report_error
 from eval.cli_run import _check_grid, cmd_run, policy_label, refuse_aliases, run_backend, run_order
-from eval.steplog import StepLogError, step_log_files
-from execution import BACKENDS, BackendUnavailableError
+from eval.steplog import step_log_files
+from execution import BACKENDS
 from follow_env.sim.atomic import atomic_folder, check_new_folder
 
 __all__ = ["MAX_EPISODES", "MAX_EPISODES_WITHOUT_LOGS", "MAX_SEED", "main"]
@@ -524,9 +525,13 @@ def _task_of_log(path: Path) -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of ``follow-eval`` and ``python -m eval``; returns the exit status."""
+    """Entry point of ``follow-eval`` and ``python -m eval``; returns the exit status: 0, 2 for
+    bad arguments or input, 3 when workers kept dying (:mod:`eval.cli_errors`), 130 on Ctrl-C."""
+    args: argparse.Namespace | None = None
     try:
         args = build_parser().parse_args(argv)
+        if args.command == "run" and args.out is None:  # named now: an error says where to resume
+            args.out = Path("runs") / f"eval-{datetime.now():%Y%m%d-%H%M%S}"
         commands = {
             "run": cmd_run,
             "metrics": cmd_metrics,
@@ -535,16 +540,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             "dominance": cmd_dominance,
         }
         return commands[args.command](args)
-    except (
-        UsageError,
-        StepLogError,
-        FileExistsError,
-        OSError,
-        ValueError,
-        BackendUnavailableError,
-    ) as e:
-        print(f"{PROG}: error: {e}", file=sys.stderr)
-        return USAGE_ERROR
+    except KNOWN_ERRORS as e:
+        return report_error(e, args)
     except KeyboardInterrupt:
         print(f"{PROG}: interrupted; nothing was written", file=sys.stderr)
         return 130

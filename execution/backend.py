@@ -8,6 +8,7 @@ run. See the package docstring for what a unit is. The local pool is here; Ray i
 from __future__ import annotations
 
 import atexit
+import logging
 import os
 import signal
 import threading
@@ -20,15 +21,28 @@ from multiprocessing import get_context
 from numbers import Integral
 from typing import Any, TypeVar
 
-from execution.on_ray import _address_problem, _check_reachable, _connect, _import_ray, _run_ray
+from execution.on_ray import (
+    _address_problem,
+    _check_reachable,
+    _connect,
+    _import_ray,
+    _release_ray,
+    _run_ray,
+    _stop_started_ray,
+)
 from execution.worker import (
     _IN_FLIGHT_PER_SLOT,
     BackendUnavailableError,
+    RemoteTraceback,
     UnitError,
     WorkerLostError,
+    _exit_reason,
+    _label,
+    _note_origin,
     _run_unit,
     _start_worker,
     pin_threads,
+    unit_origin,
 )
 
 __all__ = [
@@ -36,12 +50,14 @@ __all__ = [
     "POOL_IDLE_S",
     "Backend",
     "BackendUnavailableError",
+    "RemoteTraceback",
     "UnitError",
     "WorkerLostError",
     "backend_from_args",
     "execute",
     "pin_threads",
     "shutdown_pools",
+    "unit_origin",
 ]
 
 U = TypeVar("U")
@@ -49,6 +65,10 @@ R = TypeVar("R")
 
 #: The backends by name: ``local`` (this process or a process pool) and ``ray``.
 BACKENDS = ("local", "ray")
+
+#: Where a worker's death is reported (one warning line each; with no logging configured,
+#: Python prints a warning's message alone on stderr).
+_LOG = logging.getLogger("execution")
 
 
 @dataclass(frozen=True)
@@ -65,9 +85,10 @@ class Backend:
         (``auto`` and ``local`` match any).
     :param cpus_per_task: CPUs each unit is given and pins its threads to (1..64).
     :param max_retries: times a unit whose worker died is run again (0..100), counted per unit;
-        an exception the unit itself raises is never retried. In a local pool the death counts
-        against the unit the dead worker was running (against every unit in flight if that is
-        not known: a worker ended by SIGTERM, as the pool ends the others).
+        an exception the unit itself raises is never retried. The death counts against the
+        unit the dead worker was running (in a local pool, against every unit in flight if that
+        is not known: a worker ended by SIGTERM, as the pool ends the others). Each death is
+        logged as a warning (logger ``execution``) naming the unit.
 
     Integers may be numpy integers; they are stored as ``int``.
     """
@@ -112,7 +133,10 @@ class Backend:
         if self.workers is not None:
             return self.workers
         ray = _connect(self)
-        cpus = int(ray.cluster_resources().get("CPU", 1))
+        try:
+            cpus = int(ray.cluster_resources().get("CPU", 1))
+        finally:
+            _release_ray(POOL_IDLE_S)
         return max(1, cpus // self.cpus_per_task)
 
 
@@ -157,6 +181,7 @@ def execute(
     *,
     done: Mapping[int, R] | None = None,
     on_result: Callable[[int, R], None] | None = None,
+    describe: Callable[[U], str] | None = None,
 ) -> list[R]:
     """Run ``fn(unit)`` for every unit on ``backend``; the results in the units' order.
 
@@ -167,11 +192,15 @@ def execute(
     :param done: results already had, by unit index (a resumed run): those units are skipped.
     :param on_result: called in this process as each unit finishes (in the order they finish)
         with its index and result: a progress bar, a journal for resuming.
+    :param describe: names a unit in messages (a worker's death, :class:`WorkerLostError`,
+        :func:`unit_origin`), in its caller's terms; default its ``repr``, cut short.
     :raises WorkerLostError: if a unit's worker died more than ``backend.max_retries`` times.
     :raises UnitError: in place of an exception of ``fn`` that cannot be pickled, from a pool
         or Ray worker.
     :raises BackendUnavailableError: if Ray is wanted and missing or its cluster unreachable.
-    :raises Exception: whatever ``fn`` raised for a unit, as it raised it.
+    :raises Exception: whatever ``fn`` raised for a unit, as it raised it; from a pool or Ray
+        worker with the worker's traceback as its ``__cause__`` (:class:`RemoteTraceback`) and
+        the unit and host in a note (:func:`unit_origin`).
     """
     backend = backend or Backend()
     work = list(units)
@@ -182,8 +211,11 @@ def execute(
             raise ValueError(f"done holds unit {i}, but there are {len(work)} units")
         results[i] = result
     todo = [(i, u) for i, u in enumerate(work) if results[i] is missing]
-    run = _run_local if backend.kind == "local" else _run_ray
-    for i, result in run(fn, todo, backend):
+    if backend.kind == "local":
+        ran = _run_local(fn, todo, backend, describe)
+    else:  # the idle time read now: tests shorten it
+        ran = _run_ray(fn, todo, backend, describe, POOL_IDLE_S)
+    for i, result in ran:
         results[i] = result
         if on_result is not None:
             on_result(i, result)
@@ -194,7 +226,10 @@ def execute(
 
 
 def _run_local(
-    fn: Callable[[Any], Any], todo: Sequence[tuple[int, Any]], backend: Backend
+    fn: Callable[[Any], Any],
+    todo: Sequence[tuple[int, Any]],
+    backend: Backend,
+    describe: Callable[[Any], str] | None = None,
 ) -> Iterator[tuple[int, Any]]:
     workers = backend.workers or 1
     # On the workers asked for, not on the number of units: a caller that asked for a pool
@@ -211,9 +246,11 @@ def _run_local(
     deaths: dict[int, int] = {}  # by unit: times its worker died (see below)
     while pending:
         submitted: set[int] = set()
-        lost: set[int] = set()
+        lost: list[tuple[int, int | None]] = []
         try:
-            yield from _pool_pass(fn, pending, workers, backend.cpus_per_task, submitted, lost)
+            yield from _pool_pass(
+                fn, pending, workers, backend.cpus_per_task, submitted, lost, describe
+            )
         except BrokenProcessPool as e:
             # A worker died (killed, out of memory): the pool is gone with every unit it held.
             # Units are pure, so running the unfinished ones again in a new pool is a retry.
@@ -222,15 +259,47 @@ def _run_local(
             # against every unit in flight, or every pending one: some unit must count it, or
             # a pool that can never run would be restarted for ever.
             in_flight = {i for i in submitted if i in pending}
-            charged = sorted(lost & in_flight) or sorted(in_flight) or sorted(pending)
+            known = {i: code for i, code in lost if i in in_flight}
+            charged = sorted(known) or sorted(in_flight) or sorted(pending)
             for i in charged:
                 deaths[i] = deaths.get(i, 0) + 1
+            codes = [code for _, code in lost]  # of every worker that died on its own
             over = [i for i in charged if deaths[i] > backend.max_retries]
             if over:
+                i = over[0]
+                reason = _exit_reason(known[i] if i in known else codes[0] if codes else None)
+                label = _label(describe, pending[i])
                 raise WorkerLostError(
-                    f"unit {over[0]}: its worker process died {deaths[over[0]]} times "
-                    f"(max_retries={backend.max_retries}; {len(pending)} units unfinished)"
+                    i, label, deaths[i], backend.max_retries, len(pending), reason
                 ) from e
+            _warn_deaths(charged, known, codes, pending, deaths, backend.max_retries, describe)
+
+
+def _warn_deaths(
+    charged: Sequence[int],
+    known: Mapping[int, int | None],
+    codes: Sequence[int | None],
+    pending: Mapping[int, Any],
+    deaths: Mapping[int, int],
+    max_retries: int,
+    describe: Callable[[Any], str] | None,
+) -> None:
+    """One warning line per worker death that the pool survives, naming the unit it ran (or
+    the units in flight when that is not known) and how the worker ended."""
+    if known:
+        for i in charged:
+            _LOG.warning(
+                "warning: a worker process died running unit %d %s, %s; it runs again "
+                "(retry %d of max_retries=%d)",
+                i, _label(describe, pending[i]), _exit_reason(known[i]), deaths[i], max_retries,
+            )  # fmt: skip
+        return
+    units = ", ".join(map(str, charged[:8])) + (", ..." if len(charged) > 8 else "")
+    _LOG.warning(
+        "warning: a worker process died %s, while units %s were in flight (which one it ran "
+        "is not known); they run again (a retry of max_retries=%d each)",
+        _exit_reason(codes[0] if codes else None), units, max_retries,
+    )  # fmt: skip
 
 
 #: A kept pool's workers exit after this long without a unit (s): long enough to span the
@@ -266,15 +335,16 @@ class _Pool(ProcessPoolExecutor):
             initargs=(cpus, os.getpid(), self.slots),
         )
 
-    def units_of_dead_workers(self, processes: Iterable[Any]) -> set[int]:
-        """The units that were running in those of ``processes`` (this pool's, all exited) that
-        died on their own: not ended by SIGTERM, as the pool ends the others when one dies."""
-        died = {p.pid for p in processes if _exit_code(p) not in (None, -signal.SIGTERM)}
+    def dead_workers(self, processes: Iterable[Any]) -> list[tuple[int, int | None]]:
+        """Those of ``processes`` (this pool's, all exited) that died on their own, not ended by
+        SIGTERM as the pool ends the others when one dies: (the unit each ran, -1 if none or
+        not known; its exit code)."""
+        codes = {p.pid: _exit_code(p) for p in processes}
+        died = {pid: code for pid, code in codes.items() if code not in (None, -signal.SIGTERM)}
         # Read without the lock: a worker killed while holding it would never release it.
         slots = self.slots.get_obj()
-        return {
-            slots[k + 1] for k in range(0, len(slots), 2) if slots[k] in died and slots[k + 1] >= 0
-        }
+        running = {slots[k]: slots[k + 1] for k in range(0, len(slots), 2) if slots[k]}
+        return [(running.get(pid, -1), code) for pid, code in died.items()]
 
 
 def _exit_code(process: Any, timeout_s: float = 1.0) -> int | None:
@@ -362,7 +432,9 @@ def _drop(key: tuple[int, int], pool: ProcessPoolExecutor) -> list[Any]:
 
 def shutdown_pools() -> None:
     """Stop the worker processes kept between calls of :func:`execute` (at exit, or to free
-    their memory before ``POOL_IDLE_S`` does; the next call with a pool starts a new one)."""
+    their memory before ``POOL_IDLE_S`` does; the next call with a pool starts a new one), and
+    the local Ray that :func:`execute` started, if it did and it is idle."""
+    _stop_started_ray()
     with _POOLS_LOCK:
         pools = list(_POOLS.values())
         _POOLS.clear()
@@ -383,14 +455,17 @@ def _pool_pass(
     workers: int,
     cpus: int,
     submitted: set[int] | None = None,
-    lost: set[int] | None = None,
+    lost: list[tuple[int, int | None]] | None = None,
+    describe: Callable[[Any], str] | None = None,
 ) -> Iterator[tuple[int, Any]]:
     """One pass over the pending units on the kept pool; removes each from ``pending`` as it
     is yielded.
 
     :param submitted: the units submitted are added to it (those still pending when the pass
         fails were in flight).
-    :param lost: if the pass fails, the units whose worker died running them are added to it.
+    :param lost: if the pass fails, (unit or -1, exit code) of each worker that died on its own
+        is added to it (:meth:`_Pool.dead_workers`).
+    :param describe: names a unit whose exception is raised (:func:`execute`).
     """
     pool = _pool(workers, cpus)
     queue = iter(list(pending.items()))
@@ -411,7 +486,13 @@ def _pool_pass(
             finished, _ = wait(in_flight, return_when=FIRST_COMPLETED)
             for future in finished:
                 i = in_flight.pop(future)
-                result = future.result()
+                try:
+                    result = future.result()
+                except BrokenProcessPool:
+                    raise
+                except BaseException as e:  # the unit's own: say which and where
+                    _note_origin(e, i, _label(describe, pending[i]))
+                    raise
                 del pending[i]
                 yield i, result
                 # After the yield: a pool broken meanwhile (a worker died) raises here, and the
@@ -428,4 +509,4 @@ def _pool_pass(
             # workers are ended now rather than when they finish.
             processes = _drop((workers, cpus), pool)
             if lost is not None and isinstance(pool, _Pool):
-                lost.update(pool.units_of_dead_workers(processes))
+                lost.extend(pool.dead_workers(processes))

@@ -4,8 +4,12 @@ or Ray's) around each unit: its threads pinned, its exception made fit to travel
 
 from __future__ import annotations
 
+import contextlib
 import os
 import pickle
+import reprlib
+import signal
+import socket
 import sys
 import threading
 import time
@@ -13,7 +17,14 @@ import traceback
 from collections.abc import Callable
 from typing import Any
 
-__all__ = ["BackendUnavailableError", "UnitError", "WorkerLostError", "pin_threads"]
+__all__ = [
+    "BackendUnavailableError",
+    "RemoteTraceback",
+    "UnitError",
+    "WorkerLostError",
+    "pin_threads",
+    "unit_origin",
+]
 
 #: Units kept in flight per slot: enough that a slot never waits for the driver, few enough
 #: that a long grid is not all queued (and pickled) at once.
@@ -25,7 +36,39 @@ class BackendUnavailableError(RuntimeError):
 
 
 class WorkerLostError(RuntimeError):
-    """Workers kept dying: a unit was retried ``max_retries`` times and its worker died again."""
+    """Workers kept dying: a unit was retried ``max_retries`` times and its worker died again.
+
+    :ivar index: the unit's index in the units given to :func:`execution.execute`.
+    :ivar label: the unit as its caller knows it (``describe``, or its ``repr`` cut short).
+    :ivar deaths: how many times its worker died.
+    :ivar unfinished: units that had not finished when the run stopped (this one among them).
+    """
+
+    def __init__(
+        self, index: int, label: str, deaths: int, max_retries: int, unfinished: int, last: str
+    ) -> None:
+        super().__init__(
+            f"unit {index} {label}: its worker process died {deaths} times (max_retries="
+            f"{max_retries}; {unfinished} units unfinished); the last time {last}"
+        )
+        self.index, self.label, self.deaths, self.unfinished = index, label, deaths, unfinished
+        self._fields = (index, label, deaths, max_retries, unfinished, last)
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        return (WorkerLostError, self._fields)
+
+
+class RemoteTraceback(Exception):  # noqa: N818  (text carried as a cause, not an error)
+    """A unit's traceback in the worker that ran it, as text: the ``__cause__`` of its exception
+    re-raised in the caller, so that a printed traceback shows the worker's frames first (as
+    :mod:`concurrent.futures` does for a process pool, whose own class is private)."""
+
+    def __init__(self, text: str) -> None:
+        super().__init__(text)
+        self.text = text
+
+    def __str__(self) -> str:
+        return f'\n"""\n{self.text.rstrip()}\n"""'
 
 
 class UnitError(RuntimeError):
@@ -51,8 +94,90 @@ class UnitError(RuntimeError):
         self.traceback_text = traceback_text
 
     def __reduce__(self) -> tuple[Any, ...]:
-        # The three fields, not the composed message: unpickling calls __init__ with these.
-        return (UnitError, (self.type_name, self.message, self.traceback_text))
+        # The three fields, not the composed message: unpickling calls __init__ with these;
+        # and the rest of its state (where it was raised: :func:`_tag_origin`).
+        return (UnitError, (self.type_name, self.message, self.traceback_text), self.__dict__)
+
+
+#: Where a worker raised an exception (an attribute of the exception, pickled with it).
+_ORIGIN = "_execution_worker"
+#: Which unit raised it and where, as :func:`unit_origin` words it (set in the caller).
+_UNIT_ORIGIN = "_execution_unit_origin"
+
+
+def unit_origin(error: BaseException) -> str:
+    """Where ``error`` was raised, if a unit raised it in a worker (a pool's or Ray's): e.g.
+    ``"work unit 3 (('pn', 'straight', ...)) on host node-2, process 4242"``; else ``""``.
+
+    A command line that prints an error in one line appends it: the worker's traceback is the
+    error's ``__cause__`` (:class:`RemoteTraceback`), which such a line leaves out.
+    """
+    where = getattr(error, _UNIT_ORIGIN, "")
+    return where if isinstance(where, str) else ""
+
+
+def _tag_origin(error: BaseException) -> None:
+    """Mark ``error`` as raised in this worker (host, pid): an attribute, which travels back
+    to the caller with the pickled exception (a class whose pickling drops it loses it)."""
+    # An exception class that refuses attributes: no origin, no harm.
+    with contextlib.suppress(Exception):
+        setattr(error, _ORIGIN, (socket.gethostname(), os.getpid()))
+
+
+def _note_origin(error: BaseException, index: int, label: str) -> None:
+    """In the caller: name the unit that raised ``error`` in a worker, and where, as a note
+    (shown under a traceback's last line) and for :func:`unit_origin`."""
+    worker = getattr(error, _ORIGIN, None)
+    if not (isinstance(worker, tuple) and len(worker) == 2):
+        return  # not raised by a unit in a worker (a result that could not be pickled, ...)
+    where = f"work unit {index} {label} on host {worker[0]}, process {worker[1]}"
+    try:
+        setattr(error, _UNIT_ORIGIN, where)
+        error.add_note(f"(raised in {where})")
+    except Exception:
+        pass
+
+
+#: How a unit is named in messages by default: its ``repr``, each part cut short.
+_REPR = reprlib.Repr()
+_REPR.maxlevel, _REPR.maxtuple, _REPR.maxlist, _REPR.maxdict = 3, 6, 6, 4
+_REPR.maxstring, _REPR.maxother = 40, 40
+#: The longest a unit's name in a message may be (characters).
+_LABEL_CHARS = 120
+
+
+def _describe(unit: Any) -> str:
+    """A unit's name in messages: its ``repr``, long parts cut short (``...``), at most
+    :data:`_LABEL_CHARS` characters; never raises (a broken ``__repr__`` names its type)."""
+    try:
+        text = _REPR.repr(unit)
+    except Exception:
+        text = f"<{type(unit).__qualname__}>"
+    return text if len(text) <= _LABEL_CHARS else text[: _LABEL_CHARS - 3] + "..."
+
+
+def _label(describe: Callable[[Any], str] | None, unit: Any) -> str:
+    """``unit`` in parentheses, as ``describe`` (the caller's) or :func:`_describe` names it."""
+    if describe is not None:
+        try:
+            return f"({describe(unit)})"
+        except Exception:
+            pass  # a message must not fail for its label's sake
+    return f"({_describe(unit)})"
+
+
+def _exit_reason(code: int | None) -> str:
+    """How a worker process ended, from its exit code (negative: the signal that ended it)."""
+    if code is None:
+        return "for a reason not known"
+    if code >= 0:
+        return f"exiting with status {code}"
+    try:
+        name = signal.Signals(-code).name
+    except ValueError:
+        name = f"signal {-code}"
+    oom = " (the system's out-of-memory killer's signal)" if -code == signal.SIGKILL else ""
+    return f"killed by {name}{oom}"
 
 
 def pin_threads(cpus: int) -> None:
@@ -99,24 +224,27 @@ def _run_unit(fn: Callable[[Any], Any], unit: Any, index: int = -1) -> Any:
     try:
         return fn(unit)
     except BaseException as e:
+        _tag_origin(e)  # first: the test below then pickles the exception as it will travel
         try:
             pickle.loads(pickle.dumps(e))
         except Exception:
             name = f"{type(e).__module__}.{type(e).__qualname__}"
             text = "".join(traceback.format_exception(e))
+            error = UnitError(name, str(e), text)
+            _tag_origin(error)
             # from None: the original stays out of the chain, which would be pickled with it
             # by anything that pickles __cause__ or __context__.
-            raise UnitError(name, str(e), text) from None
+            raise error from None
         raise
     finally:
         if _SLOTS is not None:
             _SLOTS[_SLOT + 1] = -1
 
 
-def _call(fn: Callable[[Any], Any], unit: Any, cpus: int) -> Any:
+def _call(fn: Callable[[Any], Any], unit: Any, cpus: int, index: int = -1) -> Any:
     """A Ray task: pin the worker's threads (it may have run other tasks), then the unit."""
     pin_threads(cpus)
-    return _run_unit(fn, unit)
+    return _run_unit(fn, unit, index)
 
 
 #: How often a pool worker checks that the process that started it is alive (s).

@@ -1,7 +1,9 @@
 """``follow-train``'s command line: options into :class:`~train.ppo.Args`, one-line errors.
 
 Bad arguments or input give one line on stderr (``follow-train: error: ...``) and exit status 2,
-before anything is written; Ctrl-C names the run to resume.
+before anything is written; Ctrl-C names the run to resume. A ``--seeds`` study whose workers
+kept dying (:class:`execution.WorkerLostError`) exits with status :data:`WORKERS_LOST` (3, as
+``follow-eval``), saying that the same command resumes it.
 """
 
 from __future__ import annotations
@@ -14,7 +16,14 @@ from pathlib import Path
 from typing import NoReturn
 
 from eval.cli_base import _positive, path_option
-from execution import BACKENDS, Backend, BackendUnavailableError, backend_from_args
+from execution import (
+    BACKENDS,
+    Backend,
+    BackendUnavailableError,
+    WorkerLostError,
+    backend_from_args,
+    unit_origin,
+)
 from train.algos import ALGOS, CONFIGS, DEFAULT_ALGO
 from train.config import ConfigError
 from train.export import FORCE_ALONE_ERROR
@@ -22,7 +31,10 @@ from train.options import MAX_THREADS, Args
 from train.ppo import PROG, USAGE_ERROR, Interrupted, TrainingError, train
 from train.seeds import parse_seeds, train_seeds
 
-__all__ = ["build_parser", "main", "parse_args"]
+__all__ = ["WORKERS_LOST", "build_parser", "main", "parse_args"]
+
+#: Exit status when a work unit's worker died more than ``max_retries`` times.
+WORKERS_LOST = 3
 
 
 # -- Command line ----------------------------------------------------------------------------
@@ -289,8 +301,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     except TrainingError as e:
         print(f"{PROG}: error: {e}", file=sys.stderr)
         return 1
+    except WorkerLostError as e:  # a seed's worker killed again and again (out of memory, often)
+        print(
+            f"{PROG}: error: {e}; the finished seeds are kept and the others resume from their "
+            "checkpoints: run the same command again (with fewer --workers if memory is short)",
+            file=sys.stderr,
+        )
+        return WORKERS_LOST
     except (UsageError, ConfigError, ValueError, FileNotFoundError, BackendUnavailableError) as e:
-        print(f"{PROG}: error: {e}", file=sys.stderr)
+        where = unit_origin(e)  # raised by a seed's training in a worker: which, and where
+        print(f"{PROG}: error: {e}" + (f" (in {where})" if where else ""), file=sys.stderr)
         return USAGE_ERROR
     from train.run import read_sessions
 

@@ -1,5 +1,6 @@
 """eval/cli.py: ``follow-eval run`` and ``metrics`` end to end, and one-line errors."""
 
+import importlib
 import json
 import os
 from pathlib import Path
@@ -471,3 +472,74 @@ def test_metrics_refuses_the_same_log_twice_and_a_run_folder(
     err = one_line_error(capsys)
     assert f"{run_dir} is a follow-eval run folder, whose tables are not step logs: give " in err
     assert str(run_dir / "logs") in err
+
+
+# -- errors from work units: dying workers, and an exception a worker raised --------------------
+
+
+def _stopped_by_dying_workers(finished: int) -> object:
+    """A rollout that finishes ``finished`` units, then loses a unit's worker for good."""
+    from execution import WorkerLostError
+
+    def rollout(*args: object, on_unit: object = None, **kwargs: object) -> list[object]:
+        for i in range(finished):
+            on_unit(i, [])  # type: ignore[operator]  # kept in the run's journal
+        raise WorkerLostError(
+            1, "(pn, straight)", 4, 3, 3, "killed by SIGKILL (the out-of-memory killer's signal)"
+        )
+
+    return rollout
+
+
+def test_workers_that_keep_dying_stop_a_run_in_one_line_saying_how_to_resume(
+    tmp_path: Path, capsys: pytest.CaptureFixture, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from eval.journal import journal_folder
+
+    rollouts = importlib.import_module("eval.rollout")  # `eval.rollout` is also a function
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(rollouts, "rollout", _stopped_by_dying_workers(finished=2))
+    args = ["run", "--policies", "pn", "--scenarios", "straight", "--episodes", "4"]
+    out = tmp_path / "run"
+    assert main([*args, "--out", str(out), "--workers", "1"]) == 3  # not 2: not a bad argument
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1, err
+    assert "Traceback" not in err
+    assert err.startswith("follow-eval: error: unit 1 (pn, straight): its worker process died 4 ")
+    folder = journal_folder(out)
+    assert f"the finished work units are kept in {folder}: the same command" in err
+    assert f"--out {out} resumes" in err
+    assert folder.is_dir()
+    assert not out.exists()
+    # without --out: the folder it would have written is named, to resume into
+    assert main([*args, "--workers", "1"]) == 3
+    err = capsys.readouterr().err
+    [kept] = Path("runs").glob(".eval-*.units")
+    assert f"--out {Path('runs') / kept.name[1:].removesuffix('.units')} resumes" in err
+    # nothing finished: nothing kept, and said so
+    monkeypatch.setattr(rollouts, "rollout", _stopped_by_dying_workers(finished=0))
+    assert main([*args, "--out", str(tmp_path / "none"), "--workers", "1"]) == 3
+    assert "no work unit had finished, nothing was kept" in capsys.readouterr().err
+    assert not journal_folder(tmp_path / "none").exists()
+
+
+def test_an_error_raised_in_a_worker_names_its_unit_and_host(
+    tmp_path: Path, capsys: pytest.CaptureFixture, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import socket
+
+    from execution import Backend, execute
+
+    def rollout(*args: object, **kwargs: object) -> list[object]:
+        return execute(_unit_that_fails, [("pn", "straight")], Backend("local", workers=2))
+
+    monkeypatch.setattr(importlib.import_module("eval.rollout"), "rollout", rollout)
+    argv = ["run", "--policies", "pn", "--scenarios", "straight", "--episodes", "1"]
+    assert main([*argv, "--out", str(tmp_path / "run"), "--workers", "1"]) == 2
+    err = one_line_error(capsys)
+    assert "error: the unit's own error (in work unit 0 (('pn', 'straight')) on host " in err
+    assert f"on host {socket.gethostname()}, process " in err
+
+
+def _unit_that_fails(unit: tuple[str, str]) -> None:  # run by a spawned worker, imported by name
+    raise ValueError("the unit's own error")
