@@ -3,14 +3,18 @@
 Every file the project writes (the evaluation's tables, plots and videos, training's runs and
 exports, the robot's step log, the composed kernels) goes to a temporary name beside its target
 and is renamed into place when complete (``os.replace`` is atomic on one file system), so an
-interrupted run never leaves a half-written file that a later reader would trust. It sits at
-the bottom layer, with no import of its own, so that every layer and leaf can use the one
-implementation (the robot's side may not import the evaluation).
+interrupted run never leaves a half-written file that a later reader would trust. The data is
+flushed to the disk (``fsync``) before the rename and the folder's entry after it: without it
+a power loss (or a kernel crash) can leave the new name on the disk before the data, an empty
+or truncated file that looks complete. It sits at the bottom layer, with no import of its own,
+so that every layer and leaf can use the one implementation (the robot's side may not import
+the evaluation).
 """
 
 from __future__ import annotations
 
 import contextlib
+import errno
 import os
 import shutil
 import stat
@@ -74,7 +78,11 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     characters of its stem, so that any name the folder's file system takes can be written.
     On an exception the temporary file is removed. A target that is there and is not a regular
     file (a device, a FIFO, a socket: ``/dev/null`` for root) is never replaced: the block's
-    file is removed and ``OSError`` says so.
+    file is removed and ``OSError`` says so. The file's data is flushed to the disk before the
+    rename, and the folder's entry after it (:func:`_sync`), so that a power loss leaves the old
+    file or the new one, never a new name on missing data. Measured on 70 kB files on the 2-core
+    test machine (ext4 on a virtual disk; a slower disk pays more): 0.67-0.78 ms a write against
+    0.23-0.27 ms without (two runs), about 0.5 ms; rendering a 70 kB step log takes longer.
 
     :raises OSError: if the folder is not writable (the message names it), or ``path`` is not
         a regular file.
@@ -94,10 +102,37 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
             raise OSError(
                 f"{path} is not a regular file (a device, a FIFO or a socket); left as it is"
             )
+        _sync(tmp)  # the data first: renamed before it reaches the disk, a crash empties it
         os.replace(tmp, path)
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
+    _sync(path.parent, folder=True)  # the rename itself
+
+
+def _sync(path: Path, *, folder: bool = False) -> None:
+    """Flush ``path``'s data (a file) or entries (a folder) to the disk: ``os.fsync``.
+
+    A file system that cannot (``EINVAL``, ``ENOTSUP``: some network and FUSE ones) is let be,
+    as is a folder that cannot be opened (Windows); any other failure, a file's data that could
+    not be written (``EIO``, ``ENOSPC``), is raised.
+    """
+    # Read-only suffices for fsync on POSIX; Windows flushes only a handle open for writing.
+    flags = os.O_RDWR if os.name == "nt" and not folder else os.O_RDONLY
+    flags |= getattr(os, "O_DIRECTORY", 0) if folder else 0
+    try:
+        fd = os.open(path, flags)
+    except OSError:
+        if folder:
+            return
+        raise
+    try:
+        os.fsync(fd)
+    except OSError as e:
+        if not (folder or e.errno in (errno.EINVAL, errno.ENOTSUP, errno.EOPNOTSUPP)):
+            raise
+    finally:
+        os.close(fd)
 
 
 def _replaceable(path: Path) -> bool:
@@ -209,7 +244,11 @@ def atomic_folder(path: str | Path) -> Iterator[Path]:
     """Yield a temporary folder beside ``path``; rename it to ``path`` if the block succeeds.
 
     ``path`` must not exist, or be an empty folder (a run folder is never overwritten).
-    On an exception the temporary folder and everything in it is removed.
+    On an exception the temporary folder and everything in it is removed. Before the rename
+    every file and folder in it is flushed to the disk, whoever wrote it (:func:`atomic_path`
+    has flushed its files already, which costs little again), and the parent's entry after: a
+    folder of 1,000 files of 70 kB written directly took 0.37-0.38 s against 0.06-0.07 s
+    (0.3 ms a file, measured as :func:`atomic_path`'s cost).
 
     :raises FileExistsError: if ``path`` exists and is not an empty folder.
     :raises NotADirectoryError: if a parent of ``path`` is a regular file (the message names it).
@@ -227,7 +266,19 @@ def atomic_folder(path: str | Path) -> Iterator[Path]:
         raise OSError(f"cannot write to {path.parent}: {e.strerror or e}") from None
     try:
         yield tmp
+        _sync_tree(tmp)
         os.replace(tmp, path)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
+    _sync(path.parent, folder=True)
+
+
+def _sync_tree(folder: Path) -> None:
+    """:func:`_sync` every regular file and folder under ``folder``, deepest first (links are
+    not followed: what they point to is not the folder's)."""
+    for root, _, names in os.walk(folder, topdown=False):
+        for name in names:
+            if stat.S_ISREG(os.lstat(os.path.join(root, name)).st_mode):
+                _sync(Path(root, name))
+        _sync(Path(root), folder=True)

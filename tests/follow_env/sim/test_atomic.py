@@ -160,3 +160,75 @@ def test_a_folder_named_as_long_as_the_file_system_takes_is_made_atomically(tmp_
         (tmp / "a.txt").write_text("x")
     assert (target / "a.txt").read_text() == "x"
     assert sorted(p.name for p in tmp_path.iterdir()) == [target.name]
+
+
+# -- durability: the data reaches the disk before the name does --------------------------------
+
+
+def _record_syncs(monkeypatch: pytest.MonkeyPatch) -> list[tuple[str, str]]:
+    """Record, in order, every fsync (of what path) and every rename (to what path)."""
+    import follow_env.sim.atomic as atomic
+
+    events: list[tuple[str, str]] = []
+    real_fsync, real_replace = os.fsync, os.replace
+
+    def fsync(fd: int) -> None:
+        events.append(("fsync", os.readlink(f"/proc/self/fd/{fd}")))
+        real_fsync(fd)
+
+    def replace(src: os.PathLike[str], dst: os.PathLike[str]) -> None:
+        events.append(("replace", str(dst)))
+        real_replace(src, dst)
+
+    monkeypatch.setattr(atomic.os, "fsync", fsync)
+    monkeypatch.setattr(atomic.os, "replace", replace)
+    return events
+
+
+@pytest.mark.skipif(not Path("/proc/self/fd").is_dir(), reason="names fds through /proc")
+def test_a_file_is_flushed_before_its_rename_and_its_folder_after(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    events = _record_syncs(monkeypatch)
+    target = tmp_path / "table.csv"
+    atomic_write_text(target, "a,b\n1,2\n")
+    at = events.index(("replace", str(target)))
+    [synced_before] = [Path(p) for k, p in events[:at] if k == "fsync"]
+    assert synced_before.parent == tmp_path  # the temporary file, not yet renamed
+    assert synced_before.name.startswith(".table.")
+    assert ("fsync", str(tmp_path)) in events[at:]  # the rename, in its folder
+    assert target.read_text() == "a,b\n1,2\n"
+
+
+@pytest.mark.skipif(not Path("/proc/self/fd").is_dir(), reason="names fds through /proc")
+def test_a_folders_files_are_flushed_before_its_rename_however_written(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    events = _record_syncs(monkeypatch)
+    with atomic_folder(tmp_path / "run") as tmp:
+        (tmp / "logs").mkdir()
+        (tmp / "logs" / "seed_0.csv").write_text("t\n0\n")  # written directly, not atomically
+    at = events.index(("replace", str(tmp_path / "run")))
+    before = {Path(p).relative_to(tmp).as_posix() for k, p in events[:at] if k == "fsync"}
+    assert before == {"logs/seed_0.csv", "logs", "."}
+    assert ("fsync", str(tmp_path)) in events[at:]
+
+
+def test_a_file_system_that_cannot_fsync_is_let_be_and_a_write_error_is_not(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import follow_env.sim.atomic as atomic
+
+    def refuse(fd: int) -> None:
+        raise OSError(errno.EINVAL, "Invalid argument")
+
+    monkeypatch.setattr(atomic.os, "fsync", refuse)
+    assert atomic_write_text(tmp_path / "a.txt", "x").read_text() == "x"
+
+    def fail(fd: int) -> None:
+        raise OSError(errno.EIO, "Input/output error")
+
+    monkeypatch.setattr(atomic.os, "fsync", fail)
+    with pytest.raises(OSError, match="Input/output"):
+        atomic_write_text(tmp_path / "b.txt", "x")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.txt"]  # no b.txt, no temp file
