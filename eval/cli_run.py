@@ -174,7 +174,7 @@ def run_backend(args: argparse.Namespace, n_episodes: int, learned_episodes: int
 def cmd_run(args: argparse.Namespace) -> int:
     """``follow-eval run``: see the module docstring."""
     from eval.grid import model_digest
-    from eval.journal import UnitJournal, journal_folder
+    from eval.journal import CODE, UnitJournal, journal_folder
     from eval.provenance import code_revision
     from eval.report import markdown_report, safe_name, write_tables, write_video
     from eval.rollout import Episode, chunk_size, rollout
@@ -200,8 +200,10 @@ def cmd_run(args: argparse.Namespace) -> int:
     digests = {label: d for label, p in built if (d := model_digest(p)) is not None}
     run |= {"model_sha256": digests} if digests else {}
     # The code the episodes run, read once before any of them, as the models are: pooling
-    # runs (`follow-eval dominance`) compares it.
+    # runs (`follow-eval dominance`) compares it, and a resume by other code is refused (its
+    # tables would mix two versions' episodes; eval.journal says so and what to do).
     code = code_revision()
+    run |= {CODE: code["sources_sha256"]}
     # Without step logs a unit keeps rows, not episodes: its journal is of another run. It
     # keeps the plot seed's episodes whole, so another --plot-seed is another run too (a run
     # with logs keeps every episode, and its journal stays as it was).

@@ -5,8 +5,9 @@ seeds: :func:`eval.rollout.work_units`) in a hidden folder beside ``DIR``, ``.DI
 pickle per unit written atomically. Ctrl-C (or a crash) leaves that folder and no ``DIR``; the
 same command run again reads it, skips the finished units and runs the rest, and removes it
 once ``DIR`` is written. The folder also holds what the run is (``run.json``: its grid, config
-and chunking), so a different command pointed at the same ``--out`` is refused instead of
-mixing two runs.
+and chunking, and the SHA-256 of the code that runs its episodes: ``"code"``), so a different
+command pointed at the same ``--out``, or the same command run by other code, is refused
+instead of mixing two runs.
 """
 
 from __future__ import annotations
@@ -22,6 +23,9 @@ from follow_env.sim.atomic import atomic_path, atomic_write_text
 __all__ = ["UnitJournal", "journal_folder"]
 
 _RUN = "run.json"
+#: The run description's key for the digest of the code its units ran
+#: (:func:`eval.provenance.code_revision`'s ``sources_sha256``).
+CODE = "code"
 
 
 def journal_folder(out: str | Path) -> Path:
@@ -51,6 +55,8 @@ class UnitJournal:
             if had != self.run:
                 keys = sorted(set(had) | set(self.run)) if isinstance(had, dict) else []
                 differ = [k for k in keys if had.get(k) != self.run.get(k)]
+                if differ == [CODE]:  # the same command: only the code changed
+                    raise ValueError(self._code_changed(had.get(CODE)))
                 what = f" (its {', '.join(differ)} differ)" if differ else ""
                 raise ValueError(
                     f"{self.folder} holds the finished units of another run{what}; see {path}: "
@@ -59,6 +65,24 @@ class UnitJournal:
         else:
             self.folder.mkdir(parents=True, exist_ok=True)
             atomic_write_text(path, json.dumps(self.run, indent=1) + "\n")
+
+    def _code_changed(self, had: Any) -> str:
+        """Why a resume by other code is refused, and what to do: one line."""
+        now = self.run.get(CODE)
+        if not isinstance(had, str) or not isinstance(now, str):
+            return (
+                f"{self.folder} holds the finished units of this run, kept by a version that "
+                "did not record its code, so whether they ran the code that would run the rest "
+                "cannot be checked (a run would mix two code versions' episodes in its tables); "
+                f"delete {self.folder} and run the command again, or give a new --out"
+            )
+        return (
+            f"{self.folder} holds the finished units of this run, but the code changed since "
+            f"the run started (the SHA-256 of its simulator, policy and evaluation sources was "
+            f"{had[:12]}, is now {now[:12]}): resuming would mix two code versions' episodes in "
+            "one run's tables; run it with the code it started with to resume, or give a new "
+            f"--out (or delete {self.folder}) to run it anew"
+        )
 
     @property
     def resumed(self) -> bool:

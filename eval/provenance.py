@@ -15,6 +15,11 @@
 The digest, not the commit, is what pooling compares (:func:`code_notes`): a run made from a
 checkout with uncommitted edits has the commit of code it did not run, and two commits that
 touch only the documentation made the same rollouts.
+
+It is also what a work unit carries from the driver to its worker (:func:`check_worker_code`):
+on a cluster each node runs its own installation, and a node with other code would make other
+episodes, or train another agent, without a sign. The worker's own digest is read once per
+process (:func:`running_sources_sha256`), so each unit pays a comparison of two strings.
 """
 
 from __future__ import annotations
@@ -22,12 +27,21 @@ from __future__ import annotations
 import hashlib
 import importlib.util
 import os
+import socket
 import subprocess
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-__all__ = ["ROLLOUT_PACKAGES", "code_notes", "code_revision", "sources_sha256"]
+__all__ = [
+    "ROLLOUT_PACKAGES",
+    "CodeMismatchError",
+    "check_worker_code",
+    "code_notes",
+    "code_revision",
+    "running_sources_sha256",
+    "sources_sha256",
+]
 
 #: The packages whose sources decide a rollout and its scores (the env and its kernels; laws
 #: and agents' code; the rollout loop and the metrics). A change to the evaluation's command
@@ -72,6 +86,46 @@ def sources_sha256(dirs: Sequence[Path]) -> str:
         digest.update(name.encode() + b"\0" + len(data).to_bytes(8, "big"))
         digest.update(data)
     return digest.hexdigest()
+
+
+#: This process's digest of each package set, read at its first use (the code it imported then).
+_RUNNING: dict[tuple[str, ...], str] = {}
+
+
+class CodeMismatchError(ValueError):
+    """A worker runs other code than the driver that sent it a unit (a ValueError: the
+    commands report it in one line, as they do bad input)."""
+
+
+def running_sources_sha256(packages: Sequence[str] = ROLLOUT_PACKAGES) -> str:
+    """:func:`sources_sha256` of ``packages``, read once per process and kept: the digest of
+    the code this process runs (its modules were imported from those files). 3-12 ms the
+    first time, a dictionary look-up after."""
+    key = tuple(packages)
+    digest = _RUNNING.get(key)
+    if digest is None:
+        # Two threads may both read it the first time: the same value, harmlessly twice.
+        digest = _RUNNING[key] = sources_sha256(_package_dirs(key))
+    return digest
+
+
+def check_worker_code(expected: str | None, packages: Sequence[str] = ROLLOUT_PACKAGES) -> None:
+    """Refuse to run a unit whose driver runs other code than this worker (module docstring).
+
+    :param expected: the driver's :func:`running_sources_sha256` of ``packages``, as the unit
+        carries it; None checks nothing (a unit made without it).
+    :raises CodeMismatchError: naming this host and both digests' first :data:`SHORT` digits.
+    """
+    if expected is None:
+        return
+    mine = running_sources_sha256(packages)
+    if mine != expected:
+        raise CodeMismatchError(
+            f"this worker ({socket.gethostname()}) runs other code than the driver: the "
+            f"SHA-256 of its {', '.join(packages)} sources is {mine[:SHORT]}, the driver's "
+            f"{expected[:SHORT]}; install the same version on every node (and leave the sources "
+            "unedited while a command runs: a worker started later reads them as they are)"
+        )
 
 
 def _git(root: Path, *args: str) -> str | None:

@@ -15,7 +15,9 @@ action it would give that episode alone (a policy without it gets one copy per l
 step logs are exactly those of one-by-one episodes, only faster. The work units (:func:`work_units`:
 one policy, scenario and chunk of at most :data:`BATCH_LANES` seeds each) run on an
 :class:`execution.Backend`: this process, a process pool (``workers``) or Ray tasks; whichever,
-the results are identical and come back in grid order (policy, then scenario, then seed).
+the results are identical and come back in grid order (policy, then scenario, then seed). A unit
+names an agent by its absolute path (a worker's folder is not this process's) and carries this
+process's sources digest, which its worker checks (:func:`eval.provenance.check_worker_code`).
 
 The task is PersonFollow's unless ``task=`` names another (``"line_trace"``): its variants (the
 ``scenario`` arguments) are then its own (LineTrace's tracks), and its step logs have its layout
@@ -29,6 +31,7 @@ import math
 import os
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, NamedTuple
 
 import gymnasium as gym
@@ -36,6 +39,7 @@ import numpy as np
 import pandas as pd
 
 from eval.grid import PolicySpec, checked_policy, policy_spec
+from eval.provenance import check_worker_code, running_sources_sha256
 from execution import Backend, execute
 from follow_env.platforms.base import Platform
 from follow_env.sim.runner import BatchedSim
@@ -180,12 +184,8 @@ def _env(
 ) -> gym.Env:
     """One env per (task, scenario, config, platform, the policy's needs) per process: gym.make
     costs more than an episode."""
-    kwargs: dict[str, Any] = {
-        task.model.variant_key: scenario,
-        "config": config,
-        "platform": platform,
-        **needs,
-    }
+    kwargs: dict[str, Any] = {task.model.variant_key: scenario, "config": config}
+    kwargs |= {"platform": platform, **needs}
     if render:
         return gym.make(task.env_id, render_mode="rgb_array", **kwargs)
     key = (task.name, scenario, repr(config), str(platform), repr(needs))
@@ -274,6 +274,7 @@ def run_batch(
     *,
     config: EnvConfigSpec | None = None,
     task: str = DEFAULT_TASK,
+    name: str | None = None,
 ) -> list[Episode]:
     """Run one episode per seed, the seeds as the lanes of one batched core; returns the step
     logs in seed order, each identical to :func:`run_episode` of that seed (module docstring).
@@ -284,6 +285,7 @@ def run_batch(
     :param seeds: the episodes' seeds.
     :param config: the env configuration, as for :func:`run_episode`.
     :param task: the task, as for :func:`run_episode`.
+    :param name: the name the episodes carry (before any ``@platform``); None: the policy's.
     """
     n = len(seeds)
     spec, platform = policy_spec(policy)
@@ -327,23 +329,15 @@ def run_batch(
     act_all = np.stack(actions).astype(np.float64)  # (steps, n, action size)
     rew_all = np.stack(rewards)  # (steps, n)
     keys = (*layout.info, "termination")
-    name = _label(actor.name, platform)
+    name = _label(name or actor.name, platform)
     info_all = {k: np.stack([inf[k] for inf in infos]) for k in keys}  # (steps + 1, n)
     episodes = []
     for i, seed in enumerate(seeds):
         last = int(ended_at[i])
         columns = {k: v[: last + 1, i] for k, v in info_all.items()}
         rewards_i = [math.nan, *rew_all[:last, i].tolist()]
-        log = _step_log(
-            layout,
-            name,
-            scenario,
-            seed,
-            obs_all[: last + 1, i],
-            act_all[:last, i],
-            columns,
-            rewards_i,
-        )
+        obs_i, act_i = obs_all[: last + 1, i], act_all[:last, i]
+        log = _step_log(layout, name, scenario, seed, obs_i, act_i, columns, rewards_i)
         episodes.append(Episode(name, scenario, int(seed), log))
     return episodes
 
@@ -401,12 +395,16 @@ def auto_workers(episodes: int, learned: int = 0, *, scored: bool = False) -> in
     return max(1, min(cores, int(cost // per_worker)))
 
 
-_Work = tuple[PolicySpec, str, tuple[int, ...], EnvConfigSpec, Reducer | None, str]
+# A work unit (:func:`work_units`): policy, scenario, seeds, config, reducer, task, the name of
+# its episodes if the policy is a path made absolute (:func:`_anchored`), and the driver's
+# sources digest, which the worker checks (:func:`eval.provenance.check_worker_code`).
+_Work = tuple[PolicySpec, str, tuple[int, ...], EnvConfigSpec, Reducer | None, str, str | None, str]
 
 
 def _run_task(work: _Work) -> Any:
-    policy, scenario, seeds, config, reduce, task = work
-    episodes = run_batch(policy, scenario, seeds, config=config, task=task)
+    policy, scenario, seeds, config, reduce, task, name, code = work
+    check_worker_code(code)  # a worker with other code would make other episodes, unnoticed
+    episodes = run_batch(policy, scenario, seeds, config=config, task=task, name=name)
     return episodes if reduce is None else [reduce(e) for e in episodes]
 
 
@@ -448,7 +446,7 @@ def rollout(
     :raises ValueError: for an unknown policy or scenario, an empty or too large grid, a
         non-integer seed, or workers < 1, before any episode runs.
     """
-    learned = _check_grid(policies, scenarios, seeds, task)
+    learned, sent = _check_grid(policies, scenarios, seeds, task)
     total = len(policies) * len(scenarios) * len(seeds)
     if backend is None:
         if workers is None:
@@ -458,7 +456,7 @@ def rollout(
         backend = Backend("local", workers=workers)
     if chunk is None:
         chunk = chunk_size(len(seeds), backend.slots(), len(policies) * len(scenarios))
-    units = work_units(policies, scenarios, seeds, config, reduce, chunk, task)
+    units = work_units(sent, scenarios, seeds, config, reduce, chunk, task)
     from tqdm import tqdm
 
     bar = tqdm(total=total, desc="episodes", unit="ep", disable=None if progress else True)
@@ -481,8 +479,9 @@ def _check_grid(
     scenarios: Sequence[str],
     seeds: Sequence[int],
     task: str = DEFAULT_TASK,
-) -> int:
-    """Refuse a grid that cannot run (``ValueError``); else how many of its policies learned."""
+) -> tuple[int, list[tuple[PolicySpec, str | None]]]:
+    """Refuse a grid that cannot run (``ValueError``); else how many of its policies learned,
+    and each as a worker is sent it (:func:`_anchored`)."""
     if isinstance(policies, str) or isinstance(scenarios, str):
         raise ValueError("policies and scenarios must be sequences of names, not one string")
     for name, items in (("policies", policies), ("scenarios", scenarios), ("seeds", seeds)):
@@ -496,9 +495,11 @@ def _check_grid(
         )
     t = _task(task)  # an unknown task raises
     learned = 0
+    sent = []
     for given in policies:
         policy, _ = checked_policy(given, task)
         learned += is_learned(policy)
+        sent.append(_anchored(given, policy))
     known, what = t.model.variants(), t.model.variant_key
     for scenario in scenarios:
         if scenario not in known:
@@ -506,11 +507,25 @@ def _check_grid(
     if isinstance(seeds, range):
         if seeds.start < 0 or seeds.step < 1:
             raise ValueError(f"seeds={seeds!r} is out of range: must count up from >= 0")
-        return learned
+        return learned, sent
     for seed in seeds:
         if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
             raise ValueError(f"seed={seed!r} is out of range: must be an integer >= 0")
-    return learned
+    return learned, sent
+
+
+def _anchored(given: PolicySpec, policy: Policy) -> tuple[PolicySpec, str | None]:
+    """``(spec, name)`` a worker is sent for ``given`` (built here as ``policy``): an agent
+    named by its relative path (not ``ppo``: each node's own install) as its absolute path,
+    named as given; else ``(given, None)``. A Ray worker finds a relative path from the folder
+    its ``ray start`` ran in: another agent than the one read here (and ``meta.json`` records)."""
+    spec, platform = policy_spec(given) if isinstance(given, str) else (given, None)
+    path = getattr(policy, "path", None) if is_learned(policy) else None
+    relative = isinstance(spec, str) and not Path(spec).is_absolute()
+    if not relative or path is None or Path(path) != Path(spec):
+        return given, None
+    where = str(Path(spec).absolute())
+    return (where if platform is None else f"{where}@{platform}"), policy.name
 
 
 def chunk_size(seeds: int, slots: int, cells: int = 1) -> int:
@@ -523,7 +538,7 @@ def chunk_size(seeds: int, slots: int, cells: int = 1) -> int:
 
 
 def work_units(
-    policies: Sequence[PolicySpec],
+    policies: Sequence[PolicySpec | tuple[PolicySpec, str | None]],
     scenarios: Sequence[str],
     seeds: Sequence[int],
     config: EnvConfigSpec,
@@ -531,13 +546,15 @@ def work_units(
     size: int,
     task: str = DEFAULT_TASK,
 ) -> list[_Work]:
-    """The work units in grid order: (policy, scenario, a chunk of at most ``size`` seeds,
-    config, reducer, task)."""
+    """The work units in grid order (``_Work``: policy, scenario, a chunk of at most ``size``
+    seeds, config, reducer, task, name, this process's sources digest); ``policies`` are specs
+    or :func:`_anchored`'s ``(spec, name)``."""
     if isinstance(size, bool) or not isinstance(size, int) or size < 1:
         raise ValueError(f"chunk={size!r} is out of range: must be an integer >= 1")
+    code = running_sources_sha256()
     return [
-        (p, s, tuple(int(x) for x in seeds[start : start + size]), config, reduce, task)
-        for p in policies
+        (p, s, tuple(int(x) for x in seeds[k : k + size]), config, reduce, task, n, code)
+        for p, n in (p if isinstance(p, tuple) else (p, None) for p in policies)
         for s in scenarios
-        for start in range(0, len(seeds), size)
+        for k in range(0, len(seeds), size)
     ]

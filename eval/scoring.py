@@ -11,7 +11,9 @@ frame for frame, to ``episode_table``, ``summarize`` and ``compare`` on all the 
 and each log's text to what :func:`eval.steplog.write_step_log` writes (tested).
 
 The units return the logs' text, and this process writes the files, so that Ray workers on other
-machines need not share the run's folder.
+machines need not share the run's folder. Each unit carries this process's sources digest, which
+its worker checks (:func:`eval.provenance.check_worker_code`): a node with other metrics' code
+would score the episodes otherwise, unnoticed.
 
 ``follow-eval metrics`` scores step logs from disk the same way, after :func:`read_episodes` has
 read them on the same backend, a chunk of files to a unit (reading costs about as much as the
@@ -30,6 +32,7 @@ from pathlib import Path
 import pandas as pd
 
 from eval.metrics import Metric
+from eval.provenance import check_worker_code, running_sources_sha256
 from eval.rollout import Episode
 from eval.stats import EpisodeRow, binary_metrics, compare, episode_table, pairing_notes, summarize
 from eval.steplog import StepLogError, read_step_log, step_log_text
@@ -65,10 +68,12 @@ class _Scenario:
     variant: str
     policies: tuple[str, ...]  # the run's policies in table order: the comparisons' pairs
     logs: bool
+    code: str | None = None  # the driver's sources digest, checked by the worker
 
 
 def _score_scenario(unit: _Scenario) -> tuple[list[str], pd.DataFrame, pd.DataFrame, pd.DataFrame]:
     """A scenario's log texts (``[]`` without logs), episode table, summary and comparisons."""
+    check_worker_code(unit.code)  # a worker with other metrics would score unnoticed
     texts = [step_log_text(ep.log) for ep in unit.episodes] if unit.logs else []  # type: ignore[union-attr]
     table = episode_table(unit.episodes, metrics=unit.metrics, variant=unit.variant)
     names = list(unit.metrics)
@@ -111,8 +116,10 @@ def score(
     rows: dict[str, list[int]] = {}  # scenario -> its episodes' positions, in first-seen order
     for k, ep in enumerate(episodes):
         rows.setdefault(ep.scenario, []).append(k)
+    code = running_sources_sha256()
+    logs = log_path is not None
     units = [
-        _Scenario([episodes[k] for k in ks], dict(metrics), variant, policies, log_path is not None)
+        _Scenario([episodes[k] for k in ks], dict(metrics), variant, policies, logs, code)
         for ks in rows.values()
     ]
     positions = list(rows.values())
@@ -151,22 +158,27 @@ def score(
 class _Files:
     """One work unit of :func:`read_episodes`: some of the files, with their positions."""
 
-    files: list[tuple[int, Path]]
+    files: list[tuple[int, Path, Path]]  # position, the path as given, the path absolute
     task: str
     variant: str  # the variant's column (``scenario``, ``track``)
     labels: tuple[str, str]  # policy and variant for a log without those columns
+    code: str | None = None  # the driver's sources digest, checked by the worker
 
 
 def _read_files(unit: _Files) -> tuple[list[Episode], StepLogError | None]:
     """The unit's files as episodes, up to the first that cannot be read (returned, so that
     :func:`read_episodes` reports the first bad file in the given order, whichever unit
-    finished first)."""
+    finished first).
+
+    Each file is read by its absolute path (a Ray worker's own folder is not the driver's)
+    and named in a message as it was given."""
+    check_worker_code(unit.code)
     episodes = []
-    for i, path in unit.files:
+    for i, given, path in unit.files:
         try:
             log = read_step_log(path, unit.task)
         except StepLogError as e:
-            return episodes, e
+            return episodes, _as_given(e, path, given)
         policy = _first_text(log, "policy") or unit.labels[0]
         variant = _first_text(log, unit.variant) or unit.labels[1]
         seed = _seed(path, float(log["seed"].iloc[0])) if _has_seeds(log) else i
@@ -174,6 +186,14 @@ def _read_files(unit: _Files) -> tuple[list[Episode], StepLogError | None]:
         # metrics of endings (collision, lost, success) are NaN, not a clean run's 0 / 100.
         episodes.append(Episode(policy, variant, seed, log))
     return episodes, None
+
+
+def _as_given(error: StepLogError, path: Path, given: Path) -> StepLogError:
+    """``error`` naming the file as the user gave it (every message starts ``<path>: ``)."""
+    text, read = str(error), f"{path}: "
+    if path == given or not text.startswith(read):
+        return error
+    return StepLogError(f"{given}: {text[len(read) :]}")
 
 
 def _has_seeds(log: pd.DataFrame) -> bool:
@@ -222,9 +242,11 @@ def read_episodes(
         process).
     :raises StepLogError: of the first file, in the given order, that cannot be read.
     """
-    numbered = list(enumerate(map(Path, files)))
+    # Absolute for the workers, whose folder is not this process's on a cluster.
+    numbered = [(i, Path(f), Path(f).absolute()) for i, f in enumerate(files)]
+    code = running_sources_sha256()
     units = [
-        _Files(numbered[k : k + _FILES_PER_UNIT], task, variant, (policy, label))
+        _Files(numbered[k : k + _FILES_PER_UNIT], task, variant, (policy, label), code)
         for k in range(0, len(numbered), _FILES_PER_UNIT)
     ]
     finished: dict[int, StepLogError | None] = {}

@@ -31,7 +31,14 @@ folder are refused.
 trains (:func:`check_study_export`). ``policies/agents/ppo_ensemble`` is such a folder.
 
 On a cluster the run folders are written by the nodes that train them: give ``--runs`` /
-``--out`` on a file system every node shares.
+``--out`` on a file system every node shares. A seed's unit names its folder (and a
+``--hyperparams`` file) by absolute path, whatever folder a node started in, and carries the
+driver's sources digest and hyperparameters, which the node checks before it trains
+(:func:`eval.provenance.check_worker_code`). Its worker decides whether the folder is a new run
+or one to resume, as the same command run again does: a unit whose worker died is run again
+(by the execution layer) from the seed's newest checkpoint. ``study.json`` records the digest
+(``code``), and a seed is trained on a study only by the code that started it (a study made
+before it was recorded is refused when a seed would train; the message says how to go on).
 """
 
 from __future__ import annotations
@@ -40,14 +47,17 @@ import contextlib
 import dataclasses
 import json
 import re
+import shutil
+import socket
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import pandas as pd
 import yaml
 
+from eval.provenance import ROLLOUT_PACKAGES, SHORT, check_worker_code, running_sources_sha256
 from execution import Backend, execute
 from follow_env.sim.atomic import atomic_folder, atomic_write_text
 from policies.learned.ensemble import ENSEMBLE
@@ -75,6 +85,11 @@ SEED_STRIDE = 100_000_000
 #: The largest training seed: seed + k * SEED_STRIDE + n_timesteps must stay below 2**32.
 MAX_SEEDS = 40
 STUDY = "study.json"
+#: The packages whose sources decide what a seed trains: the env, the policies, the evaluation
+#: (the held-out scores and the model card's comparison) and the training.
+TRAINING_PACKAGES = (*ROLLOUT_PACKAGES, "train")
+#: ``study.json``'s key for the sources digest of :data:`TRAINING_PACKAGES`.
+CODE = "code"
 SEEDS_CSV = "seeds.csv"
 SUMMARY_MD = "summary.md"
 SUMMARY_JSON = "summary.json"
@@ -109,11 +124,14 @@ def parse_seeds(text: str) -> tuple[int, ...]:
 
 
 def seed_args(args: Args, k: int, study: Path) -> Args:
-    """The options of training seed ``k``'s run in ``study`` (see the module docstring)."""
+    """The options of training seed ``k``'s run in ``study`` (see the module docstring); its
+    folder and hyperparameter file by absolute path, as any node of a cluster finds them."""
+    hyperparams = args.hyperparams.absolute() if args.hyperparams is not None else None
     return dataclasses.replace(
         args,
         seed=args.seed + k * SEED_STRIDE,
-        out=study / f"seed-{k}",
+        out=Path(study).absolute() / f"seed-{k}",
+        hyperparams=hyperparams,
         progress=False,
         export=None,  # the study exports its seeds together, once all are trained
         force=False,
@@ -197,11 +215,72 @@ def _row(k: int, folder: Path) -> dict[str, Any]:
     }
 
 
-def _train_unit(unit: tuple[int, Args, str]) -> dict[str, Any]:
-    """One seed's run (a work unit: in this process, a pool worker or a Ray task)."""
-    k, args, command = unit
-    folder = train(args, command=command)
-    return _row(k, folder)
+class _Seed(NamedTuple):
+    """One seed's work unit: the seed ``k``, its options as a new run (:func:`seed_args`), the
+    study's command line, the budget [env steps] a resume must reach if longer than the run's
+    own, whether its folder was new or empty when the command started, the driver's sources
+    digest of :data:`TRAINING_PACKAGES`, and the hyperparameters a new run trains with (JSON)."""
+
+    k: int
+    args: Args
+    command: str
+    longer: int | None
+    new: bool
+    code: str
+    hp: dict[str, Any]
+
+
+def _train_unit(unit: _Seed) -> dict[str, Any]:
+    """One seed's run (a work unit: in this process, a pool worker or a Ray task): trained
+    anew or resumed as its folder is now, not as it was when the command started, so that a
+    unit run again after its worker died resumes what that worker left."""
+    check_worker_code(unit.code, TRAINING_PACKAGES)
+    k, folder = unit.k, unit.args.out
+    assert folder is not None  # seed_args names it
+    if _finished(folder) and (unit.longer is None or _budget(folder) >= unit.longer):
+        return _row(k, folder)  # its worker died after the run had finished
+    if unit.new and folder.is_dir() and not any(folder.glob(f"{runs.CHECKPOINTS}/*_steps.zip")):
+        # What a lost worker wrote before its first checkpoint (the folder was empty when
+        # the command started): nothing to resume from, so the seed starts again.
+        _clear(folder)
+    if folder.is_dir() and any(folder.iterdir()):
+        # Its own budget once a lost worker's resume has written the longer one (a resume
+        # whose training is done then writes the report only).
+        longer = unit.longer if unit.longer is not None and _budget(folder) < unit.longer else None
+        resume = Args(resume=folder, n_timesteps=longer, threads=unit.args.threads, progress=False)
+        return _row(k, train(resume, command=f"{unit.command} [seed {k}, resumed]"))
+    if json.loads(json.dumps(run_hyperparams(unit.args))) != unit.hp:
+        raise ValueError(
+            f"seed {k}: this worker ({socket.gethostname()}) reads other hyperparameters than "
+            f"the driver from {unit.args.hyperparams or 'its installed defaults'}: give a "
+            "--hyperparams file every node shares, or install the same version on every node"
+        )
+    return _row(k, train(unit.args, command=f"{unit.command} [seed {k}]"))
+
+
+def _budget(folder: Path) -> int:
+    """The env steps the run in ``folder`` trains to (its ``config.yaml``'s)."""
+    return int(runs.read_config(folder)["hyperparams"]["n_timesteps"])
+
+
+def _clear(folder: Path) -> None:
+    """Empty ``folder``, a new seed's run that ended before its first checkpoint, if it holds
+    only what such a run writes (and hidden temporary files): nothing else is deleted.
+
+    :raises ValueError: naming a file no run writes before its first checkpoint.
+    """
+    early = {runs.CONFIG, runs.SESSIONS, runs.EVALUATIONS, runs.LOGS, runs.CHECKPOINTS}
+    other = sorted({c.name for c in folder.iterdir() if not c.name.startswith(".")} - early)
+    if other:
+        raise ValueError(
+            f"{folder}: its run ended before its first checkpoint, but the folder holds "
+            f"{other[0]}, which no run writes: move it away to train the seed again"
+        )
+    for child in folder.iterdir():
+        if child.is_dir() and not child.is_symlink():
+            shutil.rmtree(child)
+        else:
+            child.unlink()
 
 
 def train_seeds(
@@ -217,6 +296,8 @@ def train_seeds(
     study = args.out if args.out is not None else _new_study_path(args.runs, args.algo)
     settings = _settings(args, seeds)
     hp = run_hyperparams(args)  # what every seed trains with, the earlier seeds too
+    code = running_sources_sha256(TRAINING_PACKAGES)  # the code every seed's worker must run
+    seen = json.loads(json.dumps(hp))
     had = _read_study(study)
     # The study's other seeds, not in this command: they must have trained as these will, and
     # the summary and the ensemble are of every finished seed.
@@ -229,28 +310,27 @@ def train_seeds(
                 f"to fewer env steps than {hp['n_timesteps']:,}; give it in --seeds too, to "
                 "resume it to them"
             )
-    units: list[tuple[int, Args, str]] = []
+    units: list[_Seed] = []
     done: dict[int, dict[str, Any]] = {}
     for i, k in enumerate(seeds):
         folder = study / f"seed-{k}"
         longer = _same_training(k, folder, hp) if (folder / runs.CONFIG).is_file() else None
+        one = seed_args(args, k, study)
         if _finished(folder) and longer is None:
-            done[i] = _row(k, folder)
-            units.append((k, args, command))  # a placeholder: done[i] stands for it
+            done[i] = _row(k, folder)  # its unit below is a placeholder
         elif folder.is_dir() and any(folder.iterdir()):
             resume = Args(resume=folder, n_timesteps=longer, threads=args.threads, progress=False)
             check_resume(resume)  # before any seed trains, as a new seed's options are
-            units.append((k, resume, f"{command} [seed {k}, resumed]"))
         else:
-            one = seed_args(args, k, study)
             if one.seed > MAX_SEED:
                 raise ValueError(f"--seeds: seed {k} is out of range with --seed {args.seed}")
             check_new_run(one)  # every option, before any seed trains
-            units.append((k, one, f"{command} [seed {k}]"))
+        new = not (folder.is_dir() and any(folder.iterdir()))
+        units.append(_Seed(k, one, command, longer, new, code, seen))
     if args.export is not None:  # before any seed trains, as for one run's export
         check_study_export(args.export, seeds, study, force=args.force)
     backend.check_reachable()  # before study.json is written
-    _claim(study, settings)
+    _claim(study, settings, code, training=len(done) < len(units))
     rows = execute(_train_unit, units, backend, done=done)
     rows += [_row(k, study / f"seed-{k}") for k in others if _finished(study / f"seed-{k}")]
     rows.sort(key=lambda row: row["seed"])
@@ -358,8 +438,9 @@ def _read_study(study: Path) -> dict[str, Any] | None:
     return had
 
 
-def _claim(study: Path, settings: dict[str, Any]) -> None:
-    """Write ``study.json``, or check that the folder's is this study's."""
+def _claim(study: Path, settings: dict[str, Any], code: str, *, training: bool) -> None:
+    """Write ``study.json``, or check that the folder's is this study's and, if a seed is to
+    train (``training``), that the study's seeds trained with this ``code``."""
     path = study / STUDY
     had = _read_study(study)
     if had is not None:
@@ -368,20 +449,39 @@ def _claim(study: Path, settings: dict[str, Any]) -> None:
         changed = sorted(
             k
             for k in settings.keys() | had.keys()
-            if k != "seeds" and had.get(k) != settings.get(k)
+            if k not in ("seeds", CODE) and had.get(k) != settings.get(k)
         )
         if changed:
             raise ValueError(
                 f"{study} holds another study (its {STUDY} differs in {', '.join(changed)}); "
                 "give another --out, or the same options to resume it"
             )
+        if training and had.get(CODE) != code:
+            raise ValueError(_other_code(study, had.get(CODE), code))
         had["seeds"] = sorted(set(had.get("seeds", [])) | set(settings["seeds"]))
         atomic_write_text(path, json.dumps(had, indent=1) + "\n")
         return
     if study.exists() and any(study.iterdir()):
         raise ValueError(f"--out {study} already exists and is not an empty folder or a study")
     study.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(path, json.dumps(settings, indent=1) + "\n")
+    atomic_write_text(path, json.dumps(settings | {CODE: code}, indent=1) + "\n")
+
+
+def _other_code(study: Path, had: Any, code: str) -> str:
+    """Why a seed may not train in ``study`` with ``code``: one line, and what to do."""
+    sources = f"{', '.join(TRAINING_PACKAGES)} sources"
+    if not isinstance(had, str):
+        return (
+            f"{study / STUDY} records no code (the study was made before studies recorded it), "
+            "so whether its seeds trained with this code cannot be checked, and a study's "
+            "seeds differ in their seed only: give another --out, or, if this code trained "
+            f'them, add "{CODE}": "{code}" (the SHA-256 of the {sources}) to {study / STUDY}'
+        )
+    return (
+        f"{study}: the code changed since the study started (the SHA-256 of its {sources} "
+        f"was {had[:SHORT]}, is now {code[:SHORT]}), and a study's seeds differ in their seed "
+        "only: run it with the code it started with, or give another --out"
+    )
 
 
 def _new_study_path(root: Path, learner: str | None) -> Path:

@@ -163,8 +163,8 @@ def test_auto_workers_starts_a_pool_sooner_when_it_also_scores_the_episodes(
 def test_the_grid_check_counts_the_learned_agents() -> None:
     from eval.rollout import _check_grid
 
-    assert _check_grid(["ppo_law", "pn", "ppo_mecanum@mecanum"], ["straight"], [0]) == 2
-    assert _check_grid(["pn", "gsmpn:tuned"], ["straight"], range(3)) == 0
+    assert _check_grid(["ppo_law", "pn", "ppo_mecanum@mecanum"], ["straight"], [0])[0] == 2
+    assert _check_grid(["pn", "gsmpn:tuned"], ["straight"], range(3))[0] == 0
 
 
 def test_a_policy_runs_on_another_platform_by_name_with_its_own_columns() -> None:
