@@ -15,12 +15,9 @@ import sys
 from eval.cli_base import PROG, USAGE_ERROR, UsageError
 from eval.journal import journal_folder
 from eval.steplog import StepLogError
-from execution import BackendUnavailableError, WorkerLostError, unit_origin
+from execution import WORKERS_LOST, BackendUnavailableError, WorkerLostError, unit_origin
 
 __all__ = ["KNOWN_ERRORS", "WORKERS_LOST", "report_error"]
-
-#: Exit status when a work unit's worker died more than ``max_retries`` times.
-WORKERS_LOST = 3
 
 #: The errors ``follow-eval`` reports in one line; any other is a bug, shown with its traceback.
 KNOWN_ERRORS = (

@@ -34,6 +34,7 @@ This package imports nothing else of the project: every layer above may use it.
 
 from execution.backend import (
     BACKENDS,
+    WORKERS_LOST,
     Backend,
     BackendUnavailableError,
     RemoteTraceback,
@@ -48,6 +49,7 @@ from execution.backend import (
 
 __all__ = [
     "BACKENDS",
+    "WORKERS_LOST",
     "Backend",
     "BackendUnavailableError",
     "RemoteTraceback",

@@ -32,6 +32,7 @@ from execution.on_ray import (
 )
 from execution.worker import (
     _IN_FLIGHT_PER_SLOT,
+    WORKERS_LOST,
     BackendUnavailableError,
     RemoteTraceback,
     UnitError,
@@ -48,6 +49,7 @@ from execution.worker import (
 __all__ = [
     "BACKENDS",
     "POOL_IDLE_S",
+    "WORKERS_LOST",
     "Backend",
     "BackendUnavailableError",
     "RemoteTraceback",

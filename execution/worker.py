@@ -18,6 +18,7 @@ from collections.abc import Callable
 from typing import Any
 
 __all__ = [
+    "WORKERS_LOST",
     "BackendUnavailableError",
     "RemoteTraceback",
     "UnitError",
@@ -33,6 +34,11 @@ _IN_FLIGHT_PER_SLOT = 2
 
 class BackendUnavailableError(RuntimeError):
     """The backend cannot run here (Ray not installed, cluster unreachable); says what to do."""
+
+
+#: The exit status of a command stopped by :class:`WorkerLostError` (every CLI of the project:
+#: 2 is bad input, 130 Ctrl-C), so a script can tell "run it again, with fewer workers" apart.
+WORKERS_LOST = 3
 
 
 class WorkerLostError(RuntimeError):

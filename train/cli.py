@@ -18,6 +18,7 @@ from typing import NoReturn
 from eval.cli_base import _positive, path_option
 from execution import (
     BACKENDS,
+    WORKERS_LOST,
     Backend,
     BackendUnavailableError,
     WorkerLostError,
@@ -32,9 +33,6 @@ from train.ppo import PROG, USAGE_ERROR, Interrupted, TrainingError, train
 from train.seeds import parse_seeds, train_seeds
 
 __all__ = ["WORKERS_LOST", "build_parser", "main", "parse_args"]
-
-#: Exit status when a work unit's worker died more than ``max_retries`` times.
-WORKERS_LOST = 3
 
 
 # -- Command line ----------------------------------------------------------------------------

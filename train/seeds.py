@@ -331,7 +331,7 @@ def train_seeds(
         check_study_export(args.export, seeds, study, force=args.force)
     backend.check_reachable()  # before study.json is written
     _claim(study, settings, code, training=len(done) < len(units))
-    rows = execute(_train_unit, units, backend, done=done)
+    rows = execute(_train_unit, units, backend, done=done, describe=lambda u: f"(seed {u.k})")
     rows += [_row(k, study / f"seed-{k}") for k in others if _finished(study / f"seed-{k}")]
     rows.sort(key=lambda row: row["seed"])
     write_summary(study, rows)

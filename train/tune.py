@@ -50,7 +50,15 @@ from eval.tuning.folders import (
     text_check,
 )
 from eval.tuning.objective import DEFAULT_VARIANTS, SCORE_KEYS, TUNE_SEED0, episode_score
-from execution import Backend, BackendUnavailableError, backend_from_args, execute
+from execution import (
+    WORKERS_LOST,
+    Backend,
+    BackendUnavailableError,
+    WorkerLostError,
+    backend_from_args,
+    execute,
+    unit_origin,
+)
 from follow_env.sim.atomic import atomic_write_text
 from policies.space import ParamRange
 from train.config import read_document
@@ -340,8 +348,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point; returns the exit status (2 with one line on stderr for bad arguments)."""
     try:
         return run(build_parser().parse_args(argv))
+    except WorkerLostError as e:  # a trial's workers killed again and again (out of memory)
+        print(
+            f"{PROG}: error: {e}; the study keeps its finished trials and their runs: run the "
+            "same command again to resume (with fewer --workers if memory is short)",
+            file=sys.stderr,
+        )
+        return WORKERS_LOST
     except (UsageError, OSError, ValueError, BackendUnavailableError) as e:
-        print(f"{PROG}: error: {e}", file=sys.stderr)
+        where = unit_origin(e)  # raised in a worker: which unit, on which host
+        print(f"{PROG}: error: {e}" + (f" (in {where})" if where else ""), file=sys.stderr)
         return 2
     except KeyboardInterrupt:  # before the search began (its own is caught in run)
         print(f"{PROG}: interrupted before the search began; nothing was written", file=sys.stderr)

@@ -35,7 +35,14 @@ from eval.tuning.folders import (
     refuse_repeats,
     text_check,
 )
-from execution import BACKENDS, BackendUnavailableError, backend_from_args
+from execution import (
+    BACKENDS,
+    WORKERS_LOST,
+    BackendUnavailableError,
+    WorkerLostError,
+    backend_from_args,
+    unit_origin,
+)
 from follow_env.sim.atomic import atomic_write_text
 
 __all__ = ["PROG", "build_parser", "main"]
@@ -379,8 +386,16 @@ def main(argv: Sequence[str] | None = None) -> int:
         args = build_parser().parse_args(argv)
         args.argv = argv
         return run(args)
+    except WorkerLostError as e:  # a trial's workers killed again and again (out of memory)
+        print(
+            f"{PROG}: error: {e}; the study keeps its finished trials: run the same command "
+            "again to resume (with fewer --workers if memory is short)",
+            file=sys.stderr,
+        )
+        return WORKERS_LOST
     except (UsageError, OSError, ValueError, BackendUnavailableError) as e:
-        print(f"{PROG}: error: {e}", file=sys.stderr)
+        where = unit_origin(e)  # raised in a worker: which unit, on which host
+        print(f"{PROG}: error: {e}" + (f" (in {where})" if where else ""), file=sys.stderr)
         return 2
     except KeyboardInterrupt:  # before the search began (its own is caught in run)
         print(f"{PROG}: interrupted before the search began; nothing was written", file=sys.stderr)
