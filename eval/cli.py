@@ -27,8 +27,9 @@ tables hold the line metrics (:mod:`eval.line_metrics`), the logs sit in
 and ``paths_seed<k>.png`` (:mod:`eval.line_report`); everything else is the same.
 
 ``meta.json``'s ``code`` is the code that made the episodes (:mod:`eval.provenance`):
-``sources_sha256`` over the ``.py`` files of ``follow_env`` and ``policies``, ``git`` (the HEAD
-commit, or null outside a git checkout) and ``git_dirty`` (those packages edited since it);
+``sources_sha256`` over the ``.py`` files of ``follow_env``, ``policies`` and ``eval``, ``git``
+(the HEAD commit, or null outside a git checkout) and ``git_dirty`` (those packages edited since
+it);
 ``dominance`` notes runs pooled from different or unrecorded code.
 
 The folder appears whole when the run succeeds, or not at all. Each finished work unit is kept

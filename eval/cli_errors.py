@@ -15,7 +15,7 @@ import sys
 from eval.cli_base import PROG, USAGE_ERROR, UsageError
 from eval.journal import journal_folder
 from eval.steplog import StepLogError
-from execution import WORKERS_LOST, BackendUnavailableError, WorkerLostError, unit_origin
+from execution import WORKERS_LOST, BackendUnavailableError, WorkerLostError, error_line
 
 __all__ = ["KNOWN_ERRORS", "WORKERS_LOST", "report_error"]
 
@@ -38,8 +38,7 @@ def report_error(error: BaseException, args: argparse.Namespace | None) -> int:
     if isinstance(error, WorkerLostError):
         print(f"{PROG}: error: {error}; {_what_was_kept(args)}", file=sys.stderr)
         return WORKERS_LOST
-    where = unit_origin(error)
-    print(f"{PROG}: error: {error}" + (f" (in {where})" if where else ""), file=sys.stderr)
+    print(f"{PROG}: error: {error_line(error)}", file=sys.stderr)
     return USAGE_ERROR
 
 

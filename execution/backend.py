@@ -42,6 +42,7 @@ from execution.worker import (
     _note_origin,
     _run_unit,
     _start_worker,
+    error_line,
     pin_threads,
     unit_origin,
 )
@@ -56,6 +57,7 @@ __all__ = [
     "UnitError",
     "WorkerLostError",
     "backend_from_args",
+    "error_line",
     "execute",
     "pin_threads",
     "shutdown_pools",

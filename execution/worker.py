@@ -23,6 +23,7 @@ __all__ = [
     "RemoteTraceback",
     "UnitError",
     "WorkerLostError",
+    "error_line",
     "pin_threads",
     "unit_origin",
 ]
@@ -120,6 +121,13 @@ def unit_origin(error: BaseException) -> str:
     """
     where = getattr(error, _UNIT_ORIGIN, "")
     return where if isinstance(where, str) else ""
+
+
+def error_line(error: BaseException) -> str:
+    """``error``'s message as a one-line command-line error gives it: followed by `` (in
+    <where>)`` (:func:`unit_origin`) if a unit raised it in a worker."""
+    where = unit_origin(error)
+    return f"{error} (in {where})" if where else str(error)
 
 
 def _tag_origin(error: BaseException) -> None:

@@ -23,7 +23,7 @@ from execution import (
     BackendUnavailableError,
     WorkerLostError,
     backend_from_args,
-    unit_origin,
+    error_line,
 )
 from train.algos import ALGOS, CONFIGS, DEFAULT_ALGO
 from train.config import ConfigError
@@ -307,8 +307,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         )
         return WORKERS_LOST
     except (UsageError, ConfigError, ValueError, FileNotFoundError, BackendUnavailableError) as e:
-        where = unit_origin(e)  # raised by a seed's training in a worker: which, and where
-        print(f"{PROG}: error: {e}" + (f" (in {where})" if where else ""), file=sys.stderr)
+        print(f"{PROG}: error: {error_line(e)}", file=sys.stderr)  # a seed's worker: which, where
         return USAGE_ERROR
     from train.run import read_sessions
 

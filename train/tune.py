@@ -56,8 +56,8 @@ from execution import (
     BackendUnavailableError,
     WorkerLostError,
     backend_from_args,
+    error_line,
     execute,
-    unit_origin,
 )
 from follow_env.sim.atomic import atomic_write_text
 from policies.space import ParamRange
@@ -356,8 +356,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         )
         return WORKERS_LOST
     except (UsageError, OSError, ValueError, BackendUnavailableError) as e:
-        where = unit_origin(e)  # raised in a worker: which unit, on which host
-        print(f"{PROG}: error: {e}" + (f" (in {where})" if where else ""), file=sys.stderr)
+        print(f"{PROG}: error: {error_line(e)}", file=sys.stderr)  # a worker's: unit, host
         return 2
     except KeyboardInterrupt:  # before the search began (its own is caught in run)
         print(f"{PROG}: interrupted before the search began; nothing was written", file=sys.stderr)
