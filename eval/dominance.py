@@ -63,7 +63,7 @@ import numpy as np
 import pandas as pd
 
 from eval.metrics import metric_digits, metric_label
-from eval.stats import paired_test, variant_column
+from eval.stats import ALPHA, holm, paired_test, variant_column
 
 __all__ = [
     "CRITERIA",
@@ -140,6 +140,7 @@ COLUMNS = [
     "diff_ci_low",
     "diff_ci_high",
     "perm_p",
+    "holm_p",
     "n",
     "verdict",
     "meets",
@@ -197,7 +198,14 @@ def dominance(
             rows.append(
                 _line(scenario, c, by_policy[learner], best, theirs, seed, variant, learner)
             )
-    return pd.DataFrame(rows, columns=[variant, *COLUMNS])
+    return _with_holm(pd.DataFrame(rows, columns=[variant, *COLUMNS]))
+
+
+def _with_holm(frame: pd.DataFrame) -> pd.DataFrame:
+    """``frame`` with ``holm_p``: :func:`eval.stats.holm` over the table's tested lines, one
+    family (the report's counts of significant lines are claims about the whole table)."""
+    frame["holm_p"] = holm(frame["perm_p"].to_numpy(dtype=np.float64))
+    return frame
 
 
 def default_laws(table: pd.DataFrame, learner: str) -> list[str]:
@@ -243,12 +251,16 @@ def tally(frame: pd.DataFrame) -> dict[str, int]:
     :param frame: :func:`dominance` output.
     :returns: ``met`` (requirements met), ``better`` and ``worse`` (lines whose difference
         ``learner - best law`` is significant, :data:`RULE`, in the learner's favour / against
-        it).
+        it), and ``better_holm`` and ``worse_holm``: those of them whose p stays below 0.05
+        after Holm's adjustment over the table's lines (``holm_p``).
     """
+    family = frame["holm_p"].to_numpy(dtype=np.float64) < ALPHA
     return {
         "met": int(frame["meets"].astype(bool).sum()),
         "better": int((frame["verdict"] == "better").sum()),
         "worse": int((frame["verdict"] == "worse").sum()),
+        "better_holm": int(((frame["verdict"] == "better") & family).sum()),
+        "worse_holm": int(((frame["verdict"] == "worse") & family).sum()),
     }
 
 
@@ -356,7 +368,7 @@ def finished_view(
         theirs = cell[cell["policy"] == r["best_law"]].set_index("seed")
         c = by_metric[r["criterion"]]
         rows.append(_line(r[variant], c, mine, r["best_law"], theirs, seed, variant, learner))
-    return pd.DataFrame(rows, columns=[variant, *COLUMNS])
+    return _with_holm(pd.DataFrame(rows, columns=[variant, *COLUMNS]))
 
 
 def finished_markdown(view: pd.DataFrame, learner: str) -> str:
@@ -370,8 +382,8 @@ def finished_markdown(view: pd.DataFrame, learner: str) -> str:
         "misses above, against the same law (an explanation, not part of the verdict):",
         "",
         f"| {variant} | criterion | episodes | {learner} | the line's law | law | "
-        f"{learner} - law [95 % CI] | p | verdict | meets |",
-        "|---|---|---:|---:|---|---:|---|---:|---|---|",
+        f"{learner} - law [95 % CI] | p | Holm p | verdict | meets |",
+        "|---|---|---:|---:|---|---:|---|---:|---:|---|---|",
     ]
     for row in view.itertuples(index=False):
         lines.append(_markdown_row(row._asdict(), variant, str(row.n)))
@@ -441,6 +453,12 @@ def dominance_markdown(
         f"significantly worse on {counts['worse']} ({RULE})"
         f"{f': {named}' if named else ''}."
     )
+    tested = int(np.isfinite(frame["holm_p"].to_numpy(dtype=np.float64)).sum())
+    lines.append(
+        f"With Holm's correction for the {tested} lines tested (the chance of any false "
+        f"verdict among them at most 5 %): better on {counts['better_holm']}, worse on "
+        f"{counts['worse_holm']}."
+    )
     if calibrated:
         met = {law: t["met"] for law, t in calibrated.items()}
         each = ", ".join(f"{law} {m}" for law, m in met.items())
@@ -483,13 +501,18 @@ def _markdown_row(r: dict[str, object], variant: str, middle: str) -> str:
     number of episodes compared)."""
     label = metric_label(str(r["criterion"]))
     if r["verdict"] == "n/a":
-        return f"| {r[variant]} | {label} | {middle} | | {r['best_law']} | | | | n/a | no |"
+        return f"| {r[variant]} | {label} | {middle} | | {r['best_law']} | | | | | n/a | no |"
     d = metric_digits(str(r["criterion"]))
-    p = float(r["perm_p"])  # type: ignore[arg-type]
+    p, adjusted = (_p(r[k]) for k in ("perm_p", "holm_p"))
     return (
         f"| {r[variant]} | {label} | {middle} | "
         f"{r['learner_mean']:.{d}f} | {r['best_law']} | {r['law_mean']:.{d}f} | "
         f"{r['diff']:+.{d}f} [{r['diff_ci_low']:+.{d}f}, {r['diff_ci_high']:+.{d}f}] | "
-        f"{'n/a' if not math.isfinite(p) else f'{p:.2g}'} | "
-        f"{r['verdict']} | {'yes' if r['meets'] else '**no**'} |"
+        f"{p} | {adjusted} | {r['verdict']} | {'yes' if r['meets'] else '**no**'} |"
     )
+
+
+def _p(value: object) -> str:
+    """A p-value for the table: two significant digits, ``n/a`` when it was not tested."""
+    p = float(value)  # type: ignore[arg-type]
+    return "n/a" if not math.isfinite(p) else f"{p:.2g}"

@@ -61,6 +61,7 @@ __all__ = [
     "compare",
     "episode_table",
     "error_bars",
+    "holm",
     "mean_ci",
     "metric_columns",
     "paired_test",
@@ -342,6 +343,26 @@ def error_bars(mean: np.ndarray, low: np.ndarray, high: np.ndarray) -> np.ndarra
     mean = np.asarray(mean, dtype=np.float64)
     err = np.vstack([mean - np.asarray(low, np.float64), np.asarray(high, np.float64) - mean])
     return np.where(np.isfinite(err), np.maximum(err, 0.0), 0.0)
+
+
+def holm(p: Sequence[float] | np.ndarray) -> np.ndarray:
+    """Holm's step-down adjustment of a family of p-values (it keeps the chance of any false
+    positive among them at or below the level, whatever their dependence).
+
+    The ``i``-th smallest of the ``m`` finite p-values becomes the running maximum of
+    ``(m - j) * p_(j)`` over ``j <= i`` (0-based), capped at 1; NaNs (lines not tested) stay
+    NaN and do not count in ``m``. A line is significant at the family's level ``ALPHA`` when
+    its adjusted p is below it. As ``statsmodels.stats.multitest.multipletests(p, method="holm")``
+    gives it (not a dependency; the test checks published values).
+    """
+    p = np.asarray(p, dtype=np.float64)
+    out = np.full(p.shape, np.nan)
+    tested = np.flatnonzero(np.isfinite(p))
+    order = tested[np.argsort(p[tested], kind="stable")]
+    m = order.size
+    scaled = (m - np.arange(m)) * p[order]
+    out[order] = np.minimum(1.0, np.maximum.accumulate(scaled)) if m else scaled
+    return out
 
 
 def mean_ci(values: np.ndarray, seed: int, *names: str) -> tuple[float, float]:

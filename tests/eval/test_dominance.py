@@ -23,6 +23,7 @@ from eval.dominance import (
     finished_view,
     tally,
 )
+from eval.stats import holm
 
 METRICS = [c.metric for c in CRITERIA]
 
@@ -133,9 +134,48 @@ def test_the_report_names_where_each_requirement_is_missed() -> None:
     )
     assert (
         # 8 seeds all +8: of the 256 sign flips only "all +" reaches +64, p = 2 / 256
-        "| curve | MeanOffset (px) | better | 9.0 | pn | 1.0 | +8.0 [+8.0, +8.0] | 0.0078 | worse "
-        "| **no** |" in text
+        # Holm over the 12 lines tested: the two at 0.0078 become 12 x 0.0078 and 11 x 0.0078,
+        # the larger carried up: neither difference holds for the table as a family
+        "| curve | MeanOffset (px) | better | 9.0 | pn | 1.0 | +8.0 [+8.0, +8.0] | 0.0078 | 0.094 "
+        "| worse | **no** |" in text
     )
+    assert text.splitlines()[2] == (
+        "With Holm's correction for the 12 lines tested (the chance of any false verdict among "
+        "them at most 5 %): better on 0, worse on 0."
+    )
+    assert tally(frame) == {"met": 9, "better": 1, "worse": 1, "better_holm": 0, "worse_holm": 0}
+
+
+def test_holm_adjusts_a_family_of_p_values_step_down() -> None:
+    # by hand: sorted 0.005, 0.01, 0.03, 0.04 -> 4 x, 3 x, 2 x, 1 x -> 0.02, 0.03, 0.06, 0.04,
+    # then the running maximum (0.04 -> 0.06); NaN is not tested and not counted in m
+    got = holm([0.01, 0.04, np.nan, 0.03, 0.005])
+    np.testing.assert_allclose(got, [0.03, 0.06, np.nan, 0.06, 0.02], rtol=1e-12)
+    np.testing.assert_array_equal(holm([0.5, 0.9]), [1.0, 1.0])  # capped at 1
+    np.testing.assert_array_equal(holm([0.04]), [0.04])  # a family of one is not adjusted
+    assert holm([]).shape == (0,)
+    # equal p-values share one adjusted value, whatever their order
+    np.testing.assert_array_equal(holm([0.01, 0.01, 0.01]), [0.03, 0.03, 0.03])
+
+
+def test_with_enough_seeds_a_difference_survives_the_correction() -> None:
+    # 20 seeds all +8 (drawn test, 9,999 flips): p = 2 / 10,000, x 12 lines = 0.0024 < 0.05
+    table = pd.concat(
+        [
+            _table({"agent": {"mean_offset_px": [1.0] * 20}, "pn": {"mean_offset_px": [9.0] * 20}}),
+            _table(
+                {"agent": {"mean_offset_px": [9.0] * 20}, "pn": {"mean_offset_px": [1.0] * 20}},
+                scenario="curve",
+            ),
+        ]
+    )
+    frame = dominance(table, "agent")
+    offset = frame[frame["criterion"] == "mean_offset_px"]
+    np.testing.assert_allclose(offset["perm_p"], 2e-4)
+    np.testing.assert_allclose(offset["holm_p"], 12 * 2e-4)
+    t = tally(frame)
+    assert (t["better_holm"], t["worse_holm"]) == (1, 1)
+    assert "better on 1, worse on 1." in dominance_markdown(frame, "agent").splitlines()[2]
 
 
 def _scenarios(n: int, offset_better: int, lost_once: int | None = None) -> pd.DataFrame:
@@ -220,9 +260,17 @@ def test_calibration_puts_each_law_through_the_test_against_the_others() -> None
     # pn centres 5 px better and is rougher than mpn (600 against ~530 mm/s²); mpn the
     # reverse; gsmpn as rough as pn and centring no better than mpn. One lost episode in 12
     # is no significant difference.
-    assert tallies["pn"] == {"met": 5, "better": 1, "worse": 1}
-    assert tallies["mpn"] == {"met": 5, "better": 1, "worse": 1}
-    assert tallies["gsmpn"] == {"met": 3, "better": 0, "worse": 2}
+    # 12 seeds of consistent differences: p = 2 / 4096 and x 6 lines, they hold under Holm too
+    both = {"better_holm": 1, "worse_holm": 1}
+    assert tallies["pn"] == {"met": 5, "better": 1, "worse": 1, **both}
+    assert tallies["mpn"] == {"met": 5, "better": 1, "worse": 1, **both}
+    assert tallies["gsmpn"] == {
+        "met": 3,
+        "better": 0,
+        "worse": 2,
+        "better_holm": 0,
+        "worse_holm": 2,
+    }
     for law, t in tallies.items():
         others = [p for p in tallies if p != law]
         assert tally(dominance(table, law, others)) == t
@@ -397,7 +445,7 @@ def test_the_finished_view_says_when_no_episode_was_finished_by_both() -> None:
     assert view["verdict"].tolist() == ["n/a"] * 3
     assert view["n"].tolist() == [0] * 3
     assert view["best_law"].tolist() == ["pn"] * 3
-    assert "| straight | InFrameRate (%) | 0 | | pn | | | | n/a | no |" in finished_markdown(
+    assert "| straight | InFrameRate (%) | 0 | | pn | | | | | n/a | no |" in finished_markdown(
         view, "agent"
     )
     with pytest.raises(ValueError, match="no 'success_pct' column"):
