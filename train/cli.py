@@ -101,7 +101,8 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         default=None,
         help="let --export write into a folder it did not make, or over exported files that "
-        "were changed: only files named like the agent's are replaced, none is deleted; let "
+        "were changed: only files named like the agent's are replaced, none is deleted (with "
+        "--seeds: an earlier export's members of other seeds are removed, if unchanged); let "
         "--add-step edit files changed since the folder's export",
     )
     p.add_argument("--no-progress", dest="progress", action="store_false", default=None)

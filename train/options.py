@@ -24,6 +24,7 @@ __all__ = [
     "MAX_SEED",
     "MAX_THREADS",
     "Args",
+    "absolute_compare_with",
     "args_from_dict",
     "args_to_dict",
     "check_new_run",
@@ -64,14 +65,17 @@ class Args:
     progress: bool = True
 
 
-def check_new_run(args: Args) -> tuple[Args, Hyperparams]:
+def check_new_run(args: Args, *, clearing: bool = False) -> tuple[Args, Hyperparams]:
     """Check a new run's options and hyperparameters without building or writing anything.
 
+    :param clearing: ``--out`` holds what a run killed before its first checkpoint wrote, and
+        the caller clears it before this run starts (:mod:`train.seeds`): that it is not empty
+        is not refused.
     :returns: the options with their defaults filled in, and the hyperparameters.
     :raises ValueError: naming the option or YAML key, its value and what it may be.
     """
     args = _with_defaults(args)
-    _check_options(args, run=None)
+    _check_options(args, run=None, clearing=clearing)
     if args.n_envs is not None:  # before the file: its batch size may not fit either
         _check_lanes(args.n_envs, args.scenarios)
     hp = run_hyperparams(args)
@@ -185,10 +189,11 @@ def _with_defaults(args: Args) -> Args:
     )
 
 
-def _check_options(args: Args, *, run: Path | None) -> None:
+def _check_options(args: Args, *, run: Path | None, clearing: bool = False) -> None:
     """Check every option that does not depend on the hyperparameters.
 
     :param run: the folder being resumed, None for a new run.
+    :param clearing: as :func:`check_new_run`'s.
     :raises ValueError: naming the option, its value and its allowed range.
     """
     from policies import make_policy
@@ -229,12 +234,27 @@ def _check_options(args: Args, *, run: Path | None) -> None:
     except (ValueError, TypeError) as e:
         raise ValueError(f"--compare-with {args.compare_with!r}: {e}") from None
     if run is None:
-        _check_run_folder(args)
+        _check_run_folder(args, clearing=clearing)
     if args.export is not None:
         location = run or args.out or args.runs / f"{args.algo}-<timestamp>"
         check_export(args.export, force=args.force, run=location)
     elif args.force:
         raise ValueError(FORCE_ALONE_ERROR)
+
+
+def absolute_compare_with(name: str) -> str:
+    """``--compare-with`` as a process in another folder reads it as this one does: a path to
+    an agent (a run or export folder, a ``.zip``, an ensemble) made absolute, a registered
+    name (``gsmpn:tuned``, ``ppo``) as it is. The registry's rule (:func:`policies.make_policy`):
+    a registered name is that policy even if a folder of that name is here too, and any other
+    name that exists is a path. A path that does not exist is left for the check to name."""
+    from policies import available_policies
+
+    if not isinstance(name, str) or not name.strip() or name in available_policies():
+        return name  # an empty name is not the current folder: make_policy refuses it
+    if not Path(name).exists():
+        return name
+    return str(Path(name).absolute())
 
 
 def _check_lanes(n_envs: int, scenarios: Sequence[str]) -> None:
@@ -255,8 +275,9 @@ def _check_against_hyperparams(args: Args, hp: Hyperparams) -> None:
     _check_int("eval_seed", args.eval_seed, 0, MAX_SEED - eval_lanes)
 
 
-def _check_run_folder(args: Args) -> None:
-    """``--out`` must be new or an empty folder, and ``--runs`` a folder or creatable."""
+def _check_run_folder(args: Args, *, clearing: bool = False) -> None:
+    """``--out`` must be new or an empty folder (or one the caller clears first:
+    ``clearing``), and ``--runs`` a folder or creatable."""
     for option, path in (("--out", args.out), ("--runs", args.runs)):
         if path is None or (option == "--runs" and args.out is not None):
             continue
@@ -268,7 +289,7 @@ def _check_run_folder(args: Args) -> None:
             check_writable(path / "config.yaml")
         except OSError as e:
             raise ValueError(f"{option} {path}: {e}") from None
-    if args.out is not None and args.out.exists() and any(args.out.iterdir()):
+    if args.out is not None and not clearing and args.out.exists() and any(args.out.iterdir()):
         raise ValueError(
             f"--out {args.out} already exists and is not empty; use --resume to continue it"
         )

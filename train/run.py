@@ -60,6 +60,7 @@ __all__ = [
     "config_text",
     "new_run_dir",
     "newest_checkpoint",
+    "not_written_early",
     "read_config",
     "read_evaluations",
     "read_sessions",
@@ -290,6 +291,40 @@ def remove_stale_scratch(run: Path) -> list[Path]:
                 shutil.rmtree(folder)
                 removed.append(folder)
     return removed
+
+
+#: What a run writes before its first checkpoint (:func:`not_written_early`): files in its
+#: folder, and the files a folder of it holds (paths relative to that folder).
+_EARLY_FILES = (CONFIG, SESSIONS, EVALUATIONS)
+_EARLY_INSIDE = {
+    LOGS: re.compile(r"progress-[0-9]+\.csv|tb|tb/events\.out\.tfevents\..+"),
+    # an unfinished checkpoint: its statistics and replay buffer are written before the model
+    CHECKPOINTS: re.compile(r"[a-z_]+_(vecnormalize|replay_buffer)_[0-9]+_steps\.pkl"),
+}
+
+
+def not_written_early(run: Path) -> str | None:
+    """The first entry of ``run`` (a path relative to it) that a run does not write before its
+    first checkpoint, or None: what may be deleted to start a run killed that early again is
+    its config, session and held-out logs, SB3's ``logs/`` (progress CSVs, TensorBoard
+    events), the files of a checkpoint it did not finish, and hidden temporary files (an
+    atomic write cut short); never a link."""
+    for path in sorted(c for c in run.iterdir() if not c.name.startswith(".")):
+        if path.is_symlink():
+            return path.name
+        if path.name in _EARLY_FILES and path.is_file():
+            continue
+        pattern = _EARLY_INSIDE.get(path.name)
+        if pattern is None or not path.is_dir():
+            return path.name
+        for child in sorted(path.rglob("*")):
+            relative = child.relative_to(path)
+            if any(part.startswith(".") for part in relative.parts) and not child.is_symlink():
+                continue  # a temporary file or folder
+            kind = child.is_dir() if relative.as_posix() == "tb" else child.is_file()
+            if child.is_symlink() or not (kind and pattern.fullmatch(relative.as_posix())):
+                return f"{path.name}/{relative.as_posix()}"
+    return None
 
 
 def save_model(model: BaseAlgorithm, path: Path) -> Path:

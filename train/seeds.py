@@ -25,14 +25,21 @@ an interrupted one from its newest checkpoint (:mod:`train.run`) and starts the 
 (so ``--seeds 0-9`` after ``--seeds 0-4`` trains five more); other settings pointed at the same
 folder are refused.
 
+A seed's folder that holds no checkpoint, only what a run writes before its first one (its
+run was killed early: :func:`_early_files`), has nothing to resume from: the same command
+clears it and trains the seed again, saying so on stderr; a folder holding anything else is
+refused, naming the file.
+
 ``--export DIR`` exports the study as one agent once every seed is trained
-(:func:`export_study`): each seed's run into ``DIR/seed-<k>`` as one run's export
-(:mod:`train.export`) and ``DIR/ensemble.yaml`` listing them; it is checked before any seed
-trains (:func:`check_study_export`). ``policies/agents/ppo_ensemble`` is such a folder.
+(:func:`train.study_export.export_study`): each seed's run into ``DIR/seed-<k>`` as one run's
+export (:mod:`train.export`) and ``DIR/ensemble.yaml`` listing them; it is checked before any
+seed trains, and an earlier export of other seeds in ``DIR`` is refused (replaced with
+``--force``). ``policies/agents/ppo_ensemble`` is such a folder.
 
 On a cluster the run folders are written by the nodes that train them: give ``--runs`` /
 ``--out`` on a file system every node shares. A seed's unit names its folder (and a
-``--hyperparams`` file) by absolute path, whatever folder a node started in, and carries the
+``--hyperparams`` file, and a ``--compare-with`` agent given by its path) by absolute path,
+whatever folder a node started in, and carries the
 driver's sources digest and hyperparameters, which the node checks before it trains
 (:func:`eval.provenance.check_worker_code`). Its worker decides whether the folder is a new run
 or one to resume, as the same command run again does: a unit whose worker died is run again
@@ -49,24 +56,30 @@ import json
 import re
 import shutil
 import socket
+import sys
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, NamedTuple
 
 import numpy as np
 import pandas as pd
-import yaml
 
 from eval.provenance import ROLLOUT_PACKAGES, SHORT, check_worker_code, running_sources_sha256
 from execution import Backend, execute
-from follow_env.sim.atomic import atomic_folder, atomic_write_text
-from policies.learned.ensemble import ENSEMBLE
+from follow_env.sim.atomic import atomic_write_text
 from train import run as runs
 from train.algos import DEFAULT_ALGO, algo
 from train.config import ConfigError, sole_section
-from train.export import ExportError, check_export, export_agent
-from train.options import MAX_SEED, Args, check_new_run, check_resume, run_hyperparams
-from train.ppo import train
+from train.options import (
+    MAX_SEED,
+    Args,
+    absolute_compare_with,
+    check_new_run,
+    check_resume,
+    run_hyperparams,
+)
+from train.ppo import PROG, train
+from train.study_export import check_study_export, export_study, write_ensemble
 
 __all__ = [
     "MAX_SEEDS",
@@ -125,13 +138,15 @@ def parse_seeds(text: str) -> tuple[int, ...]:
 
 def seed_args(args: Args, k: int, study: Path) -> Args:
     """The options of training seed ``k``'s run in ``study`` (see the module docstring); its
-    folder and hyperparameter file by absolute path, as any node of a cluster finds them."""
+    folder, hyperparameter file and a ``--compare-with`` agent's path absolute, as any node of
+    a cluster finds them (a Ray worker reads a relative path from the folder it started in)."""
     hyperparams = args.hyperparams.absolute() if args.hyperparams is not None else None
     return dataclasses.replace(
         args,
         seed=args.seed + k * SEED_STRIDE,
         out=Path(study).absolute() / f"seed-{k}",
         hyperparams=hyperparams,
+        compare_with=absolute_compare_with(args.compare_with),
         progress=False,
         export=None,  # the study exports its seeds together, once all are trained
         force=False,
@@ -239,7 +254,7 @@ def _train_unit(unit: _Seed) -> dict[str, Any]:
     assert folder is not None  # seed_args names it
     if _finished(folder) and (unit.longer is None or _budget(folder) >= unit.longer):
         return _row(k, folder)  # its worker died after the run had finished
-    if unit.new and folder.is_dir() and not any(folder.glob(f"{runs.CHECKPOINTS}/*_steps.zip")):
+    if unit.new and _no_checkpoint(folder):
         # What a lost worker wrote before its first checkpoint (the folder was empty when
         # the command started): nothing to resume from, so the seed starts again.
         _clear(folder)
@@ -263,24 +278,45 @@ def _budget(folder: Path) -> int:
     return int(runs.read_config(folder)["hyperparams"]["n_timesteps"])
 
 
-def _clear(folder: Path) -> None:
+def _no_checkpoint(folder: Path) -> bool:
+    """``folder`` holds something but no checkpoint: a seed's run killed before its first
+    checkpoint (if it holds only what such a run writes: :func:`_early_files`)."""
+    return (
+        folder.is_dir()
+        and any(folder.iterdir())
+        and not any(folder.glob(f"{runs.CHECKPOINTS}/*_steps.zip"))
+    )
+
+
+def _early_files(folder: Path) -> list[str]:
+    """The names in ``folder`` (a run folder without a checkpoint), checked to be only what a
+    run writes before its first checkpoint (:func:`train.run.not_written_early`).
+
+    :raises ValueError: naming the folder and the first file no run writes before then.
+    """
+    other = runs.not_written_early(folder)
+    if other is not None:
+        raise ValueError(
+            f"{folder}: its run ended before its first checkpoint, but the folder holds "
+            f"{other}, which no run writes before then: move it away to train the seed again"
+        )
+    return sorted(c.name for c in folder.iterdir() if not c.name.startswith("."))
+
+
+def _clear(folder: Path) -> list[str]:
     """Empty ``folder``, a new seed's run that ended before its first checkpoint, if it holds
-    only what such a run writes (and hidden temporary files): nothing else is deleted.
+    only what such a run writes (:func:`_early_files`): nothing else is deleted. Returns the
+    names it held (hidden ones left out).
 
     :raises ValueError: naming a file no run writes before its first checkpoint.
     """
-    early = {runs.CONFIG, runs.SESSIONS, runs.EVALUATIONS, runs.LOGS, runs.CHECKPOINTS}
-    other = sorted({c.name for c in folder.iterdir() if not c.name.startswith(".")} - early)
-    if other:
-        raise ValueError(
-            f"{folder}: its run ended before its first checkpoint, but the folder holds "
-            f"{other[0]}, which no run writes: move it away to train the seed again"
-        )
+    names = [f"{n}/" if (folder / n).is_dir() else n for n in _early_files(folder)]
     for child in folder.iterdir():
         if child.is_dir() and not child.is_symlink():
             shutil.rmtree(child)
         else:
             child.unlink()
+    return names
 
 
 def train_seeds(
@@ -312,25 +348,40 @@ def train_seeds(
             )
     units: list[_Seed] = []
     done: dict[int, dict[str, Any]] = {}
+    restart: list[tuple[int, Path]] = []  # seeds killed before their first checkpoint
     for i, k in enumerate(seeds):
         folder = study / f"seed-{k}"
-        longer = _same_training(k, folder, hp) if (folder / runs.CONFIG).is_file() else None
         one = seed_args(args, k, study)
+        # Nothing to resume from: the seed starts again, in its folder cleared below once every
+        # check has passed (refused now, naming it, if the folder holds another file).
+        early = _no_checkpoint(folder) and not _finished(folder)
+        if early:
+            _early_files(folder)
+            restart.append((k, folder))
+        saved = (folder / runs.CONFIG).is_file() and not early
+        longer = _same_training(k, folder, hp) if saved else None
         if _finished(folder) and longer is None:
             done[i] = _row(k, folder)  # its unit below is a placeholder
-        elif folder.is_dir() and any(folder.iterdir()):
+        elif folder.is_dir() and any(folder.iterdir()) and not early:
             resume = Args(resume=folder, n_timesteps=longer, threads=args.threads, progress=False)
             check_resume(resume)  # before any seed trains, as a new seed's options are
         else:
             if one.seed > MAX_SEED:
                 raise ValueError(f"--seeds: seed {k} is out of range with --seed {args.seed}")
-            check_new_run(one)  # every option, before any seed trains
-        new = not (folder.is_dir() and any(folder.iterdir()))
+            check_new_run(one, clearing=early)  # every option, before any seed trains
+        new = early or not (folder.is_dir() and any(folder.iterdir()))
         units.append(_Seed(k, one, command, longer, new, code, seen))
     if args.export is not None:  # before any seed trains, as for one run's export
         check_study_export(args.export, seeds, study, force=args.force)
     backend.check_reachable()  # before study.json is written
     _claim(study, settings, code, training=len(done) < len(units))
+    for k, folder in restart:
+        held = ", ".join(_clear(folder)) or "hidden temporary files"
+        print(
+            f"{PROG}: {folder} held no checkpoint, only what its run wrote before the first "
+            f"({held}): cleared it; seed {k} starts again",
+            file=sys.stderr,
+        )
     rows = execute(_train_unit, units, backend, done=done, describe=lambda u: f"(seed {u.k})")
     rows += [_row(k, study / f"seed-{k}") for k in others if _finished(study / f"seed-{k}")]
     rows.sort(key=lambda row: row["seed"])
@@ -343,78 +394,6 @@ def train_seeds(
         except ValueError as e:  # the folder changed during training: the study stays whole
             raise ValueError(f"{e} (training finished: the study is complete in {study})") from None
     return study
-
-
-def check_study_export(
-    dest: str | Path, seeds: Sequence[int], study: Path, *, force: bool = False
-) -> None:
-    """Check that :func:`export_study` loses nothing: each seed's folder ``dest/seed-<k>`` as
-    one run's export is checked (:func:`train.export.check_export`), and ``dest`` itself must
-    be new, empty, or a study's earlier export (it holds an ``ensemble.yaml``); ``--force``
-    writes into any folder, replacing only the export's files. One seed is exported as one
-    agent, into ``dest`` itself.
-
-    :raises ExportError: naming the path and what is in the way.
-    """
-    dest, study = Path(dest), Path(study)
-    if len(seeds) == 1:
-        check_export(dest, force=force, run=study / f"seed-{seeds[0]}")
-        return
-    option = f"--export {dest}"
-    target, folder = dest.resolve(), study.resolve()
-    if target == folder or target in folder.parents or folder in target.parents:
-        raise ExportError(f"{option}: is, holds or lies in the study folder {study}; give another")
-    if dest.is_dir() and any(dest.iterdir()) and not (dest / ENSEMBLE).is_file() and not force:
-        raise ExportError(
-            f"{option}: the folder is not empty and holds no study's export (no {ENSEMBLE}); "
-            "choose a new or empty folder, or give --force to write the seeds' folders and "
-            f"{ENSEMBLE} into it (nothing else is touched)"
-        )
-    for k in seeds:
-        check_export(dest / f"seed-{k}", force=force, run=study / f"seed-{k}")
-
-
-def export_study(
-    study: Path, seeds: Sequence[int], dest: str | Path, *, force: bool = False
-) -> Path:
-    """Copy the trained ``seeds`` of ``study`` into ``dest`` as one agent: each seed's run
-    exported into ``dest/seed-<k>`` (:func:`train.export.export_agent`) and an
-    ``ensemble.yaml`` listing them, so ``make_policy(str(dest))`` is the mean of their actions.
-    A new ``dest`` appears whole or not at all; in an earlier export each seed's files are
-    replaced as one run's export replaces them, and the ensemble file last. One seed is
-    exported as one agent, into ``dest`` itself.
-
-    :raises ExportError: as :func:`check_study_export` (nothing is written then).
-    :returns: ``dest``.
-    """
-    dest = Path(dest)
-    check_study_export(dest, seeds, study, force=force)
-    if len(seeds) == 1:
-        return export_agent(study / f"seed-{seeds[0]}", dest, force=force)
-    members = [f"seed-{k}" for k in seeds]
-    if not dest.exists() or not any(dest.iterdir()):
-        with atomic_folder(dest) as tmp:
-            for member in members:
-                export_agent(study / member, tmp / member)
-            write_ensemble(tmp, members)
-        return dest
-    for member in members:
-        export_agent(study / member, dest / member, force=force)
-    write_ensemble(dest, members)
-    return dest
-
-
-def write_ensemble(study: Path, members: Sequence[str]) -> Path:
-    """``study/ensemble.yaml``, listing ``members`` (run folders relative to ``study``),
-    atomically: ``make_policy(str(study))`` is then the mean of their actions
-    (:mod:`policies.learned.ensemble`). Returns its path."""
-    path = study / ENSEMBLE
-    text = (
-        "# The mean of these agents' actions acts as one agent (policies.learned.ensemble).\n"
-        + yaml.safe_dump({"members": list(members)}, default_flow_style=True, sort_keys=False)
-    )
-    atomic_write_text(path, text)
-    return path
 
 
 def _read_study(study: Path) -> dict[str, Any] | None:
