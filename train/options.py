@@ -71,10 +71,14 @@ def check_new_run(args: Args, *, clearing: bool = False) -> tuple[Args, Hyperpar
     :param clearing: ``--out`` holds what a run killed before its first checkpoint wrote, and
         the caller clears it before this run starts (:mod:`train.seeds`): that it is not empty
         is not refused.
-    :returns: the options with their defaults filled in, and the hyperparameters.
+    :returns: the options with their defaults filled in (a ``--compare-with`` agent's path
+        absolute, :func:`absolute_compare_with`: the run's ``config.yaml`` records it, and a
+        ``--resume`` from another folder must compare with the same agent), and the
+        hyperparameters.
     :raises ValueError: naming the option or YAML key, its value and what it may be.
     """
     args = _with_defaults(args)
+    args = dataclasses.replace(args, compare_with=absolute_compare_with(args.compare_with))
     _check_options(args, run=None, clearing=clearing)
     if args.n_envs is not None:  # before the file: its batch size may not fit either
         _check_lanes(args.n_envs, args.scenarios)

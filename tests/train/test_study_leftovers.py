@@ -17,7 +17,7 @@ from policies import make_policy
 from policies.learned.ensemble import EnsemblePolicy
 from policies.learned.ppo import AGENTS
 from train.cli import main
-from train.options import Args
+from train.options import Args, check_new_run
 from train.seeds import _train_unit, seed_args
 
 TINY = [
@@ -125,6 +125,18 @@ def test_a_compare_with_path_is_made_absolute_and_a_name_left_as_it_is(
     monkeypatch.chdir(tmp_path)
     one = seed_args(Args(compare_with=given), 2, tmp_path / "study")
     assert one.compare_with == sent.format(here=tmp_path)
+
+
+def test_a_single_runs_compare_with_path_is_recorded_absolute(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """One run's ``config.yaml`` is what ``--resume`` reads: from another folder, a relative
+    path there named another agent or none."""
+    shutil.copytree(AGENTS / "ppo", tmp_path / "agents" / "mine")
+    monkeypatch.chdir(tmp_path)
+    args, _ = check_new_run(Args(compare_with="agents/mine", out=tmp_path / "run"))
+    assert args.compare_with == str(tmp_path / "agents" / "mine")
+    assert check_new_run(Args(compare_with="gsmpn:tuned"))[0].compare_with == "gsmpn:tuned"
 
 
 # -- a seed killed before its first checkpoint ------------------------------------------------
