@@ -382,7 +382,7 @@ def train_seeds(
             f"({held}): cleared it; seed {k} starts again",
             file=sys.stderr,
         )
-    rows = execute(_train_unit, units, backend, done=done, describe=lambda u: f"(seed {u.k})")
+    rows = execute(_train_unit, units, backend, done=done, describe=lambda u: f"seed {u.k}")
     rows += [_row(k, study / f"seed-{k}") for k in others if _finished(study / f"seed-{k}")]
     rows.sort(key=lambda row: row["seed"])
     write_summary(study, rows)

@@ -79,8 +79,11 @@ def test_a_compare_with_path_names_the_drivers_agent_on_any_worker(
     sent: list[Any] = []
     real = train.seeds.execute
 
+    labels: list[str] = []
+
     def kept(fn: Any, units: Any, *args: Any, **kwargs: Any) -> Any:
         sent.extend(units)
+        labels.extend(kwargs["describe"](u) for u in units)
         return real(fn, units, *args, **kwargs)
 
     monkeypatch.setattr(train.seeds, "execute", kept)
@@ -89,6 +92,8 @@ def test_a_compare_with_path_names_the_drivers_agent_on_any_worker(
     assert main([*TINY, "--final-episodes", "1", *argv]) == 0
     (unit,) = sent
     assert unit.args.compare_with == str(agent)
+    # messages put the label in parentheses themselves: "unit 0 (seed 0)", not "((seed 0))"
+    assert labels == ["seed 0"]
     card = driver / "study" / "seed-0" / "MODEL_CARD.md"
     on_the_driver = _comparison(card)
     assert on_the_driver[0].startswith(f"Against `{agent}` on held-out seeds"), on_the_driver
