@@ -13,7 +13,9 @@ scenarios and every learner and law judged, and no episode (policy, scenario, se
 them. The pooled table keeps a ``run`` column naming each episode's run. Runs made from other
 simulator, policy or evaluation code (``meta.json``'s ``code``, :mod:`eval.provenance`), or
 recording none, are pooled with a warning and a note under the report's opening line, not
-refused: rollouts can survive a refactor.
+refused: rollouts can survive a refactor. So are runs that record no digest of a judged learned
+policy's files (``model_sha256``: written before runs recorded it), whose model under that
+label cannot be checked to be the other runs'.
 """
 
 from __future__ import annotations
@@ -86,7 +88,8 @@ def cmd_dominance(args: argparse.Namespace) -> int:
         laws = given or [p for p in default_laws(table, learner) if p not in learners]
         check_covered(table, [learner, *laws])
         judged.append((learner, laws, dominance(table, learner, laws)))
-    pooled = _pooled_note(runs, table, _code_notes(runs)) if len(runs) > 1 else ""
+    labels = [label for learner, laws, _ in judged for label in (learner, *laws)]
+    pooled = _pooled_note(runs, table, _code_notes(runs, labels)) if len(runs) > 1 else ""
     calibrated: dict[tuple[str, ...], Any] = {}
     files: dict[str, str] = {}  # file name -> text, written together at the end
     written: list[str] = []
@@ -436,12 +439,14 @@ def _meta(run: Path) -> dict[str, Any]:
     return meta
 
 
-def _code_notes(runs: list[Path]) -> list[str]:
-    """What the pooled report notes about the runs' code (:func:`eval.provenance.code_notes`),
-    each note also warned of on stderr."""
-    from eval.provenance import code_notes
+def _code_notes(runs: list[Path], labels: Sequence[str] = ()) -> list[str]:
+    """What the pooled report notes about the runs' code (:func:`eval.provenance.code_notes`)
+    and the models under the judged ``labels`` (:func:`eval.provenance.model_notes`), each
+    note also warned of on stderr."""
+    from eval.provenance import code_notes, model_notes
 
-    notes = code_notes(runs, [_meta(run) for run in runs])
+    metas = [_meta(run) for run in runs]
+    notes = code_notes(runs, metas) + model_notes(runs, metas, labels)
     for note in notes:
         print(f"{PROG}: warning: {note}", file=sys.stderr)
     return notes
@@ -449,7 +454,7 @@ def _code_notes(runs: list[Path]) -> list[str]:
 
 def _pooled_note(runs: list[Path], table: Any, notes: Sequence[str] = ()) -> str:
     """The line that opens a pooled report: which runs, how many episodes a cell; then each of
-    ``notes`` (on the runs' code) as a paragraph of its own."""
+    ``notes`` (on the runs' code and models) as a paragraph of its own."""
     from eval.stats import variant_column
 
     cells = table.groupby(["policy", variant_column(table)]).size()
@@ -467,13 +472,14 @@ def _learners_table(judged: list[tuple[str, list[str], Any]]) -> str:
 
     rows = [
         "",
-        "| learner | dominates | requirements met | significantly better | significantly worse |",
-        "|---|---|---:|---:|---:|",
+        "| learner | dominates | requirements met | significantly better | significantly worse "
+        "| better, Holm | worse, Holm |",
+        "|---|---|---:|---:|---:|---:|---:|",
     ]
     for learner, _, frame in judged:
         t = tally(frame)
         rows.append(
             f"| {learner} | {'yes' if dominates(frame) else 'no'} | {t['met']} of {len(frame)} "
-            f"| {t['better']} | {t['worse']} |"
+            f"| {t['better']} | {t['worse']} | {t['better_holm']} | {t['worse_holm']} |"
         )
     return "\n".join(rows)
