@@ -173,9 +173,8 @@ def run_backend(args: argparse.Namespace, n_episodes: int, learned_episodes: int
 
 def cmd_run(args: argparse.Namespace) -> int:
     """``follow-eval run``: see the module docstring."""
-    from eval.grid import model_digest
-    from eval.journal import CODE, UnitJournal, journal_folder
-    from eval.provenance import code_revision
+    from eval.journal import CODE, MODELS, UnitJournal, journal_folder
+    from eval.provenance import agent_path, code_revision, model_sha256
     from eval.report import markdown_report, safe_name, write_tables, write_video
     from eval.rollout import Episode, chunk_size, rollout
     from eval.scoring import score
@@ -196,9 +195,11 @@ def cmd_run(args: argparse.Namespace) -> int:
     run = {"task": task.name, "policies": policies, task.variants_option: scenarios}
     run |= {"seeds": [seeds[0], seeds[-1]], "config": args.config}
     # What each learned policy's files held, read once, before any episode: a model replaced
-    # between an interrupted run and its resume is another run, not mixed into this one.
-    digests = {label: d for label, p in built if (d := model_digest(p)) is not None}
-    run |= {"model_sha256": digests} if digests else {}
+    # between an interrupted run and its resume is another run, not mixed into this one (the
+    # journal names the policy and its files), and each unit's worker checks its own files.
+    digests = {label: d for label, p in built if (d := model_sha256(p)) is not None}
+    agents = {label: str(agent_path(p)) for label, p in built if label in digests}
+    run |= {MODELS: digests} if digests else {}
     # The code the episodes run, read once before any of them, as the models are: pooling
     # runs (`follow-eval dominance`) compares it, and a resume by other code is refused (its
     # tables would mix two versions' episodes; eval.journal says so and what to do).
@@ -216,11 +217,13 @@ def cmd_run(args: argparse.Namespace) -> int:
     )
     # The run's grid, and with --ideal-baseline the same grid again under perfect sensing
     # (its units kept in a journal of their own, inside the run's).
-    journal = UnitJournal(folder, run | {"chunk": chunk})
+    journal = UnitJournal(folder, run | {"chunk": chunk}, agents)
     grids = [("", args.config, journal)]
     if args.ideal_baseline:
         perfect = task.perfect_sensing(args.config)
-        ideal = UnitJournal(folder / "ideal", run | {"chunk": chunk, "baseline": IDEAL_SUFFIX})
+        ideal = UnitJournal(
+            folder / "ideal", run | {"chunk": chunk, "baseline": IDEAL_SUFFIX}, agents
+        )
         grids.append((IDEAL_SUFFIX, perfect, ideal))
     episodes: list[Any] = []
     try:

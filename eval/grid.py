@@ -8,14 +8,13 @@ trained agent's folder, a :class:`policies.Policy` object, each optionally on an
 
 from __future__ import annotations
 
-import hashlib
 from pathlib import Path
 
 from follow_env.platforms import get_platform
 from follow_env.tasks import task_for_env
 from policies import Policy, available_policies, for_platform, make_policy
 
-__all__ = ["PolicySpec", "checked_policy", "model_digest", "policy_spec"]
+__all__ = ["PolicySpec", "checked_policy", "policy_spec"]
 
 PolicySpec = str | Policy
 
@@ -70,40 +69,3 @@ def checked_policy(given: PolicySpec, task: str) -> tuple[Policy, str | None]:
     if platform is not None:  # a law the platform cannot run raises
         for_platform(policy, tuple(a.name for a in get_platform(platform).actions))
     return policy, platform
-
-
-def model_digest(policy: object) -> str | None:
-    """SHA-256 (hex) of the files a learned policy was loaded from, None for any other policy.
-
-    A trained agent's name and ``repr`` hold only the path it was given (often relative), so
-    two runs of ``runs/agent`` may hold two different models: the digest tells them apart. It
-    covers each agent's ``model.zip`` (or checkpoint), its normalisation statistics and its
-    ``config.yaml`` (:func:`policies.learned.ppo.agent_files`), in member order for an
-    ensemble; a file the agent does without (no statistics) counts as absent.
-    """
-    from policies.learned.ensemble import EnsemblePolicy
-    from policies.learned.ppo import PPOPolicy, agent_files
-
-    if isinstance(policy, PPOPolicy):
-        folders = [policy.path]
-    elif isinstance(policy, EnsemblePolicy):
-        folders = list(policy.members)
-    else:
-        return None
-    digest = hashlib.sha256()
-    for folder in folders:
-        files = agent_files(folder)
-        # by role, not by file name: a checkpoint's files are named after its step count
-        for role, path in (
-            ("model", files.model),
-            ("normalization", files.normalization),
-            ("config", files.config),
-        ):
-            digest.update(role.encode("ascii"))
-            if not path.is_file():
-                digest.update(b"\0absent\0")
-                continue
-            data = path.read_bytes()  # an agent's files are at most a few MB
-            digest.update(b"\0%d\0" % len(data))  # lengths keep the files' bounds apart
-            digest.update(data)
-    return digest.hexdigest()

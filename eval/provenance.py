@@ -20,6 +20,16 @@ It is also what a work unit carries from the driver to its worker (:func:`check_
 on a cluster each node runs its own installation, and a node with other code would make other
 episodes, or train another agent, without a sign. The worker's own digest is read once per
 process (:func:`running_sources_sha256`), so each unit pays a comparison of two strings.
+
+A learned policy's files are not sources: ``meta.json``'s ``model_sha256`` maps each learned
+policy's label to :func:`model_sha256` of the files it was loaded from (laws have no entry).
+The journal of an interrupted run records it too (a resume with other files is refused,
+:mod:`eval.journal`), each work unit carries the driver's (:func:`check_worker_model`: a node
+holding other files at the agent's path stops the command, naming its host and the policy), and
+pooling runs refuses two digests under one label and notes a run that records none
+(:func:`model_notes`). Only the files that decide the agent's actions count
+(:data:`MODEL_ROLES`); the model card, learning curve and an export's manifest
+(``follow-train-export.json``) do not, so a re-export of the same files keeps its digest.
 """
 
 from __future__ import annotations
@@ -28,17 +38,24 @@ import hashlib
 import importlib.util
 import os
 import socket
+import stat
 import subprocess
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 __all__ = [
+    "MODEL_ROLES",
     "ROLLOUT_PACKAGES",
     "CodeMismatchError",
+    "ModelMismatchError",
+    "agent_path",
     "check_worker_code",
+    "check_worker_model",
     "code_notes",
     "code_revision",
+    "model_notes",
+    "model_sha256",
     "running_sources_sha256",
     "sources_sha256",
 ]
@@ -125,6 +142,135 @@ def check_worker_code(expected: str | None, packages: Sequence[str] = ROLLOUT_PA
             f"SHA-256 of its {', '.join(packages)} sources is {mine[:SHORT]}, the driver's "
             f"{expected[:SHORT]}; install the same version on every node (and leave the sources "
             "unedited while a command runs: a worker started later reads them as they are)"
+        )
+
+
+#: The files of a learned agent its digest covers, by role (``agent_files`` of
+#: :mod:`policies.learned.ppo`): the SB3 model (``model.zip``, or a checkpoint's
+#: ``ppo_<steps>_steps.zip``), the observation normalisation statistics (``vecnormalize.pkl``,
+#: or the checkpoint's own) and ``config.yaml`` (how the agent sees the env and acts). Roles,
+#: not file names, are hashed: a checkpoint's files are named after its step count, and the
+#: same files are the same model wherever they are saved.
+MODEL_ROLES = ("model", "normalization", "config")
+#: :func:`model_sha256` by the state of the files it read (:func:`_state`), so that a unit's
+#: check reads no file whose version it has seen: a few ``stat`` calls.
+_MODELS: dict[tuple[Any, ...], str] = {}
+#: Versions kept before the cache starts afresh (an agent is a few files; a long tuning session
+#: that re-exports an agent now and then still stays small).
+_MODELS_KEPT = 256
+#: How ``meta.json``'s ``policies`` names a learned policy (its ``repr``), in runs written
+#: before ``model_sha256`` was recorded.
+_LEARNED_REPRS = ("PPOPolicy(", "EnsemblePolicy(")
+
+
+class ModelMismatchError(ValueError):
+    """A worker reads other files for a learned policy than the driver did (a ValueError: the
+    commands report it in one line, as they do bad input)."""
+
+
+def _agent_folders(policy: object) -> list[str] | None:
+    """The folders (or ``.zip`` files) a learned policy was loaded from, an ensemble's members
+    in its ``ensemble.yaml``'s order; None for any other policy."""
+    from policies.learned.ensemble import EnsemblePolicy
+    from policies.learned.ppo import PPOPolicy
+
+    if isinstance(policy, PPOPolicy):
+        return [policy.path]
+    if isinstance(policy, EnsemblePolicy):
+        return list(policy.members)
+    return None
+
+
+def agent_path(policy: object) -> str | None:
+    """The absolute path a learned policy was loaded from (its folder, ``.zip`` or ensemble),
+    as messages name it; None for any other policy."""
+    path = getattr(policy, "path", None) if _agent_folders(policy) is not None else None
+    return None if path is None else str(Path(path).absolute())
+
+
+def _state(path: Path) -> tuple[int, ...] | None:
+    """What tells one version of a file from another without reading it: its device, inode,
+    size, and modification and change times (ns); None if no regular file is there. The change
+    time moves on every write, even one that keeps the modification time (``cp -p``)."""
+    try:
+        st = path.stat()
+    except OSError:
+        return None
+    if not stat.S_ISREG(st.st_mode):
+        return None
+    return (st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns, st.st_ctime_ns)
+
+
+def _files_sha256(files: Sequence[tuple[str, Path]]) -> str:
+    """SHA-256 (hex) over ``(role, path)`` pairs: :func:`model_sha256`'s layout."""
+    digest = hashlib.sha256()
+    for role, path in files:
+        digest.update(role.encode("ascii"))
+        if not path.is_file():
+            digest.update(b"\0absent\0")
+            continue
+        data = path.read_bytes()  # an agent's files are at most a few MB
+        digest.update(b"\0%d\0" % len(data))  # lengths keep the files' bounds apart
+        digest.update(data)
+    return digest.hexdigest()
+
+
+def model_sha256(policy: object) -> str | None:
+    """SHA-256 (hex) of the files a learned policy was loaded from; None for any other policy
+    (a law: its gains are in the sources).
+
+    A trained agent's name and ``repr`` hold only the path it was given (often relative), so
+    two runs of ``runs/agent`` may hold two different models: the digest tells them apart. For
+    each agent (an ensemble's members in its ``ensemble.yaml``'s order) and each of
+    :data:`MODEL_ROLES` in turn, it hashes the role's name, then ``\\0absent\\0`` for a file
+    the agent does without (a run that does not normalise), else ``\\0<size in bytes, in
+    decimal>\\0`` and the file's bytes. Read once per version of the files (:func:`_state`)
+    and kept: 0.25 ms for the shipped ``ppo`` the first time (1 ms its two-member ensemble), then
+    a ``stat`` of each file (25 us; 50 us).
+    """
+    folders = _agent_folders(policy)
+    if folders is None:
+        return None
+    from policies.learned.ppo import agent_files
+
+    files: list[tuple[str, Path]] = []
+    for folder in folders:
+        found = agent_files(folder)
+        files += zip(MODEL_ROLES, (found.model, found.normalization, found.config), strict=True)
+    key = tuple((str(path), _state(path)) for _, path in files)
+    digest = _MODELS.get(key)
+    if digest is None:
+        digest = _files_sha256(files)
+        # kept only if no file changed while it was read (else its bytes may be either version's)
+        if tuple((str(path), _state(path)) for _, path in files) == key:
+            if len(_MODELS) >= _MODELS_KEPT:
+                _MODELS.clear()
+            _MODELS[key] = digest
+    return digest
+
+
+def check_worker_model(expected: str | None, policy: object, label: str) -> None:
+    """Refuse to run a unit of ``policy`` (built by this worker from the unit) whose files are
+    not those the driver read: a node holding another model at the agent's path (or files
+    replaced while the command runs) would play other episodes under the run's label.
+
+    :param expected: the driver's :func:`model_sha256` of the policy, as the unit carries it;
+        None checks nothing (a law, or a unit made without it).
+    :param label: the policy's label in the run (its episodes').
+    :raises ModelMismatchError: naming this host, the policy, its path and both digests' first
+        :data:`SHORT` digits.
+    """
+    if expected is None:
+        return
+    mine = model_sha256(policy)
+    if mine != expected:
+        here = "none (not a learned policy here)" if mine is None else mine[:SHORT]
+        raise ModelMismatchError(
+            f"this worker ({socket.gethostname()}) reads other files for the learned policy "
+            f"{label} than the driver: the SHA-256 of its model, statistics and config in "
+            f"{agent_path(policy) or repr(policy)} is {here}, the driver's {expected[:SHORT]}; "
+            "give every node the driver's files at that path (a shipped agent: install the "
+            "same version), and leave them unchanged while a command runs"
         )
 
 
@@ -218,4 +364,43 @@ def code_notes(runs: Sequence[Path | str], metas: Sequence[Mapping[str, Any]]) -
             "none: made before runs recorded it), so the runs pooled cannot be checked to come "
             "from the same code"
         )
+    return notes
+
+
+def _recorded(meta: Mapping[str, Any], label: str) -> str | None:
+    """The SHA-256 of ``label``'s agent files a run records, or None."""
+    models = meta.get("model_sha256")
+    digest = models.get(label) if isinstance(models, Mapping) else None
+    return digest if isinstance(digest, str) and digest else None
+
+
+def model_notes(
+    runs: Sequence[Path | str], metas: Sequence[Mapping[str, Any]], labels: Sequence[str]
+) -> list[str]:
+    """What pooling ``runs`` (their ``meta.json`` in ``metas``) should say about the models
+    under ``labels`` (the policies judged), one line each: for a label that is a learned policy
+    in some run (it records the digest of its files, or names an agent in ``policies``), the
+    runs holding it that record no digest (made before runs recorded it), whose model cannot be
+    checked to be the others'. Two digests under one label are not noted: pooling refuses them
+    (another model is another controller; :mod:`eval.cli_dominance`)."""
+    notes = []
+    for label in dict.fromkeys(labels):
+        held = [
+            (str(run), meta)
+            for run, meta in zip(runs, metas, strict=True)
+            if isinstance(meta.get("policies"), Mapping) and label in meta["policies"]
+        ]
+        learned = any(
+            _recorded(meta, label) is not None
+            or str(meta["policies"][label]).startswith(_LEARNED_REPRS)
+            for _, meta in held
+        )
+        unknown = [run for run, meta in held if _recorded(meta, label) is None]
+        if learned and unknown:
+            which = "its" if len(unknown) == 1 else "their"
+            notes.append(
+                f"{', '.join(unknown)}: the model under {label} is unknown ({which} meta.json "
+                f"records no SHA-256 of its agent files: made before runs recorded it), so the "
+                f"runs pooled cannot be checked to hold the same model under {label}"
+            )
     return notes

@@ -17,7 +17,8 @@ one policy, scenario and chunk of at most :data:`BATCH_LANES` seeds each) run on
 :class:`execution.Backend`: this process, a process pool (``workers``) or Ray tasks; whichever,
 the results are identical and come back in grid order (policy, then scenario, then seed). A unit
 names an agent by its absolute path (a worker's folder is not this process's) and carries this
-process's sources digest, which its worker checks (:func:`eval.provenance.check_worker_code`).
+process's digests of its sources and of the agent's files, which its worker checks; messages
+name it by its policy, scenario and seeds (:mod:`eval.units`).
 
 The task is PersonFollow's unless ``task=`` names another (``"line_trace"``): its variants (the
 ``scenario`` arguments) are then its own (LineTrace's tracks), and its step logs have its layout
@@ -31,7 +32,6 @@ import math
 import os
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any, NamedTuple
 
 import gymnasium as gym
@@ -39,7 +39,8 @@ import numpy as np
 import pandas as pd
 
 from eval.grid import PolicySpec, checked_policy, policy_spec
-from eval.provenance import check_worker_code, running_sources_sha256
+from eval.provenance import check_worker_code, check_worker_model
+from eval.units import BATCH_LANES, Sent, Work, chunk_size, sent, unit_label, work_units
 from execution import Backend, execute
 from follow_env.platforms.base import Platform
 from follow_env.sim.runner import BatchedSim
@@ -167,8 +168,6 @@ def _layout(platform: Platform, task: _Task, n_obs: int | None = None) -> _Layou
 
 _ENV_CACHE: dict[tuple[str, str, str, str], gym.Env] = {}
 
-#: Most seeds run as the lanes of one batch (bounds the memory of the step logs in flight).
-BATCH_LANES = 256
 #: Most episodes one grid may hold (policies x scenarios x seeds): beyond this a run is refused
 #: before any work, rather than allowed to exhaust memory.
 MAX_EPISODES = 1_000_000
@@ -275,6 +274,7 @@ def run_batch(
     config: EnvConfigSpec | None = None,
     task: str = DEFAULT_TASK,
     name: str | None = None,
+    model_sha256: str | None = None,
 ) -> list[Episode]:
     """Run one episode per seed, the seeds as the lanes of one batched core; returns the step
     logs in seed order, each identical to :func:`run_episode` of that seed (module docstring).
@@ -286,12 +286,15 @@ def run_batch(
     :param config: the env configuration, as for :func:`run_episode`.
     :param task: the task, as for :func:`run_episode`.
     :param name: the name the episodes carry (before any ``@platform``); None: the policy's.
+    :param model_sha256: the agent's files' digest as its unit carries it (the driver's): the
+        batch is refused if this process reads other files (:func:`check_worker_model`).
     """
     n = len(seeds)
     spec, platform = policy_spec(policy)
     t = _task(task)
     model = t.model
     built = _policy(spec, task)
+    check_worker_model(model_sha256, built, _label(name or built.name, platform))
     variant = {model.variant_key: scenario}
     cfg = model.resolve_config(config, platform=platform, **variant, **_needs(built))
     period = cfg.episode.control_dt_s  # a law differentiates over it (policies.at_period)
@@ -395,17 +398,18 @@ def auto_workers(episodes: int, learned: int = 0, *, scored: bool = False) -> in
     return max(1, min(cores, int(cost // per_worker)))
 
 
-# A work unit (:func:`work_units`): policy, scenario, seeds, config, reducer, task, the name of
-# its episodes if the policy is a path made absolute (:func:`_anchored`), and the driver's
-# sources digest, which the worker checks (:func:`eval.provenance.check_worker_code`).
-_Work = tuple[PolicySpec, str, tuple[int, ...], EnvConfigSpec, Reducer | None, str, str | None, str]
-
-
-def _run_task(work: _Work) -> Any:
-    policy, scenario, seeds, config, reduce, task, name, code = work
-    check_worker_code(code)  # a worker with other code would make other episodes, unnoticed
-    episodes = run_batch(policy, scenario, seeds, config=config, task=task, name=name)
-    return episodes if reduce is None else [reduce(e) for e in episodes]
+def _run_task(work: Work) -> Any:
+    check_worker_code(work.code)  # a worker with other code would make other episodes, unnoticed
+    episodes = run_batch(
+        work.policy,
+        work.scenario,
+        work.seeds,
+        config=work.config,
+        task=work.task,
+        name=work.name,
+        model_sha256=work.model,  # nor one reading another model at the agent's path
+    )
+    return episodes if work.reduce is None else [work.reduce(e) for e in episodes]
 
 
 def rollout(
@@ -446,7 +450,7 @@ def rollout(
     :raises ValueError: for an unknown policy or scenario, an empty or too large grid, a
         non-integer seed, or workers < 1, before any episode runs.
     """
-    learned, sent = _check_grid(policies, scenarios, seeds, task)
+    learned, carried = _check_grid(policies, scenarios, seeds, task)
     total = len(policies) * len(scenarios) * len(seeds)
     if backend is None:
         if workers is None:
@@ -456,7 +460,7 @@ def rollout(
         backend = Backend("local", workers=workers)
     if chunk is None:
         chunk = chunk_size(len(seeds), backend.slots(), len(policies) * len(scenarios))
-    units = work_units(sent, scenarios, seeds, config, reduce, chunk, task)
+    units = work_units(carried, scenarios, seeds, config, reduce, chunk, task)
     from tqdm import tqdm
 
     bar = tqdm(total=total, desc="episodes", unit="ep", disable=None if progress else True)
@@ -468,7 +472,9 @@ def rollout(
             on_unit(i, chunk)
 
     try:
-        chunks = execute(_run_task, units, backend, done=done, on_result=finished)
+        chunks = execute(
+            _run_task, units, backend, done=done, on_result=finished, describe=unit_label
+        )
     finally:
         bar.close()
     return [result for chunk in chunks for result in chunk]
@@ -479,9 +485,9 @@ def _check_grid(
     scenarios: Sequence[str],
     seeds: Sequence[int],
     task: str = DEFAULT_TASK,
-) -> tuple[int, list[tuple[PolicySpec, str | None]]]:
+) -> tuple[int, list[Sent]]:
     """Refuse a grid that cannot run (``ValueError``); else how many of its policies learned,
-    and each as a worker is sent it (:func:`_anchored`)."""
+    and each as its units carry it (:func:`eval.units.sent`)."""
     if isinstance(policies, str) or isinstance(scenarios, str):
         raise ValueError("policies and scenarios must be sequences of names, not one string")
     for name, items in (("policies", policies), ("scenarios", scenarios), ("seeds", seeds)):
@@ -495,11 +501,11 @@ def _check_grid(
         )
     t = _task(task)  # an unknown task raises
     learned = 0
-    sent = []
+    carried = []
     for given in policies:
-        policy, _ = checked_policy(given, task)
+        policy, platform = checked_policy(given, task)
         learned += is_learned(policy)
-        sent.append(_anchored(given, policy))
+        carried.append(sent(given, policy, platform))
     known, what = t.model.variants(), t.model.variant_key
     for scenario in scenarios:
         if scenario not in known:
@@ -507,54 +513,8 @@ def _check_grid(
     if isinstance(seeds, range):
         if seeds.start < 0 or seeds.step < 1:
             raise ValueError(f"seeds={seeds!r} is out of range: must count up from >= 0")
-        return learned, sent
+        return learned, carried
     for seed in seeds:
         if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
             raise ValueError(f"seed={seed!r} is out of range: must be an integer >= 0")
-    return learned, sent
-
-
-def _anchored(given: PolicySpec, policy: Policy) -> tuple[PolicySpec, str | None]:
-    """``(spec, name)`` a worker is sent for ``given`` (built here as ``policy``): an agent
-    named by its relative path (not ``ppo``: each node's own install) as its absolute path,
-    named as given; else ``(given, None)``. A Ray worker finds a relative path from the folder
-    its ``ray start`` ran in: another agent than the one read here (and ``meta.json`` records)."""
-    spec, platform = policy_spec(given) if isinstance(given, str) else (given, None)
-    path = getattr(policy, "path", None) if is_learned(policy) else None
-    relative = isinstance(spec, str) and not Path(spec).is_absolute()
-    if not relative or path is None or Path(path) != Path(spec):
-        return given, None
-    where = str(Path(spec).absolute())
-    return (where if platform is None else f"{where}@{platform}"), policy.name
-
-
-def chunk_size(seeds: int, slots: int, cells: int = 1) -> int:
-    """Seeds per work unit for ``cells`` (policy, scenario) cells of ``seeds`` seeds on ``slots``
-    slots (pool workers, Ray CPUs): as many as a batch takes (:data:`BATCH_LANES`: the lanes of
-    one batch step together, far faster than apart) while every slot still gets about two
-    units. The episodes do not depend on it (lane ``i`` of a batch is the env seeded ``s_i``)."""
-    splits = math.ceil(2 * slots / max(cells, 1)) if slots > 1 else 1
-    return max(1, min(BATCH_LANES, math.ceil(seeds / splits)))
-
-
-def work_units(
-    policies: Sequence[PolicySpec | tuple[PolicySpec, str | None]],
-    scenarios: Sequence[str],
-    seeds: Sequence[int],
-    config: EnvConfigSpec,
-    reduce: Reducer | None,
-    size: int,
-    task: str = DEFAULT_TASK,
-) -> list[_Work]:
-    """The work units in grid order (``_Work``: policy, scenario, a chunk of at most ``size``
-    seeds, config, reducer, task, name, this process's sources digest); ``policies`` are specs
-    or :func:`_anchored`'s ``(spec, name)``."""
-    if isinstance(size, bool) or not isinstance(size, int) or size < 1:
-        raise ValueError(f"chunk={size!r} is out of range: must be an integer >= 1")
-    code = running_sources_sha256()
-    return [
-        (p, s, tuple(int(x) for x in seeds[k : k + size]), config, reduce, task, n, code)
-        for p, n in (p if isinstance(p, tuple) else (p, None) for p in policies)
-        for s in scenarios
-        for k in range(0, len(seeds), size)
-    ]
+    return learned, carried

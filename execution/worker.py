@@ -114,7 +114,8 @@ _UNIT_ORIGIN = "_execution_unit_origin"
 
 def unit_origin(error: BaseException) -> str:
     """Where ``error`` was raised, if a unit raised it in a worker (a pool's or Ray's): e.g.
-    ``"work unit 3 (('pn', 'straight', ...)) on host node-2, process 4242"``; else ``""``.
+    ``"work unit 3 (pn:tuned on straight, seeds 0-19) on host node-2, process 4242"`` (the unit as
+    its caller's ``describe`` names it); else ``""``.
 
     A command line that prints an error in one line appends it: the worker's traceback is the
     error's ``__cause__`` (:class:`RemoteTraceback`), which such a line leaves out.

@@ -19,6 +19,7 @@ META = {
     "config": "thesis",
     "ideal_baseline": False,
     "policies": {"ppo": "PPOPolicy(name='ppo')", "pn:tuned": "PNParams(kv=5)"},
+    "model_sha256": {"ppo": "a0" * 32},  # a learned policy's files (laws have none)
     "code": {"sources_sha256": "c0de" * 16, "git": "1234567890ab" * 3 + "cdef", "git_dirty": False},
 }
 
@@ -196,6 +197,7 @@ def test_an_episode_twice_in_one_run_is_refused_by_its_line(tmp_path: Path, caps
 
 def _with_digest(digest: str | None, model: str = "PPOPolicy(name='ppo')") -> dict:
     meta = _changed("policies", {**META["policies"], "ppo": model})
+    meta.pop("model_sha256")
     if digest is not None:
         meta["model_sha256"] = {"ppo": digest}
     return meta
@@ -308,3 +310,43 @@ def test_a_run_that_records_no_code_is_noted_as_unknown(tmp_path: Path, capsys) 
     assert f"warning: {b}: its code revision is unknown" in capsys.readouterr().err
     report = (out / "dominance-ppo.md").read_text().split("\n\n")
     assert report[1].startswith(f"Note: {b}: its code revision is unknown")
+
+
+@pytest.mark.parametrize("recorded", ["no model_sha256", "no entry"])
+def test_a_run_that_records_no_digest_of_the_learners_files_is_noted_as_unknown(
+    tmp_path: Path, capsys, recorded: str
+) -> None:
+    """Pooled by its repr alone (a path), the learner may be two models in one table: the
+    report says it cannot tell (it said nothing)."""
+    old = json.loads(json.dumps(META))
+    if recorded == "no model_sha256":  # a run written before runs recorded the digests
+        del old["model_sha256"]
+    else:
+        old["model_sha256"] = {}
+    a, b = _run(tmp_path / "a", 0, 4), _run(tmp_path / "b", 10, 4, meta=old)
+    out = tmp_path / "pooled"
+    assert main(["dominance", str(a), str(b), "--learner", "ppo", "--out", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1, err  # one warning: the law judged records none, as laws do
+    assert err.startswith(f"follow-eval: warning: {b}: the model under ppo is unknown (its ")
+    assert "records no SHA-256 of its agent files" in err
+    assert "cannot be checked to hold the same model under ppo" in err
+    report = (out / "dominance-ppo.md").read_text().split("\n\n")
+    assert report[1].startswith(f"Note: {b}: the model under ppo is unknown")
+
+
+def test_runs_that_all_predate_the_digests_are_noted_by_their_learned_policys_repr(
+    tmp_path: Path, capsys
+) -> None:
+    old = json.loads(json.dumps(META))
+    del old["model_sha256"]
+    a, b = _run(tmp_path / "a", 0, 4, meta=old), _run(tmp_path / "b", 10, 4, meta=old)
+    out = tmp_path / "pooled"
+    assert main(["dominance", str(a), str(b), "--learner", "ppo", "--out", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1, err
+    assert f"warning: {a}, {b}: the model under ppo is unknown (their meta.json records" in err
+    # a law judged against a law: no files to record, nothing to note
+    argv = ["dominance", str(a), str(b), "--learner", "pn:tuned", "--laws", "gsmpn:tuned"]
+    assert main([*argv, "--out", str(tmp_path / "laws")]) == 0
+    assert capsys.readouterr().err == ""

@@ -223,7 +223,12 @@ def test_a_resume_whose_agent_files_changed_is_another_run(
     assert main(args) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1
-    assert "holds the finished units of another run (its model_sha256 differ)" in err
+    # the policy, its files and what to do are named (it said "another run (its model_sha256
+    # differ)" and to run the same command again, which was refused again)
+    assert f"the files of its learned policy {agent} changed since the run started" in err
+    assert f"the SHA-256 of {agent}'s model, statistics and config in {agent} was " in err
+    assert "run it with the agent files it started with to resume" in err
+    assert "give a new --out" in err
     assert not out.exists()
 
 

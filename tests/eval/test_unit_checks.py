@@ -187,7 +187,8 @@ def test_a_run_whose_workers_run_other_code_stops_in_one_line(
 ) -> None:
     """The driver's digest is another than its workers': in this process (its own digest is
     read from its own files) and in a pool of spawned processes alike."""
-    monkeypatch.setattr(sys.modules["eval.rollout"], "running_sources_sha256", lambda: OTHER)
+    # the units are made by eval.units, which reads the driver's digest
+    monkeypatch.setattr(sys.modules["eval.units"], "running_sources_sha256", lambda: OTHER)
     out = tmp_path / "run"
     assert main(["run", *GRID, "--out", str(out), "--workers", workers]) == 2
     err = _one_line(capsys)
