@@ -38,7 +38,6 @@ import hashlib
 import importlib.util
 import os
 import socket
-import stat
 import subprocess
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -152,8 +151,9 @@ def check_worker_code(expected: str | None, packages: Sequence[str] = ROLLOUT_PA
 #: not file names, are hashed: a checkpoint's files are named after its step count, and the
 #: same files are the same model wherever they are saved.
 MODEL_ROLES = ("model", "normalization", "config")
-#: :func:`model_sha256` by the state of the files it read (:func:`_state`), so that a unit's
-#: check reads no file whose version it has seen: a few ``stat`` calls.
+#: :func:`model_sha256` by the versions of the files it read
+#: (:func:`policies.learned.ppo.file_version`), so that a unit's check reads no file whose
+#: version it has seen: a few ``stat`` calls.
 _MODELS: dict[tuple[Any, ...], str] = {}
 #: Versions kept before the cache starts afresh (an agent is a few files; a long tuning session
 #: that re-exports an agent now and then still stays small).
@@ -188,19 +188,6 @@ def agent_path(policy: object) -> str | None:
     return None if path is None else str(Path(path).absolute())
 
 
-def _state(path: Path) -> tuple[int, ...] | None:
-    """What tells one version of a file from another without reading it: its device, inode,
-    size, and modification and change times (ns); None if no regular file is there. The change
-    time moves on every write, even one that keeps the modification time (``cp -p``)."""
-    try:
-        st = path.stat()
-    except OSError:
-        return None
-    if not stat.S_ISREG(st.st_mode):
-        return None
-    return (st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns, st.st_ctime_ns)
-
-
 def _files_sha256(files: Sequence[tuple[str, Path]]) -> str:
     """SHA-256 (hex) over ``(role, path)`` pairs: :func:`model_sha256`'s layout."""
     digest = hashlib.sha256()
@@ -224,25 +211,25 @@ def model_sha256(policy: object) -> str | None:
     each agent (an ensemble's members in its ``ensemble.yaml``'s order) and each of
     :data:`MODEL_ROLES` in turn, it hashes the role's name, then ``\\0absent\\0`` for a file
     the agent does without (a run that does not normalise), else ``\\0<size in bytes, in
-    decimal>\\0`` and the file's bytes. Read once per version of the files (:func:`_state`)
-    and kept: 0.25 ms for the shipped ``ppo`` the first time (1 ms its two-member ensemble), then
-    a ``stat`` of each file (25 us; 50 us).
+    decimal>\\0`` and the file's bytes. Read once per version of the files
+    (:func:`policies.learned.ppo.file_version`) and kept: 0.25 ms for the shipped ``ppo`` the
+    first time (1 ms its two-member ensemble), then a ``stat`` of each file (25 us; 50 us).
     """
     folders = _agent_folders(policy)
     if folders is None:
         return None
-    from policies.learned.ppo import agent_files
+    from policies.learned.ppo import agent_files, file_version
 
     files: list[tuple[str, Path]] = []
     for folder in folders:
         found = agent_files(folder)
         files += zip(MODEL_ROLES, (found.model, found.normalization, found.config), strict=True)
-    key = tuple((str(path), _state(path)) for _, path in files)
+    key = tuple((str(path), file_version(path)) for _, path in files)
     digest = _MODELS.get(key)
     if digest is None:
         digest = _files_sha256(files)
         # kept only if no file changed while it was read (else its bytes may be either version's)
-        if tuple((str(path), _state(path)) for _, path in files) == key:
+        if tuple((str(path), file_version(path)) for _, path in files) == key:
             if len(_MODELS) >= _MODELS_KEPT:
                 _MODELS.clear()
             _MODELS[key] = digest

@@ -74,6 +74,7 @@ __all__ = [
     "AgentLoadError",
     "PPOPolicy",
     "agent_files",
+    "file_version",
     "load_agent",
     "load_default",
     "load_shipped",
@@ -333,9 +334,19 @@ _CACHE_LOCK = threading.Lock()
 _LOADING = threading.local()
 
 
+def file_version(path: Path) -> tuple[int, ...] | None:
+    """A file's version, told without reading it (None: nothing there): device, inode, size,
+    modification and change times. The change time moves even when ``cp -p`` keeps the other."""
+    try:
+        st = path.stat()
+    except OSError:
+        return None
+    return (st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns, st.st_ctime_ns)
+
+
 def _loaded(files: AgentFiles) -> _Loaded:
     key = tuple(
-        (str(p.resolve()), p.stat().st_mtime_ns if p.exists() else None)
+        (str(p.resolve()), file_version(p))
         for p in (files.model, files.normalization, files.config)
     )
     with _CACHE_LOCK:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import pickle
 import re
 import shutil
@@ -105,6 +106,26 @@ def test_policy_is_deterministic_for_a_seed() -> None:
     second = run_episode("ppo", "curve", 3).log
     columns = ["action_v_mps", "action_w_radps", "obs_offset_px"]
     np.testing.assert_array_equal(first[columns].to_numpy(), second[columns].to_numpy())
+
+
+def test_an_agent_replaced_under_its_old_times_is_loaded_again(tmp_path: Path) -> None:
+    """The loaded-agent cache tells a file's versions apart by more than the modification
+    time: an agent copied over with ``cp -p``-like times kept acting as the old model."""
+    from policies.learned.ppo import AGENTS
+
+    agent, other = tmp_path / "agent", tmp_path / "other"
+    shutil.copytree(AGENTS / "ppo_ensemble" / "seed-0", agent)
+    shutil.copytree(AGENTS / "ppo_ensemble" / "seed-1", other)  # same view, other weights
+    columns = ["action_v_mps", "action_w_radps"]
+    before = run_episode(str(agent), "curve", 3).log[columns].to_numpy()
+    for name in ("model.zip", "vecnormalize.pkl", "config.yaml"):
+        st = (agent / name).stat()
+        shutil.copyfile(other / name, agent / name)
+        os.utime(agent / name, ns=(st.st_atime_ns, st.st_mtime_ns))  # the old times
+    after = run_episode(str(agent), "curve", 3).log[columns].to_numpy()
+    theirs = run_episode(str(other), "curve", 3).log[columns].to_numpy()
+    assert not np.array_equal(before, theirs)  # the two models act differently here
+    np.testing.assert_array_equal(after, theirs)
 
 
 def test_reset_forgets_the_previous_episode() -> None:
