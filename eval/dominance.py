@@ -351,7 +351,8 @@ def finished_view(
     :param seed: seeds the bootstrap resampling.
     :returns: one row per missed line whose criterion does not end an episode
         (:data:`ENDINGS`), with the columns of :func:`dominance`; ``n`` is the number of seeds
-        both finished (a line with none has verdict ``n/a``, as in :func:`dominance`).
+        both finished (a line with none has verdict ``n/a``, as in :func:`dominance`), and
+        ``holm_p`` NaN (lines picked because they were missed are no family to adjust over).
     :raises ValueError: if the table has no :data:`FINISHED` column.
     """
     if FINISHED not in table:
@@ -368,7 +369,9 @@ def finished_view(
         theirs = cell[cell["policy"] == r["best_law"]].set_index("seed")
         c = by_metric[r["criterion"]]
         rows.append(_line(r[variant], c, mine, r["best_law"], theirs, seed, variant, learner))
-    return _with_holm(pd.DataFrame(rows, columns=[variant, *COLUMNS]))
+    # No Holm p here: these lines were chosen after seeing the table (the missed ones), so they
+    # are no family to adjust over; the main table's adjusted p is the one to read.
+    return pd.DataFrame(rows, columns=[variant, *COLUMNS])
 
 
 def finished_markdown(view: pd.DataFrame, learner: str) -> str:
@@ -382,11 +385,11 @@ def finished_markdown(view: pd.DataFrame, learner: str) -> str:
         "misses above, against the same law (an explanation, not part of the verdict):",
         "",
         f"| {variant} | criterion | episodes | {learner} | the line's law | law | "
-        f"{learner} - law [95 % CI] | p | Holm p | verdict | meets |",
-        "|---|---|---:|---:|---|---:|---|---:|---:|---|---|",
+        f"{learner} - law [95 % CI] | p | verdict | meets |",
+        "|---|---|---:|---:|---|---:|---|---:|---|---|",
     ]
     for row in view.itertuples(index=False):
-        lines.append(_markdown_row(row._asdict(), variant, str(row.n)))
+        lines.append(_markdown_row(row._asdict(), variant, str(row.n), holm=False))
     return "\n".join(lines) + "\n"
 
 
@@ -455,9 +458,9 @@ def dominance_markdown(
     )
     tested = int(np.isfinite(frame["holm_p"].to_numpy(dtype=np.float64)).sum())
     lines.append(
-        f"With Holm's correction for the {tested} lines tested (the chance of any false "
-        f"verdict among them at most 5 %): better on {counts['better_holm']}, worse on "
-        f"{counts['worse_holm']}."
+        f"With Holm's correction for the {tested} lines tested (the chance that any line counted "
+        f"here differs by chance alone at most 5 %): better on {counts['better_holm']}, worse "
+        f"on {counts['worse_holm']}."
     )
     if calibrated:
         met = {law: t["met"] for law, t in calibrated.items()}
@@ -496,19 +499,20 @@ def _span(values: Iterable[int]) -> str:
     return str(lo) if lo == hi else f"{lo}-{hi}"
 
 
-def _markdown_row(r: dict[str, object], variant: str, middle: str) -> str:
+def _markdown_row(r: dict[str, object], variant: str, middle: str, *, holm: bool = True) -> str:
     """One line of a table in markdown; ``middle`` goes after the criterion (the need, or the
-    number of episodes compared)."""
+    number of episodes compared); ``holm``: with the Holm p column."""
     label = metric_label(str(r["criterion"]))
+    ps = [_p(r[k]) for k in ("perm_p", "holm_p")[: 2 if holm else 1]]
     if r["verdict"] == "n/a":
-        return f"| {r[variant]} | {label} | {middle} | | {r['best_law']} | | | | | n/a | no |"
+        blank = " |" * len(ps)
+        return f"| {r[variant]} | {label} | {middle} | | {r['best_law']} | | |{blank} n/a | no |"
     d = metric_digits(str(r["criterion"]))
-    p, adjusted = (_p(r[k]) for k in ("perm_p", "holm_p"))
     return (
         f"| {r[variant]} | {label} | {middle} | "
         f"{r['learner_mean']:.{d}f} | {r['best_law']} | {r['law_mean']:.{d}f} | "
         f"{r['diff']:+.{d}f} [{r['diff_ci_low']:+.{d}f}, {r['diff_ci_high']:+.{d}f}] | "
-        f"{p} | {adjusted} | {r['verdict']} | {'yes' if r['meets'] else '**no**'} |"
+        f"{' | '.join(ps)} | {r['verdict']} | {'yes' if r['meets'] else '**no**'} |"
     )
 
 
