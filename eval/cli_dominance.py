@@ -46,6 +46,7 @@ _MAX_SEED_DIGITS = 77
 
 def cmd_dominance(args: argparse.Namespace) -> int:
     """``follow-eval dominance``: see :mod:`eval.dominance`."""
+    from eval.cli_run import IDEAL_SUFFIX
     from eval.dominance import (
         CRITERIA,
         ENDINGS,
@@ -88,7 +89,9 @@ def cmd_dominance(args: argparse.Namespace) -> int:
         laws = given or [p for p in default_laws(table, learner) if p not in learners]
         check_covered(table, [learner, *laws])
         judged.append((learner, laws, dominance(table, learner, laws)))
-    labels = [label for learner, laws, _ in judged for label in (learner, *laws)]
+    # meta.json names a policy by its own label: `ppo+ideal` (--ideal-baseline) is `ppo`'s model
+    judged_labels = [label for learner, laws, _ in judged for label in (learner, *laws)]
+    labels = [label.removesuffix(IDEAL_SUFFIX) for label in judged_labels]
     pooled = _pooled_note(runs, table, _code_notes(runs, labels)) if len(runs) > 1 else ""
     calibrated: dict[tuple[str, ...], Any] = {}
     files: dict[str, str] = {}  # file name -> text, written together at the end

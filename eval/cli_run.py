@@ -246,6 +246,7 @@ def cmd_run(args: argparse.Namespace) -> int:
                 done=done,
                 on_unit=kept_in.put,
                 reduce=reduce,
+                models=digests,  # as recorded: files replaced since stop the run
             )
             episodes += [_labelled(ep, suffix) for ep in got] if suffix else got
     except BaseException as e:

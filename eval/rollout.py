@@ -426,6 +426,7 @@ def rollout(
     chunk: int | None = None,
     done: Mapping[int, list[Any]] | None = None,
     on_unit: Callable[[int, list[Any]], None] | None = None,
+    models: Mapping[str, str] | None = None,
 ) -> list[Any]:
     """Run every policy on every (scenario, seed) pair: identical rollouts.
 
@@ -446,11 +447,16 @@ def rollout(
     :param chunk: seeds per unit (default :func:`chunk_size`); a resumed run passes its own.
     :param done: results of units already run, by unit index (:func:`work_units`' order).
     :param on_unit: called with (unit index, its episodes) as each finishes (a journal).
+    :param models: the digests of the learned policies' files by label as the caller recorded
+        them (``meta.json``'s ``model_sha256``): the units carry these, not a digest read now,
+        so that files replaced since (between a run's two grids, say) stop the command rather
+        than play another model under the recorded label (:func:`check_worker_model`).
     :returns: the episodes (or their reductions) in grid order: policy, scenario, seed.
     :raises ValueError: for an unknown policy or scenario, an empty or too large grid, a
         non-integer seed, or workers < 1, before any episode runs.
     """
     learned, carried = _check_grid(policies, scenarios, seeds, task)
+    carried = [c._replace(model=(models or {}).get(c.label, c.model)) for c in carried]
     total = len(policies) * len(scenarios) * len(seeds)
     if backend is None:
         if workers is None:

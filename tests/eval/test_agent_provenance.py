@@ -168,6 +168,34 @@ def test_a_run_whose_pool_workers_read_another_model_stops_in_one_line(
     assert not journal_folder(out).exists()  # no unit finished: nothing to resume
 
 
+def test_an_agent_replaced_between_a_runs_two_grids_stops_the_run(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """With --ideal-baseline a run makes two grids; each read the digest again, so files
+    replaced after the first played the second under the label meta.json recorded for the
+    first model (exit 0, two models in one table)."""
+    agent = _agent(tmp_path)
+    rollout_module = sys.modules["eval.rollout"]
+    real = rollout_module.rollout
+    calls: list[int] = []
+
+    def replaced_after_the_first(*args: object, **kwargs: object) -> object:
+        got = real(*args, **kwargs)
+        calls.append(1)
+        if len(calls) == 1:
+            _replace(agent, "ppo_law")
+        return got
+
+    monkeypatch.setattr(rollout_module, "rollout", replaced_after_the_first)
+    out = tmp_path / "run"
+    grid = ["--policies", str(agent), "--scenarios", "straight", "--episodes", "1", "--seed", "3"]
+    argv = ["run", *grid, "--ideal-baseline", "--no-logs", "--workers", "1", "--out", str(out)]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert f"reads other files for the learned policy {agent} than the driver" in err, err
+    assert not out.exists()
+
+
 # -- the journal: a resume with other agent files --------------------------------------------
 
 

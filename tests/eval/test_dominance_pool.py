@@ -350,3 +350,25 @@ def test_runs_that_all_predate_the_digests_are_noted_by_their_learned_policys_re
     argv = ["dominance", str(a), str(b), "--learner", "pn:tuned", "--laws", "gsmpn:tuned"]
     assert main([*argv, "--out", str(tmp_path / "laws")]) == 0
     assert capsys.readouterr().err == ""
+
+
+def test_a_run_with_no_digest_is_noted_for_the_learner_under_perfect_sensing(
+    tmp_path: Path, capsys
+) -> None:
+    """meta.json names the model by its own label: `ppo+ideal` (--ideal-baseline) is `ppo`'s
+    model, and the note was missed for it."""
+    ideal = json.loads(json.dumps(META)) | {"ideal_baseline": True}
+    old = json.loads(json.dumps(ideal))
+    del old["model_sha256"]
+    runs = []
+    for name, first, meta in (("a", 0, ideal), ("b", 10, old)):
+        folder = _run(tmp_path / name, first, 4, meta=meta)
+        table = pd.read_csv(folder / "episodes.csv")
+        perfect = table.assign(policy=table["policy"] + "+ideal")
+        pd.concat([table, perfect]).to_csv(folder / "episodes.csv", index=False)
+        runs.append(str(folder))
+    out = tmp_path / "pooled"
+    assert main(["dominance", *runs, "--learner", "ppo+ideal", "--out", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert err.startswith(f"follow-eval: warning: {runs[1]}: the model under ppo is unknown"), err
+    assert "Note: " in (out / "dominance-ppo_ideal.md").read_text()
