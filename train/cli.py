@@ -102,8 +102,8 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         help="let --export write into a folder it did not make, or over exported files that "
         "were changed: only files named like the agent's are replaced, none is deleted (with "
-        "--seeds: an earlier export's members of other seeds are removed, if unchanged); let "
-        "--add-step edit files changed since the folder's export",
+        "--seeds: an earlier export's members of this study's other seeds are removed, if "
+        "unchanged); let --add-step edit files changed since the folder's export",
     )
     p.add_argument("--no-progress", dest="progress", action="store_false", default=None)
     edit = p.add_argument_group(

@@ -301,30 +301,40 @@ _EARLY_INSIDE = {
     # an unfinished checkpoint: its statistics and replay buffer are written before the model
     CHECKPOINTS: re.compile(r"[a-z_]+_(vecnormalize|replay_buffer)_[0-9]+_steps\.pkl"),
 }
+#: The name of an atomic write's temporary file, as :mod:`follow_env.sim.atomic` makes it
+#: (``mkstemp`` with its ``_affixes``): ".", at most 32 characters of the target's stem, ".",
+#: ``mkstemp``'s 8 random characters, ".tmp" and the target's suffix if at most 16 long.
+_TEMPORARY = re.compile(r"\.[^/]{1,32}\.[a-z0-9_]{8}\.tmp(\.[^./]{1,15})?")
 
 
 def not_written_early(run: Path) -> str | None:
     """The first entry of ``run`` (a path relative to it) that a run does not write before its
     first checkpoint, or None: what may be deleted to start a run killed that early again is
     its config, session and held-out logs, SB3's ``logs/`` (progress CSVs, TensorBoard
-    events), the files of a checkpoint it did not finish, and hidden temporary files (an
-    atomic write cut short); never a link."""
-    for path in sorted(c for c in run.iterdir() if not c.name.startswith(".")):
+    events), the files of a checkpoint it did not finish, and the temporary files of atomic
+    writes cut short (:data:`_TEMPORARY`); never a link, another hidden file, or a hidden
+    folder (a ``.git``, a notebook's ``.ipynb_checkpoints``)."""
+    for path in sorted(run.iterdir()):
         if path.is_symlink():
             return path.name
-        if path.name in _EARLY_FILES and path.is_file():
+        if _temporary(path) or (path.name in _EARLY_FILES and path.is_file()):
             continue
         pattern = _EARLY_INSIDE.get(path.name)
         if pattern is None or not path.is_dir():
             return path.name
-        for child in sorted(path.rglob("*")):
-            relative = child.relative_to(path)
-            if any(part.startswith(".") for part in relative.parts) and not child.is_symlink():
-                continue  # a temporary file or folder
-            kind = child.is_dir() if relative.as_posix() == "tb" else child.is_file()
-            if child.is_symlink() or not (kind and pattern.fullmatch(relative.as_posix())):
-                return f"{path.name}/{relative.as_posix()}"
+        for child in sorted(path.rglob("*")):  # a folder before what it holds
+            relative = child.relative_to(path).as_posix()
+            if _temporary(child):
+                continue
+            kind = child.is_dir() if relative == "tb" else child.is_file()
+            if child.is_symlink() or not (kind and pattern.fullmatch(relative)):
+                return f"{path.name}/{relative}"
     return None
+
+
+def _temporary(path: Path) -> bool:
+    """``path`` is a regular file named as an atomic write's temporary file."""
+    return bool(_TEMPORARY.fullmatch(path.name)) and path.is_file() and not path.is_symlink()
 
 
 def save_model(model: BaseAlgorithm, path: Path) -> Path:

@@ -27,8 +27,12 @@ folder are refused.
 
 A seed's folder that holds no checkpoint, only what a run writes before its first one (its
 run was killed early: :func:`_early_files`), has nothing to resume from: the same command
-clears it and trains the seed again, saying so on stderr; a folder holding anything else is
-refused, naming the file.
+clears it and trains the seed again, saying so on stderr; a folder holding anything else (a
+hidden file that is no atomic write's temporary file, a hidden folder) is refused, naming it.
+
+A command holds its study for as long as it runs (:class:`train.study_lock.StudyLock`): a second
+command on the same folder meanwhile is refused before it changes anything (a seed training
+before its first checkpoint looks like one killed then, and would be cleared).
 
 ``--export DIR`` exports the study as one agent once every seed is trained
 (:func:`train.study_export.export_study`): each seed's run into ``DIR/seed-<k>`` as one run's
@@ -80,6 +84,7 @@ from train.options import (
 )
 from train.ppo import PROG, train
 from train.study_export import check_study_export, export_study, write_ensemble
+from train.study_lock import StudyLock
 
 __all__ = [
     "MAX_SEEDS",
@@ -325,11 +330,20 @@ def train_seeds(
     """Train every seed (skipping finished ones, resuming interrupted ones); returns the study
     folder, with its summary written.
 
-    :raises ValueError: for bad options (every seed's are checked before any trains), or a
-        study folder that holds another study.
+    :raises ValueError: for bad options (every seed's are checked before any trains), a
+        study folder that holds another study, or a study another command is training now.
     """
     backend = backend or Backend("local", workers=1, cpus_per_task=args.threads)
     study = args.out if args.out is not None else _new_study_path(args.runs, args.algo)
+    with StudyLock(study) as lock:
+        return _train_study(args, seeds, backend, command, study, lock)
+
+
+def _train_study(
+    args: Args, seeds: Sequence[int], backend: Backend, command: str, study: Path, lock: StudyLock
+) -> Path:
+    """:func:`train_seeds` in ``study``, held by ``lock`` from when it exists."""
+    lock.take()  # before anything is read: a command refused here has changed nothing
     settings = _settings(args, seeds)
     hp = run_hyperparams(args)  # what every seed trains with, the earlier seeds too
     code = running_sources_sha256(TRAINING_PACKAGES)  # the code every seed's worker must run
@@ -374,7 +388,7 @@ def train_seeds(
     if args.export is not None:  # before any seed trains, as for one run's export
         check_study_export(args.export, seeds, study, force=args.force)
     backend.check_reachable()  # before study.json is written
-    _claim(study, settings, code, training=len(done) < len(units))
+    _claim(study, settings, code, lock, training=len(done) < len(units))
     for k, folder in restart:
         held = ", ".join(_clear(folder)) or "hidden temporary files"
         print(
@@ -417,9 +431,13 @@ def _read_study(study: Path) -> dict[str, Any] | None:
     return had
 
 
-def _claim(study: Path, settings: dict[str, Any], code: str, *, training: bool) -> None:
+def _claim(
+    study: Path, settings: dict[str, Any], code: str, lock: StudyLock, *, training: bool
+) -> None:
     """Write ``study.json``, or check that the folder's is this study's and, if a seed is to
-    train (``training``), that the study's seeds trained with this ``code``."""
+    train (``training``), that the study's seeds trained with this ``code``; the folder is held
+    (``lock``) before it is written, whether this command made it or another one meanwhile."""
+    lock.take()
     path = study / STUDY
     had = _read_study(study)
     if had is not None:
@@ -443,6 +461,7 @@ def _claim(study: Path, settings: dict[str, Any], code: str, *, training: bool) 
     if study.exists() and any(study.iterdir()):
         raise ValueError(f"--out {study} already exists and is not an empty folder or a study")
     study.mkdir(parents=True, exist_ok=True)
+    lock.take()
     atomic_write_text(path, json.dumps(settings | {CODE: code}, indent=1) + "\n")
 
 

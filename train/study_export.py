@@ -12,14 +12,23 @@ one ``DIR`` is. Without ``--force`` it is refused, naming them (the user may hav
 ``--seeds 0-9``); with ``--force`` the export is replaced: the new members are written whole
 first, then ``ensemble.yaml`` (one atomic rename: ``make_policy("DIR")`` is the old agent or
 the new one, never a mix), then the stale members are removed, each renamed out of sight
-before it is deleted. A stale member is removed only if every file in it is its export's own,
+before it is deleted. A stale member is removed only if it is ``seed-<k>`` exported from this
+study's ``seed-<k>`` (its manifest names the run) and every file in it is its export's own,
 unchanged (its manifest lists it with its content), as an export never deletes another file;
-anything else in ``DIR`` is left as it is.
+anything else in ``DIR`` is left as it is. A member the old ``ensemble.yaml`` lists that is not
+this study's (``best`` in an ensemble assembled by hand, another study's ``seed-0``) is refused,
+with ``--force`` too: the new ``ensemble.yaml`` would drop it. A removal cut short leaves its
+hidden folder (``.seed-0.<8 characters>.removed``), which the next export into ``DIR`` removes.
+
+One seed is exported as one agent, into ``DIR`` itself (:func:`train.export.export_agent`); a
+``DIR`` holding an ``ensemble.yaml`` is refused then, with ``--force`` too: ``make_policy(DIR)``
+would still be the old ensemble.
 """
 
 from __future__ import annotations
 
 import contextlib
+import json
 import os
 import re
 import shutil
@@ -37,6 +46,9 @@ __all__ = ["check_study_export", "export_study", "stale_members", "write_ensembl
 
 #: The name of seed ``k``'s folder in a study and in its export.
 _MEMBER = re.compile(r"seed-[0-9]+")
+#: The hidden folder a stale member is renamed into to be removed (:func:`_remove`): its name,
+#: ``mkdtemp``'s 8 random characters, ".removed".
+_REMOVED = re.compile(r"\.seed-[0-9]+\.[a-z0-9_]{8}\.removed")
 
 
 def check_study_export(
@@ -46,16 +58,22 @@ def check_study_export(
     one run's export is checked (:func:`train.export.check_export`), and ``dest`` itself must
     be new, empty, or a study's earlier export (it holds an ``ensemble.yaml``); ``--force``
     writes into any folder, replacing only the export's files. An earlier export of other
-    seeds is refused, and replaced with ``--force`` (module docstring). One seed is exported
-    as one agent, into ``dest`` itself.
+    seeds is refused, and replaced with ``--force`` if it is this study's; a member that is not
+    is refused, as is a single seed over an ``ensemble.yaml`` (module docstring).
 
     :raises ExportError: naming the path and what is in the way.
     """
     dest, study = Path(dest), Path(study)
+    option = f"--export {dest}"
     if len(seeds) == 1:
+        if (dest / ENSEMBLE).exists():  # the agent beside it: make_policy(dest) is the ensemble
+            raise ExportError(
+                f"{option}: holds {ENSEMBLE}, and one seed is exported as one agent into the "
+                f"folder itself, so make_policy({str(dest)!r}) would still be the old ensemble "
+                "(--force does not remove it); choose another folder, or give more seeds"
+            )
         check_export(dest, force=force, run=study / f"seed-{seeds[0]}")
         return
-    option = f"--export {dest}"
     target, folder = dest.resolve(), study.resolve()
     if target == folder or target in folder.parents or folder in target.parents:
         raise ExportError(f"{option}: is, holds or lies in the study folder {study}; give another")
@@ -67,7 +85,16 @@ def check_study_export(
         )
     for k in seeds:
         check_export(dest / f"seed-{k}", force=force, run=study / f"seed-{k}")
-    stale = stale_members(dest, [f"seed-{k}" for k in seeds])
+    stale = stale_members(dest, [f"seed-{k}" for k in seeds], study)
+    foreign = [m for m in stale if Path(m).name != m or not _own(dest / m, study)]
+    if foreign:
+        raise ExportError(
+            f"{option}: its {ENSEMBLE} lists {', '.join(foreign)}, not exported from this "
+            f"study's seed of that name (an ensemble assembled by hand, or another study's "
+            f"export), which the new {ENSEMBLE} would drop (--force removes only this study's "
+            f"own seeds' exports); move {'it' if len(foreign) == 1 else 'them'} away, or "
+            "choose another folder"
+        )
     if stale and not force:
         raise ExportError(
             f"{option}: holds an export of other seeds ({', '.join(stale)}), which the new "
@@ -78,11 +105,12 @@ def check_study_export(
         _check_removable(dest, member)
 
 
-def stale_members(dest: Path, members: Sequence[str]) -> list[str]:
+def stale_members(dest: Path, members: Sequence[str], study: Path) -> list[str]:
     """The members of the study export in ``dest`` that are not ``members``: the folders its
-    ``ensemble.yaml`` lists and the ``seed-<k>`` folders an export wrote (a folder with an
-    export manifest), sorted by seed. Empty when ``dest`` holds no ``ensemble.yaml`` (no
-    study's export: ``--force`` writes into it and touches nothing else)."""
+    ``ensemble.yaml`` lists and the ``seed-<k>`` folders this ``study``'s export wrote (a
+    kill after ``ensemble.yaml`` was replaced leaves them unlisted), sorted by seed. Empty when
+    ``dest`` holds no ``ensemble.yaml`` (no study's export: ``--force`` writes into it and
+    touches nothing else). Only ``study``'s own (:func:`_own`) may be removed."""
     if not (dest / ENSEMBLE).is_file():
         return []
     listed: list[str] = []
@@ -90,12 +118,23 @@ def stale_members(dest: Path, members: Sequence[str]) -> list[str]:
         document = yaml.safe_load((dest / ENSEMBLE).read_text(encoding="utf-8"))
         if isinstance(document, dict) and isinstance(document.get("members"), list):
             listed = [m for m in document["members"] if isinstance(m, str)]
-    # Only folders right in dest: a member listed as "../run" is not the export's to remove.
-    names = {m for m in listed if Path(m).parts == (m,) and m not in (".", "..")}
+    # "./seed-0" is seed-0; a member elsewhere ("../run") keeps its spelling, and is not ours.
+    names = {Path(m).name if len(Path(m).parts) == 1 else m for m in listed}
     names = {m for m in names if (dest / m).exists() or (dest / m).is_symlink()}
-    # A seed's export the ensemble.yaml no longer names (a kill after it was replaced).
-    names |= {p.name for p in dest.iterdir() if _MEMBER.fullmatch(p.name) and _exported(p)}
+    names |= {p.name for p in dest.iterdir() if _MEMBER.fullmatch(p.name) and _own(p, study)}
     return sorted(names - set(members), key=_seed_order)
+
+
+def _own(folder: Path, study: Path) -> bool:
+    """``folder`` is ``seed-<k>``, exported from ``study``'s ``seed-<k>`` (its manifest names
+    the run it was exported from)."""
+    if not (_MEMBER.fullmatch(folder.name) and _exported(folder)):
+        return False
+    try:
+        run = json.loads((folder / MANIFEST).read_text(encoding="utf-8")).get("run")
+    except (OSError, UnicodeDecodeError, ValueError, AttributeError):
+        return False
+    return run == str((study / folder.name).resolve())
 
 
 def _exported(folder: Path) -> bool:
@@ -154,12 +193,15 @@ def export_study(
                 export_agent(study / member, tmp / member)
             write_ensemble(tmp, members)
         return dest
-    stale = stale_members(dest, members)  # checked removable above
+    stale = stale_members(dest, members, study)  # checked removable above
     for member in members:
         export_agent(study / member, dest / member, force=force)
     write_ensemble(dest, members)  # the switch: dest is the new agent from here on
     for member in stale:
         _remove(dest / member)
+    for left in sorted(dest.iterdir()):  # what a removal cut short left (module docstring)
+        if _REMOVED.fullmatch(left.name) and left.is_dir() and not left.is_symlink():
+            shutil.rmtree(left)
     return dest
 
 

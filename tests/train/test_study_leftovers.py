@@ -1,11 +1,17 @@
 """``follow-train --seeds`` run again over what an earlier command left: a ``--compare-with``
 agent a seed's worker must find as the driver named it, a seed killed before its first
-checkpoint, and an export folder holding an earlier export of other seeds."""
+checkpoint, an export folder holding an earlier export of other seeds; and a second command on
+a study another one is training."""
 
 from __future__ import annotations
 
+import contextlib
+import fcntl
 import json
+import os
 import shutil
+import subprocess
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -18,6 +24,7 @@ from policies.learned.ensemble import EnsemblePolicy
 from policies.learned.ppo import AGENTS
 from train.cli import main
 from train.options import Args, check_new_run
+from train.run import not_written_early
 from train.seeds import _train_unit, seed_args
 
 TINY = [
@@ -35,6 +42,11 @@ TINY = [
 def _files(folder: Path) -> dict[Path, bytes]:
     """Every file below ``folder`` with its bytes: what a refused command must not change."""
     return {p: p.read_bytes() for p in folder.rglob("*") if p.is_file()}
+
+
+def _tree(folder: Path) -> dict[Path, bytes | None]:
+    """Every file (with its bytes) and folder below ``folder``."""
+    return {p: p.read_bytes() if p.is_file() else None for p in folder.rglob("*")}
 
 
 def _error(capsys: pytest.CaptureFixture[str]) -> str:
@@ -337,3 +349,240 @@ def test_a_kill_while_an_export_is_replaced_leaves_one_whole_agent(
 
 def _raise(error: type[BaseException]) -> None:
     raise error
+
+
+# -- two commands on one study ------------------------------------------------------------------
+
+#: Another process holding a study folder as a follow-train command does, until it is killed.
+_HOLD = (
+    "import fcntl, os, sys; fd = os.open(sys.argv[1], os.O_RDONLY); "
+    "fcntl.flock(fd, fcntl.LOCK_EX); print('held', flush=True); sys.stdin.read()"
+)
+
+
+def test_a_second_command_on_a_study_in_training_is_refused_and_changes_nothing(
+    copy: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Once, the same command run while the first still trained seed 1 before its first
+    checkpoint cleared that live run's folder (it looks exactly like a run killed then)."""
+    _killed_before_its_first_checkpoint(copy / "seed-1")  # as the live run has it now
+    capsys.readouterr()
+    holder = subprocess.Popen(
+        [sys.executable, "-c", _HOLD, str(copy)], stdin=subprocess.PIPE, stdout=subprocess.PIPE
+    )
+    try:
+        assert holder.stdout is not None
+        assert holder.stdout.readline() == b"held\n"
+        before = _tree(copy)
+        assert main([*TINY, "--seeds", "0-3", "--out", str(copy)]) == 2
+        err = _error(capsys)
+        assert f"--out {copy}: another follow-train command is training this study now; " in err
+        assert "wait for it to end (or stop it) and run this again" in err
+        assert _tree(copy) == before
+    finally:
+        holder.kill()  # a command killed: the kernel lets its hold go
+        holder.wait()
+    assert main([*TINY, "--seeds", "0-3", "--out", str(copy)]) == 0
+    assert "seed 1 starts again" in capsys.readouterr().err
+
+
+def test_a_new_study_is_held_from_when_it_is_made_until_the_command_ends(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "study"
+    argv = [*TINY, "--seeds", "0", "--out", str(out)]
+    real = train.seeds.execute
+    meanwhile: list[tuple[int, str]] = []
+    calls: list[int] = []
+
+    def and_the_same_command_again(*args: Any, **kwargs: Any) -> Any:
+        calls.append(1)
+        if len(calls) == 1:  # once: unrefused, the second command would come here too
+            capsys.readouterr()
+            meanwhile.append((main(argv), capsys.readouterr().err))  # while seed 0 is to train
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(train.seeds, "execute", and_the_same_command_again)
+    assert main(argv) == 0
+    ((status, err),) = meanwhile
+    assert status == 2, err
+    assert f"--out {out}: another follow-train command is training this study now" in err
+    fd = os.open(out, os.O_RDONLY)  # let go once the command ended
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    finally:
+        os.close(fd)
+
+
+# -- hidden files in a seed killed before its first checkpoint ---------------------------------
+
+
+@pytest.mark.parametrize(
+    ("hidden", "named"),
+    [
+        ([".git/HEAD"], ".git"),
+        ([".analysis.ipynb"], ".analysis.ipynb"),
+        (["logs/.ipynb_checkpoints/x.ipynb"], "logs/.ipynb_checkpoints"),
+        (["checkpoints/.mine/best_by_hand.zip"], "checkpoints/.mine"),
+        # named as a temporary file, but a folder, or a name no atomic write makes
+        ([".config.abcdefgh.tmp.yaml/x"], ".config.abcdefgh.tmp.yaml"),
+        ([".config.abcdefgh.tmp.yaml.bak"], ".config.abcdefgh.tmp.yaml.bak"),
+        (["logs/.progress-0.abcdefg.tmp.csv"], "logs/.progress-0.abcdefg.tmp.csv"),
+        (
+            [
+                ".git/HEAD",
+                ".analysis.ipynb",
+                "logs/.ipynb_checkpoints/x.ipynb",
+                "checkpoints/.mine/best_by_hand.zip",
+            ],
+            ".analysis.ipynb",
+        ),
+    ],
+)
+def test_a_killed_seeds_hidden_file_or_folder_is_refused_naming_it(
+    hidden: list[str], named: str, copy: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Once, every hidden entry was taken for an atomic write's temporary file and deleted
+    with the folder, and the message listed only the visible ones."""
+    folder = copy / "seed-1"
+    _killed_before_its_first_checkpoint(folder)
+    for name in hidden:
+        (folder / name).parent.mkdir(parents=True, exist_ok=True)
+        (folder / name).write_text("mine")
+    capsys.readouterr()
+    before = _tree(copy)
+    assert main([*TINY, "--seeds", "0-3", "--out", str(copy)]) == 2
+    err = _error(capsys)
+    assert (
+        f"{folder}: its run ended before its first checkpoint, but the folder holds {named}, "
+        in (err)
+    )
+    assert _tree(copy) == before
+
+
+def test_a_hidden_link_is_refused(tmp_path: Path) -> None:
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "config.yaml").write_text("x")
+    (tmp_path / "mine.yaml").write_text("mine")
+    (run / ".config.abcdefgh.tmp.yaml").symlink_to(tmp_path / "mine.yaml")
+    assert not_written_early(run) == ".config.abcdefgh.tmp.yaml"
+
+
+@pytest.mark.parametrize(
+    "target",
+    [
+        "config.yaml",
+        "sessions.json",
+        "evaluations.npz",
+        "checkpoints/ppo_300_steps.zip",
+        "checkpoints/recurrent_ppo_vecnormalize_300_steps.pkl",
+        "logs/tb/" + "x" * 60 + ".json",  # the stem cut short
+        "logs/notes." + "y" * 20,  # a suffix too long to keep
+        "logs/archive.tar.gz",
+    ],
+)
+def test_the_temporary_files_of_atomic_writes_are_what_a_killed_run_may_hold(
+    target: str, tmp_path: Path
+) -> None:
+    """Named by :mod:`follow_env.sim.atomic` itself: what a kill in an atomic write leaves."""
+    from follow_env.sim.atomic import atomic_path
+
+    run = tmp_path / "run"
+    (run / target).parent.mkdir(parents=True)
+    made: list[Path] = []
+    with contextlib.suppress(KeyboardInterrupt), atomic_path(run / target) as tmp:
+        made.append(tmp)
+        raise KeyboardInterrupt  # atomic_path removes its file; a kill would have left it
+    (left,) = made
+    assert not left.exists()
+    left.write_bytes(b"half")
+    assert left.name.startswith(".")
+    assert not_written_early(run) is None
+
+
+# -- exports over a folder an export of other agents holds -------------------------------------
+
+
+@pytest.mark.parametrize(("seeds", "force"), [("3", True), ("3", False), ("4", True)])
+def test_one_seed_is_not_exported_beside_an_ensemble(
+    seeds: str, force: bool, copy: Path, exported: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Once, ``--seeds 3 --export DIR --force`` wrote the agent beside DIR's ensemble.yaml, and
+    make_policy(DIR) was still the old ensemble."""
+    capsys.readouterr()
+    before = _tree(exported)
+    assert _export(copy, exported, seeds, *(["--force"] if force else [])) == 2
+    err = _error(capsys)
+    assert f"--export {exported}: holds ensemble.yaml, and one seed is exported as one" in err
+    assert f"make_policy({str(exported)!r}) would still be the old ensemble" in err
+    assert _tree(exported) == before
+    assert not (copy / "seed-4").exists()  # refused before the new seed trained
+    assert isinstance(make_policy(str(exported)), EnsemblePolicy)
+
+
+@pytest.mark.parametrize("force", [True, False])
+def test_the_members_of_an_ensemble_assembled_by_hand_are_never_removed(
+    force: bool, copy: Path, exported: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Once, --force removed the members ``best`` and ``robust`` as "other seeds": they held
+    an export's manifest."""
+    hand = tmp_path / "hand"
+    hand.mkdir()
+    shutil.copytree(exported / "seed-0", hand / "best")
+    shutil.copytree(exported / "seed-1", hand / "robust")
+    (hand / "ensemble.yaml").write_text("members: [best, robust]\n")
+    capsys.readouterr()
+    before = _tree(hand)
+    assert _export(copy, hand, "2-3", *(["--force"] if force else [])) == 2
+    err = _error(capsys)
+    assert f"--export {hand}: its ensemble.yaml lists best, robust, not exported from this " in err
+    assert "move them away, or choose another folder" in err
+    assert _tree(hand) == before
+
+
+def test_another_studys_seeds_in_an_export_are_never_removed(
+    copy: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    other, dest = tmp_path / "other-study", tmp_path / "pair"
+    shutil.copytree(copy, other)
+    assert main([*TINY, "--seeds", "0-1", "--out", str(other), "--export", str(dest)]) == 0
+    capsys.readouterr()
+    before = _tree(dest)
+    assert _export(copy, dest, "2-3", "--force") == 2
+    err = _error(capsys)
+    assert f"--export {dest}: its ensemble.yaml lists seed-0, seed-1, not exported from" in err
+    assert _tree(dest) == before
+
+
+def test_a_removal_cut_short_is_finished_by_the_next_export(
+    copy: Path, exported: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Once, the hidden folder a stale member was renamed into stayed for good."""
+    real = shutil.rmtree
+
+    def killed_while_deleting(path: Any, *args: Any, **kwargs: Any) -> None:
+        if str(path).endswith(".removed"):
+            raise KeyboardInterrupt
+        real(path, *args, **kwargs)
+
+    with monkeypatch.context() as patch:
+        patch.setattr(shutil, "rmtree", killed_while_deleting)
+        assert _export(copy, exported, "2-3", "--force") == 130
+    (left,) = exported.glob(".seed-0.*.removed")
+    assert (left / "seed-0" / "model.zip").is_file()
+    # names of another shape are the user's, not a removal's: left alone
+    for name in (".seed-0.abcdefg.removed", ".best.abcdefgh.removed", ".seed-0.abcdefgh.removed.1"):
+        (exported / name).mkdir()
+    (exported / ".seed-1.abcdefgh.removed").write_text("a file")
+    assert _export(copy, exported, "2-3", "--force") == 0
+    assert sorted(p.name for p in exported.iterdir()) == [
+        ".best.abcdefgh.removed",
+        ".seed-0.abcdefg.removed",
+        ".seed-0.abcdefgh.removed.1",
+        ".seed-1.abcdefgh.removed",
+        "ensemble.yaml",
+        "notes.txt",
+        "seed-2",
+        "seed-3",
+    ]

@@ -1,0 +1,51 @@
+"""One ``follow-train --seeds`` command at a time on a study folder.
+
+Two commands on one study at once would both resume the same seed, and a seed still training
+before its first checkpoint looks exactly like one killed then, which the other command clears
+(:mod:`train.seeds`). A command therefore holds its study folder for as long as it runs: an
+exclusive ``flock`` on the folder itself, so no lock file is left behind, and the kernel
+releases it when the process ends, however it ends (a killed command never blocks the next).
+A second command is refused in one line before it changes anything. A file system that takes
+no lock on a folder (NFS, on a folder opened to read) leaves the study unguarded, as before.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import fcntl
+import os
+from pathlib import Path
+
+__all__ = ["StudyLock"]
+
+
+class StudyLock(contextlib.ExitStack):
+    """The hold of this command on ``study`` (module docstring), released on leaving the
+    ``with`` block; :meth:`take` takes it once the folder exists."""
+
+    def __init__(self, study: Path) -> None:
+        super().__init__()
+        self.study, self.held = Path(study), False
+
+    def take(self) -> None:
+        """Hold the study folder, if it exists and is not held yet.
+
+        :raises ValueError: if another command holds it (nothing is changed).
+        """
+        if self.held or not self.study.is_dir():
+            return
+        try:
+            fd = os.open(self.study, os.O_RDONLY)
+        except OSError:  # a folder this user may not read: its first use names it
+            return
+        self.callback(os.close, fd)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise ValueError(
+                f"--out {self.study}: another follow-train command is training this study now; "
+                "wait for it to end (or stop it) and run this again"
+            ) from None
+        except OSError:
+            pass  # no lock on this file system: unguarded (module docstring)
+        self.held = True
