@@ -39,6 +39,7 @@ from follow_env.sim.atomic import (
     check_writable,
     file_on_path,
 )
+from policies.learned.ensemble import ENSEMBLE
 
 __all__ = [
     "AGENT_FILES",
@@ -163,6 +164,12 @@ def check_export(dest: str | Path, *, force: bool = False, run: Path | None = No
         raise ExportError(
             f"{option}: {', '.join(folders)} in it is a folder; an export writes a file of "
             "that name (--force replaces files, never folders)"
+        )
+    if (dest / ENSEMBLE).exists():  # the agent beside it: make_policy(dest) is the ensemble
+        raise ExportError(
+            f"{option}: holds {ENSEMBLE}, and an agent is exported into the folder itself, so "
+            f"make_policy({str(dest)!r}) would still be the old ensemble (--force does not "
+            "remove it); choose another folder"
         )
     if not any(dest.iterdir()):
         return ExportPlan(dest, create=False, exported={})

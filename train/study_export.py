@@ -65,13 +65,7 @@ def check_study_export(
     """
     dest, study = Path(dest), Path(study)
     option = f"--export {dest}"
-    if len(seeds) == 1:
-        if (dest / ENSEMBLE).exists():  # the agent beside it: make_policy(dest) is the ensemble
-            raise ExportError(
-                f"{option}: holds {ENSEMBLE}, and one seed is exported as one agent into the "
-                f"folder itself, so make_policy({str(dest)!r}) would still be the old ensemble "
-                "(--force does not remove it); choose another folder, or give more seeds"
-            )
+    if len(seeds) == 1:  # as one run's export: refused beside an ensemble.yaml, --force too
         check_export(dest, force=force, run=study / f"seed-{seeds[0]}")
         return
     target, folder = dest.resolve(), study.resolve()

@@ -62,6 +62,20 @@ def test_force_writes_the_agent_beside_the_users_files_and_deletes_none(tmp_path
 
 
 @pytest.mark.parametrize("force", [False, True])
+def test_an_agent_is_not_exported_beside_an_ensemble_file(tmp_path: Path, force: bool) -> None:
+    """make_policy(DIR) reads ensemble.yaml first: an agent written beside it (--force) was
+    never the policy DIR names, without a word."""
+    dest = tmp_path / "agent"
+    dest.mkdir()
+    (dest / "ensemble.yaml").write_text("members: [seed-0, seed-1]\n")
+    with pytest.raises(
+        ExportError, match=r"holds ensemble\.yaml.* would still be the old ensemble"
+    ):
+        export_agent(fake_run(tmp_path), dest, force=force)
+    assert contents(dest) == {"ensemble.yaml": "members: [seed-0, seed-1]\n"}
+
+
+@pytest.mark.parametrize("force", [False, True])
 def test_a_regular_file_is_refused_even_with_force(tmp_path: Path, force: bool) -> None:
     dest = tmp_path / "agent"
     dest.write_text("a file of mine")

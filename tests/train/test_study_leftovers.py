@@ -514,7 +514,7 @@ def test_one_seed_is_not_exported_beside_an_ensemble(
     before = _tree(exported)
     assert _export(copy, exported, seeds, *(["--force"] if force else [])) == 2
     err = _error(capsys)
-    assert f"--export {exported}: holds ensemble.yaml, and one seed is exported as one" in err
+    assert f"--export {exported}: holds ensemble.yaml, and an agent is exported into the" in err
     assert f"make_policy({str(exported)!r}) would still be the old ensemble" in err
     assert _tree(exported) == before
     assert not (copy / "seed-4").exists()  # refused before the new seed trained
