@@ -80,7 +80,7 @@ def _comparison(card: Path) -> list[str]:
 
 
 def test_a_compare_with_path_names_the_drivers_agent_on_any_worker(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
     """A Ray worker resolves a relative path from the folder its ``ray start`` ran in: once, it
     compared the seed with another agent at the same relative path there (or found none)."""
@@ -112,15 +112,28 @@ def test_a_compare_with_path_names_the_drivers_agent_on_any_worker(
     assert len(on_the_driver) > 1
     saved = yaml.safe_load((driver / "study" / "seed-0" / "config.yaml").read_text())
     assert saved["args"]["compare_with"] == str(agent)  # a resume compares with it too
-    # the study's record keeps the option as given: the same command is the same study
-    assert json.loads((driver / "study" / "study.json").read_text())["compare_with"] == (
-        "agents/mine"
-    )
+    # the study's record names the agent as this folder read it
+    study_json = driver / "study" / "study.json"
+    assert json.loads(study_json.read_text())["compare_with"] == str(agent)
     # The same unit on a worker started in another folder: the driver's agent, the same table.
     shutil.rmtree(driver / "study" / "seed-0")
     monkeypatch.chdir(worker)
     _train_unit(unit)
     assert _comparison(card) == on_the_driver
+    # The same command from the worker's folder names another agent: another study (it was
+    # taken for the same one, and its new seeds compared with the other agent).
+    study = str(driver / "study")
+    argv = ["--final-episodes", "1", "--seeds", "0-1", "--out", study]
+    assert main([*TINY, *argv, "--compare-with", "agents/mine"]) == 2
+    assert "holds another study (its study.json differs in compare_with)" in _error(capsys)
+    # From the driver's folder, relative or absolute, it is the same study; so is a study.json
+    # that kept the option as typed (before it was recorded absolute).
+    monkeypatch.chdir(driver)
+    argv = ["--final-episodes", "1", "--seeds", "0", "--out", study]
+    assert main([*TINY, *argv, "--compare-with", str(agent)]) == 0
+    legacy = json.loads(study_json.read_text()) | {"compare_with": "agents/mine"}
+    study_json.write_text(json.dumps(legacy))
+    assert main([*TINY, *argv, "--compare-with", "agents/mine"]) == 0
 
 
 @pytest.mark.parametrize(
