@@ -26,7 +26,8 @@
 ``mean_true_offset_px`` (mean |true offset|, simulation only), ``mean_abs_accel_mm_s2`` (mean
 |a|), ``mean_distance_error_m`` and ``rms_distance_error_m`` (distance minus the 1.0 m
 reference, reference §1.5; true distance when logged, else the published one where it is > 0),
-``reacquire_time_s``, ``jerk_rms_m_s3``,
+``reacquire_time_s`` and ``reacquired_pct`` (the losses that ended, and how many did),
+``jerk_rms_m_s3``,
 ``turn_accel_rms_rad_s2``, ``lost_rate_pct`` and ``collision_rate_pct`` (per episode 100 or 0,
 so their mean over episodes is a rate), ``target_swap_rate_pct``, the social-navigation
 benchmarks' ``success_pct`` (neither collided nor lost; 100 or 0 per episode) and
@@ -215,27 +216,49 @@ def rms_distance_error_m(log: pd.DataFrame) -> float:
     return float(np.sqrt(np.mean(error**2))) if error.size else float("nan")
 
 
-@metric("reacquire_time_s", "s", "time to reacquire (s)")
-def reacquire_time_s(log: pd.DataFrame) -> float:
-    """Mean time [s] from losing the person until the next detection; NaN if never lost.
+def _losses(log: pd.DataFrame) -> np.ndarray | None:
+    """Each loss of the person in an episode, the time to reacquire it [s] (NaN: never
+    reacquired before the episode ended); None without a ``detected`` column.
 
     A loss starts at a row where the person is out of the frame (ground truth ``in_frame``;
     without it, a row without detection) after a row where it was not, and ends at the next row
-    with a detection. Losses that never end (the episode ended first) are not timed: they show
-    in ``lost_rate_pct``.
+    with a detection (and, with ``in_frame``, in the frame).
     """
     if "detected" not in log:
-        return float("nan")
+        return None
     detected = log["detected"].to_numpy() > 0.5
     lost = log["in_frame"].to_numpy() < 0.5 if "in_frame" in log else ~detected
     t = log["time_s"].to_numpy()
     starts = np.flatnonzero(lost[1:] & ~lost[:-1]) + 1
-    durations = []
-    for k in starts:
+    durations = np.full(starts.size, np.nan)
+    for i, k in enumerate(starts):
         found = np.flatnonzero(detected[k:] & ~lost[k:])
         if found.size:
-            durations.append(t[k + found[0]] - t[k])
-    return _mean(np.asarray(durations))
+            durations[i] = t[k + found[0]] - t[k]
+    return durations
+
+
+@metric("reacquire_time_s", "s", "time to reacquire (s)")
+def reacquire_time_s(log: pd.DataFrame) -> float:
+    """Mean time [s] from losing the person until the next detection; NaN if never lost.
+
+    Losses that never end (the episode ended first) are not timed: the mean is over the
+    losses that ended, so read it with ``reacquired_pct`` (how many did) and ``lost_rate_pct``
+    (episodes ended by a loss).
+    """
+    durations = _losses(log)
+    return float("nan") if durations is None else _mean(durations[np.isfinite(durations)])
+
+
+@metric("reacquired_pct", "%", "losses reacquired (%)")
+def reacquired_pct(log: pd.DataFrame) -> float:
+    """Share of the episode's losses of the person (:func:`_losses`) that ended with the person
+    detected again before the episode ended, %; NaN if never lost. The time to reacquire counts
+    only these: a controller that never finds the person again does not get a short one."""
+    durations = _losses(log)
+    if durations is None or durations.size == 0:
+        return float("nan")
+    return float(100.0 * np.isfinite(durations).mean())
 
 
 @metric("jerk_rms_m_s3", "m/s³", "jerk RMS (m/s³)")

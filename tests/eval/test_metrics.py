@@ -105,6 +105,18 @@ def test_reacquire_time_averages_losses_and_skips_one_never_reacquired() -> None
 def test_reacquire_time_is_nan_when_never_lost() -> None:
     log = make_log(in_frame=[1, 1, 1], detected=[1, 0, 1])
     assert math.isnan(METRICS["reacquire_time_s"].fn(log))
+    assert math.isnan(METRICS["reacquired_pct"].fn(log))
+
+
+def test_the_share_of_losses_reacquired_counts_the_one_the_time_leaves_out() -> None:
+    # The three losses above: two found again (0.1 s and 0.3 s), the last never.
+    log = make_log(in_frame=[1, 0, 1, 0, 0, 1, 1, 0], detected=[1, 0, 1, 0, 0, 0, 1, 0])
+    assert METRICS["reacquired_pct"].fn(log) == pytest.approx(200.0 / 3.0)
+    # one loss, never found again: no time to reacquire at all, and none of it reacquired
+    never = make_log(in_frame=[1, 1, 0, 0], detected=[1, 1, 0, 0])
+    assert math.isnan(METRICS["reacquire_time_s"].fn(never))
+    assert METRICS["reacquired_pct"].fn(never) == 0.0
+    assert METRICS["reacquired_pct"].fn(make_log(in_frame=[1, 0, 1], detected=[1, 0, 1])) == 100.0
 
 
 def test_jerk_rms_is_rms_of_accel_differences_over_time() -> None:
@@ -161,6 +173,7 @@ def test_metrics_needing_absent_columns_are_nan() -> None:
     for name in (
         "mean_true_offset_px",
         "reacquire_time_s",
+        "reacquired_pct",
         "turn_accel_rms_rad_s2",
         "lost_rate_pct",
         "collision_rate_pct",
