@@ -246,17 +246,18 @@ def _check_options(args: Args, *, run: Path | None, clearing: bool = False) -> N
         raise ValueError(FORCE_ALONE_ERROR)
 
 
-def absolute_compare_with(name: str) -> str:
+def absolute_compare_with(name: str, *, missing: bool = False) -> str:
     """``--compare-with`` as a process in another folder reads it as this one does: a path to
     an agent (a run or export folder, a ``.zip``, an ensemble) made absolute, a registered
     name (``gsmpn:tuned``, ``ppo``) as it is. The registry's rule (:func:`policies.make_policy`):
     a registered name is that policy even if a folder of that name is here too, and any other
-    name that exists is a path. A path that does not exist is left for the check to name."""
+    name that exists is a path. A path that does not exist is left for the check to name,
+    unless ``missing`` (a study's record: the agent may have moved since its seeds trained)."""
     from policies import available_policies
 
     if not isinstance(name, str) or not name.strip() or name in available_policies():
         return name  # an empty name is not the current folder: make_policy refuses it
-    if not Path(name).exists():
+    if not missing and not Path(name).exists():
         return name
     return str(Path(name).absolute())
 

@@ -303,8 +303,12 @@ _EARLY_INSIDE = {
 }
 #: The name of an atomic write's temporary file, as :mod:`follow_env.sim.atomic` makes it
 #: (``mkstemp`` with its ``_affixes``): ".", at most 32 characters of the target's stem, ".",
-#: ``mkstemp``'s 8 random characters, ".tmp" and the target's suffix if at most 16 long.
-_TEMPORARY = re.compile(r"\.[^/]{1,32}\.[a-z0-9_]{8}\.tmp(\.[^./]{1,15})?")
+#: ``mkstemp``'s 8 random characters, ".tmp" and the target's suffix if at most 16 long; or
+#: the probe ``check_writable`` makes and removes at once (``.write-check.`` and 8 characters,
+#: after ``x`` padding when a long name is probed).
+_TEMPORARY = re.compile(
+    r"\.[^/]{1,32}\.[a-z0-9_]{8}\.tmp(\.[^./]{1,15})?|\.write-check\.x*[a-z0-9_]{8}"
+)
 
 
 def not_written_early(run: Path) -> str | None:

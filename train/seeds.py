@@ -171,8 +171,8 @@ def _settings(args: Args, seeds: Sequence[int]) -> dict[str, Any]:
     learner = algo(args.algo or DEFAULT_ALGO)
     out["hyperparams"] = str(args.hyperparams or learner.hyperparams)
     # An agent by its path as this folder reads it: the same command run from another folder
-    # names another agent (or none), and is another study.
-    out["compare_with"] = absolute_compare_with(args.compare_with)
+    # names another agent (or none), and is another study; one moved away since is still this.
+    out["compare_with"] = absolute_compare_with(args.compare_with, missing=True)
     if args.env_id is None:  # the file's only section, as the run fills it in
         with contextlib.suppress(ConfigError):  # the seeds' own checks name the file
             out["env_id"] = sole_section(out["hyperparams"])
@@ -447,7 +447,7 @@ def _claim(
         if had.get("env_id") is None:  # written before the default was filled in
             had = {**had, "env_id": settings.get("env_id")}
         if isinstance(had.get("compare_with"), str):  # kept as typed before: read from here
-            had = {**had, "compare_with": absolute_compare_with(had["compare_with"])}
+            had = {**had, "compare_with": absolute_compare_with(had["compare_with"], missing=True)}
         changed = sorted(
             k
             for k in settings.keys() | had.keys()

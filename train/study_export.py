@@ -82,12 +82,13 @@ def check_study_export(
     stale = stale_members(dest, [f"seed-{k}" for k in seeds], study)
     foreign = [m for m in stale if Path(m).name != m or not _own(dest / m, study)]
     if foreign:
+        where = "; ".join(f"{m} from {_source(dest / m)}" for m in foreign)
         raise ExportError(
-            f"{option}: its {ENSEMBLE} lists {', '.join(foreign)}, not exported from this "
-            f"study's seed of that name (an ensemble assembled by hand, or another study's "
-            f"export), which the new {ENSEMBLE} would drop (--force removes only this study's "
-            f"own seeds' exports); move {'it' if len(foreign) == 1 else 'them'} away, or "
-            "choose another folder"
+            f"{option}: its {ENSEMBLE} lists {', '.join(foreign)}, which the new {ENSEMBLE} "
+            f"would drop and which are not exports of {study}'s own seeds ({where}: an "
+            "ensemble assembled by hand, another study's export, or this study's before it "
+            f"was moved); --force removes only this study's own seeds' exports: move "
+            f"{'it' if len(foreign) == 1 else 'them'} away, or choose another folder"
         )
     if stale and not force:
         raise ExportError(
@@ -129,6 +130,15 @@ def _own(folder: Path, study: Path) -> bool:
     except (OSError, UnicodeDecodeError, ValueError, AttributeError):
         return False
     return run == str((study / folder.name).resolve())
+
+
+def _source(folder: Path) -> str:
+    """Where the member ``folder`` was exported from, as its manifest says, for a message."""
+    try:
+        run = json.loads((folder / MANIFEST).read_text(encoding="utf-8")).get("run")
+    except (OSError, UnicodeDecodeError, ValueError, AttributeError):
+        run = None
+    return f"the run {run}" if isinstance(run, str) else "no export's run"
 
 
 def _exported(folder: Path) -> bool:

@@ -12,9 +12,13 @@ no lock on a folder (NFS, on a folder opened to read) leaves the study unguarded
 from __future__ import annotations
 
 import contextlib
-import fcntl
 import os
 from pathlib import Path
+
+try:
+    import fcntl
+except ImportError:  # Windows: no flock, so unguarded (as on a file system without locks)
+    fcntl = None  # type: ignore[assignment]
 
 __all__ = ["StudyLock"]
 
@@ -32,7 +36,7 @@ class StudyLock(contextlib.ExitStack):
 
         :raises ValueError: if another command holds it (nothing is changed).
         """
-        if self.held or not self.study.is_dir():
+        if self.held or fcntl is None or not self.study.is_dir():
             return
         try:
             fd = os.open(self.study, os.O_RDONLY)

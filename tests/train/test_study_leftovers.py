@@ -134,6 +134,10 @@ def test_a_compare_with_path_names_the_drivers_agent_on_any_worker(
     legacy = json.loads(study_json.read_text()) | {"compare_with": "agents/mine"}
     study_json.write_text(json.dumps(legacy))
     assert main([*TINY, *argv, "--compare-with", "agents/mine"]) == 0
+    # The agent moved away since: nothing left to train, the same command is still this study
+    # (say, to export it).
+    shutil.move(agent, driver / "agents" / "moved")
+    assert main([*TINY, *argv, "--compare-with", "agents/mine"]) == 0
 
 
 @pytest.mark.parametrize(
@@ -514,6 +518,31 @@ def test_the_temporary_files_of_atomic_writes_are_what_a_killed_run_may_hold(
     assert not_written_early(run) is None
 
 
+@pytest.mark.parametrize("name_bytes", [0, 80])
+def test_the_probe_of_a_folders_writability_is_what_a_killed_run_may_hold(
+    name_bytes: int, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``check_writable`` makes a file and removes it at once: a kill in between leaves it."""
+    import follow_env.sim.atomic as atomic
+
+    run = tmp_path / "run"
+    run.mkdir()
+    made: list[str] = []
+    real = atomic.tempfile.mkstemp
+
+    def kept(*args: Any, **kwargs: Any) -> Any:
+        fd, name = real(*args, **kwargs)
+        made.append(name)
+        return fd, name
+
+    monkeypatch.setattr(atomic.tempfile, "mkstemp", kept)
+    monkeypatch.setattr(atomic.os, "unlink", lambda name: None)  # the kill: never removed
+    atomic.try_new_file(run, name_bytes=name_bytes)
+    (left,) = made
+    assert Path(left).name.startswith(".write-check.")
+    assert not_written_early(run) is None
+
+
 # -- exports over a folder an export of other agents holds -------------------------------------
 
 
@@ -549,7 +578,8 @@ def test_the_members_of_an_ensemble_assembled_by_hand_are_never_removed(
     before = _tree(hand)
     assert _export(copy, hand, "2-3", *(["--force"] if force else [])) == 2
     err = _error(capsys)
-    assert f"--export {hand}: its ensemble.yaml lists best, robust, not exported from this " in err
+    assert f"--export {hand}: its ensemble.yaml lists best, robust, which the new " in err
+    assert f"(best from the run {(copy / 'seed-0').resolve()}; robust from the run" in err
     assert "move them away, or choose another folder" in err
     assert _tree(hand) == before
 
@@ -564,7 +594,9 @@ def test_another_studys_seeds_in_an_export_are_never_removed(
     before = _tree(dest)
     assert _export(copy, dest, "2-3", "--force") == 2
     err = _error(capsys)
-    assert f"--export {dest}: its ensemble.yaml lists seed-0, seed-1, not exported from" in err
+    assert f"--export {dest}: its ensemble.yaml lists seed-0, seed-1, which the new" in err
+    # each named with the run it came from
+    assert f"seed-0 from the run {(other / 'seed-0').resolve()}; seed-1 from the run" in err
     assert _tree(dest) == before
 
 
@@ -599,3 +631,19 @@ def test_a_removal_cut_short_is_finished_by_the_next_export(
         "seed-2",
         "seed-3",
     ]
+
+
+def test_without_flock_a_study_is_unguarded_not_refused(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Windows has no fcntl: every follow-train command imported it, and failed there."""
+    import train.study_lock
+
+    monkeypatch.setattr(train.study_lock, "fcntl", None)
+    study = tmp_path / "study"
+    study.mkdir()
+    with train.study_lock.StudyLock(study) as first, train.study_lock.StudyLock(study) as second:
+        first.take()
+        second.take()  # nothing to hold it with: not refused
+        assert not first.held
+        assert not second.held
