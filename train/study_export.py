@@ -13,7 +13,8 @@ one ``DIR`` is. Without ``--force`` it is refused, naming them (the user may hav
 first, then ``ensemble.yaml`` (one atomic rename: ``make_policy("DIR")`` is the old agent or
 the new one, never a mix), then the stale members are removed, each renamed out of sight
 before it is deleted. A stale member is removed only if it is ``seed-<k>`` exported from this
-study's ``seed-<k>`` (its manifest names the run) and every file in it is its export's own,
+study's ``seed-<k>`` (its manifest names the run, or lists that run's ``model.zip`` by its
+content: a study moved since) and every file in it is its export's own,
 unchanged (its manifest lists it with its content), as an export never deletes another file;
 anything else in ``DIR`` is left as it is. A member the old ``ensemble.yaml`` lists that is not
 this study's (``best`` in an ensemble assembled by hand, another study's ``seed-0``) is refused,
@@ -86,8 +87,8 @@ def check_study_export(
         raise ExportError(
             f"{option}: its {ENSEMBLE} lists {', '.join(foreign)}, which the new {ENSEMBLE} "
             f"would drop and which are not exports of {study}'s own seeds ({where}: an "
-            "ensemble assembled by hand, another study's export, or this study's before it "
-            f"was moved); --force removes only this study's own seeds' exports: move "
+            "ensemble assembled by hand, another study's export, or a seed trained again "
+            f"since); --force removes only this study's own seeds' exports: move "
             f"{'it' if len(foreign) == 1 else 'them'} away, or choose another folder"
         )
     if stale and not force:
@@ -121,15 +122,22 @@ def stale_members(dest: Path, members: Sequence[str], study: Path) -> list[str]:
 
 
 def _own(folder: Path, study: Path) -> bool:
-    """``folder`` is ``seed-<k>``, exported from ``study``'s ``seed-<k>`` (its manifest names
-    the run it was exported from)."""
+    """``folder`` is ``seed-<k>``, exported from ``study``'s ``seed-<k>``: its manifest names
+    that run, or (the study was moved or copied since, or is mounted elsewhere) lists that
+    run's ``model.zip`` by its content."""
     if not (_MEMBER.fullmatch(folder.name) and _exported(folder)):
         return False
     try:
         run = json.loads((folder / MANIFEST).read_text(encoding="utf-8")).get("run")
     except (OSError, UnicodeDecodeError, ValueError, AttributeError):
         return False
-    return run == str((study / folder.name).resolve())
+    seed = study / folder.name
+    if run == str(seed.resolve()):
+        return True
+    manifest, model = read_manifest(folder), seed / "model.zip"
+    if manifest is None or not model.is_file():
+        return False
+    return sha256(model) in manifest.get(model.name, [])
 
 
 def _source(folder: Path) -> str:

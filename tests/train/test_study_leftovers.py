@@ -588,8 +588,9 @@ def test_another_studys_seeds_in_an_export_are_never_removed(
     copy: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     other, dest = tmp_path / "other-study", tmp_path / "pair"
-    shutil.copytree(copy, other)
-    assert main([*TINY, "--seeds", "0-1", "--out", str(other), "--export", str(dest)]) == 0
+    # trained from other seeds: other models (a copy of this study's would be its own models)
+    argv = ["--seed", "7", "--seeds", "0-1", "--out", str(other), "--export", str(dest)]
+    assert main([*TINY, *argv]) == 0
     capsys.readouterr()
     before = _tree(dest)
     assert _export(copy, dest, "2-3", "--force") == 2
@@ -647,3 +648,20 @@ def test_without_flock_a_study_is_unguarded_not_refused(
         second.take()  # nothing to hold it with: not refused
         assert not first.held
         assert not second.held
+
+
+def test_a_moved_study_replaces_its_own_earlier_export(
+    copy: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The members' manifests name the study's old folder; their model files are the moved
+    study's still. Once, its own seed-2 was refused as "not exported from this study"."""
+    dest = tmp_path / "three"
+    assert main([*TINY, "--seeds", "0-2", "--out", str(copy), "--export", str(dest)]) == 0
+    moved = tmp_path / "moved"
+    shutil.copytree(copy, moved, symlinks=True)
+    capsys.readouterr()
+    assert _export(moved, dest, "0-1", "--force") == 0
+    assert sorted(p.name for p in dest.iterdir() if p.name.startswith("seed-")) == [
+        "seed-0",
+        "seed-1",
+    ]
