@@ -41,6 +41,7 @@ from train.algos import ALGOS, DEFAULT_ALGO, load_model, new_model
 from train.config import ConfigError, Hyperparams, check_action_fit, policy_class
 from train.export import AGENT_FILES, EXPORT_EXTRAS, export_agent
 from train.options import MAX_SEED, MAX_THREADS, Args, args_to_dict, check_new_run, check_resume
+from train.study_lock import StudyLock
 
 __all__ = [
     "AGENT_FILES",
@@ -70,11 +71,22 @@ class TrainingError(RuntimeError):
 def train(args: Args, command: str = PROG) -> Path:
     """Train (or resume) a run as ``args`` say; returns the run folder.
 
+    The run folder is held while it trains (:class:`train.study_lock.StudyLock`): a second
+    training of the same run meanwhile (``--resume RUN`` twice, or beside the ``--seeds``
+    command training it) is refused before it writes anything.
+
     :raises ValueError: for bad options or inputs (the message names them), before anything
         is written.
     :raises Interrupted: on Ctrl-C once the run folder exists.
     :raises TrainingError: if the policy's outputs became NaN.
     """
+    option = "--resume" if args.resume is not None else "--out"
+    with StudyLock(args.resume or args.out or Path(), option, "run") as lock:
+        return _train(args, command, lock)
+
+
+def _train(args: Args, command: str, lock: StudyLock) -> Path:
+    """:func:`train`, its run folder held by ``lock`` from when it exists."""
     import torch
     from stable_baselines3.common.logger import CSVOutputFormat, Logger, TensorBoardOutputFormat
 
@@ -103,6 +115,8 @@ def train(args: Args, command: str = PROG) -> Path:
         if args.out is None:
             made.insert(0, run)
         run.mkdir(parents=True, exist_ok=True)
+    lock.study = run  # a new run's folder exists only now
+    lock.take()  # before anything is written (a refusal removes nothing: the folder is another's)
     try:
         if saved is None:
             runs.write_config(run, _resolved_config(args, hp, venv, command))

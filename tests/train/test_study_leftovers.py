@@ -403,6 +403,31 @@ def test_a_second_command_on_a_study_in_training_is_refused_and_changes_nothing(
     assert "seed 1 starts again" in capsys.readouterr().err
 
 
+def test_a_run_in_training_is_not_trained_again_beside_it(
+    copy: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``--resume RUN`` while another command trains RUN (a second resume, or the study
+    command training that seed) wrote the same checkpoints and logs as the other."""
+    run = copy / "seed-1"
+    _interrupted_after_its_first_checkpoint(run)
+    capsys.readouterr()
+    holder = subprocess.Popen(
+        [sys.executable, "-c", _HOLD, str(run)], stdin=subprocess.PIPE, stdout=subprocess.PIPE
+    )
+    try:
+        assert holder.stdout is not None
+        assert holder.stdout.readline() == b"held\n"
+        before = _tree(copy)
+        assert main(["--resume", str(run), "--no-progress"]) == 2
+        err = _error(capsys)
+        assert f"--resume {run}: another follow-train command is training this run now" in err
+        assert _tree(copy) == before
+    finally:
+        holder.kill()
+        holder.wait()
+    assert main(["--resume", str(run), "--no-progress"]) == 0
+
+
 def test_a_new_study_is_held_from_when_it_is_made_until_the_command_ends(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
