@@ -38,6 +38,7 @@ import yaml
 
 from eval.cli_base import UsageError, _names, _Parser, _positive, path_option
 from eval.rollout import rollout
+from eval.tuning.cli import run_reporting
 from eval.tuning.driver import SearchConfig, run_search
 from eval.tuning.folders import (
     check_journal_owner,
@@ -50,15 +51,7 @@ from eval.tuning.folders import (
     text_check,
 )
 from eval.tuning.objective import DEFAULT_VARIANTS, SCORE_KEYS, TUNE_SEED0, episode_score
-from execution import (
-    WORKERS_LOST,
-    Backend,
-    BackendUnavailableError,
-    WorkerLostError,
-    backend_from_args,
-    error_line,
-    execute,
-)
+from execution import Backend, backend_from_args, execute
 from follow_env.sim.atomic import atomic_write_text
 from policies.space import ParamRange
 from train.config import read_document
@@ -346,21 +339,11 @@ def _check_out_owner(out: Path, study: str) -> None:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point; returns the exit status (2 with one line on stderr for bad arguments)."""
-    try:
-        return run(build_parser().parse_args(argv))
-    except WorkerLostError as e:  # a trial's workers killed again and again (out of memory)
-        print(
-            f"{PROG}: error: {e}; the study keeps its finished trials and their runs: run the "
-            "same command again to resume (with fewer --workers if memory is short)",
-            file=sys.stderr,
-        )
-        return WORKERS_LOST
-    except (UsageError, OSError, ValueError, BackendUnavailableError) as e:
-        print(f"{PROG}: error: {error_line(e)}", file=sys.stderr)  # a worker's: unit, host
-        return 2
-    except KeyboardInterrupt:  # before the search began (its own is caught in run)
-        print(f"{PROG}: interrupted before the search began; nothing was written", file=sys.stderr)
-        return 130
+    return run_reporting(
+        PROG,
+        "the study keeps its finished trials and their runs",
+        lambda: run(build_parser().parse_args(argv)),
+    )
 
 
 if __name__ == "__main__":

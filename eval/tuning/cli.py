@@ -18,7 +18,7 @@ import re
 import shlex
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import replace
 from datetime import UTC, datetime
 from pathlib import Path
@@ -45,7 +45,7 @@ from execution import (
 )
 from follow_env.sim.atomic import atomic_write_text
 
-__all__ = ["PROG", "build_parser", "main"]
+__all__ = ["PROG", "build_parser", "main", "run_reporting"]
 
 PROG = "follow-tune"
 #: Most tuning or held-out seeds: 1000 + k and 2000 + k must never meet.
@@ -382,22 +382,37 @@ def _counts(trials: dict[str, int]) -> str:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``follow-tune``; returns the exit status."""
     argv = sys.argv[1:] if argv is None else list(argv)
-    try:
+
+    def parsed_and_run() -> int:
         args = build_parser().parse_args(argv)
         args.argv = argv
         return run(args)
+
+    return run_reporting(PROG, "the study keeps its finished trials", parsed_and_run)
+
+
+def run_reporting(prog: str, kept: str, call: Callable[[], int]) -> int:
+    """A tuning command's ``call`` (``follow-tune``'s, ``python -m train.tune``'s), its
+    expected errors reported in one line on stderr: its exit status.
+
+    :param prog: the command's name, as its lines begin.
+    :param kept: what its study keeps when a trial's workers kept dying (exit status
+        :data:`execution.WORKERS_LOST`); the line then says how to resume.
+    """
+    try:
+        return call()
     except WorkerLostError as e:  # a trial's workers killed again and again (out of memory)
         print(
-            f"{PROG}: error: {e}; the study keeps its finished trials: run the same command "
-            "again to resume (with fewer --workers if memory is short)",
+            f"{prog}: error: {e}; {kept}: run the same command again to resume (with fewer "
+            "--workers if memory is short)",
             file=sys.stderr,
         )
         return WORKERS_LOST
     except (UsageError, OSError, ValueError, BackendUnavailableError) as e:
-        print(f"{PROG}: error: {error_line(e)}", file=sys.stderr)  # a worker's: unit, host
+        print(f"{prog}: error: {error_line(e)}", file=sys.stderr)  # a worker's: unit, host
         return 2
     except KeyboardInterrupt:  # before the search began (its own is caught in run)
-        print(f"{PROG}: interrupted before the search began; nothing was written", file=sys.stderr)
+        print(f"{prog}: interrupted before the search began; nothing was written", file=sys.stderr)
         return 130
 
 
