@@ -127,12 +127,8 @@ def _own(folder: Path, study: Path) -> bool:
     run's ``model.zip`` by its content."""
     if not (_MEMBER.fullmatch(folder.name) and _exported(folder)):
         return False
-    try:
-        run = json.loads((folder / MANIFEST).read_text(encoding="utf-8")).get("run")
-    except (OSError, UnicodeDecodeError, ValueError, AttributeError):
-        return False
     seed = study / folder.name
-    if run == str(seed.resolve()):
+    if _exported_from(folder) == str(seed.resolve()):
         return True
     manifest, model = read_manifest(folder), seed / "model.zip"
     if manifest is None or not model.is_file():
@@ -140,13 +136,20 @@ def _own(folder: Path, study: Path) -> bool:
     return sha256(model) in manifest.get(model.name, [])
 
 
-def _source(folder: Path) -> str:
-    """Where the member ``folder`` was exported from, as its manifest says, for a message."""
+def _exported_from(folder: Path) -> str | None:
+    """The run the export in ``folder`` was made from, as its manifest names it (None: no
+    readable manifest names one)."""
     try:
         run = json.loads((folder / MANIFEST).read_text(encoding="utf-8")).get("run")
     except (OSError, UnicodeDecodeError, ValueError, AttributeError):
-        run = None
-    return f"the run {run}" if isinstance(run, str) else "no export's run"
+        return None
+    return run if isinstance(run, str) else None
+
+
+def _source(folder: Path) -> str:
+    """Where the member ``folder`` was exported from, as its manifest says, for a message."""
+    run = _exported_from(folder)
+    return "no export's run" if run is None else f"the run {run}"
 
 
 def _exported(folder: Path) -> bool:
