@@ -81,7 +81,7 @@ def train(args: Args, command: str = PROG) -> Path:
     :raises TrainingError: if the policy's outputs became NaN.
     """
     option = "--resume" if args.resume is not None else "--out"
-    with StudyLock(args.resume or args.out or Path(), option, "run") as lock:
+    with StudyLock(option=option, what="run") as lock:
         return _train(args, command, lock)
 
 
@@ -115,8 +115,7 @@ def _train(args: Args, command: str, lock: StudyLock) -> Path:
         if args.out is None:
             made.insert(0, run)
         run.mkdir(parents=True, exist_ok=True)
-    lock.study = run  # a new run's folder exists only now
-    lock.take()  # before anything is written (a refusal removes nothing: the folder is another's)
+    lock.take(run)  # before anything is written (a refusal removes nothing: it is another's)
     try:
         if saved is None:
             runs.write_config(run, _resolved_config(args, hp, venv, command))

@@ -29,20 +29,24 @@ class StudyLock(contextlib.ExitStack):
     """The hold of this command on ``study`` (module docstring), released on leaving the
     ``with`` block; :meth:`take` takes it once the folder exists."""
 
-    def __init__(self, study: Path, option: str = "--out", what: str = "study") -> None:
-        """:param option: the option that named the folder, and ``what`` it is, for the
-        refusal (``--resume``, ``run``)."""
+    def __init__(
+        self, study: Path | None = None, option: str = "--out", what: str = "study"
+    ) -> None:
+        """:param study: the folder (None: named by :meth:`take`, when a new run makes it).
+        :param option: the option that named the folder, and ``what`` it is, for the refusal
+            (``--resume``, ``run``)."""
         super().__init__()
-        self.study, self.held = Path(study), False
+        self.study, self.held = study, False
         self.option, self.what = option, what
 
-    def take(self) -> None:
-        """Hold the study folder, if it exists and is not held yet.
+    def take(self, folder: Path | None = None) -> None:
+        """Hold the study folder (``folder``, if given), if it exists and is not held yet.
 
         :raises ValueError: if another command holds it (nothing is changed).
         """
         # (one class for a study and a run: the same hold, only the words differ)
-        if self.held or fcntl is None or not self.study.is_dir():
+        self.study = self.study if folder is None else folder
+        if self.held or fcntl is None or self.study is None or not self.study.is_dir():
             return
         try:
             fd = os.open(self.study, os.O_RDONLY)
