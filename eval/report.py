@@ -37,6 +37,7 @@ __all__ = [
     "PERSON_FOLLOW_TABLES",
     "Tables",
     "comparison_markdown",
+    "holm_note",
     "markdown_report",
     "plot_metric_bars",
     "plot_offsets",
@@ -205,6 +206,39 @@ def comparison_markdown(
     return pd.DataFrame(rows).to_markdown(index=False, disable_numparse=True) if rows else ""
 
 
+def holm_note(
+    comparisons: pd.DataFrame,
+    metrics: Sequence[str] | None = None,
+    *,
+    tables: Tables = PERSON_FOLLOW_TABLES,
+) -> str:
+    """How many of the starred differences of each metric shown (the headline metrics unless
+    ``metrics`` names others) stand under Holm's correction over the metric's comparisons
+    (``holm_p``, :func:`eval.stats.with_holm`): a sentence after a blank line, or ``""`` for a
+    table without ``holm_p`` (written before it had one) or with no starred difference."""
+    metrics = tables.headline if metrics is None else metrics
+    if "holm_p" not in comparisons:
+        return ""
+    counts = []
+    for name in metrics:
+        rows = comparisons[comparisons["metric"] == name]
+        if rows.empty:
+            continue
+        starred = stand = 0
+        for r in rows.to_dict("records"):
+            ends = (r["mean_diff"], r["diff_ci_low"], r["diff_ci_high"])
+            starred += bool(PairedTest(*ends, r["perm_p"]).direction)
+            stand += bool(PairedTest(*ends, r["holm_p"]).direction)
+        if starred:
+            counts.append(f"{metric_label(name, tables.metrics)} {stand} of {starred}")
+    if not counts:
+        return ""
+    return (
+        "\n\nStarred differences that stand under Holm's correction over each metric's "
+        f"comparisons in the table (holm_p in comparisons.csv), per metric: {'; '.join(counts)}."
+    )
+
+
 def _ci_note(tables: Tables) -> str:
     """What the summary's intervals are, said under its tables."""
     rates = [m.label for m in tables.metrics.values() if m.binary]
@@ -240,6 +274,7 @@ def markdown_report(
             "\n\n## Paired differences on the seeds both ran: A - B [95 % CI], permutation p\n",
             comparison_markdown(comparisons, tables=tables),
             "\n\n" + COMPARISON_NOTE,
+            holm_note(comparisons, tables=tables),
         ]
         notes = pairing_notes(comparisons)
         if notes:

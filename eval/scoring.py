@@ -34,7 +34,15 @@ import pandas as pd
 from eval.metrics import Metric
 from eval.provenance import check_worker_code, running_sources_sha256
 from eval.rollout import Episode
-from eval.stats import EpisodeRow, binary_metrics, compare, episode_table, pairing_notes, summarize
+from eval.stats import (
+    EpisodeRow,
+    binary_metrics,
+    compare,
+    episode_table,
+    pairing_notes,
+    summarize,
+    with_holm,
+)
 from eval.steplog import StepLogError, read_step_log, step_log_text
 from execution.backend import Backend, execute
 
@@ -143,7 +151,8 @@ def score(
     summary = pd.concat([part[2] for part in parts], ignore_index=True)
     cells = table[["policy", variant]].drop_duplicates()
     summary = cells.merge(summary, on=["policy", variant], how="left", validate="one_to_one")
-    comparisons = pd.concat([part[3] for part in parts], ignore_index=True)
+    # Holm's family is a metric's rows over every scenario: adjusted again on the whole table.
+    comparisons = with_holm(pd.concat([part[3] for part in parts], ignore_index=True))
     notes = pairing_notes(comparisons)
     if notes:  # the report says so too (eval.report.markdown_report); this is the one line
         print(

@@ -8,8 +8,9 @@
   to [0, 0] when no episode had the event.
 - :func:`compare`: per scenario and pair of policies, the paired difference A - B on the seeds
   both ran (identical rollouts make the pairing valid): its mean, a bootstrap CI, the Wilcoxon
-  signed-rank p-value (``scipy.stats.wilcoxon``, two-sided) and the p-value of a paired
-  sign-flip permutation test of the mean difference (:func:`paired_test`).
+  signed-rank p-value (``scipy.stats.wilcoxon``, two-sided), the p-value of a paired
+  sign-flip permutation test of the mean difference (:func:`paired_test`) and that p adjusted
+  by Holm's method over the metric's comparisons (:func:`with_holm`).
 
 **Significance.** A paired difference is significant (:attr:`PairedTest.direction`) when its
 95 % bootstrap CI excludes zero *and* the sign-flip permutation test gives p < :data:`ALPHA` on
@@ -68,6 +69,7 @@ __all__ = [
     "pairing_notes",
     "summarize",
     "variant_column",
+    "with_holm",
 ]
 
 #: Confidence level of every interval.
@@ -437,7 +439,8 @@ def compare(
         both values finite), ``mean_a``, ``mean_b``, ``mean_diff`` (A - B), ``diff_ci_low``,
         ``diff_ci_high``, ``wilcoxon_p`` (NaN when every difference is 0 or n < 2),
         ``perm_p`` (the sign-flip permutation test's, :func:`paired_test`; NaN when n = 0),
-        and the pairing: ``seeds_a`` and ``seeds_b`` (the seeds each policy ran on the
+        ``holm_p`` (``perm_p`` adjusted over the metric's rows, :func:`with_holm`), and the
+        pairing: ``seeds_a`` and ``seeds_b`` (the seeds each policy ran on the
         scenario) and ``seeds_both`` (those both ran). A pair that shares no seed keeps its
         rows, with n = 0 and NaN statistics (:func:`pairing_notes` says so).
     """
@@ -481,7 +484,27 @@ def compare(
     columns = [variant, "policy_a", "policy_b", "metric", "n", "mean_a", "mean_b"]
     columns += ["mean_diff", "diff_ci_low", "diff_ci_high", "wilcoxon_p", "perm_p"]
     columns += ["seeds_a", "seeds_b", "seeds_both"]
-    return pd.DataFrame(rows, columns=columns)
+    return with_holm(pd.DataFrame(rows, columns=columns))
+
+
+def with_holm(comparisons: pd.DataFrame) -> pd.DataFrame:
+    """``comparisons`` (:func:`compare`'s) with ``holm_p`` after ``perm_p`` (replaced if it
+    has one): :func:`holm` over each metric's rows, every scenario and pair of the table.
+
+    A metric is one question asked of every pair on every scenario ("which collides less?"),
+    and a table of many pairs asks it many times: at 5 % each, one line in twenty of a table
+    with no real difference would be starred. A difference significant by
+    :attr:`PairedTest.direction` with ``holm_p`` in place of ``perm_p`` stands under the
+    correction: the chance of any false one among the metric's lines stays at or below 5 %.
+    Another family (one scenario, one pair) is :func:`holm` of those rows' ``perm_p``.
+    """
+    out = comparisons.drop(columns="holm_p", errors="ignore")
+    p = out["perm_p"].to_numpy(dtype=np.float64)
+    adjusted = np.full(p.shape, np.nan)
+    for rows in out.groupby("metric", sort=False).indices.values():
+        adjusted[rows] = holm(p[rows])
+    out.insert(out.columns.get_loc("perm_p") + 1, "holm_p", adjusted)
+    return out
 
 
 def pairing_notes(comparisons: pd.DataFrame) -> list[str]:

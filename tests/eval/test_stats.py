@@ -192,3 +192,55 @@ def test_pairs_on_different_seeds_are_noted() -> None:
     report = markdown_report(summarize(t), compare(t))
     assert "**Different seeds.**" in report
     assert "- scenario straight: a ran 6 seeds and c 1; they share none: not compared" in report
+
+
+def test_holm_adjusts_each_metrics_comparisons_over_every_scenario_and_pair() -> None:
+    from eval.stats import holm, with_holm
+
+    rng = np.random.default_rng(3)
+    rows = [
+        {"policy": p, "scenario": s, "seed": k, "x": rng.normal(shift), "y": rng.normal()}
+        for s in ("straight", "curve")
+        for p, shift in (("a", 0.0), ("b", 0.8), ("c", 0.3))
+        for k in range(12)
+    ]
+    got = compare(pd.DataFrame(rows), metrics=["x", "y"])
+    assert list(got.columns).index("holm_p") == list(got.columns).index("perm_p") + 1
+    for metric in ("x", "y"):
+        rows_m = got[got["metric"] == metric]
+        assert len(rows_m) == 6  # 3 pairs x 2 scenarios: the family of one metric
+        np.testing.assert_array_equal(rows_m["holm_p"], holm(rows_m["perm_p"].to_numpy()))
+    # per line p < 0.05 on the shift, and the adjustment only ever raises a p
+    assert (got["holm_p"] >= got["perm_p"]).all()
+    assert (got["holm_p"] > got["perm_p"]).any()
+    # adjusted again over the whole table, a table's holm_p does not depend on its parts
+    parts = [
+        compare(pd.DataFrame(rows).query("scenario == @s"), metrics=["x", "y"])
+        for s in ("straight", "curve")
+    ]
+    joined = with_holm(pd.concat(parts, ignore_index=True))
+    pd.testing.assert_frame_equal(joined, got)
+    assert not pd.concat(parts, ignore_index=True)["holm_p"].equals(got["holm_p"])
+
+
+def test_the_report_says_how_many_starred_differences_stand_under_holm() -> None:
+    from eval.report import holm_note, markdown_report
+    from eval.stats import summarize
+
+    # +1 on each of 6 seeds: p = 2/64 = 0.031 per line, starred; two scenarios make a family
+    # of two, and Holm's 0.0625 does not stand. One more seed (p = 0.016, Holm 0.031) does.
+    for n, stand in ((6, 0), (7, 2)):
+        rows = [
+            {"policy": p, "scenario": s, "seed": k, "in_frame_rate_pct": v}
+            for s in ("straight", "curve")
+            for p, v in (("a", 2.0), ("b", 1.0))
+            for k in range(n)
+        ]
+        frame = pd.DataFrame(rows)
+        comparisons = compare(frame, metrics=["in_frame_rate_pct"])
+        note = holm_note(comparisons)
+        assert note.endswith(f"per metric: InFrameRate (%) {stand} of 2.")
+        report = markdown_report(summarize(frame, metrics=["in_frame_rate_pct"]), comparisons)
+        assert note in report
+    assert holm_note(comparisons.drop(columns="holm_p")) == ""  # a table written before
+    assert holm_note(compare(table({"a": [1.0] * 6, "b": [1.0] * 6}))) == ""  # nothing starred
