@@ -247,6 +247,7 @@ def cmd_run(args: argparse.Namespace) -> int:
                 on_unit=kept_in.put,
                 reduce=reduce,
                 models=digests,  # as recorded: files replaced since stop the run
+                label_suffix=suffix,  # the ideal grid's units named as its episodes will be
             )
             episodes += [_labelled(ep, suffix) for ep in got] if suffix else got
     except BaseException as e:

@@ -427,6 +427,7 @@ def rollout(
     done: Mapping[int, list[Any]] | None = None,
     on_unit: Callable[[int, list[Any]], None] | None = None,
     models: Mapping[str, str] | None = None,
+    label_suffix: str = "",
 ) -> list[Any]:
     """Run every policy on every (scenario, seed) pair: identical rollouts.
 
@@ -451,12 +452,19 @@ def rollout(
         them (``meta.json``'s ``model_sha256``): the units carry these, not a digest read now,
         so that files replaced since (between a run's two grids, say) stop the command rather
         than play another model under the recorded label (:func:`check_worker_model`).
+    :param label_suffix: appended to each policy's label where messages name its units
+        (:func:`eval.units.unit_label`): ``follow-eval run --ideal-baseline`` passes ``+ideal``
+        for its second grid, whose failures would otherwise be named as the first grid's. The
+        episodes keep their policy's name, and ``models`` is still looked up by the bare label.
     :returns: the episodes (or their reductions) in grid order: policy, scenario, seed.
     :raises ValueError: for an unknown policy or scenario, an empty or too large grid, a
         non-integer seed, or workers < 1, before any episode runs.
     """
     learned, carried = _check_grid(policies, scenarios, seeds, task)
-    carried = [c._replace(model=(models or {}).get(c.label, c.model)) for c in carried]
+    carried = [
+        c._replace(model=(models or {}).get(c.label, c.model), label=c.label + label_suffix)
+        for c in carried
+    ]
     total = len(policies) * len(scenarios) * len(seeds)
     if backend is None:
         if workers is None:

@@ -14,8 +14,8 @@ import pytest
 
 from eval import provenance
 from eval.cli import main
-from eval.rollout import rollout
-from eval.units import seeds_text
+from eval.rollout import _run_task, rollout
+from eval.units import Work, seeds_text
 from execution import Backend, WorkerLostError
 
 
@@ -90,3 +90,30 @@ def test_a_unit_whose_worker_keeps_dying_is_named_by_its_label(
     with pytest.raises(WorkerLostError) as lost:
         rollout(["pn"], ["crowd"], [7], backend=Backend("local", workers=2, max_retries=0))
     assert str(lost.value).startswith("unit 0 (pn:tuned on crowd, seed 7): its worker process died")
+
+
+def _fails_under_perfect_sensing(work: Work) -> object:  # run by a spawned worker, by name
+    """The plain grid's units run (its config is the preset's name); the ideal grid's, whose
+    config is the perfectly sensed one, raise."""
+    if not isinstance(work.config, str):
+        raise ValueError("this unit refuses perfect sensing")
+    return _run_task(work)
+
+
+def test_a_unit_failing_in_the_ideal_grid_is_named_with_its_suffix(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """It was named ``pn:tuned on straight, ...``: as the plain grid's unit, which had run."""
+    monkeypatch.setattr(sys.modules["eval.rollout"], "_run_task", _fails_under_perfect_sensing)
+    grid = ["--policies", "pn", "--scenarios", "straight", "--episodes", "2", "--ideal-baseline"]
+    argv = ["run", *grid, "--out", str(tmp_path / "run"), "--workers", "2", "--no-logs"]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1, err
+    assert "this unit refuses perfect sensing" in err
+    found = re.search(r"\(in work unit (\d) \(pn:tuned\+ideal on straight, seed (\d)\) on ", err)
+    assert found is not None, err
+    assert found.group(1) == found.group(2)  # 2 units of one seed each: unit k runs seed k
+    assert not (tmp_path / "run").exists()
+    # the plain grid's two units had run (and are kept to resume): the failure was the ideal's
+    assert len(list((tmp_path / ".run.units").glob("unit-*.pkl"))) == 2
