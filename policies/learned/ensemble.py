@@ -118,6 +118,7 @@ class EnsemblePolicy:
 
     def __init__(self, path: str | Path, name: str | None = None) -> None:
         self.path = str(path)
+        self._absolute = str(Path(path).absolute())  # not resolve(): symlinks as given
         self.name = name if name is not None else self.path.rstrip("/")
         where = Path(path)
         where = where / ENSEMBLE if where.is_dir() else where
@@ -232,8 +233,9 @@ class EnsemblePolicy:
         return actions
 
     def __reduce__(self) -> tuple[Any, ...]:
-        # Rebuilt from its files in a worker process, as a lone agent is.
-        return (EnsemblePolicy, (self.path, self.name))
+        # Rebuilt from its files in a worker process, as a lone agent is: by the absolute path
+        # taken when built (a worker's current folder need not be this one's).
+        return (EnsemblePolicy, (self._absolute, self.name))
 
     def __repr__(self) -> str:
         return f"EnsemblePolicy(name={self.name!r}, members={len(self._folders)})"

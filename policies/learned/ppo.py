@@ -379,6 +379,7 @@ class PPOPolicy:
 
     def __init__(self, path: str | Path, name: str | None = None) -> None:
         self.path = str(path)
+        self._absolute = str(Path(path).absolute())  # not resolve(): symlinks as given
         self.name = name if name is not None else self.path.rstrip("/")
         self._agent = _loaded(agent_files(path))
         #: The platform the agent was trained on, and its action's entries (what it commands).
@@ -515,8 +516,8 @@ class PPOPolicy:
         return self._batch.act(actions).astype(np.float32)
 
     def __reduce__(self) -> tuple[Any, ...]:
-        # A policy sent to a worker process is rebuilt there from its files (no torch pickling).
-        return (PPOPolicy, (self.path, self.name))
+        # From its files (no torch pickling) by the absolute path: a worker's folder may differ.
+        return (PPOPolicy, (self._absolute, self.name))
 
     def __repr__(self) -> str:
         return f"PPOPolicy(name={self.name!r}, model={str(self._agent.files.model)!r})"

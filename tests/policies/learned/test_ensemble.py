@@ -14,7 +14,7 @@ import yaml
 from eval.rollout import run_episode
 from policies import make_policy
 from policies.learned.ensemble import ENSEMBLE, EnsemblePolicy
-from policies.learned.ppo import DEFAULT_AGENT, AgentLoadError, PPOPolicy
+from policies.learned.ppo import AGENTS, DEFAULT_AGENT, AgentLoadError, PPOPolicy
 
 FILES = ("model.zip", "vecnormalize.pkl", "config.yaml")
 
@@ -126,6 +126,23 @@ def test_ensemble_survives_pickling_by_path(pair: Path) -> None:
     obs = np.array([1.3, 50.0], np.float32)
     assert copy.name == policy.name
     np.testing.assert_array_equal(copy.act(obs), policy.act(obs))
+
+
+def test_an_ensemble_given_a_relative_path_survives_pickling_in_another_folder(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """It was rebuilt from the path as given, which a worker's folder does not hold."""
+    monkeypatch.chdir(AGENTS)
+    policy = EnsemblePolicy("ppo_ensemble")
+    monkeypatch.chdir(tmp_path)
+    copy = pickle.loads(pickle.dumps(policy))
+    assert (policy.name, policy.path) == ("ppo_ensemble", "ppo_ensemble")  # as given
+    assert copy.name == "ppo_ensemble"
+    assert Path(copy.path) == AGENTS.absolute() / "ppo_ensemble"
+    assert [Path(m) for m in copy.members] == [AGENTS.absolute() / m for m in policy.members]
+    for obs in ([1.3, 50.0, 4.0], [2.2, -140.0, 1.5]):  # it reads the reading ahead too
+        seen = np.array(obs, np.float32)
+        np.testing.assert_array_equal(copy.act(seen), policy.act(seen))
 
 
 def test_members_that_see_the_env_differently_are_refused_naming_the_difference(pair: Path) -> None:

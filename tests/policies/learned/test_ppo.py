@@ -202,6 +202,25 @@ def test_policy_survives_pickling_by_path() -> None:
     np.testing.assert_array_equal(copy.act(obs(1.3, 50.0)), make_policy("ppo").act(obs(1.3, 50.0)))
 
 
+def test_a_policy_given_a_relative_path_survives_pickling_in_another_folder(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """It was rebuilt from the path as given: from a worker's folder (another node's, or after a
+    chdir) another agent, or none at all."""
+    (tmp_path / "link").symlink_to(DEFAULT_AGENT, target_is_directory=True)
+    monkeypatch.chdir(tmp_path)
+    here = Path.cwd()  # the folder's own path, as a relative path is made absolute
+    policy = PPOPolicy("link")
+    (tmp_path / "elsewhere").mkdir()
+    monkeypatch.chdir(tmp_path / "elsewhere")
+    copy = pickle.loads(pickle.dumps(policy))
+    assert (policy.name, policy.path) == ("link", "link")  # as given: tables show it
+    assert copy.name == "link"
+    assert copy.path == str(here / "link")  # absolute, the link kept (not resolved)
+    for seen in (obs(1.3, 50.0), obs(2.2, -140.0)):
+        np.testing.assert_array_equal(copy.act(seen), policy.act(seen))
+
+
 @pytest.mark.slow
 def test_names_resolve_in_evaluation_worker_processes() -> None:
     from eval.rollout import rollout
