@@ -40,16 +40,15 @@ export (:mod:`train.export`) and ``DIR/ensemble.yaml`` listing them; it is check
 seed trains, and an earlier export of other seeds in ``DIR`` is refused (replaced with
 ``--force``). ``policies/agents/ppo_ensemble`` is such a folder.
 
-On a cluster the run folders are written by the nodes that train them: give ``--runs`` /
-``--out`` on a file system every node shares. A seed's unit names its folder (and a
-``--hyperparams`` file, and a ``--compare-with`` agent given by its path) by absolute path,
-whatever folder a node started in, and carries the
-driver's sources digest and hyperparameters, which the node checks before it trains
-(:func:`eval.provenance.check_worker_code`). Its worker decides whether the folder is a new run
-or one to resume, as the same command run again does: a unit whose worker died is run again
-(by the execution layer) from the seed's newest checkpoint. ``study.json`` records the digest
-(``code``), and a seed is trained on a study only by the code that started it (a study made
-before it was recorded is refused when a seed would train; the message says how to go on).
+On a cluster the run folders are written by the nodes that train them: give ``--runs`` / ``--out``
+on a file system every node shares. A seed's unit names its folder (and a ``--hyperparams`` file,
+and a ``--compare-with`` agent given by its path) by absolute path, whatever folder a node started
+in, and carries the driver's sources digest and hyperparameters, which the node checks before it
+trains (:func:`eval.provenance.check_worker_code`). Its worker decides whether the folder is a new
+run or one to resume, as the same command run again does: a unit whose worker died is run again (by
+the execution layer) from the seed's newest checkpoint. ``study.json`` records the digest
+(``code``), and a seed is trained on a study only by the code that started it (a study made before
+it was recorded is refused when a seed would train; the message says how to go on).
 """
 
 from __future__ import annotations
@@ -70,7 +69,7 @@ import pandas as pd
 
 from eval.provenance import ROLLOUT_PACKAGES, SHORT, check_worker_code, running_sources_sha256
 from execution import Backend, execute
-from follow_env.sim.atomic import atomic_write_text
+from follow_env.sim.atomic import atomic_write_text, missing_folders, remove_empty_folders
 from train import run as runs
 from train.algos import DEFAULT_ALGO, algo
 from train.config import ConfigError, sole_section
@@ -337,9 +336,14 @@ def train_seeds(
         study folder that holds another study, or a study another command is training now.
     """
     backend = backend or Backend("local", workers=1, cpus_per_task=args.threads)
+    made = [] if args.out is not None else missing_folders(args.runs)  # --runs, if it is new
     study = args.out if args.out is not None else _new_study_path(args.runs, args.algo)
-    with StudyLock(study) as lock:
-        return _train_study(args, seeds, backend, command, study, lock)
+    try:
+        with StudyLock(study) as lock:
+            return _train_study(args, seeds, backend, command, study, lock)
+    except BaseException:  # a new study is still empty if a check refused it: taken back
+        remove_empty_folders([study, *made] if args.out is None else [])
+        raise
 
 
 def _train_study(
@@ -488,10 +492,9 @@ def _other_code(study: Path, had: Any, code: str) -> str:
 
 
 def _new_study_path(root: Path, learner: str | None) -> Path:
-    """``root/<algo>-seeds-<timestamp>[-k]`` (``ppo-seeds-...`` by default), not yet made
-    (nothing is written before the checks)."""
-    prefix = f"{learner or DEFAULT_ALGO}-seeds"
-    return next(p for p in runs.run_dir_names(root, prefix) if not p.exists())
+    """A new folder ``root/<algo>-seeds-<timestamp>[-k]`` (``ppo-seeds-...`` by default), made
+    now, exclusively (:func:`train.run.new_run_dir`): two commands in one second get two."""
+    return runs.new_run_dir(root, f"{learner or DEFAULT_ALGO}-seeds")
 
 
 def write_summary(study: Path, rows: Sequence[dict[str, Any]]) -> pd.DataFrame:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import shutil
+from datetime import datetime, tzinfo
 from pathlib import Path
 
 import numpy as np
@@ -17,7 +18,7 @@ from policies.learned.ensemble import EnsemblePolicy
 from policies.learned.ppo import PPOPolicy
 from train.cli import main
 from train.ppo import DEFAULT_HYPERPARAMS
-from train.seeds import SEED_STRIDE, parse_seeds
+from train.seeds import SEED_STRIDE, _new_study_path, parse_seeds
 
 TINY = [
     "--scenarios", "straight",
@@ -369,6 +370,56 @@ def test_force_without_export_is_refused(
     assert main([*TINY, "--seeds", "0-1", "--out", str(tmp_path / "s"), "--force"]) == 2
     assert "--force applies to --export only" in capsys.readouterr().err
     assert not (tmp_path / "s").exists()
+
+
+class _OneSecond(datetime):
+    """Every ``now()`` in the same second: two commands started together."""
+
+    @classmethod
+    def now(cls, tz: tzinfo | None = None) -> _OneSecond:
+        return cls(2031, 2, 3, 4, 5, 6, tzinfo=tz)
+
+
+def test_two_studies_named_in_the_same_second_get_two_folders(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The first free name was picked and made only after the checks: two commands started in
+    one second took the same folder, and the second was refused by the first's lock."""
+    monkeypatch.setattr("train.run.datetime", _OneSecond)
+    runs, stamp = tmp_path / "runs", "ppo-seeds-20310203-040506"
+    first, second = _new_study_path(runs, "ppo"), _new_study_path(runs, "ppo")
+    assert (first.name, second.name) == (stamp, f"{stamp}-1")
+    # each made when named: a third command, in the same second, takes neither
+    assert first.is_dir()
+    assert second.is_dir()
+    assert _new_study_path(runs, None).name == f"{stamp}-2"
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--eval-episodes", "0"], "--eval-episodes 0 is out of range"),  # a seed's options
+        (["--export", "{runs}"], "is, holds or lies in the study folder"),  # checked after them
+    ],
+)
+@pytest.mark.parametrize("runs_existed", [False, True])
+def test_a_refused_study_without_out_leaves_no_folder(
+    argv: list[str],
+    message: str,
+    runs_existed: bool,
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """The study's folder is made when named (before the checks): taken back while empty, with
+    the --runs folder if the command made it."""
+    runs = tmp_path / "runs"
+    if runs_existed:
+        (runs / "ppo-old").mkdir(parents=True)
+    argv = [arg.format(runs=runs) for arg in argv]
+    assert main([*TINY, "--seeds", "0-1", "--runs", str(runs), *argv]) == 2
+    assert message in _error(capsys)
+    left = sorted(str(p.relative_to(tmp_path)) for p in tmp_path.rglob("*"))
+    assert left == (["runs", "runs/ppo-old"] if runs_existed else [])
 
 
 def test_a_new_study_trains_then_exports_its_seeds_together(tmp_path: Path) -> None:
