@@ -123,11 +123,16 @@ class SerialLink:
         self._inbox: deque[Received] = deque()
         self._last_rx = time.monotonic()
         try:
+            # exclusive: a device another link (another follow-robot run) holds is refused; two
+            # of them would both command the wheels. pyserial takes a flock on a POSIX device;
+            # socket:// and loop:// ignore it.
             self._port = serial.serial_for_url(
-                url, baudrate=baudrate, timeout=0, write_timeout=write_timeout_s
+                url, baudrate=baudrate, timeout=0, write_timeout=write_timeout_s, exclusive=True
             )
         except (serial.SerialException, ValueError, OSError) as exc:
-            raise LinkOpenError(f"cannot open serial link {url!r}: {exc}") from exc
+            held = "exclusively lock" in str(exc)
+            why = "another program has it open (another follow-robot run?)" if held else exc
+            raise LinkOpenError(f"cannot open serial link {url!r}: {why}") from exc
         _no_nagle(self._port)
 
     # ---- life cycle ---------------------------------------------------------------------

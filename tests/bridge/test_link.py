@@ -250,6 +250,18 @@ def test_handshake_keeps_the_messages_that_came_in_the_same_read_after_the_hello
         assert link.receive(timeout_s=0.5) == [feedback]
 
 
+def test_a_device_another_link_holds_is_refused(pty_port: tuple[int, str]) -> None:
+    # two follow-robot runs on one port would both command the wheels
+    peer, path = pty_port
+    with SerialLink(path, "reference") as link:
+        with pytest.raises(LinkOpenError, match=rf"'{path}': another program has it open"):
+            SerialLink(path, "reference")
+        link.send(WheelCommand(40, 40, CommandKind.DUTY_PERCENT))
+        assert len(os.read(peer, 64)) == 6  # the first link still drives
+    with SerialLink(path, "reference"):  # free again once the first is closed
+        pass
+
+
 def test_a_port_that_disappears_while_its_bytes_drain_is_a_link_error(
     pty_port: tuple[int, str],
 ) -> None:
