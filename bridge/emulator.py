@@ -41,7 +41,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from bridge.mcu import FIRMWARES, EmulatedMCU, Firmware
-from bridge.perception import parse_socket_url, perception_address
+from bridge.perception import parse_socket_url, perception_address, socket_url
 from bridge.protocol import (
     FRAMINGS,
     CommandKind,
@@ -122,8 +122,8 @@ class Emulator:
 
     @property
     def url(self) -> str:
-        """The serial line's address, ``socket://HOST:PORT``."""
-        return f"socket://{self.host}:{self._serial.getsockname()[1]}"
+        """The serial line's address, ``socket://HOST:PORT`` (an IPv6 host in brackets)."""
+        return socket_url(self.host, self._serial.getsockname()[1])
 
     @property
     def camera_address(self) -> tuple[str, int]:

@@ -18,6 +18,7 @@ needs it), and, where the source knows it, ground truth for the step log.
 
 from __future__ import annotations
 
+import bisect
 import contextlib
 import json
 import socket
@@ -38,8 +39,10 @@ __all__ = [
     "PerceptionSource",
     "Replay",
     "SimCamera",
+    "host_text",
     "parse_socket_url",
     "perception_address",
+    "socket_url",
 ]
 
 
@@ -55,6 +58,17 @@ def parse_socket_url(url: str) -> tuple[str, int]:
     if parts.scheme != "socket" or not parts.hostname or port is None:
         raise ValueError(f"{url!r} is not a socket://HOST:PORT address")
     return parts.hostname, port
+
+
+def socket_url(host: str, port: int) -> str:
+    """``socket://HOST:PORT``, an IPv6 address in brackets (as :func:`parse_socket_url` and
+    pyserial read it back)."""
+    return f"socket://{host_text(host)}:{port}"
+
+
+def host_text(host: str) -> str:
+    """``host`` as it goes before ``:PORT``: an IPv6 address in brackets."""
+    return f"[{host}]" if ":" in host else host
 
 
 def perception_address(url: str) -> tuple[str, int]:
@@ -233,6 +247,7 @@ class Replay:
         self._clock = clock
         self._t0 = 0.0
         self.rows = _read_replay(self.path)
+        self._times = [row[0] for row in self.rows]  # strictly increasing (read_columns checks)
         # The log holds the reading but not the settings it was taken with.
         self.ahead: dict[str, Any] | str | None = "unknown" if self.rows[0][4] is not None else None
 
@@ -241,12 +256,8 @@ class Replay:
 
     def read(self) -> Frame:
         t = self._clock() - self._t0 + self.rows[0][0]
-        index = 0
-        for k, row in enumerate(self.rows):  # logs are short: a few thousand rows
-            if row[0] <= t + 1e-9:
-                index = k
-            else:
-                break
+        # a bisection, not a scan: an hour's log has 36,000 rows, read ten times a second
+        index = max(0, bisect.bisect_right(self._times, t + 1e-9) - 1)
         _, distance, offset, detected, ahead = self.rows[index]
         done = index == len(self.rows) - 1 and t >= self.rows[-1][0]
         return Frame(distance, offset, detected, done, "replay_over" if done else "", {}, ahead)

@@ -204,3 +204,25 @@ def test_a_world_configured_with_the_reading_ahead_publishes_it() -> None:
     finally:
         emu.stop()
         plain.stop()
+
+
+def test_an_ipv6_emulator_gives_an_address_a_link_and_the_camera_open() -> None:
+    from bridge.perception import perception_address
+
+    try:
+        emu = Emulator("socket://[::1]:0").start()
+    except OSError as exc:  # a host without IPv6 loopback
+        pytest.skip(f"no IPv6 loopback here: {exc}")
+    try:
+        port = emu._serial.getsockname()[1]
+        assert emu.url == f"socket://[::1]:{port}"  # brackets: pyserial and --port read it
+        assert perception_address(emu.url) == emu.camera_address == ("::1", port + 1)
+        with SerialLink(emu.url, "reference") as link:
+            assert _feedback(link, 0.15) == []  # (and the emulator has taken the connection)
+            link.send(WheelCommand(40, 40, CommandKind.DUTY_PERCENT))
+            assert len(_feedback(link, 0.15)) == 1
+        camera = Camera(emu)  # the camera answers on the address given
+        assert camera.ask(op="frame")["step"] >= 0
+        camera.close()
+    finally:
+        emu.stop()

@@ -47,6 +47,24 @@ def test_replay_gives_the_row_of_the_moment(tmp_path: Path) -> None:
     assert last.termination == "replay_over"
 
 
+def test_replay_finds_the_row_of_any_moment_in_a_long_log(tmp_path: Path) -> None:
+    # found by bisection (an hour's log is 36,000 rows): the last row at or before the moment
+    times = np.cumsum(np.random.default_rng(0).uniform(0.05, 0.15, 3000))
+    rows = "".join(f"{float(t)!r},{k},0,1\n" for k, t in enumerate(times))
+    log = tmp_path / "log.csv"
+    log.write_text("time_s,obs_distance_m,obs_offset_px,detected\n" + rows)
+    clock = Clock()
+    replay = Replay(log, clock=clock)
+    replay.start()
+    start = clock.t
+    for k in (0, 1, 1234, 2998, 2999):
+        for dt, row in ((0.0, k), (-1e-6, k - 1), (1e-6, k)):
+            clock.t = start + (times[k] - times[0]) + dt
+            frame = replay.read()
+            assert frame.distance_m == max(row, 0)
+            assert frame.done == (row == 2999)
+
+
 @pytest.mark.parametrize(
     ("text", "error"),
     [
