@@ -33,7 +33,7 @@ from collections.abc import Sequence
 from typing import Any, NoReturn
 
 from bridge.link import LinkError, SerialLink
-from bridge.perception import PerceptionError
+from bridge.perception import PerceptionError, host_text
 from bridge.protocol import FRAMINGS
 from bridge.sources import open_source
 
@@ -91,11 +91,6 @@ def _http(text: str) -> tuple[str, int]:
     if not (port.isascii() and port.isdigit()) or not 0 <= int(port) <= 65535:
         raise argparse.ArgumentTypeError(f"{text!r} is not HOST:PORT (port 0-65535)")
     return host, int(port)
-
-
-def _host(host: str) -> str:
-    """``host`` as ``--http`` takes it (an IPv6 address in brackets)."""
-    return f"[{host}]" if ":" in host else host
 
 
 def _config(text: str) -> Any:
@@ -183,8 +178,8 @@ def _dispatch(args: argparse.Namespace) -> int:
             args.token, given = os.environ[TOKEN_ENV], TOKEN_ENV
         if host not in LOOPBACK_HOSTS and not args.token:
             raise UsageError(
-                f"--http {_host(host)}: not loopback; give --token (or set {TOKEN_ENV}) so that "
-                "only you can drive the robot"
+                f"--http {host_text(host)}: not loopback; give --token (or set {TOKEN_ENV}) so "
+                "that only you can drive the robot"
             )
         if args.token is not None:
             try:  # bytes that are not UTF-8 arrive as lone surrogates: no page could send them
@@ -209,6 +204,12 @@ def _dispatch(args: argparse.Namespace) -> int:
                     "chooses the mode (--scenario and --policy are for monitor --sim; or use "
                     "run --policy NAME --monitor)"
                 )
+    if args.subcommand == "run" and args.policy == "manual" and not args.monitor:
+        # the commands come from the monitor's page: without it the robot would idle unasked
+        raise UsageError(
+            "--policy manual: the monitor's page sends the manual commands; add --monitor (or "
+            "give --policy stop to hold the wheels at zero while the session logs)"
+        )
     for name, value in ROBOT_DEFAULTS.items():
         if getattr(args, name) is None:
             setattr(args, name, value)
@@ -269,7 +270,7 @@ def _emulate(args: argparse.Namespace) -> int:
     print(
         f"{PROG}: emulating the {args.firmware} firmware ({args.framing} framing) on "
         f"{emulator.url}; the world's camera ({config.scenario.name}, seed {args.seed}) on "
-        f"{host}:{port}. Ctrl-C ends.",
+        f"{host_text(host)}:{port}. Ctrl-C ends.",
         flush=True,
     )
     with contextlib.suppress(KeyboardInterrupt):
@@ -348,7 +349,7 @@ def _start_monitor(args: argparse.Namespace, hub: Any) -> Any:
     except ValueError as exc:
         raise UsageError(str(exc)) from None
     except RuntimeError as exc:  # the port is in use, the address is not this machine's
-        raise UsageError(f"--http {_host(host)}:{port}: {exc}") from None
+        raise UsageError(f"--http {host_text(host)}:{port}: {exc}") from None
     # quoted: a token with +, &, # or % would otherwise not survive the page's URL
     query = f"?token={urllib.parse.quote(args.token, safe='')}" if args.token else ""
     print(f"{PROG}: monitor on {server.url}{query}", flush=True)

@@ -294,6 +294,8 @@ def test_a_session_whose_log_metadata_is_not_utf8_text_keeps_its_rows(
             ["--policy", "ppo_mecanum"],
             ["--policy ppo_mecanum: ppo_mecanum commands [v_mps, vy_mps, w_radps], but this"],
         ),
+        # nothing would send its commands: the robot would idle, logged as driven by hand
+        (["--policy", "manual"], ["--policy manual: the monitor's page sends", "--monitor"]),
     ],
 )
 def test_what_the_robot_cannot_run_is_refused_before_the_session(
