@@ -207,10 +207,14 @@ class _StrictLoader(yaml.SafeLoader):
 def load_yaml(text: str) -> Any:
     """``text`` parsed as ``yaml.safe_load`` does, but a key given twice in one mapping raises.
 
-    :raises yaml.YAMLError: for text that is not YAML, or a mapping that gives a key twice
-        (``found the key 'gamma' twice``, with its place for :func:`yaml_problem`).
+    :raises yaml.YAMLError: for text that is not YAML, a mapping that gives a key twice
+        (``found the key 'gamma' twice``, with its place for :func:`yaml_problem`), or text
+        nested too deeply to parse (PyYAML's recursion would otherwise end in a traceback).
     """
-    return yaml.load(text, Loader=_StrictLoader)  # a SafeLoader subclass: no arbitrary objects
+    try:
+        return yaml.load(text, Loader=_StrictLoader)  # a SafeLoader subclass: no arbitrary objects
+    except RecursionError:
+        raise yaml.YAMLError("nested too deeply (thousands of levels)") from None
 
 
 def utf8_problem(exc: UnicodeDecodeError) -> str:

@@ -230,6 +230,10 @@ def config_from_text(
             overrides = json.loads(text, object_pairs_hook=_unique_keys)
         except _KeyTwiceError as exc:
             raise ValueError(f"{text!r} is not a valid JSON object: {exc}") from None
+        except RecursionError:  # json's recursion, thousands of levels deep
+            raise ValueError(
+                f"the JSON object given ({len(text)} characters) is nested too deeply"
+            ) from None
         except json.JSONDecodeError as exc:
             if text.lstrip().startswith("{"):  # meant as JSON: say what is wrong with it
                 raise ValueError(

@@ -223,6 +223,14 @@ def test_a_config_file_that_is_not_yaml_is_one_line_with_its_place(
     twice.write_bytes(b"perception: {}\n\xff\n")
     assert main(["run", "--config", str(twice), "--out", str(tmp_path / "run")]) == 2
     assert f"{twice} is not a UTF-8 text file (byte 16 is 0xff)" in one_line_error(capsys)
+    # nested thousands deep: the parsers' recursion ended in a traceback, exit status 1
+    deep = tmp_path / "deep.yaml"
+    deep.write_text("[" * 5000 + "]" * 5000)
+    assert main(["run", "--config", str(deep), "--out", str(tmp_path / "run")]) == 2
+    assert f"{deep} is not valid YAML/JSON: nested too deeply" in one_line_error(capsys)
+    text = '{"a":' * 5000 + "1" + "}" * 5000
+    assert main(["run", "--config", text, "--out", str(tmp_path / "run")]) == 2
+    assert "the JSON object given (30001 characters) is nested too deeply" in one_line_error(capsys)
     assert not (tmp_path / "run").exists()
 
 
