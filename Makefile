@@ -10,12 +10,14 @@ setup: $(STAMP)
 
 # Torch first and pinned: an unpinned torch (directly or through stable-baselines3) pulls a
 # multi-GB CUDA build. The stamp is keyed on pyproject.toml, so a re-run with nothing changed
-# skips the install.
+# skips the install. Editable in setuptools' compat mode (the clone's folder on sys.path): in
+# its default mode a folder named policies/, eval/ or train/ where a script runs hides the
+# package of that name (Python's own search finds the folder first).
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	$(BIN)/python -m pip install --quiet torch==2.13.0
-	$(BIN)/python -m pip install --quiet -e '.[dev]'
+	$(BIN)/python -m pip install --quiet -e '.[dev]' --config-settings editable_mode=compat
 	rm -f $(VENV)/.installed-*
 	touch $@
 
