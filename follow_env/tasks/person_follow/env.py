@@ -103,8 +103,8 @@ class PersonFollowEnv(TaskEnv):
     * ``config``: preset name (``thesis`` default, ``ideal``, ``noisy``, ``randomized``), an
       ``EnvConfig``, or a dict of section overrides.
     * ``scenario``: a registered scenario name (``straight``, ``curve``, ``random``,
-      ``corridor_turn``, ``doorway``, ``occlusion``, ``crossing``, ``crowd``, ``stop_and_go``,
-      ``zigzag``, ``random_world``).
+      ``corridor_turn``, ``doorway``, ``occlusion``, ``crossing``, ``lookalike``, ``crowd``,
+      ``stop_and_go``, ``zigzag``, ``random_world``).
     * ``platform``: a registered platform name (``"diff_drive"``, the default, or
       ``"mecanum"``) or a platform config object (``DiffDriveConfig(...)``,
       ``MecanumConfig(...)``); in ``config`` dicts also ``{"platform": {"name": "mecanum",
