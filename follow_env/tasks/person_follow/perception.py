@@ -137,7 +137,9 @@ def frame(
             zp, cam, (ox, oy, c_th, s_th), people, n_people, dims, walls, n_walls, keys, step, skip
         )
 
-    # Ground truth of the target (person 0): distance from the camera to the body's front,
+    # Ground truth of the target (person 0): distance from the camera to the body's centre less
+    # half its depth, whichever way it faces (its near face when it faces towards or away from
+    # the camera; a side is up to 0.1 m nearer: README, "What the perception model leaves out"),
     # and the pixel column of the body's axis at camera height.
     ts.true_d = np.hypot(people[0].x - ox, people[0].y - oy) - 0.5 * tp.person_d
     xc, _, zc = world_to_camera(
