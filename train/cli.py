@@ -318,8 +318,24 @@ def main(argv: Sequence[str] | None = None) -> int:
         f"{last['wall_s']:.0f} s ({last['env_steps_per_s'] or 0:,} env-steps/s). Wrote {run}/: "
         + _written(run)
         + (f"; exported the agent to {args.export}/" if args.export else "")
+        + _no_held_out([run])
     )
     return 0
+
+
+def _no_held_out(runs_: Sequence[Path]) -> str:
+    """A sentence for runs that wrote no held-out evaluation (a run shorter than its
+    ``--eval-freq``: SB3's EvalCallback never came due), else ``""``."""
+    from train.run import EVALUATIONS
+
+    missing = [run for run in runs_ if not (run / EVALUATIONS).is_file()]
+    if not missing:
+        return ""
+    which = "the run" if len(runs_) == 1 else f"{len(missing)} of the {len(runs_)} runs"
+    return (
+        f". No held-out evaluation ran in {which} (trained fewer env steps than --eval-freq): "
+        f"no {EVALUATIONS}, and no held-out return in the learning curve or the summary"
+    )
 
 
 def _main_edit(
@@ -371,6 +387,7 @@ def _main_study(args: Args, seeds: tuple[int, ...], backend: Backend, command: s
     print(
         f"Trained {len(seeds)} seeds. Wrote {study}/: seed-<k>/ (runs), {SEEDS_CSV}, {SUMMARY_MD}"
         + (f"; exported the study to {args.export}/" if args.export else "")
+        + _no_held_out([study / f"seed-{k}" for k in seeds])
     )
     return 0
 

@@ -115,6 +115,21 @@ def test_a_finished_run_resumes_from_its_final_state(smoke_run: Path, tmp_path: 
     assert json.loads((run / "sessions.json").read_text())[-1]["first_step"] == final
 
 
+def test_a_run_shorter_than_its_eval_freq_says_it_has_no_held_out_evaluation(
+    smoke_run: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from train.cli import _no_held_out
+
+    assert _no_held_out([smoke_run]) == ""  # evaluated every 800 steps: nothing to say
+    run = tmp_path / "short"
+    argv = [*SMOKE, "--eval-freq", "100000", "--final-episodes", "0", "--out", str(run)]
+    assert main(argv) == 0
+    assert not (run / "evaluations.npz").exists()  # SB3's EvalCallback never came due
+    out = capsys.readouterr().out
+    assert "No held-out evaluation ran in the run (trained fewer env steps than --eval-freq)" in out
+    assert "1 of the 2 runs" in _no_held_out([smoke_run, run])
+
+
 def test_a_resume_drops_the_evaluations_past_its_checkpoint(
     smoke_run: Path, tmp_path: Path
 ) -> None:
