@@ -53,10 +53,22 @@ __all__ = [
     "algo",
     "load_model",
     "new_model",
+    "shipped_hint",
 ]
 
 CONFIGS = Path(__file__).parent / "configs"
 DEFAULT_ALGO = "ppo"
+
+
+def shipped_hint(path: Path) -> str:
+    """For a relative path not found here that names a shipped file (the README's
+    ``train/configs/ppo_fast.yaml`` given from outside the clone): where that file is, as the
+    end of a message; else ``""``."""
+    shipped = CONFIGS / path.name
+    if path.is_absolute() or path.exists() or not shipped.is_file():
+        return ""
+    return f" (looked for in {Path.cwd()}; the shipped {path.name} is {shipped})"
+
 
 #: (where, hp, name, defaults): raise ConfigError if the section breaks an SB3 constraint;
 #: ``name(key)`` is how the key is named in messages (``--n-envs`` when given as an option).

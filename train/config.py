@@ -29,9 +29,8 @@ as ``--env-kwargs``): ``platform`` names the robot the agent is trained for (a r
 platform, default the preset's, the differential drive); ``scenario`` and ``config`` are
 follow-train's own (``--scenarios``, ``--env-config``) and may not be set here. The platform
 decides the action's width and names, which the per-action settings must fit
-(:func:`check_action_fit`). Project settings that are not
-hyperparameters (scenarios, seeds, evaluation and checkpoint intervals) are ``follow-train``
-options (:class:`train.ppo.Args`).
+(:func:`check_action_fit`). Project settings that are not hyperparameters (scenarios, seeds,
+evaluation and checkpoint intervals) are ``follow-train`` options (:class:`train.ppo.Args`).
 
 Every key is checked here, before anything is built or written: its type, its range (SB3's
 meaning of it for the algorithm), and the constraints stable-baselines3 asserts later, each
@@ -59,7 +58,7 @@ import yaml
 
 from follow_env.sim.checks import load_yaml, utf8_problem, yaml_problem
 from policies.learned.feature import wrapper_entries
-from train.algos import DEFAULT_ALGO, PPO_RULES, Algo, algo
+from train.algos import DEFAULT_ALGO, PPO_RULES, Algo, algo, shipped_hint
 from train.rules import (
     ConfigError,
     _Linear,  # noqa: F401  (models saved with a lin_ schedule name it here)
@@ -151,7 +150,8 @@ def read_document(path: str | Path) -> Any:
     try:
         return load_yaml(path.read_text(encoding="utf-8"))
     except OSError as e:
-        raise ConfigError(f"{path}: cannot read hyperparameters: {e.strerror or e}") from None
+        why = f"{e.strerror or e}{shipped_hint(path)}"
+        raise ConfigError(f"{path}: cannot read hyperparameters: {why}") from None
     except UnicodeDecodeError as e:
         raise ConfigError(f"{path}: {utf8_problem(e)}") from None
     except yaml.YAMLError as e:

@@ -57,8 +57,23 @@ def test_missing_env_section_lists_the_sections(tmp_path: Path) -> None:
 
 
 def test_missing_file_is_named(tmp_path: Path) -> None:
-    with pytest.raises(ConfigError, match=r"nope\.yaml: cannot read"):
+    with pytest.raises(ConfigError, match=r"nope\.yaml: cannot read") as caught:
         load_hyperparams(tmp_path / "nope.yaml", ENV_ID)
+    assert "shipped" not in str(caught.value)
+
+
+def test_a_shipped_file_named_from_outside_the_clone_is_pointed_to(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # the README's `--hyperparams train/configs/ppo_fast.yaml`, run from another folder
+    monkeypatch.chdir(tmp_path)
+    shipped = Path(__file__).parents[2] / "train" / "configs" / "ppo_fast.yaml"
+    with pytest.raises(ConfigError) as caught:
+        load_hyperparams("train/configs/ppo_fast.yaml", ENV_ID)
+    assert str(caught.value) == (
+        "train/configs/ppo_fast.yaml: cannot read hyperparameters: No such file or directory "
+        f"(looked for in {tmp_path}; the shipped ppo_fast.yaml is {shipped})"
+    )
 
 
 @pytest.mark.parametrize(
