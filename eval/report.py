@@ -30,7 +30,15 @@ from eval.metrics import (
     metric_label,
 )
 from eval.rollout import Episode
-from eval.stats import ALPHA, SMALL_CELL, PairedTest, error_bars, pairing_notes, variant_column
+from eval.stats import (
+    ALPHA,
+    SMALL_CELL,
+    PairedTest,
+    error_bars,
+    pairing_notes,
+    smallest_p,
+    variant_column,
+)
 from follow_env.sim.atomic import atomic_path, atomic_write_text
 
 __all__ = [
@@ -219,7 +227,7 @@ def holm_note(
     metrics = tables.headline if metrics is None else metrics
     if "holm_p" not in comparisons:
         return ""
-    counts = []
+    counts, unreachable = [], []
     for name in metrics:
         rows = comparisons[comparisons["metric"] == name]
         if rows.empty:
@@ -229,14 +237,29 @@ def holm_note(
             ends = (r["mean_diff"], r["diff_ci_low"], r["diff_ci_high"])
             starred += bool(PairedTest(*ends, r["perm_p"]).direction)
             stand += bool(PairedTest(*ends, r["holm_p"]).direction)
-        if starred:
-            counts.append(f"{metric_label(name, tables.metrics)} {stand} of {starred}")
+        if not starred:
+            continue
+        label = metric_label(name, tables.metrics)
+        counts.append(f"{label} {stand} of {starred}")
+        # the permutation p has a floor: past ALPHA / floor lines, none can stand
+        tested = rows[np.isfinite(rows["perm_p"].to_numpy(dtype=np.float64))]
+        floor = min(smallest_p(int(n)) for n in tested["n"])
+        if len(tested) * floor >= ALPHA:
+            unreachable.append((label, len(tested), floor))
     if not counts:
         return ""
-    return (
+    text = (
         "\n\nStarred differences that stand under Holm's correction over each metric's "
-        f"comparisons in the table (holm_p in comparisons.csv), per metric: {'; '.join(counts)}."
+        "comparisons in the table (holm_p, in comparisons.csv when the tables are written), per "
+        f"metric: {'; '.join(counts)}."
     )
+    for label, m, floor in unreachable:
+        text += (
+            f" {label}: none can stand, whatever the data: with {m} comparisons a line needs "
+            f"p < {ALPHA / m:.2g}, and the permutation test's p is at least {floor:.2g} here "
+            "(compare fewer policies at once)."
+        )
+    return text
 
 
 def _ci_note(tables: Tables) -> str:

@@ -67,6 +67,7 @@ __all__ = [
     "metric_columns",
     "paired_test",
     "pairing_notes",
+    "smallest_p",
     "summarize",
     "variant_column",
     "with_holm",
@@ -294,6 +295,14 @@ def _sign_flip_p(diff: np.ndarray, rng: np.random.Generator) -> float:
     extra = 0 if exact else 1
     one_sided = (min(at_least, at_most) + extra) / (draws + extra)
     return min(1.0, 2.0 * one_sided)
+
+
+def smallest_p(n: int) -> float:
+    """The smallest p :func:`_sign_flip_p` can give on ``n`` pairs: ``2 / 2**n`` when it is
+    exact, ``2 / (N_SIGN_FLIPS + 1)`` when drawn. A family of ``m`` lines adjusted by
+    :func:`holm` can hold none of them when ``m`` times this is at least :data:`ALPHA`."""
+    exact = n < 63 and 2**n <= N_SIGN_FLIPS
+    return 2.0 / 2**n if exact else 2.0 / (N_SIGN_FLIPS + 1)
 
 
 @dataclass(frozen=True)

@@ -239,8 +239,17 @@ def test_the_report_says_how_many_starred_differences_stand_under_holm() -> None
         frame = pd.DataFrame(rows)
         comparisons = compare(frame, metrics=["in_frame_rate_pct"])
         note = holm_note(comparisons)
-        assert note.endswith(f"per metric: InFrameRate (%) {stand} of 2.")
+        assert f"per metric: InFrameRate (%) {stand} of 2." in note
+        # on 6 seeds no p is below 2/64, and a family of two needs one below 0.025: the note
+        # says that none can stand, so that "0 of 2" is not read as a verdict on the data
+        floor = "with 2 comparisons a line needs p < 0.025, and the permutation test's p is at "
+        assert (f"InFrameRate (%): none can stand, whatever the data: {floor}" in note) == (n == 6)
         report = markdown_report(summarize(frame, metrics=["in_frame_rate_pct"]), comparisons)
         assert note in report
+    from eval.stats import paired_test, smallest_p
+
+    # the floor the note uses is the test's: exact up to 13 pairs, drawn (9,999 flips) beyond
+    assert paired_test(np.ones(6), 0, "x").p == smallest_p(6) == 2 / 64
+    assert paired_test(np.ones(20), 0, "x").p == smallest_p(20) == 2 / 10_000
     assert holm_note(comparisons.drop(columns="holm_p")) == ""  # a table written before
     assert holm_note(compare(table({"a": [1.0] * 6, "b": [1.0] * 6}))) == ""  # nothing starred
