@@ -27,6 +27,7 @@ __all__ = [
     "absolute_compare_with",
     "args_from_dict",
     "args_to_dict",
+    "check_folder_option",
     "check_new_run",
     "check_resume",
     "run_hyperparams",
@@ -280,20 +281,28 @@ def _check_against_hyperparams(args: Args, hp: Hyperparams) -> None:
     _check_int("eval_seed", args.eval_seed, 0, MAX_SEED - eval_lanes)
 
 
+def check_folder_option(option: str, path: Path) -> None:
+    """``option``'s ``path`` is a folder, or one that can be made, and takes a new file.
+
+    :raises ValueError: naming the option, the path and what is in the way.
+    """
+    blocker = file_on_path(path)
+    if blocker is not None:
+        where = "is a file" if blocker == path else f"runs through the file {blocker}"
+        raise ValueError(f"{option} {path}: {where}, not a folder")
+    try:  # before training: a folder that takes no file would lose the run at the end
+        check_writable(path / "config.yaml")
+    except OSError as e:
+        raise ValueError(f"{option} {path}: {e}") from None
+
+
 def _check_run_folder(args: Args, *, clearing: bool = False) -> None:
     """``--out`` must be new or an empty folder (or one the caller clears first:
     ``clearing``), and ``--runs`` a folder or creatable."""
     for option, path in (("--out", args.out), ("--runs", args.runs)):
         if path is None or (option == "--runs" and args.out is not None):
             continue
-        blocker = file_on_path(path)
-        if blocker is not None:
-            where = "is a file" if blocker == path else f"runs through the file {blocker}"
-            raise ValueError(f"{option} {path}: {where}, not a folder")
-        try:  # before training: a folder that takes no file would lose the run at the end
-            check_writable(path / "config.yaml")
-        except OSError as e:
-            raise ValueError(f"{option} {path}: {e}") from None
+        check_folder_option(option, path)
     if args.out is not None and not clearing and args.out.exists() and any(args.out.iterdir()):
         raise ValueError(
             f"--out {args.out} already exists and is not empty; use --resume to continue it"

@@ -30,15 +30,13 @@ run was killed early: :func:`_early_files`), has nothing to resume from: the sam
 clears it and trains the seed again, saying so on stderr; a folder holding anything else (a
 hidden file that is no atomic write's temporary file, a hidden folder) is refused, naming it.
 
-A command holds its study for as long as it runs (:class:`train.study_lock.StudyLock`): a second
-command on the same folder meanwhile is refused before it changes anything (a seed training
-before its first checkpoint looks like one killed then, and would be cleared).
+A command holds its study while it runs (:class:`train.study_lock.StudyLock`, which says why): a
+second command on the same folder meanwhile is refused before it changes anything.
 
 ``--export DIR`` exports the study as one agent once every seed is trained
-(:func:`train.study_export.export_study`): each seed's run into ``DIR/seed-<k>`` as one run's
-export (:mod:`train.export`) and ``DIR/ensemble.yaml`` listing them; it is checked before any
-seed trains, and an earlier export of other seeds in ``DIR`` is refused (replaced with
-``--force``). ``policies/agents/ppo_ensemble`` is such a folder.
+(:func:`train.study_export.export_study`): each seed's run into ``DIR/seed-<k>`` as one run's export
+(:mod:`train.export`) and ``DIR/ensemble.yaml`` listing them, checked before any seed trains; an
+earlier one of other seeds in ``DIR`` is refused (``--force`` replaces it). ``ppo_ensemble`` is one.
 
 On a cluster the run folders are written by the nodes that train them: give ``--runs`` / ``--out``
 on a file system every node shares. A seed's unit names its folder (and a ``--hyperparams`` file,
@@ -77,6 +75,7 @@ from train.options import (
     MAX_SEED,
     Args,
     absolute_compare_with,
+    check_folder_option,
     check_new_run,
     check_resume,
     run_hyperparams,
@@ -336,6 +335,8 @@ def train_seeds(
         study folder that holds another study, or a study another command is training now.
     """
     backend = backend or Backend("local", workers=1, cpus_per_task=args.threads)
+    if args.out is None:  # the study's folder is made now: a file in the way named first
+        check_folder_option("--runs", args.runs)
     made = [] if args.out is not None else missing_folders(args.runs)  # --runs, if it is new
     study = args.out if args.out is not None else _new_study_path(args.runs, args.algo)
     try:
@@ -492,8 +493,7 @@ def _other_code(study: Path, had: Any, code: str) -> str:
 
 
 def _new_study_path(root: Path, learner: str | None) -> Path:
-    """A new folder ``root/<algo>-seeds-<timestamp>[-k]`` (``ppo-seeds-...`` by default), made
-    now, exclusively (:func:`train.run.new_run_dir`): two commands in one second get two."""
+    """A new study folder, made now, exclusively (:func:`train.run.new_run_dir`)."""
     return runs.new_run_dir(root, f"{learner or DEFAULT_ALGO}-seeds")
 
 

@@ -422,6 +422,20 @@ def test_a_refused_study_without_out_leaves_no_folder(
     assert left == (["runs", "runs/ppo-old"] if runs_existed else [])
 
 
+@pytest.mark.parametrize("below", ["", "sub"])
+def test_runs_that_is_a_file_is_refused_in_one_line_before_a_study_folder_is_made(
+    below: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    afile = tmp_path / "afile"
+    afile.write_text("mine\n")
+    runs = afile / below if below else afile
+    assert main([*TINY, "--seeds", "0-1", "--runs", str(runs)]) == 2  # was a traceback
+    where = "is a file" if not below else f"runs through the file {afile}"
+    assert f"--runs {runs}: {where}, not a folder" in _error(capsys)
+    assert afile.read_text() == "mine\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["afile"]
+
+
 def test_a_new_study_trains_then_exports_its_seeds_together(tmp_path: Path) -> None:
     out, dest = tmp_path / "study", tmp_path / "pair"
     assert main([*TINY, "--seeds", "0-1", "--out", str(out), "--export", str(dest)]) == 0
