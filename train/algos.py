@@ -60,12 +60,13 @@ CONFIGS = Path(__file__).parent / "configs"
 DEFAULT_ALGO = "ppo"
 
 
-def shipped_hint(path: Path) -> str:
-    """For a relative path not found here that names a shipped file (the README's
-    ``train/configs/ppo_fast.yaml`` given from outside the clone): where that file is, as the
-    end of a message; else ``""``."""
+def shipped_hint(path: Path, error: OSError) -> str:
+    """For ``train/configs/<file>`` not found here (the README's ``--hyperparams`` given from
+    outside the clone) that names a shipped file: where that file is, as the end of the
+    message of ``error``; else ``""``."""
     shipped = CONFIGS / path.name
-    if path.is_absolute() or path.exists() or not shipped.is_file():
+    relative = not path.is_absolute() and path.parts[-3:-1] == ("train", "configs")
+    if not (isinstance(error, FileNotFoundError) and relative and shipped.is_file()):
         return ""
     return f" (looked for in {Path.cwd()}; the shipped {path.name} is {shipped})"
 

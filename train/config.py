@@ -150,7 +150,7 @@ def read_document(path: str | Path) -> Any:
     try:
         return load_yaml(path.read_text(encoding="utf-8"))
     except OSError as e:
-        why = f"{e.strerror or e}{shipped_hint(path)}"
+        why = f"{e.strerror or e}{shipped_hint(path, e)}"
         raise ConfigError(f"{path}: cannot read hyperparameters: {why}") from None
     except UnicodeDecodeError as e:
         raise ConfigError(f"{path}: {utf8_problem(e)}") from None

@@ -74,6 +74,12 @@ def test_a_shipped_file_named_from_outside_the_clone_is_pointed_to(
         "train/configs/ppo_fast.yaml: cannot read hyperparameters: No such file or directory "
         f"(looked for in {tmp_path}; the shipped ppo_fast.yaml is {shipped})"
     )
+    # a file of the user's own that shares a shipped file's name is not pointed elsewhere, and
+    # an error other than a missing file (a name too long) stays one line
+    for given in ("mine/ppo.yaml", "x" * 300 + "/train/configs/ppo.yaml"):
+        with pytest.raises(ConfigError, match="cannot read hyperparameters") as caught:
+            load_hyperparams(given, ENV_ID)
+        assert "shipped" not in str(caught.value)
 
 
 @pytest.mark.parametrize(
