@@ -333,8 +333,9 @@ def _no_held_out(runs_: Sequence[Path]) -> str:
         return ""
     which = "the run" if len(runs_) == 1 else f"{len(missing)} of the {len(runs_)} runs"
     return (
-        f". No held-out evaluation ran in {which} (trained fewer env steps than --eval-freq): "
-        f"no {EVALUATIONS}, and no held-out return in the learning curve or the summary"
+        f". No periodic held-out evaluation ran in {which} (trained fewer env steps than "
+        f"--eval-freq): no {EVALUATIONS}, so the learning curve has no held-out points and a "
+        "study's summary no held-out return"
     )
 
 
