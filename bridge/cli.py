@@ -32,8 +32,9 @@ import urllib.parse
 from collections.abc import Sequence
 from typing import Any, NoReturn
 
+from bridge.address import host_text
 from bridge.link import LinkError, SerialLink
-from bridge.perception import PerceptionError, host_text
+from bridge.perception import PerceptionError
 from bridge.protocol import FRAMINGS
 from bridge.sources import open_source
 

@@ -40,8 +40,9 @@ import time
 from dataclasses import dataclass
 from typing import Any
 
+from bridge.address import host_text, socket_url
 from bridge.mcu import FIRMWARES, EmulatedMCU, Firmware
-from bridge.perception import parse_socket_url, perception_address, socket_url
+from bridge.perception import parse_socket_url, perception_address
 from bridge.protocol import (
     FRAMINGS,
     CommandKind,
@@ -497,6 +498,6 @@ def _listener(host: str, port: int) -> socket.socket:
         sock.bind((host, port))
     except OSError as exc:
         sock.close()
-        raise OSError(f"cannot listen on {host}:{port}: {exc.strerror or exc}") from exc
+        raise OSError(f"cannot listen on {host_text(host)}:{port}: {exc.strerror or exc}") from exc
     sock.listen(1)
     return sock

@@ -17,6 +17,7 @@ allows it); the link is not meant to be shared otherwise.
 
 from __future__ import annotations
 
+import errno
 import math
 import socket
 import time
@@ -130,7 +131,8 @@ class SerialLink:
                 url, baudrate=baudrate, timeout=0, write_timeout=write_timeout_s, exclusive=True
             )
         except (serial.SerialException, ValueError, OSError) as exc:
-            held = "exclusively lock" in str(exc)
+            # pyserial's flock failed because another holds it (not a file system without locks)
+            held = "exclusively lock" in str(exc) and getattr(exc, "errno", None) == errno.EAGAIN
             why = "another program has it open (another follow-robot run?)" if held else exc
             raise LinkOpenError(f"cannot open serial link {url!r}: {why}") from exc
         _no_nagle(self._port)

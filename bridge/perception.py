@@ -30,6 +30,7 @@ from urllib.parse import urlsplit
 
 import numpy as np
 
+from bridge.address import host_text
 from follow_env.sim.steplog import LogLayout, StepLogError, read_columns
 from follow_env.tasks.person_follow.steplog import AHEAD_COLUMN, REQUIRED_COLUMNS, TEXT_COLUMNS
 
@@ -39,10 +40,8 @@ __all__ = [
     "PerceptionSource",
     "Replay",
     "SimCamera",
-    "host_text",
     "parse_socket_url",
     "perception_address",
-    "socket_url",
 ]
 
 
@@ -58,17 +57,6 @@ def parse_socket_url(url: str) -> tuple[str, int]:
     if parts.scheme != "socket" or not parts.hostname or port is None:
         raise ValueError(f"{url!r} is not a socket://HOST:PORT address")
     return parts.hostname, port
-
-
-def socket_url(host: str, port: int) -> str:
-    """``socket://HOST:PORT``, an IPv6 address in brackets (as :func:`parse_socket_url` and
-    pyserial read it back)."""
-    return f"socket://{host_text(host)}:{port}"
-
-
-def host_text(host: str) -> str:
-    """``host`` as it goes before ``:PORT``: an IPv6 address in brackets."""
-    return f"[{host}]" if ":" in host else host
 
 
 def perception_address(url: str) -> tuple[str, int]:
@@ -158,7 +146,7 @@ class SimCamera:
         except OSError as exc:
             host, port = self.address
             raise PerceptionError(
-                f"no emulator camera at {host}:{port} ({exc.strerror or exc}); start "
+                f"no emulator camera at {host_text(host)}:{port} ({exc.strerror or exc}); start "
                 "`follow-robot emulate` first"
             ) from exc
         self._sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)

@@ -62,6 +62,7 @@ from starlette.datastructures import Headers
 from starlette.types import ASGIApp, Receive, Scope, Send
 from uvicorn.protocols.http.h11_impl import H11Protocol
 
+from bridge.address import host_text
 from bridge.monitor.hub import MANUAL_LIMITS, MonitorHub
 
 __all__ = [
@@ -509,7 +510,7 @@ class Server:
                 if not self._thread.is_alive() or time.monotonic() > end:
                     why = f" ({'; '.join(held.errors)})" if held.errors else ""
                     raise RuntimeError(
-                        f"the monitor could not listen on {self.host}:{self.port}{why}"
+                        f"the monitor could not listen on {host_text(self.host)}:{self.port}{why}"
                     )
                 time.sleep(0.02)
         finally:
@@ -522,8 +523,7 @@ class Server:
     @property
     def url(self) -> str:
         """The page's address."""
-        host = f"[{self.host}]" if ":" in self.host else self.host
-        return f"http://{host}:{self.port}/"
+        return f"http://{host_text(self.host)}:{self.port}/"
 
     def stop(self) -> None:
         """Stop serving (idempotent)."""
