@@ -214,7 +214,7 @@ def load_yaml(text: str) -> Any:
     try:
         return yaml.load(text, Loader=_StrictLoader)  # a SafeLoader subclass: no arbitrary objects
     except RecursionError:
-        raise yaml.YAMLError("nested too deeply (thousands of levels)") from None
+        raise yaml.YAMLError("nested too deeply (PyYAML stops at a few hundred levels)") from None
 
 
 def utf8_problem(exc: UnicodeDecodeError) -> str:
