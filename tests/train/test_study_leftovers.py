@@ -12,6 +12,7 @@ import os
 import shutil
 import subprocess
 import sys
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -377,6 +378,22 @@ _HOLD = (
 )
 
 
+@contextlib.contextmanager
+def _held(folder: Path) -> Iterator[None]:
+    """``folder`` held by another process (:data:`_HOLD`) inside the block, then let go as a
+    killed command's hold is: by the kernel."""
+    holder = subprocess.Popen(
+        [sys.executable, "-c", _HOLD, str(folder)], stdin=subprocess.PIPE, stdout=subprocess.PIPE
+    )
+    try:
+        assert holder.stdout is not None
+        assert holder.stdout.readline() == b"held\n"
+        yield
+    finally:
+        holder.kill()
+        holder.wait()
+
+
 def test_a_second_command_on_a_study_in_training_is_refused_and_changes_nothing(
     copy: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
@@ -384,21 +401,13 @@ def test_a_second_command_on_a_study_in_training_is_refused_and_changes_nothing(
     checkpoint cleared that live run's folder (it looks exactly like a run killed then)."""
     _killed_before_its_first_checkpoint(copy / "seed-1")  # as the live run has it now
     capsys.readouterr()
-    holder = subprocess.Popen(
-        [sys.executable, "-c", _HOLD, str(copy)], stdin=subprocess.PIPE, stdout=subprocess.PIPE
-    )
-    try:
-        assert holder.stdout is not None
-        assert holder.stdout.readline() == b"held\n"
+    with _held(copy):
         before = _tree(copy)
         assert main([*TINY, "--seeds", "0-3", "--out", str(copy)]) == 2
         err = _error(capsys)
         assert f"--out {copy}: another follow-train command is training this study now; " in err
         assert "wait for it to end (or stop it) and run this again" in err
         assert _tree(copy) == before
-    finally:
-        holder.kill()  # a command killed: the kernel lets its hold go
-        holder.wait()
     assert main([*TINY, "--seeds", "0-3", "--out", str(copy)]) == 0
     assert "seed 1 starts again" in capsys.readouterr().err
 
@@ -411,20 +420,12 @@ def test_a_run_in_training_is_not_trained_again_beside_it(
     run = copy / "seed-1"
     _interrupted_after_its_first_checkpoint(run)
     capsys.readouterr()
-    holder = subprocess.Popen(
-        [sys.executable, "-c", _HOLD, str(run)], stdin=subprocess.PIPE, stdout=subprocess.PIPE
-    )
-    try:
-        assert holder.stdout is not None
-        assert holder.stdout.readline() == b"held\n"
+    with _held(run):
         before = _tree(copy)
         assert main(["--resume", str(run), "--no-progress"]) == 2
         err = _error(capsys)
         assert f"--resume {run}: another follow-train command is training this run now" in err
         assert _tree(copy) == before
-    finally:
-        holder.kill()
-        holder.wait()
     assert main(["--resume", str(run), "--no-progress"]) == 0
 
 
