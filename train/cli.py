@@ -373,7 +373,7 @@ def _main_edit(
 
 def _main_study(args: Args, seeds: tuple[int, ...], backend: Backend, command: str) -> int:
     """``follow-train --seeds``: see :mod:`train.seeds`."""
-    from train.seeds import SEEDS_CSV, SUMMARY_MD
+    from train.study_summary import SEEDS_CSV, SUMMARY_MD
 
     try:
         study = train_seeds(args, seeds, backend, command=command)

@@ -51,7 +51,6 @@ it was recorded is refused when a seed would train; the message says how to go o
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 import json
 import re
@@ -63,14 +62,12 @@ from pathlib import Path
 from typing import Any, NamedTuple
 
 import numpy as np
-import pandas as pd
 
-from eval.provenance import ROLLOUT_PACKAGES, SHORT, check_worker_code, running_sources_sha256
+from eval.provenance import check_worker_code, running_sources_sha256
 from execution import Backend, execute
-from follow_env.sim.atomic import atomic_write_text, missing_folders, remove_empty_folders
+from follow_env.sim.atomic import missing_folders, remove_empty_folders
 from train import run as runs
-from train.algos import DEFAULT_ALGO, algo
-from train.config import ConfigError, sole_section
+from train.algos import DEFAULT_ALGO
 from train.options import (
     MAX_SEED,
     Args,
@@ -83,6 +80,8 @@ from train.options import (
 from train.ppo import PROG, train
 from train.study_export import check_study_export, export_study, write_ensemble
 from train.study_lock import StudyLock
+from train.study_record import TRAINING_PACKAGES, claim, read_study, study_settings
+from train.study_summary import write_summary
 
 __all__ = [
     "MAX_SEEDS",
@@ -100,15 +99,6 @@ __all__ = [
 SEED_STRIDE = 100_000_000
 #: The largest training seed: seed + k * SEED_STRIDE + n_timesteps must stay below 2**32.
 MAX_SEEDS = 40
-STUDY = "study.json"
-#: The packages whose sources decide what a seed trains: the env, the policies, the evaluation
-#: (the held-out scores and the model card's comparison) and the training.
-TRAINING_PACKAGES = (*ROLLOUT_PACKAGES, "train")
-#: ``study.json``'s key for the sources digest of :data:`TRAINING_PACKAGES`.
-CODE = "code"
-SEEDS_CSV = "seeds.csv"
-SUMMARY_MD = "summary.md"
-SUMMARY_JSON = "summary.json"
 
 
 def parse_seeds(text: str) -> tuple[int, ...]:
@@ -154,31 +144,6 @@ def seed_args(args: Args, k: int, study: Path) -> Args:
         export=None,  # the study exports its seeds together, once all are trained
         force=False,
     )
-
-
-def _settings(args: Args, seeds: Sequence[int]) -> dict[str, Any]:
-    """What a study is, as ``study.json`` keeps it (paths as text, the seeds as a list)."""
-    out: dict[str, Any] = {"seeds": list(seeds)}
-    for f in dataclasses.fields(args):
-        if f.name in ("out", "resume", "export", "force", "progress", "threads", "n_timesteps"):
-            continue  # where it goes and how fast, not what is trained (a resume may lengthen)
-        value = getattr(args, f.name)
-        out[f.name] = str(value) if isinstance(value, Path) else value
-    # The defaults as the run fills them in, so that leaving an option out or giving its
-    # default is the same study; PPO studies keep no "algo" (as before there was a choice).
-    learner = algo(args.algo or DEFAULT_ALGO)
-    out["hyperparams"] = str(args.hyperparams or learner.hyperparams)
-    # An agent by its path as this folder reads it: the same command run from another folder
-    # names another agent (or none), and is another study; one moved away since is still this.
-    out["compare_with"] = absolute_compare_with(args.compare_with, missing=True)
-    if args.env_id is None:  # the file's only section, as the run fills it in
-        with contextlib.suppress(ConfigError):  # the seeds' own checks name the file
-            out["env_id"] = sole_section(out["hyperparams"])
-    if learner.name == DEFAULT_ALGO:
-        del out["algo"]
-    else:
-        out["algo"] = learner.name
-    return json.loads(json.dumps(out))
 
 
 def _same_training(k: int, folder: Path, hp: dict[str, Any]) -> int | None:
@@ -335,15 +300,19 @@ def train_seeds(
         study folder that holds another study, or a study another command is training now.
     """
     backend = backend or Backend("local", workers=1, cpus_per_task=args.threads)
-    if args.out is None:  # the study's folder is made now: a file in the way named first
+    made: list[Path] = []  # the folders this command makes before any check: taken back below
+    if args.out is not None:
+        study = args.out
+    else:  # the study's folder is made now, in --runs (a file in the way named first)
         check_folder_option("--runs", args.runs)
-    made = [] if args.out is not None else missing_folders(args.runs)  # --runs, if it is new
-    study = args.out if args.out is not None else _new_study_path(args.runs, args.algo)
+        made = missing_folders(args.runs)
+        study = _new_study_path(args.runs, args.algo)
+        made.insert(0, study)
     try:
         with StudyLock(study) as lock:
             return _train_study(args, seeds, backend, command, study, lock)
     except BaseException:  # a new study is still empty if a check refused it: taken back
-        remove_empty_folders([study, *made] if args.out is None else [])
+        remove_empty_folders(made)
         raise
 
 
@@ -352,11 +321,11 @@ def _train_study(
 ) -> Path:
     """:func:`train_seeds` in ``study``, held by ``lock`` from when it exists."""
     lock.take()  # before anything is read: a command refused here has changed nothing
-    settings = _settings(args, seeds)
+    settings = study_settings(args, seeds)
     hp = run_hyperparams(args)  # what every seed trains with, the earlier seeds too
     code = running_sources_sha256(TRAINING_PACKAGES)  # the code every seed's worker must run
     seen = json.loads(json.dumps(hp))
-    had = _read_study(study)
+    had = read_study(study)
     # The study's other seeds, not in this command: they must have trained as these will, and
     # the summary and the ensemble are of every finished seed.
     others = sorted(set(had["seeds"] if had else ()) - set(seeds))
@@ -396,7 +365,7 @@ def _train_study(
     if args.export is not None:  # before any seed trains, as for one run's export
         check_study_export(args.export, seeds, study, force=args.force)
     backend.check_reachable()  # before study.json is written
-    _claim(study, settings, code, lock, training=len(done) < len(units))
+    claim(study, settings, code, lock, training=len(done) < len(units))
     for k, folder in restart:
         held = ", ".join(_clear(folder)) or "hidden temporary files"
         print(
@@ -418,143 +387,6 @@ def _train_study(
     return study
 
 
-def _read_study(study: Path) -> dict[str, Any] | None:
-    """The folder's ``study.json`` (None if it has none), checked.
-
-    :raises ValueError: naming the file if it is unreadable or not a study description.
-    """
-    path = study / STUDY
-    if not path.exists():
-        return None
-    try:
-        had = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError) as e:
-        raise ValueError(f"{path}: not a readable study description ({e})") from None
-    seeds = had.get("seeds") if isinstance(had, dict) else None
-    if not (isinstance(seeds, list) and all(type(s) is int and s >= 0 for s in seeds)):
-        raise ValueError(
-            f"{path}: not a study description (a JSON object with a list of seeds, as "
-            "follow-train --seeds writes it)"
-        )
-    return had
-
-
-def _claim(
-    study: Path, settings: dict[str, Any], code: str, lock: StudyLock, *, training: bool
-) -> None:
-    """Write ``study.json``, or check that the folder's is this study's and, if a seed is to
-    train (``training``), that the study's seeds trained with this ``code``; the folder is held
-    (``lock``) before it is written, whether this command made it or another one meanwhile."""
-    lock.take()
-    path = study / STUDY
-    had = _read_study(study)
-    if had is not None:
-        if had.get("env_id") is None:  # written before the default was filled in
-            had = {**had, "env_id": settings.get("env_id")}
-        if isinstance(had.get("compare_with"), str):  # kept as typed before: read from here
-            had = {**had, "compare_with": absolute_compare_with(had["compare_with"], missing=True)}
-        changed = sorted(
-            k
-            for k in settings.keys() | had.keys()
-            if k not in ("seeds", CODE) and had.get(k) != settings.get(k)
-        )
-        if changed:
-            raise ValueError(
-                f"{study} holds another study (its {STUDY} differs in {', '.join(changed)}); "
-                "give another --out, or the same options to resume it"
-            )
-        if training and had.get(CODE) != code:
-            raise ValueError(_other_code(study, had.get(CODE), code))
-        had["seeds"] = sorted(set(had.get("seeds", [])) | set(settings["seeds"]))
-        atomic_write_text(path, json.dumps(had, indent=1) + "\n")
-        return
-    if study.exists() and any(study.iterdir()):
-        raise ValueError(f"--out {study} already exists and is not an empty folder or a study")
-    study.mkdir(parents=True, exist_ok=True)
-    lock.take()
-    atomic_write_text(path, json.dumps(settings | {CODE: code}, indent=1) + "\n")
-
-
-def _other_code(study: Path, had: Any, code: str) -> str:
-    """Why a seed may not train in ``study`` with ``code``: one line, and what to do."""
-    sources = f"{', '.join(TRAINING_PACKAGES)} sources"
-    if not isinstance(had, str):
-        return (
-            f"{study / STUDY} records no code (the study was made before studies recorded it), "
-            "so whether its seeds trained with this code cannot be checked, and a study's "
-            "seeds differ in their seed only: give another --out, or, if this code trained "
-            f'them, add "{CODE}": "{code}" (the SHA-256 of the {sources}) to {study / STUDY}'
-        )
-    return (
-        f"{study}: the code changed since the study started (the SHA-256 of its {sources} "
-        f"was {had[:SHORT]}, is now {code[:SHORT]}), and a study's seeds differ in their seed "
-        "only: run it with the code it started with, or give another --out"
-    )
-
-
 def _new_study_path(root: Path, learner: str | None) -> Path:
     """A new study folder, made now, exclusively (:func:`train.run.new_run_dir`)."""
     return runs.new_run_dir(root, f"{learner or DEFAULT_ALGO}-seeds")
-
-
-def write_summary(study: Path, rows: Sequence[dict[str, Any]]) -> pd.DataFrame:
-    """``seeds.csv``, ``summary.json`` and ``summary.md`` of a study (atomically); returns the
-    one-row summary."""
-    table = pd.DataFrame(list(rows))
-    returns = table["heldout_return"].to_numpy(dtype=float)
-    returns = returns[np.isfinite(returns)]
-    summary = {
-        "seeds": len(table),
-        "heldout_return_mean": _num(returns.mean()) if len(returns) else None,
-        "heldout_return_std": _num(returns.std(ddof=1)) if len(returns) > 1 else None,
-        "heldout_return_median": _num(np.median(returns)) if len(returns) else None,
-        "heldout_return_iqm": _num(_iqm(returns)) if len(returns) else None,
-        "heldout_return_mean_ci95": _ci(returns),
-        "env_steps_per_s_mean": _num(table["env_steps_per_s"].astype(float).mean()),
-    }
-    atomic_write_text(study / SEEDS_CSV, table.to_csv(index=False))
-    atomic_write_text(study / SUMMARY_JSON, json.dumps(summary, indent=2) + "\n")
-    ci = summary["heldout_return_mean_ci95"]
-    lines = [
-        f"# {study.name}: {summary['seeds']} training seeds",
-        "",
-        "Final held-out return (the mean over the held-out episodes of the last evaluation), per "
-        "seed and across seeds. The interval is a bootstrap 95 % CI of the mean over seeds.",
-        "",
-        table.to_markdown(index=False),
-        "",
-        f"- mean {_fmt(summary['heldout_return_mean'])}"
-        + (f" [{_fmt(ci[0])}, {_fmt(ci[1])}]" if ci else "")
-        + f", std {_fmt(summary['heldout_return_std'])}, median "
-        f"{_fmt(summary['heldout_return_median'])}, IQM {_fmt(summary['heldout_return_iqm'])}",
-        "",
-    ]
-    atomic_write_text(study / SUMMARY_MD, "\n".join(lines))
-    return pd.DataFrame([summary])
-
-
-def _num(x: float) -> float | None:
-    return None if not np.isfinite(x) else round(float(x), 3)
-
-
-def _fmt(x: float | None) -> str:
-    return "n/a" if x is None else f"{x:.1f}"
-
-
-def _iqm(x: np.ndarray) -> float:
-    """The interquartile mean: the mean of the middle 50 % (scipy's trimmed mean)."""
-    from scipy.stats import trim_mean
-
-    return float(trim_mean(x, 0.25))
-
-
-def _ci(x: np.ndarray) -> list[float] | None:
-    if len(x) < 2 or np.ptp(x) == 0.0:
-        return None
-    from scipy.stats import bootstrap
-
-    res = bootstrap((x,), np.mean, confidence_level=0.95, n_resamples=10_000, random_state=0)
-    return [
-        round(float(res.confidence_interval.low), 3),
-        round(float(res.confidence_interval.high), 3),
-    ]

@@ -20,7 +20,8 @@ import pytest
 import train.seeds
 from eval.provenance import running_sources_sha256
 from train.cli import main
-from train.seeds import TRAINING_PACKAGES, _train_unit
+from train.seeds import _train_unit
+from train.study_record import TRAINING_PACKAGES
 
 TINY = [
     "--scenarios", "straight",

@@ -1,0 +1,132 @@
+"""A study's record, ``study.json``: what the study is, and a command's claim on its folder.
+
+``follow-train --seeds`` (:mod:`train.seeds`) writes the study's settings (:func:`study_settings`:
+every option that decides what its seeds train, with the defaults filled in) and the digest of
+the sources that train them (:data:`CODE`) when it makes the study, and checks them whenever it
+comes back (:func:`claim`): other settings pointed at the same folder are refused, and a seed
+trains on a study only with the code that started it.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import json
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from eval.provenance import ROLLOUT_PACKAGES, SHORT
+from follow_env.sim.atomic import atomic_write_text
+from train.algos import DEFAULT_ALGO, algo
+from train.config import ConfigError, sole_section
+from train.options import Args, absolute_compare_with
+from train.study_lock import StudyLock
+
+__all__ = ["CODE", "STUDY", "TRAINING_PACKAGES", "claim", "read_study", "study_settings"]
+
+STUDY = "study.json"
+#: The packages whose sources decide what a seed trains: the env, the policies, the evaluation
+#: (the held-out scores and the model card's comparison) and the training.
+TRAINING_PACKAGES = (*ROLLOUT_PACKAGES, "train")
+#: ``study.json``'s key for the sources digest of :data:`TRAINING_PACKAGES`.
+CODE = "code"
+
+
+def study_settings(args: Args, seeds: Sequence[int]) -> dict[str, Any]:
+    """What a study is, as ``study.json`` keeps it (paths as text, the seeds as a list)."""
+    out: dict[str, Any] = {"seeds": list(seeds)}
+    for f in dataclasses.fields(args):
+        if f.name in ("out", "resume", "export", "force", "progress", "threads", "n_timesteps"):
+            continue  # where it goes and how fast, not what is trained (a resume may lengthen)
+        value = getattr(args, f.name)
+        out[f.name] = str(value) if isinstance(value, Path) else value
+    # The defaults as the run fills them in, so that leaving an option out or giving its
+    # default is the same study; PPO studies keep no "algo" (as before there was a choice).
+    learner = algo(args.algo or DEFAULT_ALGO)
+    out["hyperparams"] = str(args.hyperparams or learner.hyperparams)
+    # An agent by its path as this folder reads it: the same command run from another folder
+    # names another agent (or none), and is another study; one moved away since is still this.
+    out["compare_with"] = absolute_compare_with(args.compare_with, missing=True)
+    if args.env_id is None:  # the file's only section, as the run fills it in
+        with contextlib.suppress(ConfigError):  # the seeds' own checks name the file
+            out["env_id"] = sole_section(out["hyperparams"])
+    if learner.name == DEFAULT_ALGO:
+        del out["algo"]
+    else:
+        out["algo"] = learner.name
+    return json.loads(json.dumps(out))
+
+
+def read_study(study: Path) -> dict[str, Any] | None:
+    """The folder's ``study.json`` (None if it has none), checked.
+
+    :raises ValueError: naming the file if it is unreadable or not a study description.
+    """
+    path = study / STUDY
+    if not path.exists():
+        return None
+    try:
+        had = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as e:
+        raise ValueError(f"{path}: not a readable study description ({e})") from None
+    seeds = had.get("seeds") if isinstance(had, dict) else None
+    if not (isinstance(seeds, list) and all(type(s) is int and s >= 0 for s in seeds)):
+        raise ValueError(
+            f"{path}: not a study description (a JSON object with a list of seeds, as "
+            "follow-train --seeds writes it)"
+        )
+    return had
+
+
+def claim(
+    study: Path, settings: dict[str, Any], code: str, lock: StudyLock, *, training: bool
+) -> None:
+    """Write ``study.json``, or check that the folder's is this study's and, if a seed is to
+    train (``training``), that the study's seeds trained with this ``code``; the folder is held
+    (``lock``) before it is written, whether this command made it or another one meanwhile."""
+    lock.take()
+    path = study / STUDY
+    had = read_study(study)
+    if had is not None:
+        if had.get("env_id") is None:  # written before the default was filled in
+            had = {**had, "env_id": settings.get("env_id")}
+        if isinstance(had.get("compare_with"), str):  # kept as typed before: read from here
+            had = {**had, "compare_with": absolute_compare_with(had["compare_with"], missing=True)}
+        changed = sorted(
+            k
+            for k in settings.keys() | had.keys()
+            if k not in ("seeds", CODE) and had.get(k) != settings.get(k)
+        )
+        if changed:
+            raise ValueError(
+                f"{study} holds another study (its {STUDY} differs in {', '.join(changed)}); "
+                "give another --out, or the same options to resume it"
+            )
+        if training and had.get(CODE) != code:
+            raise ValueError(other_code(study, had.get(CODE), code))
+        had["seeds"] = sorted(set(had.get("seeds", [])) | set(settings["seeds"]))
+        atomic_write_text(path, json.dumps(had, indent=1) + "\n")
+        return
+    if study.exists() and any(study.iterdir()):
+        raise ValueError(f"--out {study} already exists and is not an empty folder or a study")
+    study.mkdir(parents=True, exist_ok=True)
+    lock.take()
+    atomic_write_text(path, json.dumps(settings | {CODE: code}, indent=1) + "\n")
+
+
+def other_code(study: Path, had: Any, code: str) -> str:
+    """Why a seed may not train in ``study`` with ``code``: one line, and what to do."""
+    sources = f"{', '.join(TRAINING_PACKAGES)} sources"
+    if not isinstance(had, str):
+        return (
+            f"{study / STUDY} records no code (the study was made before studies recorded it), "
+            "so whether its seeds trained with this code cannot be checked, and a study's "
+            "seeds differ in their seed only: give another --out, or, if this code trained "
+            f'them, add "{CODE}": "{code}" (the SHA-256 of the {sources}) to {study / STUDY}'
+        )
+    return (
+        f"{study}: the code changed since the study started (the SHA-256 of its {sources} "
+        f"was {had[:SHORT]}, is now {code[:SHORT]}), and a study's seeds differ in their seed "
+        "only: run it with the code it started with, or give another --out"
+    )
