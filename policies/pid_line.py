@@ -121,7 +121,7 @@ class PIDLine(LineLaw):
         p = self.params
         left, centre, right = (float(readings[k]) for k in PID_SENSORS)
         total = left + centre + right
-        if total < p.lost_sum:
+        if total < p.lost_sum or total <= 0.0:  # a blank row is lost, with lost_sum 0 too
             self._e_prev = None
             if abs(self._e_seen) < p.centred:
                 return p.speed_mps, 0.0  # it was centred: a gap, cross it straight on

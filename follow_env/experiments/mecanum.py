@@ -37,6 +37,7 @@ from typing import Any
 import numpy as np
 
 from follow_env.platforms.mecanum import PLATFORM, MecanumConfig, command, drive_ticks
+from follow_env.sim.atomic import atomic_path, atomic_write_text, check_writable, file_on_path
 from follow_env.sim.body import BODY
 from follow_env.sim.jit import njit
 from follow_env.sim.rng import LaneSeeds
@@ -265,7 +266,7 @@ def plot(results: dict[str, Any], out: Path) -> list[Path]:
     ax.set_title("1. diagonal travel, duty 50, 5 s (dots: trials)")
     ax.axhline(0, color="grey", lw=0.5)
     files.append(out / "mecanum_diagonal.png")
-    fig.savefig(files[-1], dpi=120, bbox_inches="tight")
+    _save(fig, files[-1])
     fig, ax = plt.subplots(figsize=(6, 4))
     for k, (name, rows) in enumerate(results["spins"].items()):
         degs = [int(d) for d in rows]
@@ -275,7 +276,7 @@ def plot(results: dict[str, Any], out: Path) -> list[Path]:
     ax.set_title("2. spins in place")
     ax.legend(fontsize=8)
     files.append(out / "mecanum_spins.png")
-    fig.savefig(files[-1], dpi=120, bbox_inches="tight")
+    _save(fig, files[-1])
     fig, ax = plt.subplots(figsize=(5, 5))
     t = results["travel"]
     ax.plot([0, t["target_m"][0]], [0, t["target_m"][1]], "k--", label="target path")
@@ -286,9 +287,19 @@ def plot(results: dict[str, Any], out: Path) -> list[Path]:
     ax.set_title("3. travel 4 m at 45 deg while turning 45 deg")
     ax.legend(fontsize=8)
     files.append(out / "mecanum_travel.png")
-    fig.savefig(files[-1], dpi=120, bbox_inches="tight")
+    _save(fig, files[-1])
     plt.close("all")
     return files
+
+
+def _save(fig: Any, path: Path) -> None:
+    """``fig`` as a PNG at ``path``, written whole or not at all."""
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=120, bbox_inches="tight", format="png")
+
+
+#: The most trials ``--trials`` takes: each is one robot of the batch in every experiment.
+MAX_TRIALS = 10_000
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -297,8 +308,15 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", type=Path, default=Path("runs/mecanum-experiments"))
     parser.add_argument("--trials", type=int, default=10)
     args = parser.parse_args(argv)
-    if args.trials < 1:
-        parser.error(f"--trials {args.trials} is out of range: must be >= 1")
+    if not 1 <= args.trials <= MAX_TRIALS:
+        parser.error(f"--trials {args.trials} is out of range: must be 1 to {MAX_TRIALS:,}")
+    blocker = file_on_path(args.out)
+    if blocker is not None:  # before the experiments run, not after
+        parser.error(f"--out {args.out}: {blocker} is a file, not a folder")
+    try:
+        check_writable(args.out)
+    except OSError as e:
+        parser.error(f"--out {args.out}: {e}")
     rig = Rig(args.trials)
     results = {
         "trials": args.trials,
@@ -306,11 +324,14 @@ def main(argv: list[str] | None = None) -> int:
         "spins": spins(rig),
         "travel": travel_while_turning(rig),
     }
-    args.out.mkdir(parents=True, exist_ok=True)
-    text = report(results)
-    (args.out / "mecanum_experiments.md").write_text(text)
-    (args.out / "mecanum_experiments.json").write_text(json.dumps(results) + "\n")
-    files = plot(results, args.out)
+    try:
+        args.out.mkdir(parents=True, exist_ok=True)
+        text = report(results)
+        atomic_write_text(args.out / "mecanum_experiments.md", text)
+        atomic_write_text(args.out / "mecanum_experiments.json", json.dumps(results) + "\n")
+        files = plot(results, args.out)
+    except OSError as e:  # the folder changed while the experiments ran
+        parser.error(f"--out {args.out}: {e}")
     print(text)
     print(f"wrote {args.out}/: mecanum_experiments.md, .json, " + ", ".join(f.name for f in files))
     return 0

@@ -167,6 +167,23 @@ class PlatformConfig(Sections):
     """
 
     NAME: ClassVar[str] = ""
+    #: The platform's manufacturing spread, drawn per episode (its motors' gains, their static
+    #: friction, the floor's traction), as dotted ``section.field`` names. A configuration
+    #: with all of them 0 (the ``ideal`` presets) keeps none when another platform is named
+    #: (:meth:`without_spread`, :func:`follow_env.tasks.config.named_platform`).
+    SPREADS: ClassVar[tuple[str, ...]] = ()
+
+    def spread(self) -> dict[str, float]:
+        """The fields of :data:`SPREADS` and their values (each a std or a half-range, 1)."""
+        out: dict[str, float] = {}
+        for name in self.SPREADS:
+            section, _, key = name.partition(".")
+            out[name] = float(getattr(getattr(self, section), key))
+        return out
+
+    def without_spread(self) -> Any:
+        """This configuration with every field of :data:`SPREADS` at 0: every motor alike."""
+        return type(self).from_overrides(self, dict.fromkeys(self.SPREADS, 0.0))
 
     @property
     def footprint_length_m(self) -> float:  # pragma: no cover - each platform overrides

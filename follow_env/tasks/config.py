@@ -94,14 +94,21 @@ def named_platform(
     key: str, value: Any, current: PlatformConfig | None = None
 ) -> PlatformConfig | None:
     """The platform config a ``platform`` override names, or None if it names none: the
-    platform's default configuration, or ``current`` when that is already of the named
-    platform (a name alone must not undo a preset's settings of it), with the mapping's
-    sections applied on top."""
+    platform's default configuration (without its manufacturing spread if ``current`` has
+    none: ``ideal`` on any platform is every motor alike), or ``current`` when that is already
+    of the named platform (a name alone must not undo a preset's settings of it), with the
+    mapping's sections applied on top."""
     if not names_platform(key, value):
         return None
     name, rest = _name_and_sections(value)
     kind = get_platform(name).config
-    base = current if type(current) is kind else kind()
+    if type(current) is kind:
+        base = current
+    else:
+        base = kind()
+        spread = current.spread() if current is not None else {}
+        if spread and not any(spread.values()):
+            base = base.without_spread()
     return type(base).from_overrides(base, rest) if rest else base
 
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from policies import make_policy
-from policies.pid_line import PID_SENSORS, PIDLineParams
+from policies.pid_line import PID_SENSORS, PIDLine, PIDLineParams
 
 
 def _front(left: float, centre: float, right: float) -> np.ndarray:
@@ -55,6 +55,17 @@ def test_a_gap_after_a_centred_line_is_crossed_straight_on() -> None:
     law.reset()
     law.act(_front(0.1, 1.0, 0.1))
     assert law.act(np.zeros(25, np.float32)).tolist() == pytest.approx([0.3, 0.0])
+
+
+def test_with_lost_sum_0_only_a_blank_row_is_lost() -> None:
+    # the error divides by the readings' sum: a blank row used to divide by zero
+    law = PIDLine(PIDLineParams(lost_sum=0.0))
+    law.reset()
+    law.act(_front(0.0, 0.4, 0.9))
+    v, w = law.act(np.zeros(25, np.float32))  # searches, as with the default lost_sum
+    assert (v, w) == pytest.approx((0.0, -PIDLineParams().search_w_radps))
+    _, w = law.act(_front(0.0, 0.0, 0.01))  # any reading at all is the line
+    assert w == pytest.approx(-PIDLineParams().kp)
 
 
 def test_bad_parameters_name_the_field() -> None:

@@ -114,6 +114,7 @@ class DiffDriveConfig(PlatformConfig):
     """The differential-drive platform's sections: geometry, motors, encoders, wheel PIDs."""
 
     NAME: ClassVar[str] = "diff_drive"
+    SPREADS: ClassVar[tuple[str, ...]] = ("motor.gain_spread",)
 
     robot: RobotConfig = field(default_factory=RobotConfig)
     motor: MotorConfig = field(default_factory=MotorConfig)

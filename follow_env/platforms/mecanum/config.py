@@ -155,6 +155,7 @@ class MecanumConfig(PlatformConfig):
     """The mecanum platform's sections: body, motors, floor, drive, encoders, wheel PIDs."""
 
     NAME: ClassVar[str] = "mecanum"
+    SPREADS: ClassVar[tuple[str, ...]] = ("motor.gain_spread", "motor.start_spread", "floor.spread")
 
     body: BodyConfig = field(default_factory=BodyConfig)
     motor: MecanumMotorConfig = field(default_factory=MecanumMotorConfig)
@@ -176,12 +177,17 @@ class MecanumConfig(PlatformConfig):
     def check_control_period(self, control_dt_s: float) -> None:
         """The control period and the encoder period must be whole numbers of ticks."""
         tick = self.drive.tick_s
-        for where, period in (
+        periods = (
             ("EpisodeConfig.control_dt_s", control_dt_s),
             ("EncoderConfig.sample_period_s", self.encoder.sample_period_s),
-        ):
+        )
+        for where, period in periods:
             ratio = period / tick
             if abs(ratio - round(ratio)) > 1e-9 or not 1 <= round(ratio) <= 2048:
+                if tick != DriveConfig().tick_s:  # the tick the user set, not the period
+                    both = " and ".join(f"{name} ({value:g} s)" for name, value in periods)
+                    rule = f"a tick that divides {both} into 1 to 2048 whole ticks"
+                    raise out_of_range("DriveConfig.tick_s", tick, rule)
                 raise out_of_range(where, period, f"1 to 2048 whole drive ticks of {tick} s")
 
     @property

@@ -231,7 +231,8 @@ IDEAL = PAPER.replace(
     motor={"gain_spread": 0.0, "start_spread": 0.0},
     floor={"spread": 0.0},
 )
-"""Noiseless sensing, no motor or floor spread, an exact start: for debugging and tests.
+"""Noiseless sensing, no motor or floor spread (on any platform), an exact start: for debugging
+and tests.
 
 The paper's robot otherwise, its gear friction included (reference §2: motors stall at low
 duty): with every motor alike, none starts under ``start_duty`` (41 of 255, 16 %), that is a

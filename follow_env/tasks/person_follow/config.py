@@ -253,7 +253,9 @@ IDEAL = THESIS.replace(
         "size_jitter_frac": 0.0,
     },
 )
-"""Perfect sensing: no detector noise, no latency, exact depth. For debugging and tests."""
+"""Perfect sensing: no detector noise, no latency, exact depth; every motor alike, on any
+platform (:meth:`~follow_env.platforms.base.PlatformConfig.without_spread`). For debugging and
+tests."""
 
 NOISY = THESIS.replace(
     motor={"gain_spread": 0.05},

@@ -49,3 +49,26 @@ def test_the_command_writes_table_data_and_plots(tmp_path: Path) -> None:
     names = {p.name for p in tmp_path.iterdir()}
     assert {"mecanum_experiments.md", "mecanum_experiments.json", "mecanum_travel.png"} <= names
     assert "### 3." in (tmp_path / "mecanum_experiments.md").read_text()
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--out", "{file}"], "is a file, not a folder"),
+        (["--out", "{file}/sub"], "is a file, not a folder"),
+        (["--trials", "100000000000"], "must be 1 to 10,000"),
+        (["--trials", "0"], "must be 1 to 10,000"),
+    ],
+)
+def test_a_bad_out_or_trials_is_one_line_before_anything_runs(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], args: list[str], message: str
+) -> None:
+    # a file as --out used to be a traceback after every experiment had run
+    file = tmp_path / "a-file"
+    file.write_text("mine\n")
+    with pytest.raises(SystemExit) as e:
+        main([a.format(file=file) for a in args])
+    assert e.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert message in err[-1] and "Traceback" not in "".join(err)
+    assert file.read_text() == "mine\n"

@@ -180,7 +180,13 @@ def test_reset_zeroes_the_wheels_and_randomize_draws_per_motor() -> None:
         ({"body": {"mass_kg": -1.0}}, r"BodyConfig\.mass_kg=-1\.0 is out of range"),
         ({"motor": {"start_duty": 10.0}}, r"MecanumMotorConfig\.start_duty=10\.0"),
         ({"drive": {"mode": "fast"}}, r"DriveConfig\.mode='fast' is out of range"),
-        ({"drive": {"tick_s": 0.003}}, r"EpisodeConfig\.control_dt_s=0\.1 is out of range"),
+        # the tick the user set is named, with the periods it must divide
+        (
+            {"drive": {"tick_s": 0.003}},
+            r"DriveConfig\.tick_s=0\.003 is out of range: must be a tick that divides "
+            r"EpisodeConfig\.control_dt_s \(0\.1 s\) and EncoderConfig\.sample_period_s",
+        ),
+        ({"encoder": {"sample_period_s": 0.0101}}, r"EncoderConfig\.sample_period_s=0\.0101 is"),
     ],
 )
 def test_bad_values_name_field_value_and_range(override: dict, message: str) -> None:
