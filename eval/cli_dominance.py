@@ -50,7 +50,6 @@ def cmd_dominance(args: argparse.Namespace) -> int:
     from eval.dominance import (
         CRITERIA,
         ENDINGS,
-        FINISHED,
         calibration,
         default_laws,
         dominance,
@@ -68,10 +67,9 @@ def cmd_dominance(args: argparse.Namespace) -> int:
         )
     if args.out is not None:
         check_new_folder(args.out)
-    # the criteria's columns (the endings among them) are needed; a table written before the
-    # finished metric existed has none, and the report then leaves its view out
+    # the criteria's columns are needed, the endings among them (which tell finished episodes)
     metrics = list(dict.fromkeys([*(c.metric for c in CRITERIA), *ENDINGS]))
-    table = pooled_table(runs, metrics, optional=[FINISHED])
+    table = pooled_table(runs, metrics)
     learners = _names(args.learner, "learner")
     given = _names(args.laws, "laws") if args.laws is not None else None
     if given is not None and (both := [name for name in learners if name in given]):
@@ -102,11 +100,10 @@ def cmd_dominance(args: argparse.Namespace) -> int:
         report = pooled + dominance_markdown(frame, learner, calibrated[tuple(laws)])
         stem = f"dominance-{safe_name(learner)}"
         written.append(f"{stem}.md|csv")
-        if FINISHED in table:  # episode tables written before the metric existed have none
-            view = finished_view(table, frame, learner)
-            report += finished_markdown(view, learner)
-            files[f"{stem}-finished.csv"] = view.to_csv(index=False)
-            written.append(f"{stem}-finished.csv")
+        view = finished_view(table, frame, learner)
+        report += finished_markdown(view, learner)
+        files[f"{stem}-finished.csv"] = view.to_csv(index=False)
+        written.append(f"{stem}-finished.csv")
         files[f"{stem}.csv"] = frame.to_csv(index=False)
         files[f"{stem}.md"] = report
         print(report)
@@ -144,9 +141,9 @@ def _write_all(folder: Path, files: dict[str, str]) -> None:
             stack.enter_context(atomic_path(folder / name)).write_text(text, encoding="utf-8")
 
 
-def pooled_table(runs: list[Path], metrics: list[str], optional: Sequence[str] = ()) -> Any:
+def pooled_table(runs: list[Path], metrics: list[str]) -> Any:
     """The episode tables of ``runs`` as one (one run: its own table, read and checked by
-    :func:`read_episode_table`: ``metrics`` needed, ``optional`` checked where present).
+    :func:`read_episode_table`, ``metrics`` needed).
 
     :raises UsageError: naming the run and what keeps it out: a folder given twice, a missing
         or unreadable table or ``meta.json``, runs made differently or of different scenarios,
@@ -161,7 +158,7 @@ def pooled_table(runs: list[Path], metrics: list[str], optional: Sequence[str] =
         if run in resolved[:k]:
             raise UsageError(f"{runs[k]}: given twice; give each run once")
     # each run's own table holds an episode once; pooling then looks only across runs
-    tables = [read_episode_table(run / "episodes.csv", metrics, optional) for run in runs]
+    tables = [read_episode_table(run / "episodes.csv", metrics) for run in runs]
     if len(runs) == 1:
         return tables[0]
     metas = [_meta(run) for run in runs]
@@ -247,12 +244,11 @@ def check_covered(table: Any, policies: list[str]) -> None:
                     )
 
 
-def read_episode_table(path: Path, metrics: list[str], optional: Sequence[str] = ()) -> Any:
+def read_episode_table(path: Path, metrics: list[str]) -> Any:
     """``follow-eval run``'s ``episodes.csv`` at ``path``, checked: every row as long as the
     header, the columns ``policy``, the variant's (``scenario`` or ``track``), ``seed`` and
     ``metrics`` each once, a name in every text cell, an integer seed, and a finite number (or
-    nothing: a metric undefined for that episode) in each cell of ``metrics`` and of those
-    ``optional`` columns the table has.
+    nothing: a metric undefined for that episode) in each cell of ``metrics``.
 
     Seeds are read as exact integers (``run`` takes seeds up to 2**256 - 1): int64 when they
     all fit, else Python ints. The other cells are read as pandas reads a CSV (so a table
@@ -284,7 +280,7 @@ def read_episode_table(path: Path, metrics: list[str], optional: Sequence[str] =
             cell = _cell(path, row, header.index(column))
             raise UsageError(f"{path}: line {lines[row]}, column {column}: {cell!r} names none")
     table["seed"] = _seeds(path, table["seed"], lines)
-    for column in [*metrics, *(m for m in optional if m in header)]:
+    for column in metrics:
         values = pd.to_numeric(table[column], errors="coerce")
         # missing: undefined for that episode; text, inf or 1e400 (which reads as inf): not
         infinite = np.isinf(values.to_numpy(dtype=np.float64))

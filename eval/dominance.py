@@ -39,7 +39,7 @@ An episode that ends early (a collision, a lost person) stops counting frames, d
 offset where it ends, so a law that crashes early can keep a better in-frame rate or distance
 error on that episode than a learner that avoids the crash and goes on. :func:`finished_view`
 asks each missed line again over the seeds on which both the learner and that line's law
-finished (``success_pct`` 100: neither lost nor collided); the report prints it after the
+finished (neither lost nor collided: :func:`finished`); the report prints it after the
 table, as an explanation, and the verdict does not change.
 
 How high that bar is shows in :func:`calibration`: each law put through the same test against
@@ -325,12 +325,19 @@ def _line(
     return row
 
 
-#: The episode-table column that marks a finished episode (100: neither lost nor collided).
-FINISHED = "success_pct"
-
-#: The criteria that end an episode: on finished episodes they are 0 for both, so
-#: :func:`finished_view` does not ask them again.
+#: The criteria that end an episode: an episode is finished when both are 0 (neither lost nor
+#: collided), so :func:`finished_view` does not ask them again.
 ENDINGS = ("lost_rate_pct", "collision_rate_pct")
+
+
+def finished(table: pd.DataFrame) -> pd.Series:
+    """Which episodes of ``table`` finished: neither lost nor collided (both :data:`ENDINGS`
+    0; an episode without an ending, a robot's log, did not).
+
+    Not ``success_pct``, which also asks that the perception kept the person, not a stranger:
+    an episode that followed a stranger to the end of the walk is finished here.
+    """
+    return (table[list(ENDINGS)] <= 0.0).all(axis=1)
 
 
 def finished_view(
@@ -344,7 +351,7 @@ def finished_view(
     """The lines ``frame`` misses, again over the seeds both the learner and the line's law
     finished (module docstring): the same law, the same test, fewer seeds.
 
-    :param table: the episode table ``frame`` was computed from; it needs :data:`FINISHED`.
+    :param table: the episode table ``frame`` was computed from, with the :data:`ENDINGS`.
     :param frame: :func:`dominance` output for ``learner``.
     :param learner: the learner's policy label.
     :param criteria: the criteria of ``frame`` (default: :data:`CRITERIA`).
@@ -353,18 +360,21 @@ def finished_view(
         (:data:`ENDINGS`), with the columns of :func:`dominance`; ``n`` is the number of seeds
         both finished (a line with none has verdict ``n/a``, as in :func:`dominance`), and
         ``holm_p`` NaN (lines picked because they were missed are no family to adjust over).
-    :raises ValueError: if the table has no :data:`FINISHED` column.
+    :raises ValueError: if the table has no column of one of the :data:`ENDINGS`.
     """
-    if FINISHED not in table:
-        raise ValueError(f"the episode table has no {FINISHED!r} column to tell finished episodes")
+    if missing := [c for c in ENDINGS if c not in table]:
+        raise ValueError(
+            f"the episode table has no {missing[0]!r} column to tell finished episodes"
+        )
     variant = frame.columns[0]
     by_metric = {c.metric: c for c in criteria}
+    done = finished(table)
     rows = []
     for line in frame.itertuples(index=False):
         r = line._asdict()
         if r["meets"] or r["criterion"] in ENDINGS or not r["best_law"]:
             continue
-        cell = table[(table[variant] == r[variant]) & (table[FINISHED] >= 100.0)]
+        cell = table[(table[variant] == r[variant]) & done]
         mine = cell[cell["policy"] == learner].set_index("seed")
         theirs = cell[cell["policy"] == r["best_law"]].set_index("seed")
         c = by_metric[r["criterion"]]

@@ -30,9 +30,10 @@ reference, reference §1.5; true distance when logged, else the published one wh
 ``jerk_rms_m_s3``,
 ``turn_accel_rms_rad_s2``, ``lost_rate_pct`` and ``collision_rate_pct`` (per episode 100 or 0,
 so their mean over episodes is a rate), ``target_swap_rate_pct``, the social-navigation
-benchmarks' ``success_pct`` (neither collided nor lost; 100 or 0 per episode) and
-``following_rate_pct`` (steps within 0.5-1.5 m of the person and facing them), and
-``path_length_ratio``. The three rates of episodes (lost, collision, success) are registered
+benchmarks' ``success_pct`` (neither collided nor lost, and the person itself detected at least
+every 3 s, so that following a stranger is no success; 100 or 0 per episode) and
+``following_rate_pct`` (steps within 0.5-1.5 m of the person and facing them, within 60 deg),
+and ``path_length_ratio``. The three rates of episodes (lost, collision, success) are registered
 ``binary=True``: their intervals are Wilson score intervals (:func:`eval.stats.summarize`).
 
 A metric whose columns a log lacks is NaN for that log: the three endings (lost, collision,
@@ -332,31 +333,70 @@ def target_swap_rate_pct(log: pd.DataFrame) -> float:
 #: The following band of the social-navigation benchmarks [m]: near enough to follow, not so
 #: near as to crowd the person (our reference distance, 1.0 m, is its middle).
 FOLLOW_BAND_M = (0.5, 1.5)
+#: "Facing" the person: the cosine of the angle between the robot's heading and the line to
+#: the person above this, i.e. within 60 deg (habitat-lab's social-navigation measures,
+#: ``facing_threshold`` 0.5); from the poses, so that a person nearer than the camera's view
+#: of 30 % of their body (about 0.66 m on the reference robot) or hidden behind an obstacle
+#: still counts as faced.
+FACING_COS = 0.5
+#: Longest the person may go without a detection of their own and the episode still succeed
+#: [s]: the robot's lost rule (``EpisodeConfig.lost_timeout_s``, 3 s) applied to the target's
+#: detections instead of anyone's, fixed here so that success means one thing in every run.
+TARGET_LOST_S = 3.0
 
 
 @metric("success_pct", "%", "success (%)", binary=True)
 def success_pct(log: pd.DataFrame) -> float:
-    """100 if the episode ended with neither a collision nor the person lost, else 0: the
-    social-navigation benchmarks' success. Averaged over episodes it is the success rate in %.
-    NaN without a ``termination`` column."""
+    """100 if the episode ended with neither a collision nor the person lost, and (where the
+    log says whose detection was published, ``detected_person``: a simulation) the person
+    itself was detected at least every :data:`TARGET_LOST_S` seconds; else 0. The robot's
+    lost rule counts a bystander's detection as a sighting, so a robot that followed a
+    stranger to the end of the walk would otherwise succeed. The social-navigation benchmarks'
+    success; averaged over episodes it is the success rate in %. NaN without a ``termination``
+    column."""
     ending = _ending(log)
     if ending is None:
         return float("nan")
-    return 100.0 * (ending != LOST_ENDING and ending not in COLLISION_ENDINGS)
+    if ending == LOST_ENDING or ending in COLLISION_ENDINGS:
+        return 0.0
+    gap = _longest_without_target_s(log)
+    return 0.0 if gap > TARGET_LOST_S + 1e-9 else 100.0
+
+
+def _longest_without_target_s(log: pd.DataFrame) -> float:
+    """The longest time [s] from the reset or a detection of the person (``detected_person``
+    0) to a row without one, as the robot's lost timer counts; 0 without the columns."""
+    if "detected_person" not in log or "time_s" not in log or log.empty:
+        return 0.0
+    t = log["time_s"].to_numpy(dtype=float)
+    seen = log["detected_person"].to_numpy(dtype=float) == 0.0
+    seen[0] = True  # the timer starts at the reset
+    last = np.maximum.accumulate(np.where(seen, t, -np.inf))
+    return float(np.max(t - last))
 
 
 @metric("following_rate_pct", "%", "following rate (%)")
 def following_rate_pct(log: pd.DataFrame) -> float:
-    """Share (%) of the steps with the person within :data:`FOLLOW_BAND_M` (true distance) and
-    in the camera's field of view (``in_frame``: the robot faces them), the reset row left out:
-    the social-navigation benchmarks' following rate. NaN without ground truth (a robot log)."""
-    if "true_distance_m" not in log or "in_frame" not in log:
+    """Share (%) of the steps with the person within :data:`FOLLOW_BAND_M` (true distance,
+    both ends included) and the robot facing them (:data:`FACING_COS`, from the poses), the
+    reset row left out: the social-navigation benchmarks' following rate. NaN without ground
+    truth (a robot log)."""
+    poses = ("robot_x_m", "robot_y_m", "robot_theta_rad", "person_x_m", "person_y_m")
+    if not all(c in log for c in ("true_distance_m", *poses)):
         return float("nan")
     steps = log.iloc[1:] if len(log) > 1 else log
+    if not len(steps):
+        return float("nan")
     d = steps["true_distance_m"].to_numpy(dtype=float)
     near = (d >= FOLLOW_BAND_M[0]) & (d <= FOLLOW_BAND_M[1])
-    facing = steps["in_frame"].to_numpy(dtype=float) > 0.5
-    return 100.0 * float(np.mean(near & facing)) if len(steps) else float("nan")
+    dx = steps["person_x_m"].to_numpy(dtype=float) - steps["robot_x_m"].to_numpy(dtype=float)
+    dy = steps["person_y_m"].to_numpy(dtype=float) - steps["robot_y_m"].to_numpy(dtype=float)
+    theta = steps["robot_theta_rad"].to_numpy(dtype=float)
+    # cos of the angle between the heading (cos, sin) and the unit vector to the person
+    with np.errstate(invalid="ignore", divide="ignore"):
+        cos = (dx * np.cos(theta) + dy * np.sin(theta)) / np.hypot(dx, dy)
+    facing = cos > FACING_COS
+    return 100.0 * float(np.mean(near & facing))
 
 
 def _path_length_m(x: pd.Series, y: pd.Series) -> float:

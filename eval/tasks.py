@@ -69,17 +69,22 @@ class EvalTask:
         return f"{self.variant}s"
 
 
-def _with_sensing_of(ideal: Any, sections: Sequence[str]) -> Callable[..., Any]:
+def _with_sensing_of(
+    ideal: Any, sections: Sequence[str], randomized: Sequence[str] = ()
+) -> Callable[..., Any]:
     """``(config, presets) -> config`` with ``ideal``'s fields of ``sections`` wherever
-    ``ideal`` differs from the default preset (its sensing changes), everything else as given;
-    ``config`` is a preset name (looked up in ``presets``) or section overrides."""
+    ``ideal`` differs from the default preset (its sensing changes), and the ``randomized``
+    fields of the ``randomization`` section (per-episode draws of sensing errors) off, as in
+    the default preset; everything else as given. ``config`` is a preset name (looked up in
+    ``presets``) or section overrides."""
     from dataclasses import fields
 
     base = type(ideal)()
+    off = {name: getattr(base.randomization, name) for name in randomized}
 
     def perfect(config: Any, presets: Mapping[str, Any]) -> Any:
         given = presets[config] if isinstance(config, str) else base.replace(**config)
-        changes: dict[str, dict[str, Any]] = {}
+        changes: dict[str, dict[str, Any]] = {"randomization": off} if off else {}
         for section in sections:
             mine, theirs = getattr(base, section), getattr(ideal, section)
             changed = {
@@ -121,8 +126,21 @@ def _person_follow() -> EvalTask:
         10,
         plots,
         summary_plot,
-        # the detector's noise and latency, the depth's: the camera and perception sections
-        partial(_with_sensing_of(IDEAL, ("camera", "perception")), presets=PRESETS),
+        # the detector's noise and latency, the depth's: the camera and perception sections,
+        # and the randomisation's draws of them (the randomized preset's latency up to 3 frames)
+        partial(
+            _with_sensing_of(
+                IDEAL,
+                ("camera", "perception"),
+                randomized=(
+                    "camera_tilt_deg",
+                    "detector_level_spread",
+                    "latency_frames_max",
+                    "depth_noise_scale_max",
+                ),
+            ),
+            presets=PRESETS,
+        ),
     )
 
 

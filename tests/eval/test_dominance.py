@@ -407,7 +407,6 @@ def _crash_table() -> pd.DataFrame:
             },
         }
     )
-    table["success_pct"] = 100.0 - table["collision_rate_pct"]
     return table
 
 
@@ -434,7 +433,6 @@ def test_the_finished_view_asks_a_missed_line_again_over_the_episodes_both_finis
     # a learner that collides too: the collision line is missed, but not asked again
     crashes = (table.policy == "agent") & table.seed.isin([5, 6, 7])
     table.loc[crashes, "collision_rate_pct"] = 100.0
-    table.loc[crashes, "success_pct"] = 0.0
     frame = dominance(table, "agent")
     assert not _line(frame, "collision_rate_pct")["meets"]
     view = finished_view(table, frame, "agent")
@@ -445,7 +443,7 @@ def test_the_finished_view_asks_a_missed_line_again_over_the_episodes_both_finis
 
 def test_the_finished_view_says_when_no_episode_was_finished_by_both() -> None:
     table = _crash_table()
-    table.loc[table.policy == "agent", "success_pct"] = 0.0
+    table.loc[table.policy == "agent", "lost_rate_pct"] = 100.0
     view = finished_view(table, dominance(table, "agent"), "agent")
     assert view["verdict"].tolist() == ["n/a"] * 3
     assert view["n"].tolist() == [0] * 3
@@ -453,8 +451,17 @@ def test_the_finished_view_says_when_no_episode_was_finished_by_both() -> None:
     assert "| straight | InFrameRate (%) | 0 | | pn | | | | n/a | no |" in finished_markdown(
         view, "agent"
     )
-    with pytest.raises(ValueError, match="no 'success_pct' column"):
-        finished_view(table.drop(columns="success_pct"), dominance(table, "agent"), "agent")
+    with pytest.raises(ValueError, match="no 'lost_rate_pct' column"):
+        finished_view(table.drop(columns="lost_rate_pct"), dominance(table, "agent"), "agent")
+
+
+def test_finished_means_neither_lost_nor_collided_whatever_success_says() -> None:
+    # success also asks that the person was kept, not a stranger: an episode that followed a
+    # stranger to the end is finished, and the view's episodes are those
+    table = _crash_table()
+    table["success_pct"] = 0.0
+    view = finished_view(table, dominance(table, "agent"), "agent")
+    assert view["n"].tolist() == [8, 8, 8]
 
 
 def test_the_command_adds_the_finished_view_when_the_table_has_it(tmp_path: Path, capsys) -> None:
@@ -584,7 +591,6 @@ def _cell(text: str, k: int, column: str, value: str) -> str:
         (lambda t: _cell(t, 4, "mean_offset_px", "inf"), "line 5, column mean_offset_px: 'inf'"),
         (lambda t: _cell(t, 5, "lost_rate_pct", "-inf"), "line 6, column lost_rate_pct: '-inf'"),
         (lambda t: _cell(t, 7, "std_accel_mm_s2", "1e400"), "std_accel_mm_s2: '1e400' is not fin"),
-        (lambda t: _cell(t, 2, "success_pct", "inf"), "line 3, column success_pct: 'inf' is not"),
         (lambda t: _cell(t, 2, "in_frame_rate_pct", "n/a!"), "'n/a!' is not a number"),
         # seeds run never takes: int() of 1e999999999 would build a billion-digit number
         (lambda t: _cell(t, 2, "seed", "1e999999999"), "line 3, column seed: '1e999999999' is out"),

@@ -62,6 +62,7 @@ def test_runs_on_disjoint_seeds_are_judged_as_one_table(tmp_path: Path, capsys) 
     pooled = pd.read_csv(out / "episodes.csv")
     assert len(pooled) == len(both)
     assert sorted(p.name for p in out.iterdir()) == [
+        "dominance-ppo-finished.csv",
         "dominance-ppo.csv",
         "dominance-ppo.md",
         "episodes.csv",

@@ -9,6 +9,7 @@ import pytest
 
 from eval.cli import main
 from eval.tasks import eval_task
+from follow_env.tasks.person_follow.config import RANDOMIZED
 
 
 def test_perfect_sensing_changes_the_sensing_fields_only() -> None:
@@ -23,6 +24,19 @@ def test_perfect_sensing_changes_the_sensing_fields_only() -> None:
     line = eval_task("line_trace").perfect_sensing("paper")
     assert (line.sensor.noise_std, line.sensor.ambient_max, line.sensor.gain_spread) == (0, 0, 0)
     assert line.start.lateral_spread_m > 0.0  # the start's randomness is not sensing
+
+
+def test_perfect_sensing_also_draws_no_sensing_error_per_episode() -> None:
+    # the randomized preset draws each episode's detector latency up to 3 frames, a camera
+    # tilt and noise levels: those draws used to stay under "perfect sensing"
+    randomized = eval_task("person_follow").perfect_sensing("randomized")
+    r = randomized.randomization
+    assert (r.latency_frames_max, r.camera_tilt_deg, r.detector_level_spread) == (0, 0.0, 0.0)
+    assert r.depth_noise_scale_max == 1.0
+    assert randomized.perception.latency_frames == 0
+    # the world's and the robot's draws stay: perfect sensing, the same robot
+    assert r.push_prob == RANDOMIZED.randomization.push_prob > 0.0
+    assert r.wheel_radius_error == RANDOMIZED.randomization.wheel_radius_error > 0.0
 
 
 @pytest.fixture(scope="module")

@@ -156,6 +156,76 @@ def test_target_swap_rate_is_the_share_of_detections_that_took_a_bystander() -> 
     assert math.isnan(METRICS["target_swap_rate_pct"].fn(make_log(detected_person=[-1, -1])))
 
 
+@pytest.mark.parametrize(
+    ("ending", "success"),
+    [("walk_over", 100.0), ("step_limit", 100.0), ("lost", 0.0), ("collision_wall", 0.0)],
+)
+def test_success_is_neither_lost_nor_collided(ending: str, success: float) -> None:
+    log = make_log(termination=["", "", ending], detected_person=[-1, 0, 0])
+    assert METRICS["success_pct"].fn(log) == success
+    assert math.isnan(METRICS["success_pct"].fn(make_log(obs_offset_px=[0.0, 1.0])))
+
+
+def test_following_a_stranger_to_the_end_is_no_success() -> None:
+    # The robot's lost rule counts a bystander's detection as a sighting, so the walk ends
+    # well (walk_over); the person itself was not detected for 3.1 s (rows 1..32 at 0.1 s).
+    picked = [-1, 0, *[1] * 31, 0]
+    log = make_log(detected_person=picked, termination=[""] * 33 + ["walk_over"])
+    assert METRICS["success_pct"].fn(log) == 0.0
+    # 3.0 s without the person's detection, as the robot's 3 s timer allows: still a success
+    log = make_log(detected_person=[-1, 0, *[1] * 29, 0], termination=[""] * 31 + ["walk_over"])
+    assert METRICS["success_pct"].fn(log) == 100.0
+    # from the reset: a person first detected after 3.1 s was not followed
+    log = make_log(detected_person=[-1] * 32 + [0], termination=[""] * 32 + ["walk_over"])
+    assert METRICS["success_pct"].fn(log) == 0.0
+
+
+def _follow_log(distance_m: float, bearing_deg: float) -> pd.DataFrame:
+    """Two rows, the robot at the origin facing +x, the person at ``distance_m`` (its true
+    distance too) and ``bearing_deg`` to the left."""
+    b = math.radians(bearing_deg)
+    x, y = distance_m * math.cos(b), distance_m * math.sin(b)
+    return make_log(
+        true_distance_m=[distance_m] * 2,
+        in_frame=[0.0] * 2,  # not asked: near or hidden, the person may be out of the image
+        robot_x_m=[0.0] * 2,
+        robot_y_m=[0.0] * 2,
+        robot_theta_rad=[0.0] * 2,
+        person_x_m=[x] * 2,
+        person_y_m=[y] * 2,
+    )
+
+
+@pytest.mark.parametrize(
+    ("distance_m", "bearing_deg", "following"),
+    [
+        (0.5, 0.0, 100.0),  # the band's ends are in it
+        (1.5, 0.0, 100.0),
+        (0.49, 0.0, 0.0),
+        (1.51, 0.0, 0.0),
+        (1.0, 59.0, 100.0),  # facing: within 60 deg of the heading, either side
+        (1.0, -59.0, 100.0),
+        (1.0, 61.0, 0.0),
+        (1.0, 180.0, 0.0),
+    ],
+)
+def test_following_is_the_band_and_facing_the_person_from_the_poses(
+    distance_m: float, bearing_deg: float, following: float
+) -> None:
+    # "facing" used to be in_frame, which needs 30 % of the body in the image: nobody
+    # straight ahead nearer than about 0.66 m was followed
+    log = _follow_log(distance_m, bearing_deg)
+    assert METRICS["following_rate_pct"].fn(log) == following
+
+
+def test_following_is_the_share_of_steps_after_the_reset() -> None:
+    log = pd.concat([_follow_log(1.0, 0.0), _follow_log(1.0, 90.0).iloc[1:]] * 2)
+    log["time_s"] = [0.1 * k for k in range(len(log))]
+    # after the reset row: facing, turned away, facing, facing, turned away
+    assert len(log) == 6
+    assert METRICS["following_rate_pct"].fn(log) == pytest.approx(100.0 * 3 / 5)
+
+
 def test_path_length_ratio_is_robot_over_person_path() -> None:
     # Person walks 2 m straight; robot goes 1 m then 1 m sideways then back: 3 m -> 1.5
     log = make_log(
@@ -179,6 +249,8 @@ def test_metrics_needing_absent_columns_are_nan() -> None:
         "collision_rate_pct",
         "path_length_ratio",
         "target_swap_rate_pct",
+        "success_pct",
+        "following_rate_pct",
     ):
         assert math.isnan(values[name]), name
     assert values["mean_offset_px"] == pytest.approx(1.5)
