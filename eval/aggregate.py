@@ -46,18 +46,25 @@ The scenarios are also grouped into the splits of the social-navigation benchmar
 the IQM of every controller and each learner's probability of improvement over each law,
 with the same stratified bootstrap over that split's scenarios only.
 
+A study's runs are the seeds its ``study.json`` lists, each of which must have finished
+(:mod:`eval.aggregate_inputs`, which finds and checks the learners before any episode runs);
+every controller runs on the differential drive (:data:`~eval.aggregate_inputs.PLATFORM`).
+
 Writes ``aggregate.csv`` (controller, metric, estimate, ci_low, ci_high), ``improvement.csv``
 (learner, law, probability, ci_low, ci_high), ``splits.csv`` (split, scenarios, controller,
 law, metric, estimate, ci_low, ci_high), ``profiles.csv``, ``scores.csv`` (every episode's
-raw and normalised score, with its split; a run's score is the mean of its rows),
-``aggregate.md`` and ``plots/`` (interval estimates, performance profiles), atomically.
+raw and normalised score, with its split, its run's position ``run`` in the learner, the run's
+``training_seed`` and ``agent`` path, both blank for a law; a run's score is the mean of its
+rows), ``aggregate.md``, ``plots/`` (interval estimates, performance profiles) and
+``meta.json`` (the command, each learner's agents with their training seeds and model digests,
+the laws, scenarios, evaluation seeds, the bootstrap's draws and seeds
+(:func:`bootstrap_record`), package versions and the code's digest), atomically.
 """
 
 from __future__ import annotations
 
 import itertools
 import operator
-import re
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -65,12 +72,15 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from eval.aggregate_inputs import LearnerRuns, check_learners, learner_runs
 from eval.rollout import rollout
 
 __all__ = [
+    "BOOTSTRAP_SEEDS",
     "LearnerRuns",
     "aggregate",
     "aggregate_metrics",
+    "bootstrap_record",
     "check_learners",
     "learner_runs",
     "normalised_scores",
@@ -80,6 +90,38 @@ __all__ = [
 
 #: Bootstrap samples of a performance profile's band, as a share of ``reps`` (21 taus each).
 _PROFILE_REPS_SHARE = 4
+#: Confidence level of every interval.
+LEVEL = 0.95
+#: The seed of each table's bootstrap (:func:`stratified_ci`'s ``seed``): the aggregate
+#: metrics one each; every probability of improvement (overall and per split), the splits'
+#: IQMs and the profiles' bands 0. Fixed, so that the same command gives the same intervals;
+#: ``meta.json`` records them.
+BOOTSTRAP_SEEDS: dict[str, int] = {
+    "iqm": 0,
+    "mean": 1,
+    "median": 2,
+    "optimality_gap": 3,
+    "improvement": 0,
+    "splits": 0,
+    "profiles": 0,
+}
+
+
+def bootstrap_record(reps: int) -> dict[str, Any]:
+    """How the intervals were drawn, as ``meta.json`` records it."""
+    return {
+        "method": "stratified hierarchical percentile bootstrap (runs per scenario, then the "
+        "evaluation seeds, paired across controllers)",
+        "level": LEVEL,
+        "reps": reps,
+        "profile_reps": _profile_reps(reps),
+        "seeds": dict(BOOTSTRAP_SEEDS),
+    }
+
+
+def _profile_reps(reps: int) -> int:
+    # a share of the draws (21 taus each), at least one: --reps 1..3 is allowed
+    return max(1, reps // _PROFILE_REPS_SHARE)
 
 
 def aggregate_metrics() -> dict[str, Callable[[np.ndarray], float]]:
@@ -92,82 +134,6 @@ def aggregate_metrics() -> dict[str, Callable[[np.ndarray], float]]:
         "median": metrics.aggregate_median,
         "optimality_gap": metrics.aggregate_optimality_gap,
     }
-
-
-class LearnerRuns:
-    """A learner's agents: its name and one agent path per training seed."""
-
-    def __init__(self, name: str, agents: Sequence[Path]) -> None:
-        self.name = name
-        self.agents = list(agents)
-
-
-def learner_runs(path: str | Path) -> LearnerRuns:
-    """The learner at ``path``: a ``follow-train --seeds`` study (its ``seed-<k>`` runs that
-    hold a model) or one run folder.
-
-    :raises ValueError: naming the path if it holds no agent.
-    """
-    path = Path(path)
-    if not path.is_dir():
-        raise ValueError(f"{path}: not a folder (a follow-train run or --seeds study)")
-    seeds = sorted(
-        (p for p in path.glob("seed-*") if (p / "model.zip").is_file()),
-        key=lambda p: int(p.name[5:]) if re.fullmatch("[0-9]+", p.name[5:]) else 0,
-    )
-    if seeds:
-        return LearnerRuns(path.name, seeds)
-    if (path / "model.zip").is_file():
-        return LearnerRuns(path.name, [path])
-    raise ValueError(f"{path}: holds no trained agent (no model.zip, no seed-<k>/model.zip)")
-
-
-def check_learners(
-    paths: Sequence[str | Path],
-    learners: Sequence[LearnerRuns],
-    laws: Sequence[tuple[str, str]],
-    aliases: Sequence[str | None] | None = None,
-) -> None:
-    """Refuse learners whose lines would merge with another controller's: two learners of one
-    name (a folder given twice, or two folders of one name), a learner named as a law (its
-    name or its label: ``learners/pn`` against ``--laws pn``), or one agent in two learners
-    (a study and its own ``seed-0`` folder), which would count that agent for one of them only.
-
-    :param paths: the learners' folders as given, in the order of ``learners``.
-    :param laws: each law's name as given and the label its episodes carry.
-    :param aliases: each learner's name read as a law's spelling, by its label (``pn`` ->
-        ``pn:tuned``), or None: a learner ``pn`` beside ``--laws pn:tuned`` is that law too.
-    :raises ValueError: one line, naming both sides of the clash.
-    """
-    seen: dict[str, Path] = {}
-    aliases = [None] * len(learners) if aliases is None else aliases
-    for path, learner, alias in zip(paths, learners, aliases, strict=True):
-        if learner.name in seen:
-            same = Path(path).resolve() == seen[learner.name].resolve()
-            raise ValueError(
-                f"{path}: names the learner {learner.name!r} twice; give each folder once"
-                if same
-                else f"{seen[learner.name]} and {path} are both named {learner.name!r} (a "
-                "learner is named by its folder): rename one"
-            )
-        seen[learner.name] = Path(path)
-        for law, label in laws:
-            if learner.name in (law, label) or alias == label:
-                raise ValueError(
-                    f"{path}: the learner is named {learner.name!r} (by its folder), as the law "
-                    f"{law!r} in --laws is: rename the folder or leave the law out"
-                )
-    owners: dict[Path, tuple[Path, Path]] = {}  # agent -> (its learner's folder, as given)
-    for path, learner in zip(paths, learners, strict=True):
-        for agent in learner.agents:
-            where = Path(agent).resolve()
-            if where in owners:
-                first, given = owners[where]
-                raise ValueError(
-                    f"the agent {given} is in two learners, {first} and {path}: give each "
-                    "agent in one learner only (a study, or one of its seed folders)"
-                )
-            owners[where] = (Path(path), Path(agent))
 
 
 def normalised_scores(raw: pd.DataFrame) -> pd.DataFrame:
@@ -210,7 +176,7 @@ def stratified_ci(
     cubes: Sequence[np.ndarray],
     reps: int,
     seed: int = 0,
-    level: float = 0.95,
+    level: float = LEVEL,
 ) -> tuple[float, float, float]:
     """``func`` of the controllers' (runs, tasks) score matrices and its percentile CI over
     ``reps`` stratified hierarchical bootstrap draws (module docstring).
@@ -266,23 +232,27 @@ def aggregate(
         reduce=operator.attrgetter("total_reward"),
         backend=backend,
     )
+    # each agent's (learner, run, training seed, path); a law is its own single run
     owner = {
-        str(a): (learner.name, k) for learner in learners for k, a in enumerate(learner.agents)
+        str(a): (learner.name, k, seed, str(Path(a).absolute()))
+        for learner in learners
+        for k, (a, seed) in enumerate(zip(learner.agents, learner.seeds, strict=True))
     }
     grid = itertools.product(policies, scenarios, seeds)  # rollout's order
     rows = [
-        (*owner.get(policy, (policy, 0)), scenario, int(seed), score)
+        (*owner.get(policy, (policy, 0, None, "")), scenario, int(seed), score)
         for (policy, scenario, seed), score in zip(grid, returns, strict=True)
     ]
-    scores = normalised_scores(
-        pd.DataFrame(rows, columns=["controller", "run", "scenario", "seed", "score"])
-    )
+    columns = ["controller", "run", "training_seed", "agent", "scenario", "seed", "score"]
+    raw = pd.DataFrame(rows, columns=columns)
+    raw["training_seed"] = raw["training_seed"].astype("Int64")  # blank for a law, a single run
+    scores = normalised_scores(raw)
     controllers = [learner.name for learner in learners] + list(laws)
     matrix = {c: _cube(scores[scores["controller"] == c], scenarios) for c in controllers}
     table = []
     for c in controllers:
-        for j, (metric, fn) in enumerate(aggregate_metrics().items()):
-            point, low, high = stratified_ci(fn, [matrix[c]], reps, seed=j)
+        for metric, fn in aggregate_metrics().items():
+            point, low, high = stratified_ci(fn, [matrix[c]], reps, seed=BOOTSTRAP_SEEDS[metric])
             table.append((c, metric, point, low, high))
     improvement = _improvements(matrix, learners, laws, reps)
     scores["split"] = scores["scenario"].map(scenario_split)
@@ -294,8 +264,8 @@ def aggregate(
             point, low, high = stratified_ci(
                 lambda m, t=tau: float(np.mean(m > t)),
                 [matrix[c]],
-                # a share of the draws (21 taus each), at least one: --reps 1..3 is allowed
-                max(1, reps // _PROFILE_REPS_SHARE),
+                _profile_reps(reps),
+                seed=BOOTSTRAP_SEEDS["profiles"],
             )
             profiles.append((c, float(tau), point, low, high))
     return {
@@ -331,7 +301,10 @@ def _improvements(
     for learner in learners:
         for law in laws:
             point, low, high = stratified_ci(
-                metrics.probability_of_improvement, [matrix[learner.name], matrix[law]], reps
+                metrics.probability_of_improvement,
+                [matrix[learner.name], matrix[law]],
+                reps,
+                seed=BOOTSTRAP_SEEDS["improvement"],
             )
             rows.append((learner.name, law, point, low, high))
     return rows
@@ -358,7 +331,9 @@ def _by_split(
         names = ",".join(scenarios[k] for k in columns)
         part = {c: m[:, columns] for c, m in matrix.items()}
         for c in part:
-            point, low, high = stratified_ci(metrics.aggregate_iqm, [part[c]], reps)
+            point, low, high = stratified_ci(
+                metrics.aggregate_iqm, [part[c]], reps, seed=BOOTSTRAP_SEEDS["splits"]
+            )
             rows.append((split, names, c, "", "iqm", point, low, high))
         for learner, law, point, low, high in _improvements(part, learners, laws, reps):
             rows.append((split, names, learner, law, "p_improvement", point, low, high))
@@ -366,11 +341,15 @@ def _by_split(
     return pd.DataFrame(rows, columns=columns)
 
 
-def write(tables: dict[str, pd.DataFrame], folder: Path) -> str:
-    """Write the tables and plots into ``folder`` (atomically, file by file); returns the
-    Markdown report."""
+def write(tables: dict[str, pd.DataFrame], folder: Path, meta: dict[str, Any] | None = None) -> str:
+    """Write the tables, plots and ``meta`` (as ``meta.json``, if given) into ``folder``
+    (atomically, file by file); returns the Markdown report."""
+    import json
+
     from follow_env.sim.atomic import atomic_write_text
 
+    if meta is not None:
+        atomic_write_text(folder / "meta.json", json.dumps(meta, indent=2) + "\n")
     for name in ("scores", "aggregate", "improvement", "splits", "profiles"):
         atomic_write_text(folder / f"{name}.csv", tables[name].to_csv(index=False))
     report = markdown(tables)

@@ -48,7 +48,6 @@ plots); the tables are the same, byte for byte, and a run takes up to
 from __future__ import annotations
 
 import argparse
-import contextlib
 import csv
 import json
 import sys
@@ -56,9 +55,9 @@ import time
 from collections.abc import Sequence
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import follow_env
+from eval.cli_aggregate import cmd_aggregate
 from eval.cli_base import (  # noqa: F401  (the limits, read here)
     MAX_EPISODES,
     MAX_EPISODES_WITHOUT_LOGS,
@@ -77,15 +76,12 @@ from eval.cli_base import (  # noqa: F401  (the limits, read here)
 )
 from eval.cli_dominance import cmd_dominance
 from eval.cli_errors import KNOWN_ERRORS, report_error
-from eval.cli_run import _check_grid, cmd_run, policy_label, refuse_aliases, run_backend, run_order
+from eval.cli_run import _check_grid, cmd_run, run_backend, run_order
 from eval.steplog import step_log_files
 from execution import BACKENDS
 from follow_env.sim.atomic import atomic_folder, check_new_folder
 
 __all__ = ["MAX_EPISODES", "MAX_EPISODES_WITHOUT_LOGS", "MAX_SEED", "main"]
-
-if TYPE_CHECKING:  # the module imports pandas: only when aggregate runs
-    from eval.aggregate import LearnerRuns
 
 
 def _backend_arguments(parser: argparse.ArgumentParser, where: str) -> None:
@@ -200,8 +196,9 @@ def build_parser() -> argparse.ArgumentParser:
         "--ideal-baseline",
         action="store_true",
         help="also run every policy under perfect sensing (the ideal preset's detector and "
-        "depth, or light sensors, on the run's config), labelled <policy>+ideal: the paired "
-        "differences say what sensing noise costs each controller",
+        "depth, with no per-episode draws of their errors, or light sensors, on the run's "
+        "config), labelled <policy>+ideal: the paired differences say what sensing noise costs "
+        "each controller",
     )
     metrics = sub.add_parser(
         "metrics",
@@ -317,65 +314,6 @@ def build_parser() -> argparse.ArgumentParser:
         "default: the run's folder)",
     )
     return parser
-
-
-def cmd_aggregate(args: argparse.Namespace) -> int:
-    """``follow-eval aggregate``: see :mod:`eval.aggregate`."""
-    from eval import aggregate as agg
-    from follow_env.sim.atomic import atomic_folder
-
-    learners = [agg.learner_runs(path) for path in args.runs]
-    laws = _names(args.laws, "laws")
-    named = [(law, policy_label(law, "laws")) for law in laws]
-    refuse_aliases(named, "laws")
-    # Each learner is named by its folder and its tables are keyed by that name, each agent
-    # by its path: a clash would merge two controllers' lines after every episode had run.
-    agg.check_learners(args.runs, learners, named, _law_aliases(learners, named))
-    scenarios = _names(args.scenarios, "scenarios")
-    _check_scenarios(scenarios)
-    n_agents = sum(len(learner.agents) for learner in learners)
-    _check_grid(n_agents + len(laws), len(scenarios), args.episodes, args.seed)
-    out = args.out or Path("runs") / f"aggregate-{datetime.now(UTC):%Y%m%d-%H%M%S}"
-    check_new_folder(out)
-    seeds = range(args.seed, args.seed + args.episodes)
-    tables = agg.aggregate(learners, laws, scenarios, seeds, reps=args.reps)
-    with atomic_folder(out) as tmp:
-        report = agg.write(tables, tmp)
-    print(report)
-    files = "aggregate.csv|md, improvement.csv, splits.csv, profiles.csv, scores.csv, plots/"
-    print(f"Wrote {out}/: {files}")
-    return 0
-
-
-def _law_aliases(learners: Sequence[LearnerRuns], named: list[tuple[str, str]]) -> list[str | None]:
-    """Each learner's folder name read as a law's spelling, by the label its episodes would
-    carry (``pn`` -> ``pn:tuned``), where it spells a law in ``--laws``; else None."""
-
-    def base(name: str) -> str:  # "pn:tuned@mecanum" -> "pn"
-        return name.partition("@")[0].partition(":")[0]
-
-    bases = {base(law) for law, _ in named}
-    aliases: list[str | None] = []
-    for learner in learners:
-        alias = None
-        if base(learner.name) in bases:  # only then is a policy built
-            with contextlib.suppress(UsageError):  # raised if it is not a law's spelling at all
-                alias = policy_label(learner.name, "laws")
-        aliases.append(alias)
-    return aliases
-
-
-def _check_scenarios(scenarios: list[str]) -> None:
-    """Refuse a ``--scenarios`` name PersonFollow does not know, naming the option."""
-    from follow_env.tasks import get_task
-
-    known = get_task("person_follow").variants()
-    for name in scenarios:
-        if name not in known:
-            raise UsageError(
-                f"--scenarios: unknown scenario {name!r}; known scenarios: "
-                + ", ".join(sorted(known))
-            )
 
 
 def cmd_thesis(args: argparse.Namespace) -> int:

@@ -16,6 +16,8 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+# read where the evaluation reads it too (follow-eval aggregate), which never imports training
+from eval.aggregate_inputs import STUDY, read_study
 from eval.provenance import ROLLOUT_PACKAGES, SHORT
 from follow_env.sim.atomic import atomic_write_text
 from train.algos import DEFAULT_ALGO, algo
@@ -25,7 +27,6 @@ from train.study_lock import StudyLock
 
 __all__ = ["CODE", "STUDY", "TRAINING_PACKAGES", "claim", "read_study", "study_settings"]
 
-STUDY = "study.json"
 #: The packages whose sources decide what a seed trains: the env, the policies, the evaluation
 #: (the held-out scores and the model card's comparison) and the training.
 TRAINING_PACKAGES = (*ROLLOUT_PACKAGES, "train")
@@ -56,27 +57,6 @@ def study_settings(args: Args, seeds: Sequence[int]) -> dict[str, Any]:
     else:
         out["algo"] = learner.name
     return json.loads(json.dumps(out))
-
-
-def read_study(study: Path) -> dict[str, Any] | None:
-    """The folder's ``study.json`` (None if it has none), checked.
-
-    :raises ValueError: naming the file if it is unreadable or not a study description.
-    """
-    path = study / STUDY
-    if not path.exists():
-        return None
-    try:
-        had = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError) as e:
-        raise ValueError(f"{path}: not a readable study description ({e})") from None
-    seeds = had.get("seeds") if isinstance(had, dict) else None
-    if not (isinstance(seeds, list) and all(type(s) is int and s >= 0 for s in seeds)):
-        raise ValueError(
-            f"{path}: not a study description (a JSON object with a list of seeds, as "
-            "follow-train --seeds writes it)"
-        )
-    return had
 
 
 def claim(

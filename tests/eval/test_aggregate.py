@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import shutil
 from pathlib import Path
 
@@ -10,6 +11,7 @@ import pandas as pd
 import pytest
 
 from eval.aggregate import (
+    BOOTSTRAP_SEEDS,
     LearnerRuns,
     _by_split,
     _cube,
@@ -19,9 +21,11 @@ from eval.aggregate import (
     scenario_split,
     stratified_ci,
 )
+from eval.aggregate_inputs import PLATFORM
 from eval.cli import main
 
-AGENT = Path(__file__).parents[2] / "policies" / "agents" / "ppo"
+ROOT = Path(__file__).parents[2]
+AGENT = ROOT / "policies" / "agents" / "ppo"
 
 
 def test_the_bootstrap_resamples_runs_within_each_task_then_their_episodes() -> None:
@@ -58,6 +62,13 @@ def test_a_run_is_a_training_seed_so_the_ci_covers_a_learners_mean() -> None:
         held_flat += low <= 0.6 <= high
     assert held / studies >= 0.8
     assert held_flat / studies <= 0.6
+    # the README quotes this simulation's figures
+    readme = " ".join((ROOT / "README.md").read_text(encoding="utf-8").split())
+    quoted = (
+        f"in {round(100 * held_flat / studies)} % of studies, the present unit's in "
+        f"{round(100 * held / studies)} %"
+    )
+    assert quoted in readme, quoted
 
 
 def test_the_episodes_are_drawn_alike_for_every_controller() -> None:
@@ -104,13 +115,15 @@ def test_a_folder_without_an_agent_is_refused_by_name(tmp_path: Path) -> None:
 
 @pytest.mark.slow
 def test_a_study_against_a_law_writes_the_tables_and_plots(
-    tmp_path: Path, capsys: pytest.CaptureFixture
+    tmp_path: Path, capsys: pytest.CaptureFixture, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     study = tmp_path / "study"
-    for k in (0, 1):  # two "seeds" (the shipped agent twice): the machinery, not the numbers
+    for k in (0, 2):  # two "seeds" (the shipped agent twice): the machinery, not the numbers
         shutil.copytree(AGENT, study / f"seed-{k}")
+    (study / "study.json").write_text(json.dumps({"seeds": [2, 0]}))
     out = tmp_path / "agg"
     grid = ["--laws", "pn", "--scenarios", "straight,curve", "--episodes", "2", "--reps", "200"]
+    monkeypatch.setattr("sys.argv", ["follow-eval", "aggregate", str(study), *grid])
     assert main(["aggregate", str(study), *grid, "--out", str(out)]) == 0
     agg = pd.read_csv(out / "aggregate.csv")
     assert set(agg["controller"]) == {"study", "pn"}
@@ -139,6 +152,31 @@ def test_a_study_against_a_law_writes_the_tables_and_plots(
         "performance_profiles.png",
     }
     assert "Probability of improvement" in capsys.readouterr().out
+    # each run by its training seed and agent, not only its place in the learner; a law's blank
+    runs = scores[scores["controller"] == "study"].drop_duplicates("run")
+    assert runs[["run", "training_seed"]].to_numpy().tolist() == [[0, 0], [1, 2]]
+    assert runs["agent"].tolist() == [str(study / "seed-0"), str(study / "seed-2")]
+    law = scores[scores["controller"] == "pn"]
+    assert law["training_seed"].isna().all()
+    assert law["agent"].isna().all()
+    # what ran, as follow-eval run records it
+    meta = json.loads((out / "meta.json").read_text())
+    assert meta["command"] == "follow-eval aggregate " + " ".join([str(study), *grid])
+    agents = meta["learners"]["study"]["agents"]
+    assert [(a["path"], a["training_seed"]) for a in agents] == [
+        (str(study / "seed-0"), 0),
+        (str(study / "seed-2"), 2),
+    ]
+    assert all(len(a["model_sha256"]) == 64 for a in agents)
+    assert meta["learners"]["study"]["study_json"] is True
+    assert meta["laws"] == {"pn": "pn:tuned"}
+    assert (meta["scenarios"], meta["seeds"]) == (["straight", "curve"], [9001, 9002])
+    assert meta["bootstrap"]["reps"] == 200
+    assert meta["bootstrap"]["profile_reps"] == 50
+    assert meta["bootstrap"]["seeds"] == BOOTSTRAP_SEEDS
+    assert meta["platform"] == PLATFORM
+    assert len(meta["code"]["sources_sha256"]) == 64
+    assert "numpy" in meta["versions"]
 
 
 def test_bad_arguments_give_one_line(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
@@ -275,3 +313,117 @@ def test_an_unknown_scenario_names_the_option(
     argv = ["aggregate", str(AGENT), "--laws", "pn", "--scenarios", "straight,bogus"]
     assert main([*argv, "--out", str(tmp_path / "x")]) == 2
     assert "error: --scenarios: unknown scenario 'bogus'; known scenarios: " in _one_line(capsys)
+
+
+def _study(folder: Path, finished: list[str], listed: list[int] | None = None) -> Path:
+    """A study whose ``finished`` seed folders hold a (placeholder) model.zip; ``listed``: its
+    study.json's seeds (None: no study.json)."""
+    for name in finished:
+        (folder / name).mkdir(parents=True)
+        (folder / name / "model.zip").write_bytes(b"")
+    if listed is not None:
+        (folder / "study.json").write_text(json.dumps({"seeds": listed, "n_envs": 4}))
+    return folder
+
+
+def test_a_study_is_the_seeds_its_record_lists(tmp_path: Path) -> None:
+    # seed-7 (not the study's) and seed-1.bak (not a seed) hold models too: neither is a run
+    study = _study(tmp_path / "s", ["seed-10", "seed-2", "seed-0", "seed-7", "seed-1.bak"])
+    (study / "study.json").write_text(json.dumps({"seeds": [10, 0, 2]}))
+    got = learner_runs(study)
+    assert (got.name, got.agents, got.seeds) == (
+        "s",
+        [study / "seed-0", study / "seed-2", study / "seed-10"],
+        [0, 2, 10],
+    )
+
+
+def test_a_study_seed_that_did_not_finish_is_refused_by_name(tmp_path: Path) -> None:
+    # seed 2 of 0-3 was cut short (checkpoints, no model.zip), seed 3 never started: scoring
+    # seeds 0 and 1 alone would keep the survivors
+    study = _study(tmp_path / "s", ["seed-0", "seed-1"], listed=[0, 1, 2, 3])
+    (study / "seed-2" / "checkpoints").mkdir(parents=True)
+    with pytest.raises(ValueError, match="seed-2, seed-3 of the study's seeds") as e:
+        learner_runs(study)
+    assert str(e.value) == (
+        f"{study}: seed-2, seed-3 of the study's seeds (study.json: 0,1,2,3) have no model.zip "
+        "(training did not finish), and scoring only the seeds that finished would bias the "
+        f"learner: run the same follow-train --seeds 0,1,2,3 ... --out {study} command again, "
+        "which resumes them"
+    )
+    (study / "study.json").write_text("{}")
+    with pytest.raises(ValueError, match=r"study.json: not a study description"):
+        learner_runs(study)
+
+
+def test_a_study_without_a_record_is_its_seed_folders(tmp_path: Path) -> None:
+    # made by hand (or before study.json): its seed-<k> folders, as follow-train names them
+    study = _study(tmp_path / "s", ["seed-1", "seed-0", "seed-1.bak", "seed-01", "seed-x"])
+    got = learner_runs(study)
+    assert (got.agents, got.seeds) == ([study / "seed-0", study / "seed-1"], [0, 1])
+    (study / "seed-2").mkdir()  # a seed whose training did not finish is not left out
+    with pytest.raises(ValueError, match=r"s: seed-2 holds no model.zip \(training did not"):
+        learner_runs(study)
+    assert learner_runs(_study(tmp_path / "run", ["."])).seeds == [None]  # one run folder
+
+
+def test_an_unfinished_study_is_refused_before_any_episode(
+    tmp_path: Path, capsys: pytest.CaptureFixture, no_episode: None
+) -> None:
+    study = tmp_path / "study"
+    for k in (0, 1):
+        shutil.copytree(AGENT, study / f"seed-{k}")
+    (study / "study.json").write_text(json.dumps({"seeds": [0, 1, 2]}))
+    out = tmp_path / "x"
+    argv = ["aggregate", str(study), "--laws", "pn", "--scenarios", "straight", "--out", str(out)]
+    assert main(argv) == 2
+    assert f"{study}: seed-2 of the study's seeds (study.json: 0,1,2) has no model.zip" in (
+        _one_line(capsys)
+    )
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("spelling", ["seed-0", "seed-0/", "./seed-0", "seed-0/model.zip"])
+def test_a_learners_agent_as_a_law_is_refused_before_any_episode(
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture,
+    no_episode: None,
+    monkeypatch: pytest.MonkeyPatch,
+    spelling: str,
+) -> None:
+    # its episodes were filed under the learner, and the command stopped after every episode
+    # with "cannot reshape array of size 0"
+    study = tmp_path / "study"
+    for k in (0, 1):
+        shutil.copytree(AGENT, study / f"seed-{k}")
+    monkeypatch.chdir(study)
+    out = tmp_path / "x"
+    law = spelling if spelling.startswith("./") else f"{study}/{spelling}"
+    argv = ["aggregate", str(study), "--laws", f"pn,{law}", "--scenarios", "straight"]
+    assert main([*argv, "--out", str(out)]) == 2
+    err = _one_line(capsys)
+    assert f"--laws: {law!r} is the agent {study / 'seed-0'} of the learner {study}" in err
+    assert not out.exists()
+
+
+def test_an_agent_of_another_platform_is_refused_saying_what_compares_it(
+    tmp_path: Path, capsys: pytest.CaptureFixture, no_episode: None
+) -> None:
+    agent = ROOT / "policies" / "agents" / "ppo_mecanum"
+    out = tmp_path / "x"
+    argv = ["aggregate", str(agent), "--laws", "pn", "--scenarios", "straight"]
+    assert main([*argv, "--out", str(out)]) == 2
+    err = _one_line(capsys)
+    assert f"{agent}: the agent was trained on the mecanum platform" in err
+    assert "follow-eval aggregate runs PersonFollow on the diff-drive platform (diff_drive)" in err
+    assert f"follow-eval run --policies {agent}@mecanum,pn@mecanum," in err
+    assert "run it @mecanum" not in err  # advice aggregate cannot follow
+    assert not out.exists()
+
+
+def test_aggregate_runs_on_the_task_default_platform() -> None:
+    from follow_env.platforms import get_platform
+    from follow_env.tasks import get_task
+
+    default = get_task("person_follow").resolve_config(None)
+    assert type(default.platform) is get_platform(PLATFORM).config
