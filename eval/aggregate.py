@@ -25,9 +25,10 @@ For every controller:
   seeds and the episodes' own, and a law's interval (one run) the episodes' alone;
 - the **performance profile**: the share of (run, scenario) scores above tau, for tau in
   [0, 1], with its bootstrap band;
-- the **probability of improvement** of each learner over each law, P(X > Y) between their
-  runs' scores averaged over the scenarios (rliable's ``probability_of_improvement``, the
-  Mann-Whitney statistic), with the same bootstrap over both.
+- the **probability of improvement** of each learner over each law, and of each learner over
+  each other learner, P(X > Y) between their runs' scores averaged over the scenarios
+  (rliable's ``probability_of_improvement``, the Mann-Whitney statistic), with the same
+  bootstrap over both.
 
 An earlier version counted every (training seed, episode) as a run. That ignores that episodes
 of one agent share its training seed: with five seeds whose agents differ, its intervals
@@ -51,14 +52,16 @@ A study's runs are the seeds its ``study.json`` lists, each of which must have f
 every controller runs on the differential drive (:data:`~eval.aggregate_inputs.PLATFORM`).
 
 Writes ``aggregate.csv`` (controller, metric, estimate, ci_low, ci_high), ``improvement.csv``
-(learner, law, probability, ci_low, ci_high), ``splits.csv`` (split, scenarios, controller,
-law, metric, estimate, ci_low, ci_high), ``profiles.csv``, ``scores.csv`` (every episode's
-raw and normalised score, with its split, its run's position ``run`` in the learner, the run's
-``training_seed`` and ``agent`` path, both blank for a law; a run's score is the mean of its
-rows), ``aggregate.md``, ``plots/`` (interval estimates, performance profiles) and
-``meta.json`` (the command, each learner's agents with their training seeds and model digests,
-the laws, scenarios, evaluation seeds, the bootstrap's draws and seeds
-(:func:`bootstrap_record`), package versions and the code's digest), atomically.
+(learner, law, probability, ci_low, ci_high), ``learners.csv`` (learner, other, probability,
+ci_low, ci_high: P(learner > other) for each pair of learners, with two or more),
+``splits.csv`` (split, scenarios, controller, law, metric, estimate, ci_low, ci_high),
+``profiles.csv``, ``scores.csv`` (every episode's raw and normalised score, with its split, its
+run's position ``run`` in the learner, the run's ``training_seed`` and ``agent`` path, both
+blank for a law; a run's score is the mean of its rows), ``aggregate.md``, ``plots/``
+(interval estimates, performance profiles) and ``meta.json`` (the command, each learner's
+agents with their training seeds and model digests, the laws, scenarios, evaluation seeds, the
+bootstrap's draws and seeds (:func:`bootstrap_record`), package versions and the code's
+digest), atomically.
 """
 
 from __future__ import annotations
@@ -102,6 +105,7 @@ BOOTSTRAP_SEEDS: dict[str, int] = {
     "median": 2,
     "optimality_gap": 3,
     "improvement": 0,
+    "between_learners": 0,
     "splits": 0,
     "profiles": 0,
 }
@@ -219,7 +223,8 @@ def aggregate(
 ) -> dict[str, pd.DataFrame]:
     """Run every agent and law on the grid and compute the tables (module docstring).
 
-    :returns: ``scores``, ``aggregate``, ``improvement`` and ``profiles`` tables.
+    :returns: ``scores``, ``aggregate``, ``improvement``, ``learners``, ``splits`` and
+        ``profiles`` tables.
     """
     agents = [str(a) for learner in learners for a in learner.agents]
     policies = [*agents, *laws]
@@ -255,6 +260,7 @@ def aggregate(
             point, low, high = stratified_ci(fn, [matrix[c]], reps, seed=BOOTSTRAP_SEEDS[metric])
             table.append((c, metric, point, low, high))
     improvement = _improvements(matrix, learners, laws, reps)
+    between = _between_learners(matrix, learners, reps)
     scores["split"] = scores["scenario"].map(scenario_split)
     splits = _by_split(matrix, learners, laws, scenarios, reps)
     taus = np.linspace(0.0, 1.0, 21)
@@ -275,6 +281,9 @@ def aggregate(
         ),
         "improvement": pd.DataFrame(
             improvement, columns=["learner", "law", "probability", "ci_low", "ci_high"]
+        ),
+        "learners": pd.DataFrame(
+            between, columns=["learner", "other", "probability", "ci_low", "ci_high"]
         ),
         "profiles": pd.DataFrame(
             profiles, columns=["controller", "tau", "fraction", "ci_low", "ci_high"]
@@ -307,6 +316,28 @@ def _improvements(
                 seed=BOOTSTRAP_SEEDS["improvement"],
             )
             rows.append((learner.name, law, point, low, high))
+    return rows
+
+
+def _between_learners(
+    matrix: dict[str, np.ndarray], learners: Sequence[LearnerRuns], reps: int
+) -> list[tuple[str, str, float, float, float]]:
+    """``(learner, other, P(learner > other), ci_low, ci_high)`` for every pair of learners,
+    each pair once in the order given (the Mann-Whitney statistic, ties counting half, so
+    P(other > learner) is 1 minus it): whether one learner's runs beat another's, which
+    overlapping IQM intervals cannot say."""
+    from rliable import metrics
+
+    rows = []
+    for i, first in enumerate(learners):
+        for second in learners[i + 1 :]:
+            point, low, high = stratified_ci(
+                metrics.probability_of_improvement,
+                [matrix[first.name], matrix[second.name]],
+                reps,
+                seed=BOOTSTRAP_SEEDS["between_learners"],
+            )
+            rows.append((first.name, second.name, point, low, high))
     return rows
 
 
@@ -350,7 +381,7 @@ def write(tables: dict[str, pd.DataFrame], folder: Path, meta: dict[str, Any] | 
 
     if meta is not None:
         atomic_write_text(folder / "meta.json", json.dumps(meta, indent=2) + "\n")
-    for name in ("scores", "aggregate", "improvement", "splits", "profiles"):
+    for name in ("scores", "aggregate", "improvement", "learners", "splits", "profiles"):
         atomic_write_text(folder / f"{name}.csv", tables[name].to_csv(index=False))
     report = markdown(tables)
     atomic_write_text(folder / "aggregate.md", report)
@@ -383,12 +414,25 @@ def markdown(tables: dict[str, pd.DataFrame]) -> str:
         for metric, law in zip(split["metric"], split["law"], strict=True)
     ]
     by_split = split[["split", "scenarios", "controller", "what", "value"]]
+    between = ""
+    if len(tables["learners"]):
+        pairs = tables["learners"].copy()
+        pairs["P(learner > other)"] = [
+            f"{p:.3f} [{lo:.3f}, {hi:.3f}]"
+            for p, lo, hi in zip(
+                pairs["probability"], pairs["ci_low"], pairs["ci_high"], strict=True
+            )
+        ]
+        between = "\n\n## Between learners\n\n" + pairs[
+            ["learner", "other", "P(learner > other)"]
+        ].to_markdown(index=False)
     return (
         "## Aggregate normalised scores (95 % stratified hierarchical bootstrap CIs; a run is a "
         "training seed)\n\n"
         + wide[list(aggregate_metrics())].to_markdown()
         + "\n\n## Probability of improvement\n\n"
         + imp[["learner", "law", "P(learner > law)"]].to_markdown(index=False)
+        + between
         + "\n\n## By scenario split (IQM; P(learner > law))\n\n"
         + by_split.to_markdown(index=False)
         + "\n"

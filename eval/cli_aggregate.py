@@ -72,7 +72,8 @@ def cmd_aggregate(args: argparse.Namespace) -> int:
     with atomic_folder(out) as tmp:
         report = agg.write(tables, tmp, meta)
     print(report)
-    files = "aggregate.csv|md, improvement.csv, splits.csv, profiles.csv, scores.csv, "
+    files = "aggregate.csv|md, improvement.csv, learners.csv, splits.csv, profiles.csv, "
+    files += "scores.csv, "
     print(f"Wrote {out}/: {files}plots/, meta.json")
     return 0
 

@@ -13,6 +13,7 @@ import pytest
 from eval.aggregate import (
     BOOTSTRAP_SEEDS,
     LearnerRuns,
+    _between_learners,
     _by_split,
     _cube,
     _resample_cube,
@@ -133,6 +134,9 @@ def test_a_study_against_a_law_writes_the_tables_and_plots(
     ).all()
     imp = pd.read_csv(out / "improvement.csv")
     assert imp[["learner", "law"]].to_numpy().tolist() == [["study", "pn"]]
+    pairs = pd.read_csv(out / "learners.csv")  # one learner: no pair, the columns only
+    assert pairs.empty
+    assert list(pairs.columns)[:2] == ["learner", "other"]
     assert 0.0 <= imp["probability"].iloc[0] <= 1.0
     scores = pd.read_csv(out / "scores.csv")
     assert len(scores) == (2 + 1) * 2 * 2  # (2 seeds + 1 law) x 2 scenarios x 2 episodes
@@ -233,6 +237,19 @@ def test_each_split_is_scored_on_its_own_scenarios_only() -> None:
     assert got["single_target", "agent", "p_improvement"] == pytest.approx(1.0)
     assert got["distractor", "agent", "p_improvement"] == pytest.approx(0.0)
     assert set(table["scenarios"]) == {"straight", "crossing"}
+
+
+def test_learners_are_compared_with_each_other_once_a_pair() -> None:
+    # overlapping IQM intervals cannot say whether one learner's runs beat another's
+    runs = np.array([[0.50, 0.60], [0.55, 0.65], [0.52, 0.62]])  # 3 runs x 2 scenarios
+    matrix = {"a": runs + 0.2, "b": runs, "c": runs - 0.2}
+    learners = [LearnerRuns(name, []) for name in ("a", "b", "c")]
+    pairs = _between_learners(matrix, learners, reps=200)
+    assert [(first, second) for first, second, *_ in pairs] == [("a", "b"), ("a", "c"), ("b", "c")]
+    for _, _, point, low, high in pairs:
+        assert point == pytest.approx(1.0)  # every run of the first above every run of the next
+        assert low <= point <= high
+    assert _between_learners(matrix, learners[:1], reps=200) == []  # one learner: no pair
 
 
 @pytest.mark.slow
