@@ -114,13 +114,19 @@ def test_a_folder_without_an_agent_is_refused_by_name(tmp_path: Path) -> None:
         learner_runs(tmp_path)
 
 
+def _agent_study(folder: Path, seeds: tuple[int, ...]) -> Path:
+    """A study without study.json whose ``seed-<k>`` folders each hold the shipped agent."""
+    for k in seeds:
+        shutil.copytree(AGENT, folder / f"seed-{k}")
+    return folder
+
+
 @pytest.mark.slow
 def test_a_study_against_a_law_writes_the_tables_and_plots(
     tmp_path: Path, capsys: pytest.CaptureFixture, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    study = tmp_path / "study"
-    for k in (0, 2):  # two "seeds" (the shipped agent twice): the machinery, not the numbers
-        shutil.copytree(AGENT, study / f"seed-{k}")
+    # two "seeds" (the shipped agent twice): the machinery, not the numbers
+    study = _agent_study(tmp_path / "study", (0, 2))
     (study / "study.json").write_text(json.dumps({"seeds": [2, 0]}))
     out = tmp_path / "agg"
     grid = ["--laws", "pn", "--scenarios", "straight,curve", "--episodes", "2", "--reps", "200"]
@@ -310,9 +316,7 @@ def test_a_learner_named_as_a_law_is_refused_before_any_episode(
 def test_an_agent_in_two_learners_is_refused_before_any_episode(
     tmp_path: Path, capsys: pytest.CaptureFixture, no_episode: None
 ) -> None:
-    study = tmp_path / "study"
-    for k in (0, 1):
-        shutil.copytree(AGENT, study / f"seed-{k}")
+    study = _agent_study(tmp_path / "study", (0, 1))
     out = tmp_path / "x"
     grid = ["--laws", "pn", "--scenarios", "straight", "--out", str(out)]
     assert main(["aggregate", str(study), str(study / "seed-0"), *grid]) == 2
@@ -387,9 +391,7 @@ def test_a_study_without_a_record_is_its_seed_folders(tmp_path: Path) -> None:
 def test_an_unfinished_study_is_refused_before_any_episode(
     tmp_path: Path, capsys: pytest.CaptureFixture, no_episode: None
 ) -> None:
-    study = tmp_path / "study"
-    for k in (0, 1):
-        shutil.copytree(AGENT, study / f"seed-{k}")
+    study = _agent_study(tmp_path / "study", (0, 1))
     (study / "study.json").write_text(json.dumps({"seeds": [0, 1, 2]}))
     out = tmp_path / "x"
     argv = ["aggregate", str(study), "--laws", "pn", "--scenarios", "straight", "--out", str(out)]
@@ -410,9 +412,7 @@ def test_a_learners_agent_as_a_law_is_refused_before_any_episode(
 ) -> None:
     # its episodes were filed under the learner, and the command stopped after every episode
     # with "cannot reshape array of size 0"
-    study = tmp_path / "study"
-    for k in (0, 1):
-        shutil.copytree(AGENT, study / f"seed-{k}")
+    study = _agent_study(tmp_path / "study", (0, 1))
     monkeypatch.chdir(study)
     out = tmp_path / "x"
     law = spelling if spelling.startswith("./") else f"{study}/{spelling}"
