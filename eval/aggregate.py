@@ -393,36 +393,23 @@ def write(tables: dict[str, pd.DataFrame], folder: Path, meta: dict[str, Any] | 
 
 def markdown(tables: dict[str, pd.DataFrame]) -> str:
     """The aggregate and improvement tables as Markdown."""
-    agg = tables["aggregate"].copy()
-    agg["value"] = [
-        f"{e:.3f} [{lo:.3f}, {hi:.3f}]"
-        for e, lo, hi in zip(agg["estimate"], agg["ci_low"], agg["ci_high"], strict=True)
-    ]
+    agg = tables["aggregate"].assign(value=_intervals(tables["aggregate"], "estimate"))
     wide = agg.pivot(index="controller", columns="metric", values="value")
-    imp = tables["improvement"].copy()
-    imp["P(learner > law)"] = [
-        f"{p:.3f} [{lo:.3f}, {hi:.3f}]"
-        for p, lo, hi in zip(imp["probability"], imp["ci_low"], imp["ci_high"], strict=True)
-    ]
-    split = tables["splits"].copy()
-    split["value"] = [
-        f"{e:.3f} [{lo:.3f}, {hi:.3f}]"
-        for e, lo, hi in zip(split["estimate"], split["ci_low"], split["ci_high"], strict=True)
-    ]
-    split["what"] = [
-        "IQM" if metric == "iqm" else f"P(> {law})"
-        for metric, law in zip(split["metric"], split["law"], strict=True)
-    ]
+    imp = tables["improvement"]
+    imp = imp.assign(**{"P(learner > law)": _intervals(imp, "probability")})
+    split = tables["splits"]
+    split = split.assign(
+        value=_intervals(split, "estimate"),
+        what=[
+            "IQM" if metric == "iqm" else f"P(> {law})"
+            for metric, law in zip(split["metric"], split["law"], strict=True)
+        ],
+    )
     by_split = split[["split", "scenarios", "controller", "what", "value"]]
     between = ""
     if len(tables["learners"]):
-        pairs = tables["learners"].copy()
-        pairs["P(learner > other)"] = [
-            f"{p:.3f} [{lo:.3f}, {hi:.3f}]"
-            for p, lo, hi in zip(
-                pairs["probability"], pairs["ci_low"], pairs["ci_high"], strict=True
-            )
-        ]
+        pairs = tables["learners"]
+        pairs = pairs.assign(**{"P(learner > other)": _intervals(pairs, "probability")})
         between = "\n\n## Between learners\n\n" + pairs[
             ["learner", "other", "P(learner > other)"]
         ].to_markdown(index=False)
@@ -430,12 +417,35 @@ def markdown(tables: dict[str, pd.DataFrame]) -> str:
         "## Aggregate normalised scores (95 % stratified hierarchical bootstrap CIs; a run is a "
         "training seed)\n\n"
         + wide[list(aggregate_metrics())].to_markdown()
+        + _single_runs(tables["scores"])
         + "\n\n## Probability of improvement\n\n"
         + imp[["learner", "law", "P(learner > law)"]].to_markdown(index=False)
         + between
         + "\n\n## By scenario split (IQM; P(learner > law))\n\n"
         + by_split.to_markdown(index=False)
         + "\n"
+    )
+
+
+def _intervals(table: pd.DataFrame, point: str) -> list[str]:
+    """``point [ci_low, ci_high]`` of each row of ``table``, to three decimals."""
+    rows = zip(table[point], table["ci_low"], table["ci_high"], strict=True)
+    return [f"{p:.3f} [{lo:.3f}, {hi:.3f}]" for p, lo, hi in rows]
+
+
+def _single_runs(scores: pd.DataFrame) -> str:
+    """A note naming the learners of one run (a single run folder): their intervals hold the
+    evaluation episodes' spread only, not the training seeds' the header speaks of."""
+    learned = scores[scores["agent"].fillna("").astype(str) != ""]
+    runs = learned.groupby("controller", sort=False)["run"].nunique()
+    single = [str(name) for name, n in runs.items() if n == 1]
+    if not single:
+        return ""
+    whose = "its" if len(single) == 1 else "their"
+    return (
+        f"\n\n{', '.join(single)}: one run (one training seed), so {whose} intervals hold the "
+        "evaluation episodes' spread only, not the spread between training seeds: give a "
+        "follow-train --seeds study to measure that."
     )
 
 

@@ -162,6 +162,7 @@ def test_a_study_against_a_law_writes_the_tables_and_plots(
         "performance_profiles.png",
     }
     assert "Probability of improvement" in capsys.readouterr().out
+    assert "one run (one training seed)" not in (out / "aggregate.md").read_text()  # two seeds
     # each run by its training seed and agent, not only its place in the learner; a law's blank
     runs = scores[scores["controller"] == "study"].drop_duplicates("run")
     assert runs[["run", "training_seed"]].to_numpy().tolist() == [[0, 0], [1, 2]]
@@ -265,6 +266,10 @@ def test_any_accepted_reps_gives_the_tables(tmp_path: Path, capsys: pytest.Captu
     grid = ["--laws", "pn", "--scenarios", "straight", "--episodes", "2", "--reps", "3"]
     assert main(["aggregate", str(AGENT), *grid, "--out", str(out)]) == 0
     capsys.readouterr()
+    # one run folder: its interval is the episodes' alone, which the report says under the
+    # header that speaks of training seeds
+    report = (out / "aggregate.md").read_text()
+    assert "ppo: one run (one training seed), so its intervals hold the evaluation" in report
     profiles = pd.read_csv(out / "profiles.csv")
     assert len(profiles) == 2 * 21  # two controllers, 21 taus
     assert (profiles["ci_low"] <= profiles["ci_high"]).all()
