@@ -45,7 +45,12 @@ class MotorConfig(Validated):
         0.08, 0.001, 2.0, "s", "choice: mechanical lag of a loaded gear-motor", lo_open=True
     )
     friction_duty_pct: float = param(
-        4.0, 0.0, 50.0, "%", "choice: Coulomb friction expressed as the duty it eats"
+        4.0,
+        0.0,
+        50.0,
+        "%",
+        "choice: friction as the duty it eats, taken off |duty| (a dead band: it acts against "
+        "the duty, not the motion, so it does not slow a coasting wheel)",
     )
     stall_duty_pct: float = param(
         8.0, 0.0, 50.0, "%", "choice: static friction; reference §2 observes stalls at low duty"
@@ -168,8 +173,8 @@ def pid_step(
 
     ``integral += e dt``; ``raw = (e - e_prev) / dt``; ``D = (tau D_prev + dt raw) / (tau + dt)``;
     ``u = Kp e + Ki integral + Kd D``, clamped to ``+-max_duty`` (reference §1.1). Anti-windup by
-    clamping: while the output saturates and the error pushes further into saturation the
-    integral is not advanced.
+    clamping (conditional integration): while the output saturates and the error pushes further
+    into saturation the integral is not advanced, and the duty stays at the limit.
 
     :return: ``(duty %, new integral, new filtered derivative)``.
     """
@@ -178,8 +183,10 @@ def pid_step(
     i_new = integral + error * dt_s
     u = kp * error + ki * i_new + kd * d_new
     if anti_windup and abs(u) > max_duty and u * error > 0.0:
+        # Hold the integral, and send the saturated duty: the output computed again from the
+        # held integral falls below the limit, so a wheel asked for more than its top speed
+        # ran below it, slower the more it was asked (a target of 2.08 m/s gave 1.34 m/s).
         i_new = integral
-        u = kp * error + ki * i_new + kd * d_new
     if u > max_duty:
         u = max_duty
     elif u < -max_duty:
@@ -206,9 +213,10 @@ def motor_step(
     """Wheel speed after one tick under ``duty_pct``: a first-order lag towards the steady speed.
 
     Steady speed: ``gain * no_load * sign(u) * (|u| - friction) / (100 - friction)`` for
-    ``|u| > friction``, else 0 (Coulomb friction eats the first ``friction`` % of duty). A wheel
-    turning slower than a small stiction speed while ``|u| < stall`` stops dead (static
-    friction: reference §2 reports motors stalling at low duty). The lag of time constant ``tau`` is
+    ``|u| > friction``, else 0 (friction eats the first ``friction`` % of duty: a dead band
+    against the duty, not the motion). A wheel turning slower than a small stiction speed while
+    ``|u| < stall`` stops dead (static friction: reference §2 reports motors stalling at low
+    duty). The lag of time constant ``tau`` is
     integrated exactly over a tick ``dt``: ``omega += (omega_ss - omega) alpha`` with
     ``alpha = 1 - exp(-dt / tau)`` (see :func:`lag_factor`).
     """
@@ -230,7 +238,7 @@ def motor_advance(
 ) -> tuple[float, float]:
     """The motor of :func:`motor_step` over ``dt_s`` of constant duty, integrated exactly.
 
-    The same model (steady speed, Coulomb friction, static stall) with the lag in closed form:
+    The same model (steady speed, friction dead band, static stall) with the lag in closed form:
     ``omega(t) = ss + (omega0 - ss) exp(-t / tau)`` and its integral for the angle, so that an
     event-driven chain (:mod:`follow_env.platforms.diff_drive.chain`) may step by any interval.
 

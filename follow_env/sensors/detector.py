@@ -52,7 +52,7 @@ class PerceptionConfig(Validated):
     )
     miss_prob: float = param(0.03, 0.0, 1.0, "", "choice: independent misses per frame")
     burst_start_prob: float = param(
-        0.01, 0.0, 1.0, "", "reference §1.3: bursts of occlusion; chance per frame that one starts"
+        0.01, 0.0, 1.0, "", "choice, in reference §1.3's model of bursts: chance a frame starts one"
     )
     burst_mean_frames: float = param(
         5.0, 1.0, 1000.0, "frames", "choice: mean length of a burst (geometric)"
@@ -64,7 +64,13 @@ class PerceptionConfig(Validated):
         0.05, 0.0, 1.0, "of box size", "choice: width/height jitter std"
     )
     min_visible_fraction: float = param(
-        0.3, 0.0, 1.0, "", "choice: a body less visible than this is not detected"
+        0.3,
+        0.0,
+        1.0,
+        "",
+        "choice: a body less visible than this is not detected (the share of the whole body's "
+        "box in sight: one cut off by the image's edge counts as hidden, so on the reference "
+        "robot nobody centred nearer than about 0.66 m is detected)",
     )
     min_box_height_px: float = param(
         10.0, 0.0, 1000.0, "px", "choice: smaller boxes are below the detector's resolution"

@@ -49,8 +49,8 @@ __all__ = [
 class PersonConfig(Validated):
     """The followed person: an upright box body and a human speed profile."""
 
-    height_m: float = param(1.7, 0.5, 2.5, "m", "choice: an adult about 1.7 m tall")
-    width_m: float = param(0.45, 0.1, 1.5, "m", "choice: about 0.45 m across the shoulders")
+    height_m: float = param(1.7, 0.5, 2.5, "m", "requirement: an adult about 1.7 m tall")
+    width_m: float = param(0.45, 0.1, 1.5, "m", "requirement: about 0.45 m across the shoulders")
     depth_m: float = param(0.25, 0.05, 1.5, "m", "choice: chest depth")
     cruise_speed_mps: float = param(
         1.0, 0.05, 3.0, "m/s", "choice: ~1 m/s walking pace behind a transport robot"
@@ -199,10 +199,10 @@ class EpisodeConfig(Validated):
         integer=True,
     )
     lost_timeout_s: float = param(
-        3.0, 0.0, 1000.0, "s", "choice: the person counts as lost after 3 s without a detection"
+        3.0, 0.0, 1000.0, "s", "requirement: lost after 3 s without a detection (anyone's)"
     )
     person_clearance_m: float = param(
-        0.3, 0.0, 5.0, "m", "choice: closer than 0.3 m to the person counts as a collision"
+        0.3, 0.0, 5.0, "m", "requirement: closer than 0.3 m to the person is a collision"
     )
 
 

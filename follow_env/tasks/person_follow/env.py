@@ -83,8 +83,9 @@ class PersonFollowEnv(TaskEnv):
     ## Episode End
 
     Terminated: the robot's footprint touches a wall or an obstacle, comes closer than
-    ``person_clearance_m`` (0.3 m) to the person, touches a bystander, or has not detected
-    the person for longer than ``lost_timeout_s`` (3 s). Truncated: the person's walk is over
+    ``person_clearance_m`` (0.3 m) to the person, touches a bystander, or has published no
+    detection for longer than ``lost_timeout_s`` (3 s): anyone's counts, a bystander taken for
+    the person too, as on the robot. Truncated: the person's walk is over
     and ``settle_s`` (2 s) have passed, or ``max_steps`` steps were taken.
     ``info["termination"]`` names the reason (``collision_wall``, ``collision_person``,
     ``collision_bystander``, ``lost``, ``walk_over``, ``step_limit``).
