@@ -8,18 +8,26 @@ difference from the current preset with a CI and a sign-flip permutation p-value
 (:func:`eval.stats.paired_test`).
 
 The choice (:func:`choose`) is the one-standard-error rule, as the grid search before it made
-it, with one addition: every candidate whose paired shortfall against the held-out top scorer is
-within one standard error of that shortfall, and that failed (lost the person or the line,
-collided) in no more episodes than the top scorer, is "as good" (``within_1se``); of those the
-one that turns most smoothly (lowest mean turn accel RMS) is ``chosen``. (Without the failure
-clause a candidate could pass *because* of a failure: its one very bad episode widens the very
-standard error it is measured against.) The current preset is a candidate,
-and a trial replaces it only with evidence: a held-out mean significantly above the preset's
-by the evaluation's rule (:data:`eval.dominance.RULE`: the paired difference's 95 % CI above 0
-*and* its permutation p < 0.05, :attr:`eval.stats.PairedTest.direction`), or within one
-standard error of the best and a smoother turn than the preset's. So the preset stays unless a
-trial scored better, or as well and more smoothly, on episodes none of them was tuned on;
-:func:`verdict` says which.
+it, with evidence required: every candidate whose paired shortfall against the held-out top
+scorer is within one standard error of that shortfall, and that failed (lost the person or the
+line, collided) in no more episodes than the top scorer, is "as good" (``within_1se``). (Without
+the failure clause a candidate could pass *because* of a failure: its one very bad episode
+widens the very standard error it is measured against.) Of those, a trial may replace the
+current preset (the last candidate) only with evidence against it, by the evaluation's rule
+(:data:`eval.dominance.RULE`: the paired difference's 95 % CI on one side of 0 *and* its
+permutation p < 0.05, :attr:`eval.stats.PairedTest.direction`), the p adjusted by Holm's method
+over the trials re-scored (the best of ``--top`` would otherwise pass by chance more often than
+the level says):
+
+- a held-out score significantly above the preset's, by at least :data:`MIN_GAIN` of it; or
+- a score not significantly below the preset's and a turn significantly smoother (the same rule
+  on the paired per-episode turn accel RMS), by at least :data:`MIN_SMOOTHER` of the preset's.
+
+Of the trials that may, the one that turns most smoothly is ``chosen``; if none may, the preset
+stays. :func:`verdict` says which, and why. (Until 2026-12-06 the smoothest "as good" candidate
+was picked first and only then asked for evidence, so a trial better by the rule could be
+passed over for a smoother one that had none; smoothness was compared by its means alone, and
+the trials' p-values were not adjusted.)
 """
 
 from __future__ import annotations
@@ -32,7 +40,7 @@ import numpy as np
 import optuna
 from optuna.trial import TrialState
 
-from eval.stats import ALPHA, PairedTest, mean_ci, paired_test
+from eval.stats import ALPHA, PairedTest, holm, mean_ci, paired_test
 from eval.tuning.objective import LawObjective
 
 __all__ = ["Candidate", "choose", "holdout_candidates", "reevaluate", "rounded", "verdict"]
@@ -159,29 +167,73 @@ def choose(
                 "values": {k: float(v) for k, v in c.values.items()},
             }
         )
-    pool = [r for r in rows if r["within_1se"]]
-    # Ties in smoothness go to the current preset (last), then to the better held-out mean.
-    best = min(
-        pool, key=lambda r: (r["turn_accel_rms_rad_s2"], r["trial"] is not None, -r["holdout_mean"])
-    )
-    # Only evidence replaces the current preset: a held-out score significantly better than
-    # the preset's by the evaluation's rule (CI above 0 and permutation p < ALPHA: the CI
-    # alone calls too many differences significant on paired seeds, eval.stats), or one as
-    # good and a smoother turn.
+    # Evidence against the preset, each kind over the family of trials re-scored (Holm): the
+    # best of --top trials tested on the episodes it was picked on would pass by chance more
+    # often than the level says.
+    trial_rows = rows[:-1]
+    turns = [np.asarray(e["turn_accel_rms_rad_s2"], dtype=np.float64) for e in episodes]
+    smoother = [
+        paired_test(turns[-1] - turns[i], BOOTSTRAP_SEED, c.label, "turn")
+        for i, c in enumerate(candidates[:-1])
+    ]
+    diff_holm = holm([r["diff_perm_p"] for r in trial_rows])
+    turn_holm = holm([t.p for t in smoother])
+    for r, dh, t, th in zip(trial_rows, diff_holm, smoother, turn_holm, strict=True):
+        r["diff_holm_p"], r["smoother_perm_p"], r["smoother_holm_p"] = float(dh), t.p, float(th)
+        r["smoother_direction"] = PairedTest(t.mean, t.low, t.high, float(th)).direction
+    rows[-1].update(diff_holm_p=1.0, smoother_perm_p=1.0, smoother_holm_p=1.0, smoother_direction=0)
+    # Only evidence replaces the current preset: among the candidates as good as the held-out
+    # top (within_1se), one whose score is significantly above the preset's by the evaluation's
+    # rule (CI above 0 and permutation p < ALPHA, Holm-adjusted) by at least MIN_GAIN of it, or
+    # one whose score is not significantly below it and whose turn is significantly smoother
+    # (the same rule on the paired turn accel RMS) by at least MIN_SMOOTHER. Of those, the most
+    # smoothly turning; none: the preset stays.
     now = rows[-1]
-    if not (_better(best) or best["turn_accel_rms_rad_s2"] < now["turn_accel_rms_rad_s2"]):
-        best = now
-    best["chosen"] = True
+    eligible = [
+        r
+        for r in trial_rows
+        if r["within_1se"] and (_better(r, now) or (_not_worse(r) and _smoother(r, now)))
+    ]
+    smoothest = min(
+        eligible, key=lambda r: (r["turn_accel_rms_rad_s2"], -r["holdout_mean"]), default=now
+    )
+    smoothest["chosen"] = True
     return rows
 
 
-def _better(row: Mapping[str, Any]) -> bool:
+#: The least held-out gain [share of the preset's mean score per episode] that replaces a preset
+#: on score: paired, nearly identical rollouts make a gain of 0.1 % significant, and a preset
+#: rewritten for it changes every result computed with it for nothing anyone would notice.
+MIN_GAIN = 0.01
+#: The least reduction of the turn accel RMS [share of the preset's] that replaces a preset on
+#: smoothness, for the same reason.
+MIN_SMOOTHER = 0.05
+
+
+def _better(row: Mapping[str, Any], now: Mapping[str, Any]) -> bool:
     """Whether a held-out row's paired difference from the current preset is significantly
-    above 0 by the evaluation's rule (:attr:`eval.stats.PairedTest.direction`)."""
+    above 0 by the evaluation's rule (:attr:`eval.stats.PairedTest.direction`, its p adjusted
+    by Holm over the trials) and at least :data:`MIN_GAIN` of the preset's mean."""
+    test = PairedTest(
+        row["diff_vs_current"], row["diff_ci_low"], row["diff_ci_high"], row["diff_holm_p"]
+    )
+    return test.direction > 0 and row["diff_vs_current"] >= MIN_GAIN * abs(now["holdout_mean"])
+
+
+def _not_worse(row: Mapping[str, Any]) -> bool:
+    """Whether a held-out row's score is not significantly below the preset's (unadjusted:
+    the stricter reading for the candidate)."""
     test = PairedTest(
         row["diff_vs_current"], row["diff_ci_low"], row["diff_ci_high"], row["diff_perm_p"]
     )
-    return test.direction > 0
+    return test.direction >= 0
+
+
+def _smoother(row: Mapping[str, Any], now: Mapping[str, Any]) -> bool:
+    """Whether a held-out row turns significantly more smoothly than the preset (Holm over the
+    trials) and by at least :data:`MIN_SMOOTHER` of the preset's turn accel RMS."""
+    gain = now["turn_accel_rms_rad_s2"] - row["turn_accel_rms_rad_s2"]
+    return row["smoother_direction"] > 0 and gain >= MIN_SMOOTHER * now["turn_accel_rms_rad_s2"]
 
 
 def verdict(rows: Sequence[Mapping[str, Any]]) -> str:
@@ -191,19 +243,21 @@ def verdict(rows: Sequence[Mapping[str, Any]]) -> str:
     if chosen is current:
         return f"keep {current['label']}: no trial is better on the held-out seeds by the rule"
     low, high = chosen["diff_ci_low"], chosen["diff_ci_high"]
-    if _better(chosen):
+    if _better(chosen, current):
         how = (
-            "better than the current preset (its paired difference's 95 % CI is above 0 and "
-            f"the permutation test's p < {ALPHA:g})"
+            "better than the current preset (its paired difference's 95 % CI is above 0, the "
+            f"permutation test's p < {ALPHA:g} with Holm's correction over the trials, and the "
+            f"gain at least {MIN_GAIN * 100:g} % of the preset's score)"
         )
     else:
-        where = "also within it" if current["within_1se"] else "below it"
         how = (
-            "within one standard error of the best held-out score and the most smoothly "
-            f"turning of those (the current preset: {where})"
+            "within one standard error of the best held-out score, not significantly below the "
+            "current preset, and turning significantly more smoothly than it (Holm over the "
+            f"trials; at least {MIN_SMOOTHER * 100:g} % less turn accel RMS): the smoothest "
+            "such trial"
         )
     return (
         f"replace {current['label']} by {chosen['label']}: {how}; paired difference "
         f"{chosen['diff_vs_current']:+.2f} [{low:+.2f}, {high:+.2f}] per episode, "
-        f"p {chosen['diff_perm_p']:.2g}"
+        f"p {chosen['diff_perm_p']:.2g} (Holm {chosen['diff_holm_p']:.2g})"
     )

@@ -21,6 +21,7 @@ from eval.tuning import (
     verdict,
 )
 from eval.tuning.cli import main
+from eval.tuning.holdout import MIN_GAIN
 from eval.tuning.objective import EVAL_SEEDS, HOLDOUT_SEED0, TUNE_SEED0
 from execution import Backend
 from policies import ParamRange, available_policies, tunable_law, tunable_laws
@@ -193,8 +194,84 @@ def test_a_trial_better_by_the_rule_replaces_the_preset_and_the_verdict_says_so(
     assert rows[0]["diff_perm_p"] < 0.05 < rows[1]["diff_perm_p"]
     said = verdict(rows)
     assert said.startswith("replace pn:tuned by trial 1: better than the current preset (its")
-    assert "95 % CI is above 0 and the permutation test's p < 0.05" in said
-    assert said.endswith(f"per episode, p {rows[0]['diff_perm_p']:.2g}")
+    assert "95 % CI is above 0, the permutation test's p < 0.05 with Holm's correction" in said
+    assert said.endswith(f"p {rows[0]['diff_perm_p']:.2g} (Holm {rows[0]['diff_holm_p']:.2g})")
+
+
+def _held(scores: list[np.ndarray], turns: list[float]) -> list[dict]:
+    """The held-out rows of trials 1.. and the preset (last), each turning at a constant rate
+    with a little noise of its own."""
+    rng = np.random.default_rng(7)
+    n = len(scores[0])
+    episodes = [
+        {
+            "score": score,
+            "turn_accel_rms_rad_s2": turn + rng.normal(0.0, 0.01, n),
+            "failed": np.zeros(n),
+        }
+        for score, turn in zip(scores, turns, strict=True)
+    ]
+    labels = [
+        Candidate(f"trial {k + 1}", {"x": float(k)}, trial=k + 1) for k in range(len(scores) - 1)
+    ]
+    return choose([*labels, Candidate("pn:tuned", {"x": -1.0})], episodes)
+
+
+def test_a_better_trial_is_not_passed_over_for_a_smoother_one_without_evidence() -> None:
+    # trial 1 is clearly better than the preset; trial 2 is as good as trial 1 within one SE,
+    # smoother than it but rougher than the preset, and not better than the preset by the rule:
+    # the smoothest "as good" candidate used to be picked first, failed the test, and the
+    # preset stayed with "no trial is better"
+    rng = np.random.default_rng(3)
+    preset = rng.normal(180.0, 1.0, 60)
+    first = preset + 10.0 + rng.normal(0.0, 0.5, 60)
+    second = preset + 6.0 + 40.0 * np.tile([1.0, -1.0], 30)  # +6 on average, +-40 an episode
+    rows = _held([first, second, preset], turns=[2.0, 1.5, 1.0])
+    assert rows[1]["within_1se"]
+    assert rows[1]["diff_perm_p"] >= 0.05
+    assert rows[0]["chosen"]
+    assert verdict(rows).startswith("replace pn:tuned by trial 1: better")
+
+
+def test_the_trials_evidence_is_adjusted_over_the_trials() -> None:
+    # one of three trials passes alone (p < 0.05), not after Holm's correction over three:
+    # 40 episodes, 27 of them +1 better and 13 -1 worse (p about 0.04), the other two level
+    preset = np.random.default_rng(4).normal(100.0, 1.0, 40)
+    steps = np.where(np.arange(40) < 27, 1.0, -1.0)
+    level = 0.5 * np.tile([1.0, -1.0], 20)
+    rows = _held([preset + steps, preset + level, preset - level, preset], turns=[1.0] * 4)
+    assert rows[0]["diff_perm_p"] < 0.05
+    assert rows[0]["diff_holm_p"] >= 0.05
+    assert rows[-1]["chosen"]
+
+
+def test_a_trivial_gain_does_not_replace_the_preset() -> None:
+    # paired, nearly identical rollouts: +0.1 % is significant, and less than MIN_GAIN
+    preset = np.random.default_rng(5).normal(180.0, 5.0, 60)
+    rows = _held([preset + 0.18, preset], turns=[1.0, 1.0])
+    assert rows[0]["diff_perm_p"] < 0.05
+    assert rows[0]["diff_vs_current"] < MIN_GAIN * rows[1]["holdout_mean"]
+    assert rows[1]["chosen"]
+
+
+def test_smoother_by_its_mean_alone_is_not_enough() -> None:
+    # the same score; the trial's turn 0.06 lower on average, +-0.3 an episode: no evidence
+    preset = np.random.default_rng(6).normal(100.0, 1.0, 40)
+    turns = 1.0 + 0.3 * np.tile([1.0, -1.0], 20)
+    rougher_or_smoother = 0.3 * np.tile([1.0, 1.0, -1.0, -1.0], 10)
+    zeros = np.zeros(40)
+    episodes = [
+        {
+            "score": preset,
+            "turn_accel_rms_rad_s2": turns - 0.06 + rougher_or_smoother,
+            "failed": zeros,
+        },
+        {"score": preset, "turn_accel_rms_rad_s2": turns, "failed": zeros},
+    ]
+    rows = choose([Candidate("trial 1", {"x": 1.0}, trial=1), Candidate("pn:tuned", {})], episodes)
+    assert rows[0]["turn_accel_rms_rad_s2"] < rows[1]["turn_accel_rms_rad_s2"]
+    assert rows[0]["smoother_perm_p"] >= 0.05
+    assert rows[1]["chosen"]
 
 
 def test_a_candidate_that_failed_more_often_than_the_top_is_not_as_good() -> None:
