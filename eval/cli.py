@@ -73,6 +73,8 @@ from eval.cli_base import (  # noqa: F401  (the limits, read here)
     _Parser,
     _positive,
     _workers,
+    sigterm_as_interrupt,
+    stopped,
 )
 from eval.cli_dominance import cmd_dominance
 from eval.cli_errors import KNOWN_ERRORS, report_error
@@ -465,7 +467,14 @@ def _task_of_log(path: Path) -> str:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``follow-eval`` and ``python -m eval``; returns the exit status: 0, 2 for
-    bad arguments or input, 3 when workers kept dying (:mod:`eval.cli_errors`), 130 on Ctrl-C."""
+    bad arguments or input, 3 when workers kept dying (:mod:`eval.cli_errors`), 130 on Ctrl-C,
+    143 on SIGTERM (which takes Ctrl-C's path: :func:`eval.cli_base.sigterm_as_interrupt`)."""
+    with sigterm_as_interrupt():
+        return _main(argv)
+
+
+def _main(argv: Sequence[str] | None) -> int:
+    """:func:`main` with SIGTERM handled."""
     args: argparse.Namespace | None = None
     try:
         args = build_parser().parse_args(argv)
@@ -481,9 +490,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         return commands[args.command](args)
     except KNOWN_ERRORS as e:
         return report_error(e, args)
-    except KeyboardInterrupt:
-        print(f"{PROG}: interrupted; nothing was written", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as e:
+        what, status = stopped(e)
+        print(f"{PROG}: {what}; nothing was written", file=sys.stderr)
+        return status
 
 
 if __name__ == "__main__":

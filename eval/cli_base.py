@@ -4,6 +4,10 @@ parsers of its option values."""
 from __future__ import annotations
 
 import argparse
+import contextlib
+import signal
+import threading
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any, NoReturn
 
@@ -15,8 +19,11 @@ __all__ = [
     "MAX_SEED",
     "PROG",
     "USAGE_ERROR",
+    "Terminated",
     "UsageError",
     "path_option",
+    "sigterm_as_interrupt",
+    "stopped",
 ]
 
 PROG = "follow-eval"
@@ -39,6 +46,58 @@ MAX_SEED = 2**256 - 1
 
 class UsageError(Exception):
     """Bad arguments or input: reported as one line, exit status 2."""
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM (``kill``, ``timeout``, Slurm's preemption, a Kubernetes stop), raised where the
+    command was, as Ctrl-C raises ``KeyboardInterrupt``: it takes Ctrl-C's path (``finally``
+    blocks release a study's locks and end the workers, one line says what was kept)."""
+
+
+#: Exit statuses of a command stopped by a signal: 128 + its number, as a shell reports a
+#: process the signal ended (Ctrl-C's SIGINT is 2, SIGTERM 15).
+INTERRUPTED = 130
+TERMINATED = 143
+
+
+#: Whether SIGTERM arrived within :func:`sigterm_as_interrupt`: Ray's ``ray.get`` catches the
+#: :class:`Terminated` raised while it waits and raises a plain ``KeyboardInterrupt`` instead.
+_SIGTERM_SEEN = threading.Event()
+
+
+def stopped(error: KeyboardInterrupt) -> tuple[str, int]:
+    """What a command stopped by ``error`` says it was (``interrupted`` for Ctrl-C,
+    ``terminated (SIGTERM)``), and its exit status (:data:`INTERRUPTED`, :data:`TERMINATED`)."""
+    if isinstance(error, Terminated) or _SIGTERM_SEEN.is_set():
+        return "terminated (SIGTERM)", TERMINATED
+    return "interrupted", INTERRUPTED
+
+
+@contextlib.contextmanager
+def sigterm_as_interrupt() -> Iterator[None]:
+    """Within the block, SIGTERM raises :class:`Terminated` in the main thread (elsewhere a
+    handler cannot be set, and nothing changes); the previous handler is put back after.
+
+    A second SIGTERM while the first is handled is ignored, so that the clean-up it started
+    runs to its end (a lock left behind makes the next run wait 30 s); SIGKILL remains for a
+    stop that must not wait.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    _SIGTERM_SEEN.clear()
+
+    def handler(signum: int, frame: object) -> None:
+        if not _SIGTERM_SEEN.is_set():
+            _SIGTERM_SEEN.set()
+            raise Terminated
+
+    previous = signal.signal(signal.SIGTERM, handler)
+    try:
+        yield
+    finally:  # a handler set outside Python reads as None: the default then
+        signal.signal(signal.SIGTERM, signal.SIG_DFL if previous is None else previous)
+        _SIGTERM_SEEN.clear()  # the block's messages are given: a later Ctrl-C is Ctrl-C
 
 
 class _Parser(argparse.ArgumentParser):

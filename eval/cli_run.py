@@ -23,6 +23,7 @@ from eval.cli_base import (
     UsageError,
     _config,
     _names,
+    stopped,
 )
 from execution import Backend, backend_from_args
 from follow_env.sim.atomic import atomic_folder, atomic_write_text, check_new_folder
@@ -191,6 +192,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     learned_episodes = n_episodes // len(policies) * learned
     check_new_folder(out)
     backend = run_backend(args, n_episodes, learned_episodes)
+    backend.reach()  # Ray connected (a cluster found answering) before the journal is made
     started = time.perf_counter()
     run = {"task": task.name, "policies": policies, task.variants_option: scenarios}
     run |= {"seeds": [seeds[0], seeds[-1]], "config": args.config}
@@ -256,8 +258,9 @@ def cmd_run(args: argparse.Namespace) -> int:
             journal.remove()  # nothing to resume (the ideal grid's journal is inside it)
         if not isinstance(e, KeyboardInterrupt):
             raise
+        what, status = stopped(e)  # Ctrl-C, or SIGTERM (eval.cli_base.sigterm_as_interrupt)
         print(
-            f"{PROG}: interrupted; {out} was not written. "
+            f"{PROG}: {what}; {out} was not written. "
             + (
                 f"{kept} finished work units are kept in {folder}: run the same command "
                 "again to resume"
@@ -266,7 +269,7 @@ def cmd_run(args: argparse.Namespace) -> int:
             ),
             file=sys.stderr,
         )
-        return 130
+        return status
     with atomic_folder(out) as tmp:
         log_path = None if args.no_logs else functools.partial(_log_path, tmp)
         if log_path is not None:

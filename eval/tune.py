@@ -12,12 +12,13 @@ ranges cover the old grid: ``tests/eval/test_tuning.py``).
 
 from __future__ import annotations
 
+import argparse
 import sys
 from collections.abc import Sequence
 
 from eval.tuning import cli
 
-__all__ = ["BUDGET", "LAWS", "commands", "main"]
+__all__ = ["BUDGET", "LAWS", "commands", "help_text", "main"]
 
 #: The laws tuned, in order.
 LAWS: tuple[str, ...] = ("pn", "mpn", "gsmpn")
@@ -41,10 +42,32 @@ def commands(
     return [[law, *budget, "--out", f"{root}/tune-{law}", *rest] for law in laws]
 
 
+def help_text(prog: str, laws: Sequence[str], budget: Sequence[str] = BUDGET) -> str:
+    """The ``--help`` of a command that runs follow-tune once per law (``python -m eval.tune``,
+    ``python -m eval.line_tune``): its own usage, not follow-tune's (which takes one law and
+    no ``--out-root``)."""
+    parser = argparse.ArgumentParser(
+        prog=prog,
+        usage=f"{prog} [-h] [--out-root DIR] [follow-tune options]",
+        description=f"Run follow-tune once per law ({', '.join(laws)}), each as `follow-tune "
+        f"LAW {' '.join(budget)} --out DIR/tune-LAW`, in turn; stop at the first that fails.",
+        epilog="Any other option is passed on to every run and overrides the budget's "
+        "(follow-tune --help lists them; LAW and --out are given here).",
+    )
+    parser.add_argument(
+        "--out-root", metavar="DIR", default="runs", help="where the runs' folders go (runs)"
+    )
+    return parser.format_help()
+
+
 def run_all(
     argv: Sequence[str], laws: Sequence[str], prog: str, budget: Sequence[str] = BUDGET
 ) -> int:
-    """Run :func:`commands` in turn; stop at the first that fails, with its exit status."""
+    """Run :func:`commands` in turn; stop at the first that fails, with its exit status
+    (``-h``/``--help``: :func:`help_text`, exit status 0)."""
+    if any(a in ("-h", "--help") for a in argv):
+        print(help_text(prog, laws, budget), end="")
+        return 0
     try:
         runs = commands(argv, laws, budget)
     except cli.UsageError as e:

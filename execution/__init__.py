@@ -8,8 +8,10 @@ config, seed) for a training run. :func:`execute` runs ``fn(unit)`` for every un
 - ``local``: in this process (``workers=1``) or a pool of spawned processes (``workers`` of
   2 or more: a pool, however few the units);
 - ``ray``: tasks on ``ray.init()``: a local Ray sized to this machine when no cluster is named,
-  ``address=`` (``--address``) or ``RAY_ADDRESS`` for a cluster. Ray is an optional extra
-  (``pip install 'personfollow[ray]'``).
+  ``address=`` (``--address``) or ``RAY_ADDRESS`` for a cluster, checked before ``ray.init``
+  so that an address no Ray answers at fails in one message rather than minutes of Ray's
+  retries (:mod:`execution.ray_address`). Ray is an optional extra (from a clone: ``pip
+  install -e '.[ray]' --config-settings editable_mode=compat``).
 
 Every task pins its numba, torch and OpenMP threads to the CPUs it was given
 (:func:`pin_threads`), so two tasks on one machine never oversubscribe it. A worker that dies

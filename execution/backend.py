@@ -21,15 +21,8 @@ from multiprocessing import get_context
 from numbers import Integral
 from typing import Any, TypeVar
 
-from execution.on_ray import (
-    _address_problem,
-    _check_reachable,
-    _connect,
-    _import_ray,
-    _release_ray,
-    _run_ray,
-    _stop_started_ray,
-)
+from execution.on_ray import _connect, _import_ray, _release_ray, _run_ray, _stop_started_ray
+from execution.ray_address import _address_problem, _check_reachable
 from execution.worker import (
     _IN_FLIGHT_PER_SLOT,
     WORKERS_LOST,
@@ -121,14 +114,29 @@ class Backend:
                 raise ValueError(f"address={self.address!r} is not allowed: {problem}")
 
     def check_reachable(self) -> None:
-        """Fail fast, without connecting, if this is Ray at a cluster address (given or
-        ``RAY_ADDRESS``) nothing listens at; callers check it before they write anything.
+        """Fail fast, without ``ray.init``, if this is Ray at a cluster address (given or
+        ``RAY_ADDRESS``; ``auto`` resolved as Ray resolves it) that no Ray GCS answers at
+        within ``execution.ray_address.GCS_ANSWER_S`` (20 s); callers check it before they
+        write anything.
 
         :raises BackendUnavailableError: naming the address.
         """
         address = self.address or os.environ.get("RAY_ADDRESS")
         if self.kind == "ray" and address:
             _check_reachable(address)
+
+    def reach(self) -> None:
+        """Connect now, as the first call would (ray: join the cluster named, or start the
+        local Ray, kept for the calls that follow as ``execute`` keeps it; local: nothing), so
+        that a caller finds an unreachable backend before it writes anything.
+
+        :raises BackendUnavailableError: naming the address, or why Ray did not start.
+        """
+        if self.kind != "ray":
+            return
+        self.check_reachable()  # first: a Ray initialised here would be refused for another
+        _connect(self)
+        _release_ray(POOL_IDLE_S)
 
     def slots(self) -> int:
         """Units that run at once: local, the workers; ray, the cluster's CPUs (connects)."""

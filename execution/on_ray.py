@@ -14,11 +14,13 @@ import copy
 import logging
 import os
 import re
+import signal
 import socket
 import threading
 from collections.abc import Callable, Iterator, Sequence
 from typing import TYPE_CHECKING, Any
 
+from execution.ray_address import _check_reachable, _endpoint
 from execution.worker import (
     _IN_FLIGHT_PER_SLOT,
     BackendUnavailableError,
@@ -32,44 +34,9 @@ from execution.worker import (
 if TYPE_CHECKING:
     from execution.backend import Backend
 
-#: What to run when Ray is missing (the ``ray`` extra of pyproject.toml).
-RAY_INSTALL = "pip install 'personfollow[ray]'"
-
-
-#: What a Ray address may be, for the messages that refuse one.
-_ADDRESS_FORMS = "HOST:PORT (e.g. 127.0.0.1:6379), ray://HOST:PORT, auto or local"
-
-
-def _address_problem(address: object) -> str | None:
-    """Why ``address`` is not a Ray cluster address (None if it is one).
-
-    ``auto`` and ``local`` are Ray's own words; otherwise ``HOST:PORT`` or Ray Client's
-    ``ray://HOST:PORT``, the port in 1..65535 and the host without spaces (``[...]`` for IPv6).
-    """
-    if not isinstance(address, str):
-        return f"must be a string: {_ADDRESS_FORMS}"
-    if address in ("auto", "local"):
-        return None
-    host, sep, port = address.removeprefix("ray://").rpartition(":")
-    bare = host.removeprefix("[").removesuffix("]") if host.startswith("[") else host
-    if (
-        not sep
-        or not bare
-        or any(c.isspace() for c in address)
-        or (":" in bare and not host.startswith("["))  # an IPv6 host needs its brackets
-        or "/" in bare
-    ):
-        return f"must be {_ADDRESS_FORMS}"
-    if not (port.isascii() and port.isdigit()) or not 1 <= int(port) <= 65535:
-        return f"the port must be an integer in 1..65535: {_ADDRESS_FORMS}"
-    return None
-
-
-def _endpoint(address: str) -> tuple[str, str]:
-    """``(host, port)`` of a ``[ray://]HOST:PORT`` address, an IPv6 host without its brackets
-    (the form sockets take)."""
-    host, _, port = address.removeprefix("ray://").rpartition(":")
-    return host.strip("[]"), port
+#: What to run when Ray is missing (the ``ray`` extra of pyproject.toml): the README's install
+#: of a clone, which this project is used from (``personfollow[ray]`` would fetch a release).
+RAY_INSTALL = "pip install -e '.[ray]' --config-settings editable_mode=compat (in the clone)"
 
 
 def _import_ray() -> Any:
@@ -117,7 +84,8 @@ def _local_cpus(backend: Backend) -> int:
 
 
 def _start(ray: Any, backend: Backend, address: str | None) -> None:
-    """``ray.init``: a new local Ray (no address) or a connection to the cluster named."""
+    """``ray.init``: a new local Ray (no address) or a connection to the cluster named (checked
+    first: :func:`execution.ray_address._check_reachable`)."""
     options: dict[str, Any] = {
         "include_dashboard": False,
         "logging_level": logging.WARNING,
@@ -131,17 +99,38 @@ def _start(ray: Any, backend: Backend, address: str | None) -> None:
     else:
         _check_reachable(address)
         options["address"] = address
+    caller = _sigterm_handler()
     try:
         ray.init(**options)
     except (ConnectionError, RuntimeError, ValueError) as e:
         where = address or "a local Ray"
         raise BackendUnavailableError(f"cannot start or reach Ray at {where}: {e}") from None
+    finally:
+        _restore_sigterm(caller)
     global _CONNECTED_ADDRESS, _STARTED
     _CONNECTED_ADDRESS = address
     _STARTED = None
     if address is None:
         with contextlib.suppress(Exception):  # unknown: treated as not this layer's
             _STARTED = (ray.get_runtime_context().gcs_address, options["num_cpus"])
+
+
+def _sigterm_handler() -> Any:
+    """The SIGTERM handler the caller installed (a Python function), or None: the default, an
+    ignored signal, or a call off the main thread (where handlers cannot be set)."""
+    if threading.current_thread() is not threading.main_thread():
+        return None
+    handler = signal.getsignal(signal.SIGTERM)
+    return handler if callable(handler) else None
+
+
+def _restore_sigterm(handler: Any) -> None:
+    """Put the caller's SIGTERM handler back: ``ray.init`` replaces it with its own (exit
+    status 15, and Ray's C++ stack dump), so a command that stops cleanly on SIGTERM (a
+    study's locks released, one line) would not. Without one of the caller's, Ray's stays:
+    it shuts Ray down on the way out."""
+    if handler is not None:
+        signal.signal(signal.SIGTERM, handler)
 
 
 def _started_here(ray: Any) -> bool:
@@ -288,30 +277,6 @@ def _addresses(host: str) -> set[str]:
     except (OSError, UnicodeError):
         return set()
     return {str(info[4][0]) for info in infos}
-
-
-def _check_reachable(address: str, timeout_s: float = 5.0) -> None:
-    """Fail fast on a cluster address nothing listens at: ``ray.init`` would retry for minutes.
-
-    ``auto`` and ``local`` are Ray's own words (no host to try); ``ray://host:port`` is Ray
-    Client's form of ``host:port``.
-    """
-    if address in ("auto", "local"):
-        return
-    # Checked again: RAY_ADDRESS reaches here without passing Backend's own check.
-    problem = _address_problem(address)
-    if problem is not None:
-        raise BackendUnavailableError(
-            f"address={address!r} is not a Ray cluster address: {problem}"
-        )
-    host, port = _endpoint(address)
-    try:
-        socket.create_connection((host, int(port)), timeout=timeout_s).close()
-    except OSError as e:
-        raise BackendUnavailableError(
-            f"cannot reach the Ray cluster at {address}: {e.strerror or e} (is `ray start "
-            "--head` running there? see --address and RAY_ADDRESS)"
-        ) from None
 
 
 #: What ``ray.get`` raises when a unit's worker or node died, or the node holding its result:

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import re
 import shlex
 import sys
@@ -24,7 +25,15 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from eval.cli_base import UsageError, _names, _Parser, _positive, path_option
+from eval.cli_base import (
+    UsageError,
+    _names,
+    _Parser,
+    _positive,
+    path_option,
+    sigterm_as_interrupt,
+    stopped,
+)
 from eval.tuning.folders import (
     check_journal_owner,
     check_out_folder,
@@ -117,7 +126,10 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--top", type=_positive, default=3, help="trials re-evaluated (default 3)")
     p.add_argument(
-        "--write-preset", type=path_option, default=None, help="also write the preset here"
+        "--write-preset",
+        type=path_option,
+        default=None,
+        help="also write the preset here (a new file, or a preset follow-tune wrote)",
     )
     p.add_argument(
         "--out", type=path_option, default=None, help="output folder (default runs/tune-LAW)"
@@ -185,6 +197,7 @@ def _check(args: argparse.Namespace) -> dict[str, Any]:
                 f"--write-preset {args.write_preset}: not a file in an existing folder"
             )
         _check_preset_target(args, database)
+        _check_preset_file(args.write_preset)
     space = {k: [r.low, r.high, r.log] for k, r in law.space.items()}
     return {
         "law": args.law,
@@ -215,6 +228,28 @@ def _check_preset_target(args: argparse.Namespace, database: Path | None) -> Non
                 f"--write-preset {args.write_preset}: that is {name}, which the study keeps "
                 "or follow-tune writes itself; give another file"
             )
+
+
+#: How a preset follow-tune writes begins (:func:`eval.tuning.report.preset_text`).
+_PRESET_HEAD = f"# {PROG} ".encode()
+
+
+def _check_preset_file(path: Path) -> None:
+    """``--write-preset`` replaces only a preset follow-tune wrote (its text begins with
+    ``# follow-tune ``), never another file: ``--write-preset policies/pn.py`` would otherwise
+    replace the law's module with four lines."""
+    if not path.exists():
+        return
+    try:
+        with path.open("rb") as f:
+            head = f.read(len(_PRESET_HEAD))
+    except OSError as e:
+        raise UsageError(f"--write-preset {path}: cannot be read: {e.strerror or e}") from None
+    if head != _PRESET_HEAD:
+        raise UsageError(
+            f"--write-preset {path}: the file exists and is not a preset follow-tune wrote (its "
+            f"text begins with {_PRESET_HEAD.decode()!r}); give a new file, or move that one"
+        )
 
 
 def _check_out_owner(out: Path, law: str, study: str) -> None:
@@ -274,32 +309,34 @@ def run(args: argparse.Namespace) -> int:
     law = tunable_law(args.law)
     workers = args.workers if args.backend == "ray" else args.workers or 1
     backend = backend_from_args(args.backend, workers=workers, address=args.address)
-    # The backend is reached before the study opens, so that an unreachable cluster leaves
-    # no journal behind (slots() connects only when it must count the cluster's CPUs).
-    backend.check_reachable()
+    # The backend is reached (Ray connected) before the study opens, whatever --workers says,
+    # so that an unreachable cluster leaves no journal behind and no failed trial in it.
+    backend.reach()
     batch = args.batch or backend.slots()
     from eval.tuning.driver import SearchConfig
 
     config = SearchConfig(args.trials, _tune_seeds(args.seeds), 1, args.seed)
     try:
         study = open_search(args.out, args.storage, args.study, config, identity)
-    except KeyboardInterrupt:  # open_search removed what it made: the folder, a new journal
+    except KeyboardInterrupt as e:  # open_search removed what it made: the folder, a new journal
+        what, status = stopped(e)  # Ctrl-C, or SIGTERM (sigterm_as_interrupt)
         print(
-            f"{PROG}: interrupted while opening the study {args.study} in {args.storage}; "
+            f"{PROG}: {what} while opening the study {args.study} in {args.storage}; "
             "no trial ran: run the same command again",
             file=sys.stderr,
         )
-        return 130
+        return status
     try:
         return _search_and_check(args, identity, law, backend, study, batch)
-    except KeyboardInterrupt:  # anywhere after the study opened: the search or held-out check
+    except KeyboardInterrupt as e:  # anywhere after the study opened: the search or held-out check
+        what, status = stopped(e)
         print(
-            f"{PROG}: interrupted; the study {args.study} in {args.storage} keeps its finished "
+            f"{PROG}: {what}; the study {args.study} in {args.storage} keeps its finished "
             f"trials (this run's held-out check is not in {args.out}): run the same command "
             "again to resume",
             file=sys.stderr,
         )
-        return 130
+        return status
 
 
 def _search_and_check(
@@ -364,14 +401,31 @@ def _search_and_check(
     atomic_write_text(args.out / "preset.txt", text)
     if args.write_preset is not None:
         atomic_write_text(args.write_preset, text)
-    atomic_write_text(args.out / "result.json", json.dumps(summary, indent=2) + "\n")
+    # Strict JSON: an interval undefined on one held-out episode is null, not NaN (which
+    # Python writes and reads back but JSON parsers elsewhere refuse).
+    result = json.dumps(_finite(summary), indent=2, allow_nan=False)
+    atomic_write_text(args.out / "result.json", result + "\n")
     print(table_text(rows, summary))
+    also = "" if args.write_preset is None else f" and {args.write_preset}"
     print(
         f"{ran} trials run now ({_counts(summary['trials'])} in the study), search "
         f"{searched:.0f} s, "
-        f"held-out check {elapsed - searched:.0f} s. Wrote {args.out}/result.json, preset.txt"
+        f"held-out check {elapsed - searched:.0f} s. Wrote {args.out}/result.json, "
+        f"preset.txt{also}"
     )
     return 0
+
+
+def _finite(value: Any) -> Any:
+    """``value`` (JSON-like: dicts, lists, numbers, text) with every NaN or infinite float
+    replaced by None, for ``json.dumps(..., allow_nan=False)``."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_finite(v) for v in value]
+    return value
 
 
 def _counts(trials: dict[str, int]) -> str:
@@ -388,7 +442,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         args.argv = argv
         return run(args)
 
-    return run_reporting(PROG, "the study keeps its finished trials", parsed_and_run)
+    with sigterm_as_interrupt():  # `timeout`, Slurm and Kubernetes stop a study as Ctrl-C does
+        return run_reporting(PROG, "the study keeps its finished trials", parsed_and_run)
 
 
 def run_reporting(prog: str, kept: str, call: Callable[[], int]) -> int:
@@ -411,9 +466,10 @@ def run_reporting(prog: str, kept: str, call: Callable[[], int]) -> int:
     except (UsageError, OSError, ValueError, BackendUnavailableError) as e:
         print(f"{prog}: error: {error_line(e)}", file=sys.stderr)  # a worker's: unit, host
         return 2
-    except KeyboardInterrupt:  # before the search began (its own is caught in run)
-        print(f"{prog}: interrupted before the search began; nothing was written", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as e:  # before the search began (its own is caught in run)
+        what, status = stopped(e)
+        print(f"{prog}: {what} before the search began; nothing was written", file=sys.stderr)
+        return status
 
 
 if __name__ == "__main__":

@@ -8,9 +8,17 @@ same driver can tune anything whose score is a mean over seeded episodes.
 
 Rungs (:func:`rungs`): a trial is scored on the first quarter of the tuning seeds, then on the
 first half, then on all of them; after each rung its mean so far is ``trial.report``-ed at step
-= seeds so far, and Optuna's :class:`~optuna.pruners.MedianPruner` prunes it when that mean is
-below the median of the finished trials at the same step. Every trial meets the same seeds in
-the same order, so the means compared at one step are over the same episodes.
+= seeds so far, and Optuna's :class:`~optuna.pruners.MedianPruner` prunes it when its best
+reported mean so far is below the median of the finished trials' means at the same step.
+Every trial meets the same seeds in the same order, so the finished trials' means at one step
+are over the same episodes; the trial's own best may be of an earlier rung (Optuna's rule:
+``PercentilePruner`` takes the best of a trial's intermediate values), so a trial lucky on the
+first quarter of the seeds can survive the half rung while trailing there: it costs episodes,
+not a wrong result (every trial that finishes is scored on all the seeds).
+
+In a batch, the trials asked while others of the batch have not been told are sampled with
+TPE's ``constant_liar`` (the pending ones count as poor), as Optuna recommends for parallel
+asks, so a batch of a cluster's size does not sample its trials from one unchanged model.
 
 Reproducibility: the sampler is a seeded :class:`~optuna.samplers.TPESampler`, the trials of a
 batch are asked, evaluated and told in trial order, and the evaluation is exact (identical
@@ -246,7 +254,7 @@ def _open_study(storage: str | Path, name: str, config: SearchConfig) -> optuna.
         # Wrapped into the sampler's range, so a resumed study with a seed near the top still
         # opens (each trial count still gives its own seed).
         sampler = optuna.samplers.TPESampler(
-            seed=(config.sampler_seed + n) % (MAX_SAMPLER_SEED + 1)
+            seed=(config.sampler_seed + n) % (MAX_SAMPLER_SEED + 1), constant_liar=True
         )
         pruner = optuna.pruners.MedianPruner(
             n_startup_trials=config.startup_trials, n_warmup_steps=0

@@ -24,6 +24,7 @@ from follow_env.sim.atomic import (
 )
 
 __all__ = [
+    "check_driver",
     "check_journal_owner",
     "check_journal_path",
     "check_out_folder",
@@ -64,7 +65,7 @@ def refuse_repeats(text: str | None, option: str) -> None:
 def check_storage(storage: str | None, out: Path) -> tuple[str, Path | None]:
     """``--storage`` (None: ``OUT/study.journal``; an empty one is :func:`refuse_empty`'s)
     checked: a journal path in an existing folder that is new, empty or a journal, or a
-    database URL that keeps its data.
+    database URL that keeps its data and whose driver is installed (:func:`check_driver`).
 
     :returns: the storage to open, and the database file of a ``sqlite:`` URL (else None).
     """
@@ -74,7 +75,44 @@ def check_storage(storage: str | None, out: Path) -> tuple[str, Path | None]:
         return str(out / "study.journal"), None
     if not is_url(storage):
         check_journal_path(Path(storage))
+    else:
+        check_driver(storage)
     return storage, sqlite_file(storage)
+
+
+#: The package (pip's name) of each database driver module SQLAlchemy imports for a storage
+#: URL: Optuna's own message for a missing one names neither the module nor the package.
+DRIVER_PACKAGES = {
+    "psycopg": "'psycopg[binary]'",  # postgresql:// in SQLAlchemy 2.1, postgresql+psycopg://
+    "psycopg2": "psycopg2-binary",  # postgresql:// in SQLAlchemy 2.0, postgresql+psycopg2://
+    "MySQLdb": "mysqlclient (or PyMySQL, with a mysql+pymysql:// URL)",  # mysql://
+    "pymysql": "PyMySQL",  # mysql+pymysql://
+}
+
+
+def check_driver(storage: str) -> None:
+    """A database URL's driver must be installed: say which package provides it.
+
+    :raises UsageError: naming the URL, the driver module and the package to install.
+    """
+    try:
+        from sqlalchemy.engine import make_url
+
+        url = make_url(storage)
+        dialect = url.get_dialect()
+    except Exception:  # a malformed URL or an unknown database: open_study names it
+        return
+    try:
+        dialect.import_dbapi()  # what create_engine imports (SQLAlchemy 2.0 and later)
+    except ImportError as e:
+        module = e.name or "its driver"
+        package = DRIVER_PACKAGES.get(module.partition(".")[0], module)
+        raise UsageError(
+            f"--storage {storage}: the {url.drivername} driver ({module}) is not installed: "
+            f"pip install {package}"
+        ) from None
+    except Exception:  # anything else is open_study's to report, as it reports the rest
+        return
 
 
 def sqlite_file(storage: str) -> Path | None:

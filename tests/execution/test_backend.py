@@ -164,7 +164,9 @@ def test_pinning_limits_numba_and_torch_in_this_process() -> None:
 
 def test_ray_without_ray_installed_says_how_to_install_it(monkeypatch) -> None:
     monkeypatch.setitem(sys.modules, "ray", None)  # import ray now raises ImportError
-    with pytest.raises(BackendUnavailableError, match=r"pip install 'personfollow\[ray\]'"):
+    # the README's install of a clone, not a release from PyPI
+    hint = r"pip install -e '\.\[ray\]' --config-settings editable_mode=compat"
+    with pytest.raises(BackendUnavailableError, match=hint):
         backend_from_args("ray")
 
 
@@ -244,7 +246,7 @@ def test_a_malformed_cluster_address_is_refused() -> None:
     for address in ("headnode", "headnode:\u00b2", "headnode:\u0663"):  # "²" broke int()
         with pytest.raises(BackendUnavailableError, match="not a Ray cluster address"):
             _check_reachable(address)
-    _check_reachable("auto")  # Ray's own word: nothing to try
+    _check_reachable("local")  # Ray's own word for a new instance: nothing to try
 
 
 def test_a_unit_finished_as_the_pool_breaks_is_neither_lost_nor_run_twice(monkeypatch) -> None:

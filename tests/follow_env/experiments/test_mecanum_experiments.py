@@ -70,5 +70,6 @@ def test_a_bad_out_or_trials_is_one_line_before_anything_runs(
         main([a.format(file=file) for a in args])
     assert e.value.code == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert message in err[-1] and "Traceback" not in "".join(err)
+    assert message in err[-1]
+    assert "Traceback" not in "".join(err)
     assert file.read_text() == "mine\n"
