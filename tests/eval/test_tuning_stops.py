@@ -136,7 +136,8 @@ def test_sigterm_stops_a_study_as_ctrl_c_does(tmp_path: Path, backend: list[str]
 @pytest.mark.slow
 def test_sigterm_stops_follow_eval_run_as_ctrl_c_does(tmp_path: Path) -> None:
     out = tmp_path / "run"
-    grid = ["--policies", "pn,mpn", "--scenarios", "straight,curve", "--episodes", "3"]
+    # enough units that SIGTERM lands while they run, not in the tables written after them
+    grid = ["--policies", "pn,mpn", "--scenarios", "straight,curve", "--episodes", "40"]
     proc = subprocess.Popen(
         [*EVAL, "run", *grid, "--workers", "1", "--out", str(out)],
         cwd=ROOT,
