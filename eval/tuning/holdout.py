@@ -120,9 +120,11 @@ def choose(
     :param episodes: per candidate, per-episode arrays on the same episodes in the same order:
         ``score`` (summed reward), ``turn_accel_rms_rad_s2`` and ``failed`` (0/1).
     :returns: per candidate: ``label, trial, search_score, holdout_mean, ci_low, ci_high,
-        diff_vs_current, diff_ci_low, diff_ci_high, diff_perm_p, se_gap, within_1se,
-        turn_accel_rms_rad_s2, failed, chosen, values`` (the current preset's difference is
-        the point 0 with p = 1).
+        diff_vs_current, diff_ci_low, diff_ci_high, diff_perm_p, diff_holm_p, se_gap,
+        within_1se, turn_accel_rms_rad_s2, smoother_diff, smoother_ci_low, smoother_ci_high,
+        smoother_perm_p, smoother_holm_p, failed, chosen, values`` (``smoother_*``: the paired
+        turn accel RMS the preset's minus the candidate's; the current preset's differences
+        are the point 0 with p = 1).
     """
     if not candidates or len(candidates) != len(episodes):
         raise ValueError("give one set of episodes per candidate, at least one candidate")
@@ -179,9 +181,10 @@ def choose(
     diff_holm = holm([r["diff_perm_p"] for r in trial_rows])
     turn_holm = holm([t.p for t in smoother])
     for r, dh, t, th in zip(trial_rows, diff_holm, smoother, turn_holm, strict=True):
-        r["diff_holm_p"], r["smoother_perm_p"], r["smoother_holm_p"] = float(dh), t.p, float(th)
-        r["smoother_direction"] = PairedTest(t.mean, t.low, t.high, float(th)).direction
-    rows[-1].update(diff_holm_p=1.0, smoother_perm_p=1.0, smoother_holm_p=1.0, smoother_direction=0)
+        r.update(diff_holm_p=float(dh), smoother_diff=t.mean, smoother_ci_low=t.low)
+        r.update(smoother_ci_high=t.high, smoother_perm_p=t.p, smoother_holm_p=float(th))
+    rows[-1].update(diff_holm_p=1.0, smoother_diff=0.0, smoother_ci_low=0.0, smoother_ci_high=0.0)
+    rows[-1].update(smoother_perm_p=1.0, smoother_holm_p=1.0)  # the preset against itself
     # Only evidence replaces the current preset: among the candidates as good as the held-out
     # top (within_1se), one whose score is significantly above the preset's by the evaluation's
     # rule (CI above 0 and permutation p < ALPHA, Holm-adjusted) by at least MIN_GAIN of it, or
@@ -232,8 +235,10 @@ def _not_worse(row: Mapping[str, Any]) -> bool:
 def _smoother(row: Mapping[str, Any], now: Mapping[str, Any]) -> bool:
     """Whether a held-out row turns significantly more smoothly than the preset (Holm over the
     trials) and by at least :data:`MIN_SMOOTHER` of the preset's turn accel RMS."""
+    keys = ("smoother_diff", "smoother_ci_low", "smoother_ci_high", "smoother_holm_p")
+    test = PairedTest(*(row[k] for k in keys))
     gain = now["turn_accel_rms_rad_s2"] - row["turn_accel_rms_rad_s2"]
-    return row["smoother_direction"] > 0 and gain >= MIN_SMOOTHER * now["turn_accel_rms_rad_s2"]
+    return test.direction > 0 and gain >= MIN_SMOOTHER * now["turn_accel_rms_rad_s2"]
 
 
 def verdict(rows: Sequence[Mapping[str, Any]]) -> str:
