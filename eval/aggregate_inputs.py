@@ -22,6 +22,8 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from policies.learned.ppo import MODEL  # a run folder holds it once its training finished
+
 __all__ = [
     "PLATFORM",
     "STUDY",
@@ -35,8 +37,6 @@ __all__ = [
 
 #: A study's record, written by ``follow-train --seeds`` (:mod:`train.study_record`).
 STUDY = "study.json"
-#: A trained agent's model file; a run folder holds it once its training has finished.
-MODEL = "model.zip"
 #: A training seed's run folder as ``follow-train --seeds`` names it (``seed-<k>``, ``k`` without
 #: leading zeros, so that ``seed-01`` cannot stand for seed 1 a second time).
 _SEED_FOLDER = re.compile(r"seed-(0|[1-9][0-9]*)")
