@@ -37,9 +37,10 @@ import numpy as np
 import yaml
 
 from eval.cli_base import UsageError, _names, _Parser, _positive, path_option
+from eval.provenance import running_sources_sha256
 from eval.rollout import rollout
 from eval.tuning.cli import run_reporting
-from eval.tuning.driver import SearchConfig, run_search
+from eval.tuning.driver import SearchConfig, run_search, stale_text
 from eval.tuning.folders import (
     check_journal_owner,
     check_out_folder,
@@ -57,10 +58,18 @@ from policies.space import ParamRange
 from train.config import read_document
 from train.options import check_new_run
 from train.ppo import DEFAULT_HYPERPARAMS, Args
+from train.study_record import TRAINING_PACKAGES
 
 __all__ = ["INTEGER_KEYS", "PPO_SPACE", "PPOObjective", "hyperparams_for", "main"]
 
 PROG = "python -m train.tune"
+
+
+def _say_stale(trials: Sequence[Any]) -> None:
+    """Name each trial a lost process left running that the search marked failed."""
+    for t in trials:
+        print(f"{PROG}: {stale_text(t)}", file=sys.stderr)
+
 
 PPO_SPACE = MappingProxyType(
     {
@@ -248,7 +257,14 @@ def run(args: argparse.Namespace) -> int:
     backend.check_reachable()  # before anything is written: no journal left behind
     config = dataclasses.replace(config, batch=backend.slots())
     try:
-        study = open_search(args.out, storage, args.study, config, identity)
+        study = open_search(
+            args.out,
+            storage,
+            args.study,
+            config,
+            identity,
+            running_sources_sha256(TRAINING_PACKAGES),
+        )
     except KeyboardInterrupt:  # open_search removed what it made: the folder, a new journal
         print(
             f"{PROG}: interrupted while opening the study {args.study} in {storage}; no trial "
@@ -257,7 +273,7 @@ def run(args: argparse.Namespace) -> int:
         )
         return 130
     try:
-        ran = run_search(study, PPO_SPACE, config, objective)
+        ran = run_search(study, PPO_SPACE, config, objective, on_stale=_say_stale)
     except KeyboardInterrupt:
         print(
             f"{PROG}: interrupted; the study {args.study} in {storage} keeps its finished "

@@ -15,7 +15,9 @@ PersonFollow, ``coordinate`` and ``pid`` on LineTrace. It replaces the grids of 
    and pruned by a median pruner when it trails. The current preset is the first trial.
 3. **Storage**: a journal file (``JournalStorage(JournalFileBackend(path))``, default
    ``OUT/study.journal``), or an RDB URL for several machines. The same command on the same
-   storage resumes the study and runs only the trials still missing.
+   storage resumes the study and runs only the trials still missing, if the study was made
+   with the same settings and scored by the same code; running trials whose machine is gone
+   (no heartbeat for 10 min) are failed, so they stop counting towards the budget.
 4. **Held-out check** (:mod:`eval.tuning.holdout`): the top trials and the current preset
    re-scored on held-out seeds 2000 + k, with bootstrap CIs and paired permutation tests,
    and one chosen by the one-standard-error rule, replacing the preset only on evidence (a

@@ -34,6 +34,7 @@ from eval.cli_base import (
     sigterm_as_interrupt,
     stopped,
 )
+from eval.provenance import running_sources_sha256
 from eval.tuning.folders import (
     check_journal_owner,
     check_out_folder,
@@ -317,7 +318,9 @@ def run(args: argparse.Namespace) -> int:
 
     config = SearchConfig(args.trials, _tune_seeds(args.seeds), 1, args.seed)
     try:
-        study = open_search(args.out, args.storage, args.study, config, identity)
+        study = open_search(
+            args.out, args.storage, args.study, config, identity, running_sources_sha256()
+        )
     except KeyboardInterrupt as e:  # open_search removed what it made: the folder, a new journal
         what, status = stopped(e)  # Ctrl-C, or SIGTERM (sigterm_as_interrupt)
         print(
@@ -348,7 +351,7 @@ def _search_and_check(
     batch: int,
 ) -> int:
     """Search the opened study, re-evaluate its best on held-out seeds, write the results."""
-    from eval.tuning.driver import SearchConfig, run_search
+    from eval.tuning.driver import SearchConfig, run_search, stale_text
     from eval.tuning.holdout import Candidate, holdout_candidates, reevaluate, verdict
     from eval.tuning.objective import HOLDOUT_SEED0, LawObjective
     from eval.tuning.report import preset_text, table_text
@@ -368,7 +371,13 @@ def _search_and_check(
                 file=sys.stderr,
             )
 
-    ran = run_search(study, law.space, config, objective, enqueue=base, on_batch=progress)
+    def stale(trials: list[Any]) -> None:
+        for t in trials:
+            print(f"{PROG}: {stale_text(t)}", file=sys.stderr)
+
+    ran = run_search(
+        study, law.space, config, objective, enqueue=base, on_batch=progress, on_stale=stale
+    )
     searched = time.perf_counter() - started
     current = Candidate(f"{law.law}:{law.default_preset}", base)
     candidates = holdout_candidates(study, current, args.top)
@@ -383,6 +392,7 @@ def _search_and_check(
         "study": args.study,
         "storage": str(args.storage),
         "search": identity,
+        "code": running_sources_sha256(),  # the study's too (open_search refuses another)
         "trials": {s: states.count(s) for s in sorted(set(states))},
         "ran_now": ran,
         "batch": batch,

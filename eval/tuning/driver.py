@@ -30,6 +30,15 @@ Storage: a journal file is checked before Optuna opens it (:func:`check_journal`
 Optuna appends its first record to any file it is given before it reads the file back, so an
 unrelated file named by mistake would be changed; a journal this module created is removed
 again if opening the study fails.
+
+Shared studies: machines sharing a study each ask their own batches; a running trial counts
+towards the budget, so together they do not overshoot it. A search records a heartbeat in
+each of its running trials every :data:`HEARTBEAT_S` (the trial's user attribute
+``heartbeat``, wall-clock seconds), and before each batch fails the running trials whose
+process is gone: of this machine, by their process id; of any machine, when their heartbeat
+is older than :data:`STALE_AFTER_S` (:func:`fail_stale`). A trial failed so while its
+process was in fact alive (a machine suspended for ten minutes) stays failed: that process
+drops it and finishes the rest of its batch.
 """
 
 from __future__ import annotations
@@ -38,6 +47,8 @@ import json
 import math
 import os
 import socket
+import threading
+import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -46,23 +57,28 @@ from typing import Any
 import numpy as np
 import optuna
 from optuna.distributions import BaseDistribution, FloatDistribution
-from optuna.trial import TrialState
+from optuna.exceptions import UpdateFinishedTrialError
+from optuna.trial import FrozenTrial, TrialState
 
 from policies.space import SearchSpace
 
 __all__ = [
     "FINISHED",
+    "HEARTBEAT_S",
     "MAX_SAMPLER_SEED",
+    "STALE_AFTER_S",
     "Evaluate",
     "SearchConfig",
     "check_journal",
     "distributions",
+    "fail_stale",
     "is_url",
     "journal_problem",
     "journal_study_names",
     "open_study",
     "run_search",
     "rungs",
+    "stale_text",
 ]
 
 #: The largest seed the TPE sampler takes (numpy's legacy ``RandomState``: 0..2**32 - 1).
@@ -70,6 +86,14 @@ MAX_SAMPLER_SEED = 2**32 - 1
 
 #: Trial states that count towards the budget once reached.
 FINISHED = (TrialState.COMPLETE, TrialState.PRUNED)
+
+#: How often a search records in the study that its running trials are alive, s.
+HEARTBEAT_S = 60.0
+#: A running trial whose last heartbeat is older than this was left by a process that is gone
+#: (a machine that crashed or lost the network): ten heartbeats missed, s. Heartbeats are
+#: wall-clock times (``time.time()``), so machines sharing a study need clocks that agree to
+#: well within it (NTP keeps them within a second).
+STALE_AFTER_S = 600.0
 
 Evaluate = Callable[[Sequence[Mapping[str, float]], Sequence[int]], list[dict[str, np.ndarray]]]
 """``evaluate(params of each trial, seeds)`` -> per trial a dict of arrays shaped (variants,
@@ -290,6 +314,8 @@ def _first_line(exc: BaseException) -> str:
 
 
 _OWNER = "owner"
+#: The user attribute holding a running trial's last heartbeat (``time.time()``, s).
+_BEAT = "heartbeat"
 
 
 def _owner() -> str:
@@ -310,17 +336,78 @@ def _alive(owner: str) -> bool:
     return True
 
 
-def fail_stale(study: optuna.Study) -> int:
-    """Mark as failed the running trials left by a process of this machine that is gone (an
-    interrupted run); returns how many. Running trials of other machines are left alone."""
-    stale = [
-        t.number
-        for t in study.get_trials(deepcopy=False, states=(TrialState.RUNNING,))
-        if not _alive(str(t.user_attrs.get(_OWNER, "")))
-    ]
-    for number in stale:
-        study.tell(number, state=TrialState.FAIL, skip_if_finished=True)
-    return len(stale)
+def _silent_s(trial: FrozenTrial, now: float) -> float | None:
+    """Seconds since a running trial's last heartbeat (None when it records none: a trial of a
+    version before heartbeats, judged by its owner alone)."""
+    beat = trial.user_attrs.get(_BEAT)
+    if isinstance(beat, bool) or not isinstance(beat, int | float):
+        return None
+    return now - float(beat)
+
+
+def fail_stale(study: optuna.Study, *, now: float | None = None) -> list[FrozenTrial]:
+    """Mark as failed the running trials whose process is gone, and return them as they were:
+    those of a process of this machine that no longer runs (an interrupted run), and those of
+    any machine whose last heartbeat is more than :data:`STALE_AFTER_S` old (a machine that
+    crashed: its trials would otherwise count towards the budget for ever)."""
+    now = time.time() if now is None else now
+    stale = []
+    for t in study.get_trials(deepcopy=False, states=(TrialState.RUNNING,)):
+        silent = _silent_s(t, now)
+        if not _alive(str(t.user_attrs.get(_OWNER, ""))) or (
+            silent is not None and silent > STALE_AFTER_S
+        ):
+            stale.append(t)
+    for t in stale:
+        study.tell(t.number, state=TrialState.FAIL, skip_if_finished=True)
+    return stale
+
+
+def stale_text(trial: FrozenTrial) -> str:
+    """What :func:`fail_stale` did to ``trial``, in a sentence for a command's output."""
+    return (
+        f"trial {trial.number} left running by {trial.user_attrs.get(_OWNER, '?')} marked "
+        "failed: its process is gone (on this machine) or sent no heartbeat for "
+        f"{STALE_AFTER_S / 60:.0f} min"
+    )
+
+
+class _Heartbeat:
+    """While in its ``with`` block, records every :data:`HEARTBEAT_S` in each of ``trials``
+    that it is alive (the user attribute ``heartbeat``), from a thread of its own, so another
+    machine sharing the study can tell a slow trial from one whose machine is gone. A trial
+    finished meanwhile (told, or failed by another machine) is no longer beaten for; a beat
+    the storage refuses is tried again at the next one (a missed beat costs nothing until ten
+    are missed)."""
+
+    def __init__(self, trials: Sequence[optuna.Trial], interval_s: float | None = None) -> None:
+        self._trials = list(trials)
+        self._interval_s = HEARTBEAT_S if interval_s is None else interval_s
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="follow-tune heartbeat", daemon=True)
+
+    def beat(self) -> None:
+        now = time.time()
+        for trial in list(self._trials):
+            try:
+                trial.set_user_attr(_BEAT, now)
+            except UpdateFinishedTrialError:
+                self._trials.remove(trial)
+            except Exception:  # a storage hiccup: the next beat tries again
+                pass
+
+    def _run(self) -> None:
+        while not self._stop.wait(self._interval_s):
+            self.beat()
+
+    def __enter__(self) -> _Heartbeat:
+        self.beat()
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._stop.set()
+        self._thread.join()
 
 
 def _counted(study: optuna.Study) -> int:
@@ -335,7 +422,8 @@ def run_search(
     evaluate: Evaluate,
     *,
     enqueue: Mapping[str, float] | None = None,
-    on_batch: Callable[[list[optuna.trial.FrozenTrial]], None] | None = None,
+    on_batch: Callable[[list[FrozenTrial]], None] | None = None,
+    on_stale: Callable[[list[FrozenTrial]], None] | None = None,
 ) -> int:
     """Run trials until the study holds ``config.trials`` finished ones; returns how many
     trials this call ran (0 when a resumed study was already complete).
@@ -346,18 +434,26 @@ def run_search(
     :param evaluate: scores a batch of trials on a set of seeds (:data:`Evaluate`).
     :param enqueue: parameters to try first in a new study (the current preset).
     :param on_batch: called with the batch's finished trials after each batch (progress).
+    :param on_stale: called with the running trials :func:`fail_stale` failed, as they were,
+        whenever it fails some: before the first batch and before each further one (a machine
+        sharing the study may be lost at any time).
     """
-    fail_stale(study)
     dists = distributions(space)
     if enqueue is not None and not study.trials:
         study.enqueue_trial(dict(enqueue))
     steps = rungs(len(config.seeds))
     ran = 0
-    while (left := config.trials - _counted(study)) > 0:
+    while True:
+        stale = fail_stale(study)
+        if stale and on_stale is not None:
+            on_stale(stale)
+        if (left := config.trials - _counted(study)) <= 0:
+            break
         batch = [study.ask(dists) for _ in range(min(config.batch, left))]
         for trial in batch:
             trial.set_user_attr(_OWNER, _owner())
-        _evaluate_batch(study, batch, steps, config.seeds, evaluate)
+        with _Heartbeat(batch):
+            _evaluate_batch(study, batch, steps, config.seeds, evaluate)
         ran += len(batch)
         if on_batch is not None:
             on_batch([study.trials[t.number] for t in batch])
@@ -384,20 +480,24 @@ def _evaluate_batch(
                 for key, values in result.items():
                     arrays.setdefault(key, []).append(np.asarray(values, dtype=np.float64))
                 joined = {k: np.concatenate(v, axis=-1) for k, v in arrays.items()}
-                for key, values in joined.items():
-                    trial.set_user_attr(key, float(np.nanmean(values)))
-                trial.set_user_attr("seeds", step)
-                trial.report(float(joined["score"].mean()), step)
-                if step < steps[-1] and trial.should_prune():
-                    study.tell(trial, state=TrialState.PRUNED)
-                else:
-                    survivors.append(trial)
+                try:
+                    for key, values in joined.items():
+                        trial.set_user_attr(key, float(np.nanmean(values)))
+                    trial.set_user_attr("seeds", step)
+                    trial.report(float(joined["score"].mean()), step)
+                    if step < steps[-1] and trial.should_prune():
+                        study.tell(trial, state=TrialState.PRUNED)
+                    else:
+                        survivors.append(trial)
+                except UpdateFinishedTrialError:
+                    pass  # failed meanwhile by a machine that missed our heartbeats: it stays so
             active = survivors
             start = step
             if not active:
                 return
         for trial in active:
-            study.tell(trial, float(np.concatenate(kept[trial.number]["score"], axis=-1).mean()))
+            score = float(np.concatenate(kept[trial.number]["score"], axis=-1).mean())
+            study.tell(trial, score, skip_if_finished=True)
     except BaseException:
         for trial in batch:  # an error or Ctrl-C: the batch's unfinished trials failed
             study.tell(trial, state=TrialState.FAIL, skip_if_finished=True)

@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from eval.cli_base import UsageError
+from eval.provenance import SHORT
 from follow_env.sim.atomic import (
     check_writable,
     file_on_path,
@@ -248,7 +249,12 @@ def check_out_folder(
 
 
 def open_search(
-    out: Path, storage: str, study: str, config: Any, identity: Mapping[str, Any]
+    out: Path,
+    storage: str,
+    study: str,
+    config: Any,
+    identity: Mapping[str, Any],
+    code: str | None = None,
 ) -> Any:
     """The study ``study`` in ``storage``, created with ``identity`` as its ``"search"``
     attribute, or loaded to resume if it holds the same one. The folder ``out`` (and its
@@ -258,6 +264,11 @@ def open_search(
     :param config: the search's :class:`~eval.tuning.driver.SearchConfig`.
     :param identity: what the study's trials depend on (JSON): a study run with other
         settings is refused, since its trials would not be comparable with this run's.
+    :param code: the digest of the code that scores a trial
+        (:func:`eval.provenance.running_sources_sha256` of the packages involved), kept as the
+        study's ``"code"`` attribute: a study scored by other code is refused as one with other
+        settings is (an edited reward or law would rank new trials against old scores). A
+        study that records none (made before the record, or without ``code``) takes this one.
     :raises UsageError: naming the folder or the study and what is wrong.
     """
     from eval.tuning.driver import open_study
@@ -280,6 +291,15 @@ def open_search(
             raise UsageError(
                 f"--study {study}: the study in {storage} was run with other settings "
                 f"({had}); give another --study or --storage"
+            )
+        had_code = opened.user_attrs.get("code")
+        if code is not None and had_code is None:
+            opened.set_user_attr("code", code)
+        elif code is not None and had_code != code:
+            raise UsageError(
+                f"--study {study}: the study in {storage} was scored by other code (sources "
+                f"{str(had_code)[:SHORT]}, this code's {code[:SHORT]}): its trials' scores would "
+                "not compare with new ones; give another --study or --storage"
             )
         return opened
     except BaseException:
