@@ -44,6 +44,7 @@ from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.callbacks import CheckpointCallback, EvalCallback
 from stable_baselines3.common.vec_env import VecNormalize
 
+import policies.learned.ppo as _ppo
 from follow_env.sim.atomic import atomic_path, atomic_write_text
 from follow_env.sim.checks import load_yaml, utf8_problem, yaml_problem
 
@@ -72,9 +73,8 @@ __all__ = [
     "write_sessions",
 ]
 
-CONFIG = "config.yaml"
-MODEL = "model.zip"
-NORMALIZATION = "vecnormalize.pkl"
+# An agent's files as the loader names them (one definition: a run folder is an agent's).
+CONFIG, MODEL, NORMALIZATION = _ppo.CONFIG, _ppo.MODEL, _ppo.NORMALIZATION
 CARD = "MODEL_CARD.md"
 CURVE = "learning_curve.png"
 EVALUATIONS = "evaluations.npz"
