@@ -151,9 +151,14 @@ class PPOObjective:
         section = self.section()
         section.update(hyperparams_for(values, self.n_envs()))
         text = yaml.safe_dump({env_id: section}, sort_keys=False)
-        # The budget and the lanes are in the key too: a trial's run trained for another
-        # --n-timesteps or --n-envs is another trial's, never reused for this one.
-        budget = f"n_timesteps={self.base.n_timesteps} n_envs={self.base.n_envs}\n"
+        # The budget, the lanes and the code are in the key too: a trial's run trained for
+        # another --n-timesteps or --n-envs, or by other code (the study refuses to resume
+        # across a code change, and a new study must not reuse the old code's agents), is
+        # another trial's, never reused for this one.
+        budget = (
+            f"n_timesteps={self.base.n_timesteps} n_envs={self.base.n_envs} "
+            f"code={running_sources_sha256(TRAINING_PACKAGES)}\n"
+        )
         key = hashlib.sha256((text + budget).encode()).hexdigest()[:12]
         trial = self.folder / f"trial-{key}"
         trial.mkdir(parents=True, exist_ok=True)
@@ -286,6 +291,7 @@ def run(args: argparse.Namespace) -> int:
     summary = {
         "study": args.study,
         "storage": storage,
+        "code": running_sources_sha256(TRAINING_PACKAGES),
         "ran_now": ran,
         "trials": len(study.trials),
         "n_timesteps": args.n_timesteps,

@@ -33,12 +33,14 @@ again if opening the study fails.
 
 Shared studies: machines sharing a study each ask their own batches; a running trial counts
 towards the budget, so together they do not overshoot it. A search records a heartbeat in
-each of its running trials every :data:`HEARTBEAT_S` (the trial's user attribute
-``heartbeat``, wall-clock seconds), and before each batch fails the running trials whose
-process is gone: of this machine, by their process id; of any machine, when their heartbeat
-is older than :data:`STALE_AFTER_S` (:func:`fail_stale`). A trial failed so while its
-process was in fact alive (a machine suspended for ten minutes) stays failed: that process
-drops it and finishes the rest of its batch.
+each of its running trials when it asks it and every :data:`HEARTBEAT_S` after (the user
+attribute ``heartbeat``, wall-clock seconds), and before each batch fails the running trials
+whose process is gone: of this machine, by their process id; of any machine, when their
+heartbeat is older than :data:`STALE_AFTER_S` (:func:`fail_stale`). A trial failed so while
+its process was in fact alive (a machine suspended for ten minutes) stays failed: that
+process drops it, whichever of its writes meets the failure, and finishes the rest of its
+batch. Machines that share a host name but not their process ids (containers on one host's
+name) would fail each other's trials by the process-id rule: give them their own names.
 """
 
 from __future__ import annotations
@@ -49,6 +51,7 @@ import os
 import socket
 import threading
 import time
+import warnings
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -316,6 +319,8 @@ def _first_line(exc: BaseException) -> str:
 _OWNER = "owner"
 #: The user attribute holding a running trial's last heartbeat (``time.time()``, s).
 _BEAT = "heartbeat"
+#: Heartbeats refused in a row before a warning says so (a storage hiccup is not worth one).
+_FAILED_BEATS = 3
 
 
 def _owner() -> str:
@@ -358,9 +363,18 @@ def fail_stale(study: optuna.Study, *, now: float | None = None) -> list[FrozenT
             silent is not None and silent > STALE_AFTER_S
         ):
             stale.append(t)
-    for t in stale:
-        study.tell(t.number, state=TrialState.FAIL, skip_if_finished=True)
-    return stale
+    return [t for t in stale if _told(study, t.number, state=TrialState.FAIL)]
+
+
+def _told(study: optuna.Study, number: int, value: float | None = None, **kwargs: Any) -> bool:
+    """``study.tell`` of a trial that another process may finish at the same moment (its owner
+    telling it, or another machine failing it as stale); whether this tell finished it. A
+    trial finished first stays as that process left it."""
+    try:
+        told = study.tell(number, value, skip_if_finished=True, **kwargs)
+    except UpdateFinishedTrialError:  # finished between Optuna's check and its write
+        return False
+    return told.state == kwargs.get("state", TrialState.COMPLETE)
 
 
 def stale_text(trial: FrozenTrial) -> str:
@@ -374,17 +388,19 @@ def stale_text(trial: FrozenTrial) -> str:
 
 class _Heartbeat:
     """While in its ``with`` block, records every :data:`HEARTBEAT_S` in each of ``trials``
-    that it is alive (the user attribute ``heartbeat``), from a thread of its own, so another
-    machine sharing the study can tell a slow trial from one whose machine is gone. A trial
-    finished meanwhile (told, or failed by another machine) is no longer beaten for; a beat
-    the storage refuses is tried again at the next one (a missed beat costs nothing until ten
-    are missed)."""
+    that it is alive (the user attribute ``heartbeat``; the first beat is the caller's, on
+    asking), from a thread of its own, so another machine sharing the study can tell a slow
+    trial from one whose machine is gone. A trial finished meanwhile (told, or failed by
+    another machine) is no longer beaten for. A beat the storage refuses is tried again at the
+    next one; after :data:`_FAILED_BEATS` refused in a row a warning says so once, since
+    other machines fail the trials when none has been recorded for :data:`STALE_AFTER_S`."""
 
     def __init__(self, trials: Sequence[optuna.Trial], interval_s: float | None = None) -> None:
         self._trials = list(trials)
         self._interval_s = HEARTBEAT_S if interval_s is None else interval_s
         self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, name="follow-tune heartbeat", daemon=True)
+        self._thread = threading.Thread(target=self._run, name="tuning heartbeat", daemon=True)
+        self._refused = 0
 
     def beat(self) -> None:
         now = time.time()
@@ -393,15 +409,25 @@ class _Heartbeat:
                 trial.set_user_attr(_BEAT, now)
             except UpdateFinishedTrialError:
                 self._trials.remove(trial)
-            except Exception:  # a storage hiccup: the next beat tries again
-                pass
+            except Exception as e:  # a storage hiccup: the next beat tries again
+                self._refused += 1
+                if self._refused == _FAILED_BEATS:
+                    warnings.warn(
+                        f"{_FAILED_BEATS} heartbeats in a row could not be recorded in the "
+                        f"study ({type(e).__name__}: {e}); other machines sharing it fail "
+                        f"this search's running trials after {STALE_AFTER_S / 60:.0f} min "
+                        "without one",
+                        RuntimeWarning,
+                        stacklevel=1,
+                    )
+                return
+        self._refused = 0
 
     def _run(self) -> None:
         while not self._stop.wait(self._interval_s):
             self.beat()
 
     def __enter__(self) -> _Heartbeat:
-        self.beat()
         self._thread.start()
         return self
 
@@ -449,11 +475,20 @@ def run_search(
             on_stale(stale)
         if (left := config.trials - _counted(study)) <= 0:
             break
-        batch = [study.ask(dists) for _ in range(min(config.batch, left))]
-        for trial in batch:
-            trial.set_user_attr(_OWNER, _owner())
-        with _Heartbeat(batch):
-            _evaluate_batch(study, batch, steps, config.seeds, evaluate)
+        batch: list[optuna.Trial] = []
+        try:
+            for _ in range(min(config.batch, left)):
+                # Owned and beaten for at once: a trial asked, then left by a crash before its
+                # batch began, must still be found stale (by its process or its heartbeat).
+                batch.append(study.ask(dists))
+                batch[-1].set_user_attr(_OWNER, _owner())
+                batch[-1].set_user_attr(_BEAT, time.time())
+            with _Heartbeat(batch):
+                _evaluate_batch(study, batch, steps, config.seeds, evaluate)
+        except BaseException:
+            for trial in batch:  # an error or Ctrl-C: the batch's unfinished trials failed
+                _told(study, trial.number, state=TrialState.FAIL)
+            raise
         ran += len(batch)
         if on_batch is not None:
             on_batch([study.trials[t.number] for t in batch])
@@ -471,34 +506,29 @@ def _evaluate_batch(
     active = list(batch)
     kept: dict[int, dict[str, list[np.ndarray]]] = {t.number: {} for t in batch}
     start = 0
-    try:
-        for step in steps:
-            results = evaluate([t.params for t in active], seeds[start:step])
-            survivors = []
-            for trial, result in zip(active, results, strict=True):
-                arrays = kept[trial.number]
-                for key, values in result.items():
-                    arrays.setdefault(key, []).append(np.asarray(values, dtype=np.float64))
-                joined = {k: np.concatenate(v, axis=-1) for k, v in arrays.items()}
-                try:
-                    for key, values in joined.items():
-                        trial.set_user_attr(key, float(np.nanmean(values)))
-                    trial.set_user_attr("seeds", step)
-                    trial.report(float(joined["score"].mean()), step)
-                    if step < steps[-1] and trial.should_prune():
-                        study.tell(trial, state=TrialState.PRUNED)
-                    else:
-                        survivors.append(trial)
-                except UpdateFinishedTrialError:
-                    pass  # failed meanwhile by a machine that missed our heartbeats: it stays so
-            active = survivors
-            start = step
-            if not active:
-                return
-        for trial in active:
-            score = float(np.concatenate(kept[trial.number]["score"], axis=-1).mean())
-            study.tell(trial, score, skip_if_finished=True)
-    except BaseException:
-        for trial in batch:  # an error or Ctrl-C: the batch's unfinished trials failed
-            study.tell(trial, state=TrialState.FAIL, skip_if_finished=True)
-        raise
+    for step in steps:
+        results = evaluate([t.params for t in active], seeds[start:step])
+        survivors = []
+        for trial, result in zip(active, results, strict=True):
+            arrays = kept[trial.number]
+            for key, values in result.items():
+                arrays.setdefault(key, []).append(np.asarray(values, dtype=np.float64))
+            joined = {k: np.concatenate(v, axis=-1) for k, v in arrays.items()}
+            try:
+                for key, values in joined.items():
+                    trial.set_user_attr(key, float(np.nanmean(values)))
+                trial.set_user_attr("seeds", step)
+                trial.report(float(joined["score"].mean()), step)
+                if step < steps[-1] and trial.should_prune():
+                    _told(study, trial.number, state=TrialState.PRUNED)
+                else:
+                    survivors.append(trial)
+            except UpdateFinishedTrialError:
+                pass  # failed meanwhile by a machine that missed our heartbeats: it stays so
+        active = survivors
+        start = step
+        if not active:
+            return
+    for trial in active:
+        score = float(np.concatenate(kept[trial.number]["score"], axis=-1).mean())
+        _told(study, trial.number, score)

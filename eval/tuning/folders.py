@@ -266,12 +266,15 @@ def open_search(
         settings is refused, since its trials would not be comparable with this run's.
     :param code: the digest of the code that scores a trial
         (:func:`eval.provenance.running_sources_sha256` of the packages involved), kept as the
-        study's ``"code"`` attribute: a study scored by other code is refused as one with other
-        settings is (an edited reward or law would rank new trials against old scores). A
-        study that records none (made before the record, or without ``code``) takes this one.
+        study's ``"code"`` attribute: a study scored by other code with trials still to run
+        (fewer finished than ``config.trials``) is refused as one with other settings is (an
+        edited reward or law would rank new trials against old scores); a complete one is
+        not, since no trial is scored again (the held-out check scores its candidates anew
+        with this code). A study that records none (made before the record, or without
+        ``code``) takes this one.
     :raises UsageError: naming the folder or the study and what is wrong.
     """
-    from eval.tuning.driver import open_study
+    from eval.tuning.driver import FINISHED, open_study
 
     made = missing_folders(out)  # ``out`` and any missing parents, deepest first
     try:
@@ -293,13 +296,14 @@ def open_search(
                 f"({had}); give another --study or --storage"
             )
         had_code = opened.user_attrs.get("code")
+        finished = len(opened.get_trials(deepcopy=False, states=FINISHED))
         if code is not None and had_code is None:
             opened.set_user_attr("code", code)
-        elif code is not None and had_code != code:
+        elif code is not None and had_code != code and finished < config.trials:
             raise UsageError(
                 f"--study {study}: the study in {storage} was scored by other code (sources "
-                f"{str(had_code)[:SHORT]}, this code's {code[:SHORT]}): its trials' scores would "
-                "not compare with new ones; give another --study or --storage"
+                f"{str(had_code)[:SHORT]}, this code's {code[:SHORT]}): new trials' scores would "
+                "not compare with its own; give another --study or --storage"
             )
         return opened
     except BaseException:

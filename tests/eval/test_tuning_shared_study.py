@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import json
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -181,10 +182,25 @@ def test_a_study_scored_by_other_code_is_not_resumed(tmp_path: Path) -> None:
         open_search(out, storage, "toy", config, {"n": 1}, "b" * 64)
     assert str(refused.value) == (
         f"--study toy: the study in {storage} was scored by other code (sources aaaaaaaaaaaa, "
-        "this code's bbbbbbbbbbbb): its trials' scores would not compare with new ones; give "
+        "this code's bbbbbbbbbbbb): new trials' scores would not compare with its own; give "
         "another --study or --storage"
     )
     assert Path(storage).read_bytes() == before
+
+
+def test_a_complete_study_scored_by_other_code_still_opens_for_its_held_out_check(
+    tmp_path: Path,
+) -> None:
+    out, config = tmp_path / "out", SearchConfig(1, (0,))
+    storage = str(out / "study.journal")
+    study = open_search(out, storage, "toy", config, {"n": 1}, "a" * 64)
+    run_search(study, SPACE, config, _toy)
+    # Nothing is scored again, so the code that would score it does not matter; the study
+    # keeps the digest of the code that scored its trials.
+    again = open_search(out, storage, "toy", config, {"n": 1}, "b" * 64)
+    assert again.user_attrs["code"] == "a" * 64
+    with pytest.raises(UsageError, match="was scored by other code"):
+        open_search(out, storage, "toy", SearchConfig(2, (0,)), {"n": 1}, "b" * 64)
 
 
 def test_a_study_that_records_no_code_takes_the_resuming_one(tmp_path: Path) -> None:
@@ -215,3 +231,124 @@ def test_follow_tune_refuses_to_resume_after_the_code_changed(
     assert f"was scored by other code (sources {code[:12]}, this code's dddddddddddd)" in err
     assert len(err.strip().splitlines()) == 1
     assert (out / "study.journal").read_bytes() == journal
+
+
+def test_a_machine_lost_while_this_one_runs_is_found_before_the_next_batch(tmp_path: Path) -> None:
+    config = SearchConfig(trials=3, seeds=(0,), batch=1)
+    study = open_study(tmp_path / "study.journal", "toy", config)
+    lost: list[int] = []
+
+    def meanwhile(params: list[dict[str, float]], seeds: list[int]) -> list[dict[str, np.ndarray]]:
+        if not lost:  # another machine asked a trial, then crashed long ago
+            lost.append(_left_running(study, "crashed-host:4242", driver.STALE_AFTER_S + 1.0))
+        return _toy(params, seeds)
+
+    told: list[list[int]] = []
+    ran = run_search(
+        study, SPACE, config, meanwhile, on_stale=lambda ts: told.append([t.number for t in ts])
+    )
+    assert told == [lost]
+    assert ran == 3  # its trial no longer counts: the budget is met by this machine's
+    assert _state(study, lost[0]) == TrialState.FAIL
+
+
+def test_a_trial_pruned_or_told_as_another_machine_fails_it_does_not_end_the_batch(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # The race a final tell loses: another machine's FAIL lands between Optuna's check that
+    # the trial still runs and its write (UpdateFinishedTrialError).
+    config = SearchConfig(trials=3, seeds=(0, 1), batch=3, startup_trials=0)
+    study = open_study(tmp_path / "study.journal", "toy", config)
+    real_tell = optuna.Study.tell
+
+    def racing_tell(self: optuna.Study, trial: object, *args: object, **kwargs: object) -> object:
+        number = trial if isinstance(trial, int) else trial.number  # type: ignore[attr-defined]
+        if number == 1 and kwargs.get("state") is None:
+            real_tell(self, number, state=TrialState.FAIL)  # the other machine's write first
+            raise optuna.exceptions.UpdateFinishedTrialError("finished meanwhile")
+        return real_tell(self, trial, *args, **kwargs)
+
+    monkeypatch.setattr(optuna.Study, "tell", racing_tell)
+    assert run_search(study, SPACE, config, _toy) == 4  # a fourth trial to meet the budget
+    states = [t.state for t in study.trials]
+    complete, fail = TrialState.COMPLETE, TrialState.FAIL
+    assert states == [complete, fail, complete, complete]
+
+
+def test_a_trial_failed_just_before_its_prune_stays_failed(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    config = SearchConfig(trials=2, seeds=(0, 1), batch=2)
+    study = open_study(tmp_path / "study.journal", "toy", config)
+
+    def failed_then_pruned(trial: optuna.Trial) -> bool:
+        if trial.number == 0:  # another machine fails it; then the pruner says prune
+            study.tell(0, state=TrialState.FAIL, skip_if_finished=True)
+            return True
+        return False
+
+    monkeypatch.setattr(optuna.Trial, "should_prune", failed_then_pruned)
+    assert run_search(study, SPACE, config, _toy) == 3
+    assert [t.state for t in study.trials] == [TrialState.FAIL] + [TrialState.COMPLETE] * 2
+
+
+def test_fail_stale_names_only_the_trials_it_failed(tmp_path: Path) -> None:
+    config = SearchConfig(trials=2, seeds=(0,))
+    study = open_study(tmp_path / "study.journal", "toy", config)
+    lost = _left_running(study, "crashed-host:1", driver.STALE_AFTER_S + 1.0)
+    finishing = _left_running(study, "crashed-host:2", driver.STALE_AFTER_S + 1.0)
+    real_tell = optuna.Study.tell
+
+    def owner_first(self: optuna.Study, trial: object, *args: object, **kwargs: object) -> object:
+        if trial == finishing:  # its owner was only slow, and told it first
+            real_tell(self, finishing, 1.0)
+        return real_tell(self, trial, *args, **kwargs)
+
+    with pytest.MonkeyPatch.context() as m:
+        m.setattr(optuna.Study, "tell", owner_first)
+        failed = driver.fail_stale(study)
+    assert [t.number for t in failed] == [lost]
+    assert _state(study, finishing) == TrialState.COMPLETE
+
+
+def test_trials_asked_before_an_interrupt_are_failed_not_left_running(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    config = SearchConfig(trials=4, seeds=(0,), batch=4)
+    study = open_study(tmp_path / "study.journal", "toy", config)
+    real_ask = optuna.Study.ask
+    asked: list[int] = []
+
+    def ctrl_c_on_the_third(self: optuna.Study, *args: object, **kwargs: object) -> object:
+        if len(asked) == 2:
+            raise KeyboardInterrupt
+        trial = real_ask(self, *args, **kwargs)
+        asked.append(trial.number)
+        return trial
+
+    monkeypatch.setattr(optuna.Study, "ask", ctrl_c_on_the_third)
+    with pytest.raises(KeyboardInterrupt):
+        run_search(study, SPACE, config, _toy)
+    assert [t.state for t in study.trials] == [TrialState.FAIL, TrialState.FAIL]
+
+
+def test_a_storage_that_refuses_heartbeats_is_warned_of_once(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    class Refusing:
+        calls = 0
+
+        def set_user_attr(self, key: str, value: object) -> None:
+            Refusing.calls += 1
+            raise OSError("disk quota exceeded")
+
+    beating = driver._Heartbeat([Refusing()], interval_s=3600.0)  # type: ignore[list-item]
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        for _ in range(6):
+            beating.beat()
+    assert [str(w.message)[:52] for w in caught] == [
+        "3 heartbeats in a row could not be recorded in the s"
+    ]
+    assert "OSError: disk quota exceeded" in str(caught[0].message)
+    assert Refusing.calls == 6
