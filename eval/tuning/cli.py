@@ -392,7 +392,7 @@ def _search_and_check(
         "study": args.study,
         "storage": str(args.storage),
         "search": identity,
-        "code": running_sources_sha256(),  # the study's too (open_search refuses another)
+        "code": running_sources_sha256(),  # this run's; the study keeps the code it was scored by
         "trials": {s: states.count(s) for s in sorted(set(states))},
         "ran_now": ran,
         "batch": batch,
