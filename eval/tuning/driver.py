@@ -32,7 +32,10 @@ unrelated file named by mistake would be changed; a journal this module created 
 again if opening the study fails.
 
 Shared studies: machines sharing a study each ask their own batches; a running trial counts
-towards the budget, so together they do not overshoot it. A search records a heartbeat in
+towards the budget, so together they do not overshoot it by more than a batch for each other
+machine that asks at the same moment (tested with three processes on one SQLite file). Drivers
+started together on a new database race to make its tables: the losers open it again once it
+is made (:func:`_rdb`). A search records a heartbeat in
 each of its running trials when it asks it and every :data:`HEARTBEAT_S` after (the user
 attribute ``heartbeat``, wall-clock seconds), and before each batch fails the running trials
 whose process is gone: of this machine, by their process id; of any machine, when their
@@ -239,9 +242,30 @@ def check_journal(path: str | Path) -> None:
         raise ValueError(f"{path} {problem}")
 
 
+#: Attempts at opening a database whose tables another process may be making at that moment.
+_RDB_TRIES = 5
+#: Wait between those attempts, s (a schema is made in well under a second).
+_RDB_RETRY_S = 0.5
+
+
+def _rdb(url: str) -> optuna.storages.RDBStorage:
+    """Optuna's storage on the database ``url``. Drivers started together on a new database
+    (a cluster's job array) each make its tables, and all but the first fail to record the
+    schema's version (SQLAlchemy's ``IntegrityError``, a unique key taken): they try again
+    once it is there, rather than fail the run."""
+    for attempt in range(1, _RDB_TRIES + 1):
+        try:
+            return optuna.storages.RDBStorage(url)
+        except Exception as e:
+            if type(e).__name__ != "IntegrityError" or attempt == _RDB_TRIES:
+                raise
+            time.sleep(_RDB_RETRY_S)
+    raise AssertionError("unreachable")  # the loop returns or raises
+
+
 def _storage(storage: str | Path) -> Any:
     if isinstance(storage, str) and is_url(storage):
-        return optuna.storages.RDBStorage(storage)
+        return _rdb(storage)
     from optuna.storages.journal import JournalFileBackend, JournalStorage
 
     return JournalStorage(JournalFileBackend(str(storage)))

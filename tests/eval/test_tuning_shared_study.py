@@ -352,3 +352,116 @@ def test_a_storage_that_refuses_heartbeats_is_warned_of_once(
     ]
     assert "OSError: disk quota exceeded" in str(caught[0].message)
     assert Refusing.calls == 6
+
+
+def test_a_database_whose_tables_another_driver_is_making_is_opened_again(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import sqlalchemy.exc
+
+    real, attempts = optuna.storages.RDBStorage, []
+
+    class Racing(real):  # type: ignore[misc, valid-type]
+        def __init__(self, url: str, *args: object, **kwargs: object) -> None:
+            attempts.append(url)
+            if len(attempts) < 3:  # the schema's version recorded by another driver first
+                raise sqlalchemy.exc.IntegrityError("INSERT INTO alembic_version", {}, Exception())
+            super().__init__(url, *args, **kwargs)
+
+    monkeypatch.setattr(driver, "_RDB_RETRY_S", 0.0)
+    monkeypatch.setattr(optuna.storages, "RDBStorage", Racing)
+    url = f"sqlite:///{tmp_path / 'x.db'}"
+    assert open_study(url, "toy", SearchConfig(1, (0,))).study_name == "toy"
+    assert len(attempts) == 3
+
+    class Unreachable(real):  # type: ignore[misc, valid-type]
+        def __init__(self, url: str, *args: object, **kwargs: object) -> None:
+            attempts.append(url)
+            raise sqlalchemy.exc.OperationalError("connect", {}, Exception("no server"))
+
+    monkeypatch.setattr(optuna.storages, "RDBStorage", Unreachable)
+    del attempts[:]
+    with pytest.raises(ValueError, match="cannot open the storage"):
+        open_study(url, "toy", SearchConfig(1, (0,)))
+    assert len(attempts) == 1  # only the race is tried again
+
+
+_DRIVER = """
+import sys, time
+import numpy as np
+from eval.tuning import SearchConfig, open_study, run_search
+from policies import ParamRange
+
+url, budget, seed, pause = sys.argv[1], int(sys.argv[2]), int(sys.argv[3]), float(sys.argv[4])
+config = SearchConfig(trials=budget, seeds=(0, 1), batch=2, sampler_seed=seed)
+study = open_study(url, "toy", config)
+print("opened", flush=True)
+
+
+def slow(params, seeds):
+    time.sleep(pause)
+    return [{"score": np.full((1, len(seeds)), -((p["x"] - 0.5) ** 2))} for p in params]
+
+
+print("ran", run_search(study, {"x": ParamRange(0.0, 1.0)}, config, slow), flush=True)
+"""
+
+
+def _drivers(tmp_path: Path, url: str, *args: tuple[int, int, float]) -> list[object]:
+    import subprocess
+    import sys
+
+    script = tmp_path / "driver.py"
+    script.write_text(_DRIVER)
+    return [
+        subprocess.Popen(
+            [sys.executable, str(script), url, *map(str, a)],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        for a in args
+    ]
+
+
+@pytest.mark.slow
+def test_drivers_started_together_on_a_new_database_share_one_study(tmp_path: Path) -> None:
+    url = f"sqlite:///{tmp_path / 'shared.db'}"
+    procs = _drivers(tmp_path, url, (8, 0, 0.05), (8, 1, 0.05), (8, 2, 0.05))
+    outs = [p.communicate(timeout=120) for p in procs]  # type: ignore[attr-defined]
+    assert [p.returncode for p in procs] == [0, 0, 0], [err for _, err in outs]  # type: ignore[attr-defined]
+    study = optuna.load_study(study_name="toy", storage=url)
+    finished = study.get_trials(states=driver.FINISHED)
+    # Each driver stops once finished and running trials meet the budget; drivers asking at
+    # the same moment may overshoot it by a batch each.
+    assert 8 <= len(finished) <= 8 + 2 * 2
+    assert not study.get_trials(states=(TrialState.RUNNING, TrialState.FAIL))
+
+
+@pytest.mark.slow
+def test_a_driver_killed_mid_batch_leaves_trials_the_next_one_fails_and_replaces(
+    tmp_path: Path,
+) -> None:
+    import signal
+
+    url = f"sqlite:///{tmp_path / 'shared.db'}"
+    (killed,) = _drivers(tmp_path, url, (6, 0, 30.0))  # its first batch never ends
+    assert killed.stdout.readline() == "opened\n"  # type: ignore[attr-defined]
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline:
+        study = optuna.load_study(study_name="toy", storage=url)
+        running = study.get_trials(states=(TrialState.RUNNING,))
+        if len(running) == 2 and all("heartbeat" in t.user_attrs for t in running):
+            break
+        time.sleep(0.1)
+    killed.send_signal(signal.SIGKILL)  # type: ignore[attr-defined]
+    killed.wait(timeout=30)  # type: ignore[attr-defined]
+    config = SearchConfig(trials=6, seeds=(0, 1), batch=2, sampler_seed=1)
+    study = open_study(url, "toy", config)
+    told: list[list[int]] = []
+    ran = run_search(
+        study, SPACE, config, _toy, on_stale=lambda ts: told.append([t.number for t in ts])
+    )
+    assert told == [[t.number for t in running]]  # its process is gone: failed at once
+    assert ran == 6
+    assert len(study.get_trials(states=driver.FINISHED)) == 6
