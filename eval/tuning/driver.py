@@ -42,8 +42,9 @@ whose process is gone: of this machine, by their process id; of any machine, whe
 heartbeat is older than :data:`STALE_AFTER_S` (:func:`fail_stale`). A trial failed so while
 its process was in fact alive (a machine suspended for ten minutes) stays failed: that
 process drops it, whichever of its writes meets the failure, and finishes the rest of its
-batch. Machines that share a host name but not their process ids (containers on one host's
-name) would fail each other's trials by the process-id rule: give them their own names.
+batch. The process-id rule asks only processes of the same host name and PID space (the
+kernel's boot id and PID namespace), so containers or machines sharing a host name leave each
+other's trials to the heartbeat rule.
 """
 
 from __future__ import annotations
@@ -341,6 +342,8 @@ def _first_line(exc: BaseException) -> str:
 
 
 _OWNER = "owner"
+#: The user attribute naming the PID space of a trial's owner (:func:`_pid_space`).
+_PID_SPACE = "pid_space"
 #: The user attribute holding a running trial's last heartbeat (``time.time()``, s).
 _BEAT = "heartbeat"
 #: Heartbeats refused in a row before a warning says so (a storage hiccup is not worth one).
@@ -351,11 +354,28 @@ def _owner() -> str:
     return f"{socket.gethostname()}:{os.getpid()}"
 
 
-def _alive(owner: str) -> bool:
-    """Whether the process that owns a running trial still runs (unknown hosts: assumed so)."""
-    host, _, pid = owner.rpartition(":")
+def _pid_space() -> str | None:
+    """Which processes this one's id is among (Linux: the kernel's boot id and this process's
+    PID namespace), or None where that cannot be read. Machines or containers may share a host
+    name; a process id means something only among the processes of one such space."""
+    try:
+        boot = Path("/proc/sys/kernel/random/boot_id").read_text().strip()
+        namespace = os.stat("/proc/self/ns/pid").st_ino
+    except OSError:
+        return None
+    return f"{boot}/{namespace}"
+
+
+def _alive(trial: FrozenTrial) -> bool:
+    """Whether the process that owns a running trial still runs: asked of this machine's
+    processes when the trial's owner has this host name and, if it recorded one, this
+    process's PID space; anywhere else assumed so (its heartbeat tells)."""
+    host, _, pid = str(trial.user_attrs.get(_OWNER, "")).rpartition(":")
     if host != socket.gethostname() or not (pid.isascii() and pid.isdigit()):
         return True
+    space = trial.user_attrs.get(_PID_SPACE)
+    if space is not None and space != _pid_space():
+        return True  # the same name, another machine or container
     try:
         os.kill(int(pid), 0)
     except ProcessLookupError:
@@ -383,9 +403,7 @@ def fail_stale(study: optuna.Study, *, now: float | None = None) -> list[FrozenT
     stale = []
     for t in study.get_trials(deepcopy=False, states=(TrialState.RUNNING,)):
         silent = _silent_s(t, now)
-        if not _alive(str(t.user_attrs.get(_OWNER, ""))) or (
-            silent is not None and silent > STALE_AFTER_S
-        ):
+        if not _alive(t) or (silent is not None and silent > STALE_AFTER_S):
             stale.append(t)
     return [t for t in stale if _told(study, t.number, state=TrialState.FAIL)]
 
@@ -506,6 +524,7 @@ def run_search(
                 # batch began, must still be found stale (by its process or its heartbeat).
                 batch.append(study.ask(dists))
                 batch[-1].set_user_attr(_OWNER, _owner())
+                batch[-1].set_user_attr(_PID_SPACE, _pid_space())
                 batch[-1].set_user_attr(_BEAT, time.time())
             with _Heartbeat(batch):
                 _evaluate_batch(study, batch, steps, config.seeds, evaluate)

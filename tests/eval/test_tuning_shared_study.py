@@ -36,11 +36,16 @@ def _toy(params: list[dict[str, float]], seeds: list[int]) -> list[dict[str, np.
     return [{"score": np.full((1, len(seeds)), -((p["x"] - 0.5) ** 2))} for p in params]
 
 
-def _left_running(study: optuna.Study, owner: str, beat_age_s: float | None) -> int:
+def _left_running(
+    study: optuna.Study, owner: str, beat_age_s: float | None, **attrs: object
+) -> int:
     """A trial another machine asked and never finished; its last heartbeat ``beat_age_s`` ago
-    (None: it records none, as a version before heartbeats)."""
+    (None: it records none, as a version before heartbeats); ``attrs`` its further user
+    attributes."""
     trial = study.ask(driver.distributions(SPACE))
     trial.set_user_attr("owner", owner)
+    for key, value in attrs.items():
+        trial.set_user_attr(key, value)
     if beat_age_s is not None:
         trial.set_user_attr("heartbeat", time.time() - beat_age_s)
     return trial.number
@@ -465,3 +470,30 @@ def test_a_driver_killed_mid_batch_leaves_trials_the_next_one_fails_and_replaces
     assert told == [[t.number for t in running]]  # its process is gone: failed at once
     assert ran == 6
     assert len(study.get_trials(states=driver.FINISHED)) == 6
+
+
+@pytest.mark.parametrize(
+    ("space", "beat_age_s", "failed"),
+    [
+        ("ours", 1.0, True),  # a process of ours that is gone: at once
+        (None, 1.0, True),  # recorded no space (a version before it): as before, at once
+        ("another-boot/4026531836", 1.0, False),  # same name, another machine: still beating
+        ("another-boot/4026531836", driver.STALE_AFTER_S + 1.0, True),  # ... no longer
+    ],
+)
+def test_a_process_id_is_asked_only_of_the_pid_space_that_owns_it(
+    tmp_path: Path, space: str | None, beat_age_s: float, failed: bool
+) -> None:
+    import socket
+    import subprocess
+    import sys
+
+    gone = subprocess.Popen([sys.executable, "-c", "pass"])
+    gone.wait()
+    config = SearchConfig(trials=1, seeds=(0,))
+    study = open_study(tmp_path / "study.journal", "toy", config)
+    recorded = {} if space is None else {"pid_space": space}
+    if space == "ours":
+        recorded["pid_space"] = driver._pid_space()
+    number = _left_running(study, f"{socket.gethostname()}:{gone.pid}", beat_age_s, **recorded)
+    assert [t.number for t in driver.fail_stale(study)] == ([number] if failed else [])
