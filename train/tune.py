@@ -40,7 +40,7 @@ from eval.cli_base import UsageError, _names, _Parser, _positive, path_option
 from eval.provenance import running_sources_sha256
 from eval.rollout import rollout
 from eval.tuning.cli import run_reporting
-from eval.tuning.driver import SearchConfig, run_search, stale_text
+from eval.tuning.driver import SearchConfig, run_search
 from eval.tuning.folders import (
     check_journal_owner,
     check_out_folder,
@@ -51,6 +51,7 @@ from eval.tuning.folders import (
     refuse_repeats,
     text_check,
 )
+from eval.tuning.liveness import stale_text
 from eval.tuning.objective import DEFAULT_VARIANTS, SCORE_KEYS, TUNE_SEED0, episode_score
 from execution import Backend, backend_from_args, execute
 from follow_env.sim.atomic import atomic_write_text

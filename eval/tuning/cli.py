@@ -351,8 +351,9 @@ def _search_and_check(
     batch: int,
 ) -> int:
     """Search the opened study, re-evaluate its best on held-out seeds, write the results."""
-    from eval.tuning.driver import SearchConfig, run_search, stale_text
+    from eval.tuning.driver import SearchConfig, run_search
     from eval.tuning.holdout import Candidate, holdout_candidates, reevaluate, verdict
+    from eval.tuning.liveness import stale_text
     from eval.tuning.objective import HOLDOUT_SEED0, LawObjective
     from eval.tuning.report import preset_text, table_text
 

@@ -35,27 +35,18 @@ Shared studies: machines sharing a study each ask their own batches; a running t
 towards the budget, so together they do not overshoot it by more than a batch for each other
 machine that asks at the same moment (tested with three processes on one SQLite file). Drivers
 started together on a new database race to make its tables: the losers open it again once it
-is made (:func:`_rdb`). A search records a heartbeat in
-each of its running trials when it asks it and every :data:`HEARTBEAT_S` after (the user
-attribute ``heartbeat``, wall-clock seconds), and before each batch fails the running trials
-whose process is gone: of this machine, by their process id; of any machine, when their
-heartbeat is older than :data:`STALE_AFTER_S` (:func:`fail_stale`). A trial failed so while
-its process was in fact alive (a machine suspended for ten minutes) stays failed: that
-process drops it, whichever of its writes meets the failure, and finishes the rest of its
-batch. The process-id rule asks only processes of the same host name and PID space (the
-kernel's boot id and PID namespace), so containers or machines sharing a host name leave each
-other's trials to the heartbeat rule.
+is made (:func:`_rdb`). Each trial records its owner and heartbeats, and before each batch the
+running trials whose process is gone are failed (:mod:`eval.tuning.liveness`). A trial failed
+so while its process was in fact alive (a machine suspended for ten minutes) stays failed:
+that process drops it, whichever of its writes meets the failure, and finishes the rest of
+its batch.
 """
 
 from __future__ import annotations
 
 import json
 import math
-import os
-import socket
-import threading
 import time
-import warnings
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -67,25 +58,22 @@ from optuna.distributions import BaseDistribution, FloatDistribution
 from optuna.exceptions import UpdateFinishedTrialError
 from optuna.trial import FrozenTrial, TrialState
 
+from eval.tuning.liveness import Heartbeat, fail_stale, own, told
 from policies.space import SearchSpace
 
 __all__ = [
     "FINISHED",
-    "HEARTBEAT_S",
     "MAX_SAMPLER_SEED",
-    "STALE_AFTER_S",
     "Evaluate",
     "SearchConfig",
     "check_journal",
     "distributions",
-    "fail_stale",
     "is_url",
     "journal_problem",
     "journal_study_names",
     "open_study",
     "run_search",
     "rungs",
-    "stale_text",
 ]
 
 #: The largest seed the TPE sampler takes (numpy's legacy ``RandomState``: 0..2**32 - 1).
@@ -93,14 +81,6 @@ MAX_SAMPLER_SEED = 2**32 - 1
 
 #: Trial states that count towards the budget once reached.
 FINISHED = (TrialState.COMPLETE, TrialState.PRUNED)
-
-#: How often a search records in the study that its running trials are alive, s.
-HEARTBEAT_S = 60.0
-#: A running trial whose last heartbeat is older than this was left by a process that is gone
-#: (a machine that crashed or lost the network): ten heartbeats missed, s. Heartbeats are
-#: wall-clock times (``time.time()``), so machines sharing a study need clocks that agree to
-#: well within it (NTP keeps them within a second).
-STALE_AFTER_S = 600.0
 
 Evaluate = Callable[[Sequence[Mapping[str, float]], Sequence[int]], list[dict[str, np.ndarray]]]
 """``evaluate(params of each trial, seeds)`` -> per trial a dict of arrays shaped (variants,
@@ -251,14 +231,17 @@ _RDB_RETRY_S = 0.5
 
 def _rdb(url: str) -> optuna.storages.RDBStorage:
     """Optuna's storage on the database ``url``. Drivers started together on a new database
-    (a cluster's job array) each make its tables, and all but the first fail to record the
-    schema's version (SQLAlchemy's ``IntegrityError``, a unique key taken): they try again
-    once it is there, rather than fail the run."""
+    (a cluster's job array) each make its tables, and all but the first may find a table made
+    meanwhile ("table studies already exists": SQLite's ``OperationalError``, PostgreSQL's
+    ``ProgrammingError``) or the schema's version recorded already (``IntegrityError``, a
+    unique key taken): they try again once it is made, rather than fail the run. Any other
+    error (a server that does not answer) is raised at once."""
     for attempt in range(1, _RDB_TRIES + 1):
         try:
             return optuna.storages.RDBStorage(url)
         except Exception as e:
-            if type(e).__name__ != "IntegrityError" or attempt == _RDB_TRIES:
+            made_meanwhile = type(e).__name__ == "IntegrityError" or "already exists" in str(e)
+            if not made_meanwhile or attempt == _RDB_TRIES:
                 raise
             time.sleep(_RDB_RETRY_S)
     raise AssertionError("unreachable")  # the loop returns or raises
@@ -341,143 +324,6 @@ def _first_line(exc: BaseException) -> str:
     return lines[0] if lines else type(exc).__name__
 
 
-_OWNER = "owner"
-#: The user attribute naming the PID space of a trial's owner (:func:`_pid_space`).
-_PID_SPACE = "pid_space"
-#: The user attribute holding a running trial's last heartbeat (``time.time()``, s).
-_BEAT = "heartbeat"
-#: Heartbeats refused in a row before a warning says so (a storage hiccup is not worth one).
-_FAILED_BEATS = 3
-
-
-def _owner() -> str:
-    return f"{socket.gethostname()}:{os.getpid()}"
-
-
-def _pid_space() -> str | None:
-    """Which processes this one's id is among (Linux: the kernel's boot id and this process's
-    PID namespace), or None where that cannot be read. Machines or containers may share a host
-    name; a process id means something only among the processes of one such space."""
-    try:
-        boot = Path("/proc/sys/kernel/random/boot_id").read_text().strip()
-        namespace = os.stat("/proc/self/ns/pid").st_ino
-    except OSError:
-        return None
-    return f"{boot}/{namespace}"
-
-
-def _alive(trial: FrozenTrial) -> bool:
-    """Whether the process that owns a running trial still runs: asked of this machine's
-    processes when the trial's owner has this host name and, if it recorded one, this
-    process's PID space; anywhere else assumed so (its heartbeat tells)."""
-    host, _, pid = str(trial.user_attrs.get(_OWNER, "")).rpartition(":")
-    if host != socket.gethostname() or not (pid.isascii() and pid.isdigit()):
-        return True
-    space = trial.user_attrs.get(_PID_SPACE)
-    if space is not None and space != _pid_space():
-        return True  # the same name, another machine or container
-    try:
-        os.kill(int(pid), 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
-
-
-def _silent_s(trial: FrozenTrial, now: float) -> float | None:
-    """Seconds since a running trial's last heartbeat (None when it records none: a trial of a
-    version before heartbeats, judged by its owner alone)."""
-    beat = trial.user_attrs.get(_BEAT)
-    if isinstance(beat, bool) or not isinstance(beat, int | float):
-        return None
-    return now - float(beat)
-
-
-def fail_stale(study: optuna.Study, *, now: float | None = None) -> list[FrozenTrial]:
-    """Mark as failed the running trials whose process is gone, and return them as they were:
-    those of a process of this machine that no longer runs (an interrupted run), and those of
-    any machine whose last heartbeat is more than :data:`STALE_AFTER_S` old (a machine that
-    crashed: its trials would otherwise count towards the budget for ever)."""
-    now = time.time() if now is None else now
-    stale = []
-    for t in study.get_trials(deepcopy=False, states=(TrialState.RUNNING,)):
-        silent = _silent_s(t, now)
-        if not _alive(t) or (silent is not None and silent > STALE_AFTER_S):
-            stale.append(t)
-    return [t for t in stale if _told(study, t.number, state=TrialState.FAIL)]
-
-
-def _told(study: optuna.Study, number: int, value: float | None = None, **kwargs: Any) -> bool:
-    """``study.tell`` of a trial that another process may finish at the same moment (its owner
-    telling it, or another machine failing it as stale); whether this tell finished it. A
-    trial finished first stays as that process left it."""
-    try:
-        told = study.tell(number, value, skip_if_finished=True, **kwargs)
-    except UpdateFinishedTrialError:  # finished between Optuna's check and its write
-        return False
-    return told.state == kwargs.get("state", TrialState.COMPLETE)
-
-
-def stale_text(trial: FrozenTrial) -> str:
-    """What :func:`fail_stale` did to ``trial``, in a sentence for a command's output."""
-    return (
-        f"trial {trial.number} left running by {trial.user_attrs.get(_OWNER, '?')} marked "
-        "failed: its process is gone (on this machine) or sent no heartbeat for "
-        f"{STALE_AFTER_S / 60:.0f} min"
-    )
-
-
-class _Heartbeat:
-    """While in its ``with`` block, records every :data:`HEARTBEAT_S` in each of ``trials``
-    that it is alive (the user attribute ``heartbeat``; the first beat is the caller's, on
-    asking), from a thread of its own, so another machine sharing the study can tell a slow
-    trial from one whose machine is gone. A trial finished meanwhile (told, or failed by
-    another machine) is no longer beaten for. A beat the storage refuses is tried again at the
-    next one; after :data:`_FAILED_BEATS` refused in a row a warning says so once, since
-    other machines fail the trials when none has been recorded for :data:`STALE_AFTER_S`."""
-
-    def __init__(self, trials: Sequence[optuna.Trial], interval_s: float | None = None) -> None:
-        self._trials = list(trials)
-        self._interval_s = HEARTBEAT_S if interval_s is None else interval_s
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, name="tuning heartbeat", daemon=True)
-        self._refused = 0
-
-    def beat(self) -> None:
-        now = time.time()
-        for trial in list(self._trials):
-            try:
-                trial.set_user_attr(_BEAT, now)
-            except UpdateFinishedTrialError:
-                self._trials.remove(trial)
-            except Exception as e:  # a storage hiccup: the next beat tries again
-                self._refused += 1
-                if self._refused == _FAILED_BEATS:
-                    warnings.warn(
-                        f"{_FAILED_BEATS} heartbeats in a row could not be recorded in the "
-                        f"study ({type(e).__name__}: {e}); other machines sharing it fail "
-                        f"this search's running trials after {STALE_AFTER_S / 60:.0f} min "
-                        "without one",
-                        RuntimeWarning,
-                        stacklevel=1,
-                    )
-                return
-        self._refused = 0
-
-    def _run(self) -> None:
-        while not self._stop.wait(self._interval_s):
-            self.beat()
-
-    def __enter__(self) -> _Heartbeat:
-        self._thread.start()
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self._stop.set()
-        self._thread.join()
-
-
 def _counted(study: optuna.Study) -> int:
     """Trials that count towards the budget: finished ones and those running elsewhere."""
     return len(study.get_trials(deepcopy=False, states=(*FINISHED, TrialState.RUNNING)))
@@ -523,14 +369,12 @@ def run_search(
                 # Owned and beaten for at once: a trial asked, then left by a crash before its
                 # batch began, must still be found stale (by its process or its heartbeat).
                 batch.append(study.ask(dists))
-                batch[-1].set_user_attr(_OWNER, _owner())
-                batch[-1].set_user_attr(_PID_SPACE, _pid_space())
-                batch[-1].set_user_attr(_BEAT, time.time())
-            with _Heartbeat(batch):
+                own(batch[-1])
+            with Heartbeat(batch):
                 _evaluate_batch(study, batch, steps, config.seeds, evaluate)
         except BaseException:
             for trial in batch:  # an error or Ctrl-C: the batch's unfinished trials failed
-                _told(study, trial.number, state=TrialState.FAIL)
+                told(study, trial.number, state=TrialState.FAIL)
             raise
         ran += len(batch)
         if on_batch is not None:
@@ -563,7 +407,7 @@ def _evaluate_batch(
                 trial.set_user_attr("seeds", step)
                 trial.report(float(joined["score"].mean()), step)
                 if step < steps[-1] and trial.should_prune():
-                    _told(study, trial.number, state=TrialState.PRUNED)
+                    told(study, trial.number, state=TrialState.PRUNED)
                 else:
                     survivors.append(trial)
             except UpdateFinishedTrialError:
@@ -574,4 +418,4 @@ def _evaluate_batch(
             return
     for trial in active:
         score = float(np.concatenate(kept[trial.number]["score"], axis=-1).mean())
-        _told(study, trial.number, score)
+        told(study, trial.number, score)

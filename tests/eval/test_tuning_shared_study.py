@@ -23,6 +23,7 @@ from optuna.trial import TrialState
 
 import eval.tuning.cli
 import eval.tuning.driver as driver
+import eval.tuning.liveness as liveness
 from eval.cli_base import UsageError
 from eval.tuning import SearchConfig, open_study, run_search
 from eval.tuning.cli import main
@@ -55,7 +56,7 @@ def _state(study: optuna.Study, number: int) -> TrialState:
     return study.trials[number].state
 
 
-@pytest.mark.parametrize("age_s", [driver.STALE_AFTER_S + 1.0, 10 * driver.STALE_AFTER_S])
+@pytest.mark.parametrize("age_s", [liveness.STALE_AFTER_S + 1.0, 10 * liveness.STALE_AFTER_S])
 def test_a_trial_without_a_heartbeat_for_ten_minutes_is_failed_and_the_budget_is_met(
     tmp_path: Path, age_s: float
 ) -> None:
@@ -77,7 +78,7 @@ def test_a_trial_another_machine_is_still_beating_for_keeps_running_and_counts(
 ) -> None:
     config = SearchConfig(trials=3, seeds=(0, 1), batch=1)
     study = open_study(tmp_path / "study.journal", "toy", config)
-    busy = _left_running(study, "busy-host:4242", driver.STALE_AFTER_S - 60.0)
+    busy = _left_running(study, "busy-host:4242", liveness.STALE_AFTER_S - 60.0)
     told: list[object] = []
     assert run_search(study, SPACE, config, _toy, on_stale=told.append) == 2
     assert _state(study, busy) == TrialState.RUNNING
@@ -95,7 +96,7 @@ def test_a_trial_that_records_no_heartbeat_is_judged_by_its_owner_alone(tmp_path
 def test_a_batch_beats_while_it_is_evaluated(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    monkeypatch.setattr(driver, "HEARTBEAT_S", 0.02)
+    monkeypatch.setattr(liveness, "HEARTBEAT_S", 0.02)
     journal = tmp_path / "study.journal"
     config = SearchConfig(trials=2, seeds=(0,), batch=2)
     study = open_study(journal, "toy", config)
@@ -160,7 +161,7 @@ def test_follow_tune_says_which_trial_it_failed_and_runs_the_budget(
             optuna.storages.journal.JournalFileBackend(str(out / "study.journal"))
         ),
     )
-    lost = _left_running(study, "crashed-host:4242", driver.STALE_AFTER_S + 5.0)
+    lost = _left_running(study, "crashed-host:4242", liveness.STALE_AFTER_S + 5.0)
     capsys.readouterr()
     assert main([*cli, "--trials", "2", "--out", str(out)]) == 0
     err = capsys.readouterr().err
@@ -245,7 +246,7 @@ def test_a_machine_lost_while_this_one_runs_is_found_before_the_next_batch(tmp_p
 
     def meanwhile(params: list[dict[str, float]], seeds: list[int]) -> list[dict[str, np.ndarray]]:
         if not lost:  # another machine asked a trial, then crashed long ago
-            lost.append(_left_running(study, "crashed-host:4242", driver.STALE_AFTER_S + 1.0))
+            lost.append(_left_running(study, "crashed-host:4242", liveness.STALE_AFTER_S + 1.0))
         return _toy(params, seeds)
 
     told: list[list[int]] = []
@@ -300,8 +301,8 @@ def test_a_trial_failed_just_before_its_prune_stays_failed(
 def test_fail_stale_names_only_the_trials_it_failed(tmp_path: Path) -> None:
     config = SearchConfig(trials=2, seeds=(0,))
     study = open_study(tmp_path / "study.journal", "toy", config)
-    lost = _left_running(study, "crashed-host:1", driver.STALE_AFTER_S + 1.0)
-    finishing = _left_running(study, "crashed-host:2", driver.STALE_AFTER_S + 1.0)
+    lost = _left_running(study, "crashed-host:1", liveness.STALE_AFTER_S + 1.0)
+    finishing = _left_running(study, "crashed-host:2", liveness.STALE_AFTER_S + 1.0)
     real_tell = optuna.Study.tell
 
     def owner_first(self: optuna.Study, trial: object, *args: object, **kwargs: object) -> object:
@@ -311,7 +312,7 @@ def test_fail_stale_names_only_the_trials_it_failed(tmp_path: Path) -> None:
 
     with pytest.MonkeyPatch.context() as m:
         m.setattr(optuna.Study, "tell", owner_first)
-        failed = driver.fail_stale(study)
+        failed = liveness.fail_stale(study)
     assert [t.number for t in failed] == [lost]
     assert _state(study, finishing) == TrialState.COMPLETE
 
@@ -347,7 +348,7 @@ def test_a_storage_that_refuses_heartbeats_is_warned_of_once(
             Refusing.calls += 1
             raise OSError("disk quota exceeded")
 
-    beating = driver._Heartbeat([Refusing()], interval_s=3600.0)  # type: ignore[list-item]
+    beating = liveness.Heartbeat([Refusing()], interval_s=3600.0)  # type: ignore[list-item]
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         for _ in range(6):
@@ -369,7 +370,11 @@ def test_a_database_whose_tables_another_driver_is_making_is_opened_again(
     class Racing(real):  # type: ignore[misc, valid-type]
         def __init__(self, url: str, *args: object, **kwargs: object) -> None:
             attempts.append(url)
-            if len(attempts) < 3:  # the schema's version recorded by another driver first
+            if len(attempts) == 1:  # a table made by another driver first
+                raise sqlalchemy.exc.OperationalError(
+                    "CREATE TABLE studies", {}, Exception("table studies already exists")
+                )
+            if len(attempts) == 2:  # the schema's version recorded by another driver first
                 raise sqlalchemy.exc.IntegrityError("INSERT INTO alembic_version", {}, Exception())
             super().__init__(url, *args, **kwargs)
 
@@ -478,7 +483,7 @@ def test_a_driver_killed_mid_batch_leaves_trials_the_next_one_fails_and_replaces
         ("ours", 1.0, True),  # a process of ours that is gone: at once
         (None, 1.0, True),  # recorded no space (a version before it): as before, at once
         ("another-boot/4026531836", 1.0, False),  # same name, another machine: still beating
-        ("another-boot/4026531836", driver.STALE_AFTER_S + 1.0, True),  # ... no longer
+        ("another-boot/4026531836", liveness.STALE_AFTER_S + 1.0, True),  # ... no longer
     ],
 )
 def test_a_process_id_is_asked_only_of_the_pid_space_that_owns_it(
@@ -494,6 +499,6 @@ def test_a_process_id_is_asked_only_of_the_pid_space_that_owns_it(
     study = open_study(tmp_path / "study.journal", "toy", config)
     recorded = {} if space is None else {"pid_space": space}
     if space == "ours":
-        recorded["pid_space"] = driver._pid_space()
+        recorded["pid_space"] = liveness._pid_space()
     number = _left_running(study, f"{socket.gethostname()}:{gone.pid}", beat_age_s, **recorded)
-    assert [t.number for t in driver.fail_stale(study)] == ([number] if failed else [])
+    assert [t.number for t in liveness.fail_stale(study)] == ([number] if failed else [])
