@@ -296,10 +296,13 @@ def open_search(
                 f"({had}); give another --study or --storage"
             )
         had_code = opened.user_attrs.get("code")
-        finished = len(opened.get_trials(deepcopy=False, states=FINISHED))
         if code is not None and had_code is None:
             opened.set_user_attr("code", code)
-        elif code is not None and had_code != code and finished < config.trials:
+        elif (
+            code is not None
+            and had_code != code
+            and len(opened.get_trials(deepcopy=False, states=FINISHED)) < config.trials
+        ):
             raise UsageError(
                 f"--study {study}: the study in {storage} was scored by other code (sources "
                 f"{str(had_code)[:SHORT]}, this code's {code[:SHORT]}): new trials' scores would "

@@ -52,6 +52,16 @@ def _left_running(
     return trial.number
 
 
+def _journal_study(path: Path, name: str) -> optuna.Study:
+    """The study ``name`` of the journal ``path``, opened as another process would."""
+    storage = optuna.storages.JournalStorage(optuna.storages.journal.JournalFileBackend(str(path)))
+    return optuna.load_study(study_name=name, storage=storage)
+
+
+#: A small follow-tune search (its --trials and --out given by each test).
+_CLI = ["pn", "--scenarios", "straight", "--seeds", "2", "--holdout-seeds", "2"]
+
+
 def _state(study: optuna.Study, number: int) -> TrialState:
     return study.trials[number].state
 
@@ -105,12 +115,7 @@ def test_a_batch_beats_while_it_is_evaluated(
     def slow(params: list[dict[str, float]], seeds: list[int]) -> list[dict[str, np.ndarray]]:
         seen: set[float] = set()
         for _ in range(10):  # as another machine sees the study while the batch runs
-            other = optuna.load_study(
-                study_name="toy",
-                storage=optuna.storages.JournalStorage(
-                    optuna.storages.journal.JournalFileBackend(str(journal))
-                ),
-            )
+            other = _journal_study(journal, "toy")
             running = other.get_trials(states=(TrialState.RUNNING,))
             assert len(running) == 2
             seen |= {t.user_attrs["heartbeat"] for t in running}
@@ -153,17 +158,11 @@ def test_follow_tune_says_which_trial_it_failed_and_runs_the_budget(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     out = tmp_path / "out"
-    cli = ["pn", "--scenarios", "straight", "--seeds", "2", "--holdout-seeds", "2"]
-    assert main([*cli, "--trials", "1", "--out", str(out)]) == 0
-    study = optuna.load_study(
-        study_name="pn-person_follow",
-        storage=optuna.storages.JournalStorage(
-            optuna.storages.journal.JournalFileBackend(str(out / "study.journal"))
-        ),
-    )
+    assert main([*_CLI, "--trials", "1", "--out", str(out)]) == 0
+    study = _journal_study(out / "study.journal", "pn-person_follow")
     lost = _left_running(study, "crashed-host:4242", liveness.STALE_AFTER_S + 5.0)
     capsys.readouterr()
-    assert main([*cli, "--trials", "2", "--out", str(out)]) == 0
+    assert main([*_CLI, "--trials", "2", "--out", str(out)]) == 0
     err = capsys.readouterr().err
     assert (
         f"follow-tune: trial {lost} left running by crashed-host:4242 marked failed: its "
@@ -224,14 +223,13 @@ def test_follow_tune_refuses_to_resume_after_the_code_changed(
     tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:
     out = tmp_path / "out"
-    cli = ["pn", "--scenarios", "straight", "--seeds", "2", "--holdout-seeds", "2"]
-    assert main([*cli, "--trials", "1", "--out", str(out)]) == 0
+    assert main([*_CLI, "--trials", "1", "--out", str(out)]) == 0
     code = json.loads((out / "result.json").read_text())["code"]
     assert code == eval.tuning.cli.running_sources_sha256()
     journal = (out / "study.journal").read_bytes()
     capsys.readouterr()
     monkeypatch.setattr(eval.tuning.cli, "running_sources_sha256", lambda: "d" * 64)
-    assert main([*cli, "--trials", "2", "--out", str(out)]) == 2
+    assert main([*_CLI, "--trials", "2", "--out", str(out)]) == 2
     err = capsys.readouterr().err
     assert err.startswith("follow-tune: error: --study pn-person_follow: ")
     assert f"was scored by other code (sources {code[:12]}, this code's dddddddddddd)" in err
