@@ -35,7 +35,8 @@ def bench_agents(quick: bool) -> list[tuple[str, float, str]]:
         with torch.no_grad():
             rows = [network.policy._predict(torch.as_tensor(row[None]), deterministic=True)
                     for row in step]  # fmt: skip
-        return np.clip(torch.cat(rows).numpy(), network._low, network._high)
+        # float64, as the network is loaded (policies.learned.networks), rounded as it rounds
+        return np.clip(torch.cat(rows).numpy(), network._low, network._high).astype(np.float32)
 
     np.testing.assert_array_equal(network.act(obs[0]), predict(obs[0]))  # the same actions
     rates = {}

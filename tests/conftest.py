@@ -70,7 +70,10 @@ def one_rollout():
 def acts_as_trained():
     """A check that a loaded agent acts as it did in training: one lane of its training stack
     (eval mode: frozen statistics), stepped by SB3's own ``load`` and ``predict``, against the
-    policy in the single env on the same seed: the same SI actions, step by step.
+    policy in the single env on the same seed: the same SI actions, step by step. SB3's model
+    is widened to float64 as the policy's network is (``policies.learned.networks.widened``):
+    in float32 its actions are the policy's but for float32's rounding, and over a closed loop
+    a last bit can move a detection by a pixel.
     ``acts_as_trained(run_dir, policy, steps)``: the first ``steps`` actions (fewer when the
     episode ends sooner). The training stack's env gets what evaluation gives the policy on top
     of the run's configuration (its ``env_overrides``: an agent's reading ahead)."""
@@ -79,6 +82,7 @@ def acts_as_trained():
     from stable_baselines3.common.vec_env import VecEnvWrapper
 
     from eval.rollout import run_episode
+    from policies.learned.networks import widened
     from train.envs import agent_env, base_env
     from train.run import read_config
 
@@ -105,6 +109,7 @@ def acts_as_trained():
     def check(run, policy, steps: int, scenario: str = "curve", seed: int = 7) -> None:
         config = read_config(run)
         model = PPO.load(run / "model.zip", device="cpu")
+        widened(model.policy)
         # what eval.rollout applies on top of the run's configuration (a PPOPolicy always has it)
         overrides = policy.env_overrides or None
         env = base_env([scenario], 1, config["args"]["env_config"], env_kwargs=overrides)
@@ -115,7 +120,8 @@ def acts_as_trained():
         agent_obs = venv.reset()
         for _ in range(steps):
             action, _ = model.predict(agent_obs, deterministic=True)
-            agent_obs, *_ = venv.step(action)
+            # rounded to float32 where the network rounds it, before the view's action steps
+            agent_obs, *_ = venv.step(action.astype(np.float32))
         log = run_episode(policy, scenario, seed).log
         expected = log[["action_v_mps", "action_w_radps"]].to_numpy()  # row k: obs k
         # the first `steps` actions, or all of an episode that ends sooner (its last row, the

@@ -14,6 +14,16 @@ deterministically, as the library's ``predict`` does:
 Every network runs one lane (one row) at a time, so a batch gives each lane exactly the action
 it gets alone (:mod:`policies.learned.ppo` says why). torch and SB3 are imported only here,
 when a network is loaded.
+
+A network acts in float64 (its float32 weights widened once, when it is loaded) and its action
+is rounded to float32 at the end: so an agent acts the same on every CPU. In float32, torch's
+matrix products pick their kernels by CPU (AVX-512, AVX2, ...) and round differently in the
+last bit, and 30 s of closed loop carry such a bit into another episode: the shipped agent's
+evaluation depended on the machine. In float64 the kernels still differ, by about 1e-16, far
+below float32's rounding step (6e-8 relative), so the float32 action they round to is the same
+but for a chance of about 1e-9 per action (``tests/policies/learned/test_networks_any_cpu.py``
+runs an agent under other instruction sets and compares). The action is within float32 rounding
+of the library's float32 ``predict``, not equal to it bit for bit.
 """
 
 from __future__ import annotations
@@ -23,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["ALGOS", "Memory", "Network", "RecurrentNetwork", "load_network"]
+__all__ = ["ALGOS", "Memory", "Network", "RecurrentNetwork", "load_network", "widened"]
 
 #: The algorithms ``follow-train --algo`` trains (``config.yaml``'s ``algo``; none: PPO).
 ALGOS = ("ppo", "recurrent_ppo", "sac")
@@ -46,7 +56,7 @@ class Memory:
     def __init__(self, n: int, shape: tuple[int, ...]) -> None:
         import torch
 
-        zeros = torch.zeros(shape, dtype=torch.float32)
+        zeros = torch.zeros(shape, dtype=torch.float64)
         self.states: list[tuple[Any, Any]] = [(zeros, zeros) for _ in range(n)]
         self.starts = np.ones(n, dtype=bool)
 
@@ -61,10 +71,11 @@ class Memory:
 
 class Network:
     """A loaded feed-forward policy network (PPO's or SAC's), acting deterministically on agent
-    observations one row at a time (module docstring)."""
+    observations one row at a time, in float64 (module docstring)."""
 
     def __init__(self, policy: Any) -> None:
-        self.policy = policy
+        # Widened before anything below takes its layers (the mean path keeps references).
+        self.policy = widened(policy)
         policy.set_training_mode(False)
         self.observation_space = policy.observation_space
         self.action_space = policy.action_space
@@ -85,11 +96,11 @@ class Network:
         return np.clip(action, self._low, self._high)[0]
 
     def act(self, obs: np.ndarray, memory: Memory | None = None) -> np.ndarray:
-        """Actions ``(n, m)`` float32 for agent observations ``(n, k)`` float32."""
+        """Actions ``(n, m)`` float32 for agent observations ``(n, k)``, computed in float64."""
         import torch
 
         out = np.empty((len(obs), *self._shape), dtype=np.float32)
-        rows = torch.from_numpy(np.ascontiguousarray(obs, dtype=np.float32))
+        rows = torch.from_numpy(np.ascontiguousarray(obs, dtype=np.float64))
         with torch.inference_mode():
             if self._gaussian is not None:  # PPO: the mean, without building a distribution
                 for i in range(len(obs)):
@@ -120,8 +131,8 @@ class RecurrentNetwork(Network):
         out = np.empty((len(obs), *self._shape), dtype=np.float32)
         with torch.no_grad():
             for i in range(len(obs)):
-                tensor = torch.as_tensor(obs[i : i + 1]).float()
-                start = torch.tensor([float(memory.starts[i])], dtype=torch.float32)
+                tensor = torch.as_tensor(obs[i : i + 1], dtype=torch.float64)
+                start = torch.tensor([float(memory.starts[i])], dtype=torch.float64)
                 action, state = self.policy._predict(
                     tensor, lstm_states=memory.states[i], episode_starts=start, deterministic=True
                 )
@@ -129,6 +140,27 @@ class RecurrentNetwork(Network):
                 out[i] = self._output(action)
         memory.starts[:] = False
         return out
+
+
+def widened(policy: Any) -> Any:
+    """``policy`` in float64, in place: its parameters and buffers, and what its features
+    extractors are given (SB3's ``preprocess_obs`` turns a Box's observation into float32 on
+    the way in, ``obs.float()``; the float32 values widen exactly)."""
+    import torch
+    from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
+
+    def widen(value: Any) -> Any:
+        if isinstance(value, torch.Tensor) and value.is_floating_point():
+            return value.to(torch.float64)
+        if isinstance(value, dict):
+            return {key: widen(item) for key, item in value.items()}
+        return value
+
+    policy.to(torch.float64)
+    for module in policy.modules():
+        if isinstance(module, BaseFeaturesExtractor):
+            module.register_forward_pre_hook(lambda _, args: tuple(map(widen, args)))
+    return policy
 
 
 def _gaussian_mean(policy: Any) -> Any:

@@ -34,8 +34,8 @@ a recurrent agent's LSTM state. No training code is imported.
 
 Batched acting (:meth:`PPOPolicy.act_batch`) runs the feature pipeline over all lanes at once
 but the network one lane at a time: torch's batched matrix products round differently from a
-single row (measured: up to 3e-7 on the shipped agent), and batched evaluation promises actions
-bitwise equal to an episode run alone.
+single row (in float32 up to 3e-7 on the shipped agent; in float64, as it acts now, a rare
+action could still round apart), and batched evaluation promises bitwise single episodes.
 
 torch and stable-baselines3 (sb3-contrib for a recurrent agent) load only when an agent is
 built; a loaded model is shared by the policies built from the same files (each keeps its own

@@ -306,17 +306,19 @@ def test_the_mecanum_agent_is_ppo_mecanum_and_follows_on_its_base_only() -> None
 @pytest.mark.parametrize("name", ["ppo", "ppo_law", "ppo_mecanum"])
 def test_a_shipped_agent_acts_on_the_gaussians_mean_as_sb3s_predict(name: str) -> None:
     """The network's fast path (the mean, no distribution object) is the one taken, and gives
-    SB3's ``predict`` to the bit, on rows alone and on a batch."""
+    SB3's ``predict`` of the float64 policy, rounded to float32, to the bit, on rows alone and on
+    a batch."""
     import torch
 
     network = make_policy(name)._agent.model
     assert network._gaussian is not None
+    assert next(network.policy.parameters()).dtype == torch.float64
     rng = np.random.default_rng(5)
     obs = rng.uniform(-3, 3, (64, *network.observation_space.shape)).astype(np.float32)
     with torch.no_grad():
         theirs = np.concatenate(
             [network.policy.predict(row[None], deterministic=True)[0] for row in obs]
-        )
+        ).astype(np.float32)
     np.testing.assert_array_equal(network.act(obs), theirs)
     np.testing.assert_array_equal(np.concatenate([network.act(row[None]) for row in obs]), theirs)
 
@@ -345,11 +347,14 @@ def test_each_policy_kind_takes_the_mean_path_to_sb3s_predict_bit_for_bit(kwargs
     kind = MirrorMlpPolicy if "mirror_obs" in kwargs else ActorCriticPolicy
     torch.manual_seed(3)
     policy = kind(spaces.Box(-5, 5, (6,)), spaces.Box(-1, 1, (2,)), lambda _: 3e-4, **kwargs)
-    network = Network(policy)
-    assert network._gaussian is not None
     rows = np.random.default_rng(7).uniform(-5, 5, (40, 6)).astype(np.float32)
+    # In float32, as trained: the same but for float32's rounding (module networks' docstring).
+    narrow = np.concatenate([policy.predict(row[None], deterministic=True)[0] for row in rows])
+    network = Network(policy)  # widens the policy in place
+    assert network._gaussian is not None
     theirs = np.concatenate([policy.predict(row[None], deterministic=True)[0] for row in rows])
-    np.testing.assert_array_equal(network.act(rows), theirs)
+    np.testing.assert_array_equal(network.act(rows), theirs.astype(np.float32))
+    np.testing.assert_allclose(network.act(rows), narrow, rtol=1e-5, atol=1e-6)
 
 
 def _normalising(folder: Path, config_norm_obs: bool = True, **fields: object) -> Path:

@@ -1,0 +1,85 @@
+"""A learned agent acts the same on every CPU (policies.learned.networks: it acts in float64).
+
+Other CPUs are stood in for by running the agent in a subprocess under other instruction sets:
+MKL_ENABLE_INSTRUCTIONS caps the kernels of torch's matrix products (MKL), ATEN_CPU_CAPABILITY
+those of torch's own element-wise ones (tanh), as a CPU without AVX-512, or without AVX2,
+would have them picked.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+# Each stands for a CPU of another kind: one with AVX2 and no AVX-512, one older still.
+SETTINGS = {
+    "avx2": {"MKL_ENABLE_INSTRUCTIONS": "AVX2", "ATEN_CPU_CAPABILITY": "avx2"},
+    "sse4_2": {"MKL_ENABLE_INSTRUCTIONS": "SSE4_2", "ATEN_CPU_CAPABILITY": "default"},
+}
+ROWS = 4000
+
+# Acts on ROWS observations drawn within the agent's view (seeded) and saves the actions: in
+# float64, as the agent acts, and, as the control, with the same network in float32.
+_ACT = """
+import sys
+import numpy as np
+import torch
+from follow_env.sim.checks import load_yaml
+from policies import make_policy
+from policies.learned import networks
+
+agent = make_policy(sys.argv[1])._agent
+box = agent.model.observation_space
+rows = np.random.default_rng(11).uniform(
+    np.maximum(box.low, -3), np.minimum(box.high, 3), (int(sys.argv[3]), *box.shape)
+).astype(np.float32)
+wide = agent.model.act(rows)
+# The control: the same network loaded again and left in float32.
+networks.widened = lambda policy: policy
+config = load_yaml(agent.files.config.read_text(encoding="utf-8"))
+kind = config["hyperparams"].get("policy")
+narrow_net = networks.load_network(agent.files.model, agent.algo, kind, RuntimeError)
+with torch.inference_mode():
+    narrow = np.concatenate(
+        [narrow_net._gaussian(torch.from_numpy(r[None])).numpy() for r in rows]
+    )
+narrow = np.clip(narrow, narrow_net._low, narrow_net._high)  # as Network.act clips its own
+np.savez(sys.argv[2], wide=wide, narrow=narrow)
+"""
+
+
+def _actions(agent: str, out: Path, settings: dict[str, str]) -> dict[str, np.ndarray]:
+    env = {**os.environ, **settings}
+    root = Path(__file__).resolve().parents[3]
+    subprocess.run(
+        [sys.executable, "-c", _ACT, agent, str(out), str(ROWS)],
+        env=env,
+        cwd=root,
+        check=True,
+        timeout=300,
+    )
+    with np.load(out) as saved:
+        return {key: saved[key] for key in saved.files}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("agent", ["ppo", "ppo_mecanum"])
+def test_an_agent_acts_bit_for_bit_the_same_under_other_instruction_sets(
+    agent: str, tmp_path: Path
+) -> None:
+    here = _actions(agent, tmp_path / "here.npz", {})
+    narrow_moved = 0
+    for name, settings in SETTINGS.items():
+        there = _actions(agent, tmp_path / f"{name}.npz", settings)
+        np.testing.assert_array_equal(there["wide"], here["wide"], err_msg=name)
+        narrow_moved += int((there["narrow"] != here["narrow"]).any())
+    # The control: in float32 the same network does act differently under them, so the
+    # settings do stand for other CPUs' kernels here.
+    assert narrow_moved >= 1
+    # And float64's actions are float32's but for its rounding.
+    np.testing.assert_allclose(here["wide"], here["narrow"], rtol=1e-5, atol=1e-6)
