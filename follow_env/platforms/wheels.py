@@ -117,8 +117,7 @@ class PIDConfig(Validated):
     anti_windup: str = param(
         "clamp",
         doc="choice: stop integrating while the duty is saturated and the error "
-        "pushes further into saturation ('none' disables it; a known defect: the duty then "
-        "drops below the limit, pid_step)",
+        "pushes further into saturation ('none' disables it)",
         choices=("clamp", "none"),
     )
 
@@ -174,9 +173,8 @@ def pid_step(
 
     ``integral += e dt``; ``raw = (e - e_prev) / dt``; ``D = (tau D_prev + dt raw) / (tau + dt)``;
     ``u = Kp e + Ki integral + Kd D``, clamped to ``+-max_duty`` (reference §1.1). Anti-windup by
-    clamping: while the output saturates and the error pushes further into saturation the
-    integral is not advanced (and the output is computed again from the held integral, which
-    takes it below the limit: the defect the comment below describes).
+    clamping (conditional integration): while the output saturates and the error pushes further
+    into saturation the integral is not advanced, and the duty stays at the limit.
 
     :return: ``(duty %, new integral, new filtered derivative)``.
     """
@@ -185,12 +183,10 @@ def pid_step(
     i_new = integral + error * dt_s
     u = kp * error + ki * i_new + kd * d_new
     if anti_windup and abs(u) > max_duty and u * error > 0.0:
-        # Known defect, kept for now: the output computed again from the held integral falls
-        # below the limit, so a wheel asked for more than its top speed runs below it (a
-        # target of 2.08 m/s gives 1.34 m/s). Dropping this line fixes it; it changes every
-        # recorded golden rollout (tests/golden), whose hashes differ by CPU.
+        # Hold the integral, and send the saturated duty: the output computed again from the
+        # held integral falls below the limit, so a wheel asked for more than its top speed
+        # ran below it, slower the more it was asked (a target of 2.08 m/s gave 1.34 m/s).
         i_new = integral
-        u = kp * error + ki * i_new + kd * d_new
     if u > max_duty:
         u = max_duty
     elif u < -max_duty:

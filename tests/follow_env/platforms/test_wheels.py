@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from follow_env.platforms.wheels import (
     encoder_count,
@@ -10,6 +11,7 @@ from follow_env.platforms.wheels import (
     lag_factor,
     motor_step,
     pid_step,
+    wheel_tick,
 )
 from follow_env.tasks.person_follow.config import THESIS
 from follow_env.tasks.person_follow.task import batched_sim
@@ -74,6 +76,31 @@ def test_anti_windup_stops_integrating_in_saturation() -> None:
     assert integ == 1.0
     _, integ, _ = pid_step(10.0, 10.0, 1.0, 0.0, 100.0, 1.0, 0.0, 0.01, 0.01, 99.0, False)
     assert np.isclose(integ, 1.1)
+
+
+def test_anti_windup_keeps_the_duty_at_the_limit() -> None:
+    # Kp e + Ki (0 + e dt) = 98.95 + 0.1 saturates; the output used to be computed again
+    # from the held integral, 98.95 %
+    u, integ, _ = pid_step(1.0, 1.0, 0.0, 0.0, 98.95, 10.0, 0.0, 0.01, 0.01, 99.0, True)
+    assert integ == 0.0
+    assert u == 99.0
+
+
+def test_a_wheel_asked_for_more_than_its_top_speed_runs_at_it() -> None:
+    # the clamp's output dropped out of saturation, so a wheel slowed as its target rose above
+    # its top speed (2.08 m/s gave 1.34): every such target now runs at 99 % duty, top speed
+    top = 20.0 * 0.075 * (99.0 - 4.0) / 96.0  # no-load speed x radius x (99 - friction) / 96
+    pid = (120.0, 1500.0, 0.5, 0.01, 0.01, 99.0, True)  # the default gains, 10 ms, 99 %
+    consts = (*pid, 20.0, ALPHA, 4.0, 8.0, 8192.0, 0.15, 0.001)
+    for target in (1.55, 1.9, 2.08, 3.0):
+        e = i = d = omega = angle = meas = 0.0
+        count = 0
+        for _ in range(400):  # 4 s
+            u, i, d, e, omega, angle, count, meas = wheel_tick(
+                target, meas, e, i, d, omega, angle, count, 0, 1.0, consts
+            )
+        assert u == 99.0, target
+        assert omega * 0.075 == pytest.approx(top, rel=1e-6), target
 
 
 def test_motor_lags_towards_its_steady_speed() -> None:
