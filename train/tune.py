@@ -36,7 +36,15 @@ from typing import Any
 import numpy as np
 import yaml
 
-from eval.cli_base import UsageError, _names, _Parser, _positive, path_option
+from eval.cli_base import (
+    UsageError,
+    _names,
+    _Parser,
+    _positive,
+    path_option,
+    sigterm_as_interrupt,
+    stopped,
+)
 from eval.provenance import running_sources_sha256
 from eval.rollout import rollout
 from eval.tuning.cli import run_reporting
@@ -271,23 +279,25 @@ def run(args: argparse.Namespace) -> int:
             identity,
             running_sources_sha256(TRAINING_PACKAGES),
         )
-    except KeyboardInterrupt:  # open_search removed what it made: the folder, a new journal
+    except KeyboardInterrupt as e:  # open_search removed what it made: the folder, a new journal
+        what, status = stopped(e)  # Ctrl-C, or SIGTERM (sigterm_as_interrupt, in main)
         print(
-            f"{PROG}: interrupted while opening the study {args.study} in {storage}; no trial "
+            f"{PROG}: {what} while opening the study {args.study} in {storage}; no trial "
             "ran: run the same command again",
             file=sys.stderr,
         )
-        return 130
+        return status
     try:
         ran = run_search(study, PPO_SPACE, config, objective, on_stale=_say_stale)
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as e:
+        what, status = stopped(e)
         print(
-            f"{PROG}: interrupted; the study {args.study} in {storage} keeps its finished "
+            f"{PROG}: {what}; the study {args.study} in {storage} keeps its finished "
             f"trials, and {args.out / 'trials'} their runs: run the same command again to "
             "resume",
             file=sys.stderr,
         )
-        return 130
+        return status
     best = study.best_trial
     summary = {
         "study": args.study,
@@ -361,12 +371,14 @@ def _check_out_owner(out: Path, study: str) -> None:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point; returns the exit status (2 with one line on stderr for bad arguments)."""
-    return run_reporting(
-        PROG,
-        "the study keeps its finished trials and their runs",
-        lambda: run(build_parser().parse_args(argv)),
-    )
+    """Entry point; returns the exit status (2 with one line on stderr for bad arguments; 130
+    on Ctrl-C, 143 on SIGTERM, which takes Ctrl-C's path as follow-tune's does)."""
+    with sigterm_as_interrupt():  # `timeout`, Slurm and Kubernetes stop a study as Ctrl-C does
+        return run_reporting(
+            PROG,
+            "the study keeps its finished trials and their runs",
+            lambda: run(build_parser().parse_args(argv)),
+        )
 
 
 if __name__ == "__main__":

@@ -218,3 +218,40 @@ def test_ctrl_c_is_one_line_saying_what_was_kept(
         assert not any(tmp_path.iterdir())  # the folder it made is gone
     else:
         assert sorted(p.name for p in out.iterdir()) == ["study.journal"]
+
+
+@pytest.mark.slow
+def test_sigterm_stops_a_search_as_ctrl_c_does(tmp_path: Path) -> None:
+    """``kill`` (as ``timeout``, Slurm and Kubernetes stop a job) takes Ctrl-C's path: one line
+    saying what was kept, exit status 143, no traceback."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    out = tmp_path / "out"
+    argv = ["--trials", "50", "--n-timesteps", "256", "--n-envs", "12", "--seeds", "1"]
+    argv += ["--scenarios", "straight", "--out", str(out)]
+    root = Path(__file__).resolve().parents[2]
+    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "train.tune", *argv],
+        cwd=root,
+        env=env,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    deadline = time.monotonic() + 120
+    while not (out / "trials").exists() and proc.poll() is None:  # a trial is training
+        assert time.monotonic() < deadline, "no trial began in 120 s"
+        time.sleep(0.05)
+    time.sleep(1.0)
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 143, err
+    assert "Traceback" not in err
+    last = err.strip().splitlines()[-1]
+    assert last.startswith("python -m train.tune: terminated (SIGTERM); the study "), err
+    assert last.endswith("run the same command again to resume")
