@@ -16,9 +16,10 @@ move: a hash of its events (every flag, count and name at every step, as the bit
 takes them) and, per real-valued channel (each observation entry, the reward, each float
 ``info`` value), a weighted sum over the steps with the sum of magnitudes as its scale. An
 episode passes when it hashes to the recorded one bit for bit, or has the same steps and events
-and every channel's sum within :data:`RTOL` of its scale: last bits move a sum by about 1e-16
-of its scale, a change of behaviour by far more (a wheel's speed 1e-6 off for one step moves
-its channel by more than 1e-9). Learned agents act in float64 and round to float32
+and every channel's sum within :data:`RTOL` of its scale (sums kept to 12 digits): last bits
+move a sum by far less (moving every person's waypoints by one unit in the last place moved none
+by more than 2e-14 of its scale in any of the 123 episodes), a change of behaviour by far more
+(moving them by a micrometre fails, tested). Learned agents act in float64 and round to float32
 (:mod:`policies.learned.networks`), so their episodes are the same on every CPU too; in
 float32 they were not (torch's matrix kernels differ by CPU and 30 s of closed loop made
 another episode of a last bit, ``crowd/ppo/0`` ending at step 116 instead of 96 on an Intel Xeon
