@@ -16,6 +16,10 @@ The digest, not the commit, is what pooling compares (:func:`code_notes`): a run
 checkout with uncommitted edits has the commit of code it did not run, and two commits that
 touch only the documentation made the same rollouts.
 
+A tuning study keeps a looser digest, :func:`code_sha256`: the same files parsed, without
+their comments, docstrings and layout, so that an edit to a comment or a docstring does not
+make a study's scores incomparable (:func:`eval.tuning.folders.open_search`).
+
 It is also what a work unit carries from the driver to its worker (:func:`check_worker_code`):
 on a cluster each node runs its own installation, and a node with other code would make other
 episodes, or train another agent, without a sign. The worker's own digest is read once per
@@ -34,6 +38,7 @@ pooling runs refuses two digests under one label and notes a run that records no
 
 from __future__ import annotations
 
+import ast
 import hashlib
 import importlib.util
 import os
@@ -53,8 +58,10 @@ __all__ = [
     "check_worker_model",
     "code_notes",
     "code_revision",
+    "code_sha256",
     "model_notes",
     "model_sha256",
+    "running_code_sha256",
     "running_sources_sha256",
     "sources_sha256",
 ]
@@ -81,9 +88,9 @@ def _package_dirs(packages: Sequence[str]) -> list[Path]:
     return dirs
 
 
-def sources_sha256(dirs: Sequence[Path]) -> str:
-    """SHA-256 (hex) over the ``.py`` files under ``dirs`` (module docstring), paths relative
-    to each folder's parent; ``__pycache__`` (numba's generated modules among them) left out."""
+def _py_files(dirs: Sequence[Path]) -> list[tuple[str, Path]]:
+    """The ``.py`` files under ``dirs``, each with its path relative to its folder's parent,
+    sorted by it; ``__pycache__`` (numba's generated modules among them) left out."""
     files: list[tuple[str, Path]] = []
     for folder in dirs:
         for where, subdirs, names in os.walk(folder):
@@ -94,9 +101,12 @@ def sources_sha256(dirs: Sequence[Path]) -> str:
                 if name.endswith(".py"):
                     files.append(((here / name).relative_to(folder.parent).as_posix(), here / name))
     files.sort()
+    return files
+
+
+def _hash_files(files: list[tuple[str, bytes]]) -> str:
     digest = hashlib.sha256()
-    for name, path in files:
-        data = path.read_bytes()
+    for name, data in files:
         # the size between the name and the bytes: no two file sets hash alike by shifting
         # bytes from one file's end into the next one's name
         digest.update(name.encode() + b"\0" + len(data).to_bytes(8, "big"))
@@ -104,8 +114,44 @@ def sources_sha256(dirs: Sequence[Path]) -> str:
     return digest.hexdigest()
 
 
+def sources_sha256(dirs: Sequence[Path]) -> str:
+    """SHA-256 (hex) over the ``.py`` files under ``dirs`` (module docstring), paths relative
+    to each folder's parent; ``__pycache__`` (numba's generated modules among them) left out."""
+    return _hash_files([(name, path.read_bytes()) for name, path in _py_files(dirs)])
+
+
+_DOCUMENTED = (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)
+
+
+def _code_of(source: bytes) -> bytes:
+    """What a file's code is, without its comments, docstrings and layout: its syntax tree,
+    docstrings removed, dumped without positions (the source itself if it does not parse)."""
+    try:
+        tree = ast.parse(source)
+    except (SyntaxError, ValueError):
+        return source
+    for node in ast.walk(tree):
+        if isinstance(node, _DOCUMENTED) and node.body:
+            first = node.body[0]
+            if (
+                isinstance(first, ast.Expr)
+                and isinstance(first.value, ast.Constant)
+                and isinstance(first.value.value, str)
+            ):
+                node.body = node.body[1:] or [ast.Pass()]
+    return ast.dump(tree).encode()
+
+
+def code_sha256(dirs: Sequence[Path]) -> str:
+    """SHA-256 (hex) over the code of the ``.py`` files under ``dirs``, as
+    :func:`sources_sha256` takes them but each file as :func:`_code_of` gives it: an edit to a
+    comment, a docstring or the layout keeps it, any other edit changes it."""
+    return _hash_files([(name, _code_of(path.read_bytes())) for name, path in _py_files(dirs)])
+
+
 #: This process's digest of each package set, read at its first use (the code it imported then).
 _RUNNING: dict[tuple[str, ...], str] = {}
+_RUNNING_CODE: dict[tuple[str, ...], str] = {}
 
 
 class CodeMismatchError(ValueError):
@@ -122,6 +168,16 @@ def running_sources_sha256(packages: Sequence[str] = ROLLOUT_PACKAGES) -> str:
     if digest is None:
         # Two threads may both read it the first time: the same value, harmlessly twice.
         digest = _RUNNING[key] = sources_sha256(_package_dirs(key))
+    return digest
+
+
+def running_code_sha256(packages: Sequence[str] = ROLLOUT_PACKAGES) -> str:
+    """:func:`code_sha256` of ``packages``, read once per process and kept, as
+    :func:`running_sources_sha256` is (parsing them takes about half a second)."""
+    key = tuple(packages)
+    digest = _RUNNING_CODE.get(key)
+    if digest is None:
+        digest = _RUNNING_CODE[key] = code_sha256(_package_dirs(key))
     return digest
 
 

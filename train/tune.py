@@ -45,7 +45,7 @@ from eval.cli_base import (
     sigterm_as_interrupt,
     stopped,
 )
-from eval.provenance import running_sources_sha256
+from eval.provenance import running_code_sha256, running_sources_sha256
 from eval.rollout import rollout
 from eval.tuning.cli import run_reporting
 from eval.tuning.driver import SearchConfig, run_search
@@ -166,7 +166,7 @@ class PPOObjective:
         # another trial's, never reused for this one.
         budget = (
             f"n_timesteps={self.base.n_timesteps} n_envs={self.base.n_envs} "
-            f"code={running_sources_sha256(TRAINING_PACKAGES)}\n"
+            f"code={running_code_sha256(TRAINING_PACKAGES)}\n"
         )
         key = hashlib.sha256((text + budget).encode()).hexdigest()[:12]
         trial = self.folder / f"trial-{key}"
@@ -272,12 +272,7 @@ def run(args: argparse.Namespace) -> int:
     config = dataclasses.replace(config, batch=backend.slots())
     try:
         study = open_search(
-            args.out,
-            storage,
-            args.study,
-            config,
-            identity,
-            running_sources_sha256(TRAINING_PACKAGES),
+            args.out, storage, args.study, config, identity, running_code_sha256(TRAINING_PACKAGES)
         )
     except KeyboardInterrupt as e:  # open_search removed what it made: the folder, a new journal
         what, status = stopped(e)  # Ctrl-C, or SIGTERM (sigterm_as_interrupt, in main)

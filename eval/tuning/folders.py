@@ -25,6 +25,7 @@ from follow_env.sim.atomic import (
 )
 
 __all__ = [
+    "SCORING_CODE",
     "check_driver",
     "check_journal_owner",
     "check_journal_path",
@@ -37,6 +38,10 @@ __all__ = [
     "sqlite_file",
     "text_check",
 ]
+
+#: The study attribute that keeps the digest of the code that scored its trials
+#: (:func:`open_search`).
+SCORING_CODE = "scoring_code"
 
 
 def refuse_empty(args: Any, options: tuple[str, ...]) -> None:
@@ -265,8 +270,10 @@ def open_search(
     :param identity: what the study's trials depend on (JSON): a study run with other
         settings is refused, since its trials would not be comparable with this run's.
     :param code: the digest of the code that scores a trial
-        (:func:`eval.provenance.running_sources_sha256` of the packages involved), kept as the
-        study's ``"code"`` attribute: a study scored by other code with trials still to run
+        (:func:`eval.provenance.running_code_sha256` of the packages involved: their code,
+        comments and docstrings aside), kept as the study's ``"scoring_code"`` attribute
+        (a study that recorded the digest of the sources as ``"code"`` before is taken as one
+        that records none): a study scored by other code with trials still to run
         (fewer finished than ``config.trials``) is refused as one with other settings is (an
         edited reward or law would rank new trials against old scores); a complete one is
         not, since no trial is scored again (the held-out check scores its candidates anew
@@ -295,9 +302,9 @@ def open_search(
                 f"--study {study}: the study in {storage} was run with other settings "
                 f"({had}); give another --study or --storage"
             )
-        had_code = opened.user_attrs.get("code")
+        had_code = opened.user_attrs.get(SCORING_CODE)
         if code is not None and had_code is None:
-            opened.set_user_attr("code", code)
+            opened.set_user_attr(SCORING_CODE, code)
         elif (
             code is not None
             and had_code != code

@@ -11,7 +11,7 @@ import pytest
 
 from eval import provenance
 from eval.cli import main
-from eval.provenance import ROLLOUT_PACKAGES, code_notes, code_revision, sources_sha256
+from eval.provenance import ROLLOUT_PACKAGES, code_notes, code_revision, code_sha256, sources_sha256
 
 needs_git = pytest.mark.skipif(shutil.which("git") is None, reason="git is not installed")
 
@@ -47,6 +47,52 @@ def test_the_digest_follows_every_source_file_and_nothing_else(tmp_path: Path) -
     assert changed != before
     (pkg / "sub" / "b.py").rename(pkg / "sub" / "c.py")  # the same bytes under another name
     assert sources_sha256([pkg]) not in (before, changed)
+
+
+_CODE = '''"""A module."""
+
+LIMIT = 2.0  # m/s
+
+
+def speed(v: float) -> float:
+    """The speed, bounded."""
+    return min(v, LIMIT)
+'''
+
+
+@pytest.mark.parametrize(
+    ("edited", "same"),
+    [
+        (_CODE.replace("# m/s", "# metres a second"), True),  # a comment
+        (_CODE.replace("The speed, bounded.", "Bounded speed (m/s)."), True),  # a docstring
+        (_CODE.replace('"""A module."""\n', ""), True),  # a docstring removed
+        (_CODE.replace("min(v, LIMIT)", "min(\n        v,\n        LIMIT,\n    )"), True),
+        (_CODE.replace("2.0", "2.5"), False),  # a constant
+        (_CODE.replace("min(v, LIMIT)", "max(v, LIMIT)"), False),  # an operation
+        (_CODE.replace("def speed(", "def bounded(").replace("speed, b", "b"), False),  # a name
+        (_CODE + "\n\nX = 'A string that is not a docstring.'\n", False),
+    ],
+    ids=["comment", "docstring", "docstring-removed", "layout", "constant", "call", "name", "str"],
+)
+def test_the_code_digest_ignores_comments_docstrings_and_layout_only(
+    tmp_path: Path, edited: str, same: bool
+) -> None:
+    pkg = _package(tmp_path, "pkg", {"a.py": _CODE})
+    before, sources = code_sha256([pkg]), sources_sha256([pkg])
+    (pkg / "a.py").write_text(edited)
+    assert (code_sha256([pkg]) == before) is same
+    assert sources_sha256([pkg]) != sources  # the sources' digest sees every edit
+
+
+def test_the_code_digest_follows_files_and_takes_one_that_does_not_parse(tmp_path: Path) -> None:
+    pkg = _package(tmp_path, "pkg", {"a.py": _CODE})
+    before = code_sha256([pkg])
+    (pkg / "a.py").rename(pkg / "b.py")
+    assert code_sha256([pkg]) != before
+    (pkg / "c.py").write_text("def broken(:\n")
+    broken = code_sha256([pkg])
+    (pkg / "c.py").write_text("def broken(:  # still broken\n")
+    assert code_sha256([pkg]) != broken  # compared as its bytes
 
 
 def test_the_digest_is_of_paths_relative_to_the_packages_folder(tmp_path: Path) -> None:

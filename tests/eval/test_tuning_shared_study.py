@@ -177,10 +177,10 @@ def test_a_study_scored_by_other_code_is_not_resumed(tmp_path: Path) -> None:
     out, config = tmp_path / "out", SearchConfig(1, (0,))
     storage = str(out / "study.journal")
     study = open_search(out, storage, "toy", config, {"n": 1}, "a" * 64)
-    assert study.user_attrs["code"] == "a" * 64
+    assert study.user_attrs["scoring_code"] == "a" * 64
     assert open_search(out, storage, "toy", config, {"n": 1}, "a" * 64).user_attrs == {
         "search": {"n": 1},
-        "code": "a" * 64,
+        "scoring_code": "a" * 64,
     }
     before = Path(storage).read_bytes()
     with pytest.raises(UsageError) as refused:
@@ -203,7 +203,7 @@ def test_a_complete_study_scored_by_other_code_still_opens_for_its_held_out_chec
     # Nothing is scored again, so the code that would score it does not matter; the study
     # keeps the digest of the code that scored its trials.
     again = open_search(out, storage, "toy", config, {"n": 1}, "b" * 64)
-    assert again.user_attrs["code"] == "a" * 64
+    assert again.user_attrs["scoring_code"] == "a" * 64
     with pytest.raises(UsageError, match="was scored by other code"):
         open_search(out, storage, "toy", SearchConfig(2, (0,)), {"n": 1}, "b" * 64)
 
@@ -212,10 +212,12 @@ def test_a_study_that_records_no_code_takes_the_resuming_one(tmp_path: Path) -> 
     out, config = tmp_path / "out", SearchConfig(1, (0,))
     storage = str(out / "study.journal")
     open_search(out, storage, "toy", config, {"n": 1})  # as a version before the record
-    assert "code" not in open_study(storage, "toy", config).user_attrs
-    assert open_search(out, storage, "toy", config, {"n": 1}, "c" * 64).user_attrs["code"] == (
-        "c" * 64
-    )
+    study = open_study(storage, "toy", config)
+    assert "scoring_code" not in study.user_attrs
+    # the versions of 2026-12-06 kept the digest of the sources, comments and all, as "code"
+    study.set_user_attr("code", "a" * 64)
+    reopened = open_search(out, storage, "toy", config, {"n": 1}, "c" * 64)
+    assert reopened.user_attrs["scoring_code"] == "c" * 64
 
 
 @pytest.mark.slow
@@ -224,11 +226,13 @@ def test_follow_tune_refuses_to_resume_after_the_code_changed(
 ) -> None:
     out = tmp_path / "out"
     assert main([*_CLI, "--trials", "1", "--out", str(out)]) == 0
-    code = json.loads((out / "result.json").read_text())["code"]
-    assert code == eval.tuning.cli.running_sources_sha256()
+    assert json.loads((out / "result.json").read_text())["code"] == (
+        eval.tuning.cli.running_sources_sha256()  # the sources this run ran, for provenance
+    )
+    code = eval.tuning.cli.running_code_sha256()  # what the study keeps: the code, not comments
     journal = (out / "study.journal").read_bytes()
     capsys.readouterr()
-    monkeypatch.setattr(eval.tuning.cli, "running_sources_sha256", lambda: "d" * 64)
+    monkeypatch.setattr(eval.tuning.cli, "running_code_sha256", lambda: "d" * 64)
     assert main([*_CLI, "--trials", "2", "--out", str(out)]) == 2
     err = capsys.readouterr().err
     assert err.startswith("follow-tune: error: --study pn-person_follow: ")
