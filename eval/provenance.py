@@ -125,7 +125,8 @@ _DOCUMENTED = (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)
 
 def _code_of(source: bytes) -> bytes:
     """What a file's code is, without its comments, docstrings and layout: its syntax tree,
-    docstrings removed, dumped without positions (the source itself if it does not parse)."""
+    docstrings removed, written out by :func:`_tree_text` (the source itself if it does not
+    parse)."""
     try:
         tree = ast.parse(source)
     except (SyntaxError, ValueError):
@@ -139,7 +140,24 @@ def _code_of(source: bytes) -> bytes:
                 and isinstance(first.value.value, str)
             ):
                 node.body = node.body[1:] or [ast.Pass()]
-    return ast.dump(tree).encode()
+    return _tree_text(tree).encode()
+
+
+def _tree_text(node: Any) -> str:
+    """A syntax tree as text, the same under every Python that parses it alike: each node's
+    type and its fields by name, leaving out the empty ones (``ast.dump`` writes them
+    differently from one Python version to the next, and 3.12 added empty ``type_params``)."""
+    if isinstance(node, ast.AST):
+        fields = []
+        for name in node._fields:
+            value = getattr(node, name, None)
+            if value is None or value == []:
+                continue
+            fields.append(f"{name}={_tree_text(value)}")
+        return f"{type(node).__name__}({', '.join(fields)})"
+    if isinstance(node, list):
+        return f"[{', '.join(_tree_text(item) for item in node)}]"
+    return repr(node)
 
 
 def code_sha256(dirs: Sequence[Path]) -> str:

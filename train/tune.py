@@ -272,7 +272,13 @@ def run(args: argparse.Namespace) -> int:
     config = dataclasses.replace(config, batch=backend.slots())
     try:
         study = open_search(
-            args.out, storage, args.study, config, identity, running_code_sha256(TRAINING_PACKAGES)
+            args.out,
+            storage,
+            args.study,
+            config,
+            identity,
+            running_code_sha256(TRAINING_PACKAGES),
+            running_sources_sha256(TRAINING_PACKAGES),
         )
     except KeyboardInterrupt as e:  # open_search removed what it made: the folder, a new journal
         what, status = stopped(e)  # Ctrl-C, or SIGTERM (sigterm_as_interrupt, in main)
@@ -284,7 +290,8 @@ def run(args: argparse.Namespace) -> int:
         return status
     try:
         ran = run_search(study, PPO_SPACE, config, objective, on_stale=_say_stale)
-    except KeyboardInterrupt as e:
+        return _report(args, storage, study, ran, n_envs)
+    except KeyboardInterrupt as e:  # anywhere after the study opened: the search or its report
         what, status = stopped(e)
         print(
             f"{PROG}: {what}; the study {args.study} in {storage} keeps its finished "
@@ -293,6 +300,10 @@ def run(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
         return status
+
+
+def _report(args: argparse.Namespace, storage: str, study: Any, ran: int, n_envs: int) -> int:
+    """Write ``OUT/result.json`` (atomically) and print it: the best trial and its values."""
     best = study.best_trial
     summary = {
         "study": args.study,

@@ -319,7 +319,13 @@ def run(args: argparse.Namespace) -> int:
     config = SearchConfig(args.trials, _tune_seeds(args.seeds), 1, args.seed)
     try:
         study = open_search(
-            args.out, args.storage, args.study, config, identity, running_code_sha256()
+            args.out,
+            args.storage,
+            args.study,
+            config,
+            identity,
+            running_code_sha256(),
+            running_sources_sha256(),
         )
     except KeyboardInterrupt as e:  # open_search removed what it made: the folder, a new journal
         what, status = stopped(e)  # Ctrl-C, or SIGTERM (sigterm_as_interrupt)

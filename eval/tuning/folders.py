@@ -260,6 +260,7 @@ def open_search(
     config: Any,
     identity: Mapping[str, Any],
     code: str | None = None,
+    sources: str | None = None,
 ) -> Any:
     """The study ``study`` in ``storage``, created with ``identity`` as its ``"search"``
     attribute, or loaded to resume if it holds the same one. The folder ``out`` (and its
@@ -271,14 +272,17 @@ def open_search(
         settings is refused, since its trials would not be comparable with this run's.
     :param code: the digest of the code that scores a trial
         (:func:`eval.provenance.running_code_sha256` of the packages involved: their code,
-        comments and docstrings aside), kept as the study's ``"scoring_code"`` attribute
-        (a study that recorded the digest of the sources as ``"code"`` before is taken as one
-        that records none): a study scored by other code with trials still to run
+        comments and docstrings aside), kept as the study's ``"scoring_code"`` attribute: a
+        study scored by other code with trials still to run
         (fewer finished than ``config.trials``) is refused as one with other settings is (an
         edited reward or law would rank new trials against old scores); a complete one is
         not, since no trial is scored again (the held-out check scores its candidates anew
         with this code). A study that records none (made before the record, or without
         ``code``) takes this one.
+    :param sources: the digest of the sources of the same packages
+        (:func:`eval.provenance.running_sources_sha256`): a study made by an earlier version
+        kept that as ``"code"``; it is resumed, and given ``code``, only if they are the same
+        sources, and refused as above if not.
     :raises UsageError: naming the folder or the study and what is wrong.
     """
     from eval.tuning.driver import FINISHED, open_study
@@ -302,19 +306,25 @@ def open_search(
                 f"--study {study}: the study in {storage} was run with other settings "
                 f"({had}); give another --study or --storage"
             )
-        had_code = opened.user_attrs.get(SCORING_CODE)
-        if code is not None and had_code is None:
+        recorded, current = opened.user_attrs.get(SCORING_CODE), code
+        legacy = opened.user_attrs.get("code")  # an earlier version's: the sources' digest
+        if recorded is None and legacy is not None and sources is not None:
+            recorded, current = legacy, sources  # compared as that version compared them
+        if code is None:
+            pass
+        elif recorded is None:
             opened.set_user_attr(SCORING_CODE, code)
-        elif (
-            code is not None
-            and had_code != code
-            and len(opened.get_trials(deepcopy=False, states=FINISHED)) < config.trials
-        ):
-            raise UsageError(
-                f"--study {study}: the study in {storage} was scored by other code (sources "
-                f"{str(had_code)[:SHORT]}, this code's {code[:SHORT]}): new trials' scores would "
-                "not compare with its own; give another --study or --storage"
-            )
+        elif recorded != current:
+            if len(opened.get_trials(deepcopy=False, states=FINISHED)) < config.trials:
+                raise UsageError(
+                    f"--study {study}: the study in {storage} was scored by other code "
+                    f"(sources {str(recorded)[:SHORT]}, this code's {str(current)[:SHORT]}): new "
+                    "trials' scores would not compare with its own; give another --study or "
+                    "--storage"
+                )
+            # complete: nothing is scored again, and the record stays the scoring code's
+        elif SCORING_CODE not in opened.user_attrs:
+            opened.set_user_attr(SCORING_CODE, code)  # an earlier version's, the same sources
         return opened
     except BaseException:
         remove_empty_folders(made)

@@ -95,6 +95,52 @@ def test_the_code_digest_follows_files_and_takes_one_that_does_not_parse(tmp_pat
     assert code_sha256([pkg]) != broken  # compared as its bytes
 
 
+def _other_pythons() -> list[str]:
+    """Pythons 3.12 and 3.13 that run here: on PATH, or pyenv's (whose shims may not run one)."""
+    import os
+
+    pyenv = Path(os.environ.get("PYENV_ROOT") or Path.home() / ".pyenv")
+    found = [shutil.which(f"python3.{minor}") for minor in (12, 13)]
+    found += [str(p) for p in sorted(pyenv.glob("versions/3.1[23]*/bin/python"))]
+    runs = {}
+    for python in filter(None, found):
+        done = subprocess.run(
+            [python, "-c", "import sys; print(sys.version_info[:2])"],
+            capture_output=True,
+            text=True,
+        )
+        if done.returncode == 0:
+            runs.setdefault(done.stdout.strip(), python)  # one per version
+    return list(runs.values())
+
+
+_OTHER_PYTHONS = _other_pythons()
+
+
+@pytest.mark.skipif(not _OTHER_PYTHONS, reason="no Python 3.12 or 3.13 on this machine")
+def test_the_code_digest_is_the_same_under_every_python_that_parses_alike() -> None:
+    """``ast.dump`` writes a tree differently from one Python version to the next (3.12 added
+    empty ``type_params``; 3.13 leaves empty fields out): the digest must not follow it, or a
+    study moved to another interpreter would be refused as scored by other code."""
+    import sys
+
+    source = Path(provenance.__file__)
+    run = (
+        "import importlib.util, sys; "
+        f"spec = importlib.util.spec_from_file_location('p', {str(source)!r}); "
+        "m = importlib.util.module_from_spec(spec); spec.loader.exec_module(m); "
+        "print(m.code_sha256([m.Path(d) for d in sys.argv[1:]]))"
+    )
+    dirs = [str(Path(provenance.__file__).parents[1] / p) for p in ROLLOUT_PACKAGES]
+    digests = {
+        python: subprocess.run(
+            [python, "-c", run, *dirs], capture_output=True, text=True, check=True
+        ).stdout.strip()
+        for python in [sys.executable, *_OTHER_PYTHONS]
+    }
+    assert len(set(digests.values())) == 1, digests
+
+
 def test_the_digest_is_of_paths_relative_to_the_packages_folder(tmp_path: Path) -> None:
     here = _package(tmp_path / "one", "pkg", {"a.py": "x = 1\n"})
     there = _package(tmp_path / "two" / "deeper", "pkg", {"a.py": "x = 1\n"})

@@ -220,6 +220,37 @@ def test_a_study_that_records_no_code_takes_the_resuming_one(tmp_path: Path) -> 
     assert reopened.user_attrs["scoring_code"] == "c" * 64
 
 
+def _legacy_study(out: Path, trials: int, sources: str) -> tuple[str, SearchConfig]:
+    """A study as the versions of 2026-12-06 left it: the sources' digest kept as "code"."""
+    config = SearchConfig(trials, (0,))
+    storage = str(out / "study.journal")
+    study = open_search(out, storage, "toy", config, {"n": 1})
+    study.set_user_attr("code", sources)
+    return storage, config
+
+
+def test_an_earlier_versions_study_resumes_on_the_same_sources_only(tmp_path: Path) -> None:
+    storage, config = _legacy_study(tmp_path / "same", 2, "s" * 64)
+    opened = open_search(tmp_path / "same", storage, "toy", config, {"n": 1}, "c" * 64, "s" * 64)
+    assert opened.user_attrs["scoring_code"] == "c" * 64  # the same sources: from now on its code
+    storage, config = _legacy_study(tmp_path / "other", 2, "s" * 64)
+    with pytest.raises(UsageError, match=r"scored by other code \(sources ssssssssssss, this"):
+        open_search(tmp_path / "other", storage, "toy", config, {"n": 1}, "c" * 64, "t" * 64)
+
+
+def test_an_earlier_versions_complete_study_keeps_no_code_it_was_not_scored_by(
+    tmp_path: Path,
+) -> None:
+    out = tmp_path / "out"
+    storage, config = _legacy_study(out, 1, "s" * 64)
+    run_search(open_study(storage, "toy", config), SPACE, config, _toy)
+    # complete: it opens for its held-out check, and is not given this code
+    opened = open_search(out, storage, "toy", config, {"n": 1}, "c" * 64, "t" * 64)
+    assert "scoring_code" not in opened.user_attrs
+    with pytest.raises(UsageError, match="scored by other code"):  # more trials: refused
+        open_search(out, storage, "toy", SearchConfig(2, (0,)), {"n": 1}, "c" * 64, "t" * 64)
+
+
 @pytest.mark.slow
 def test_follow_tune_refuses_to_resume_after_the_code_changed(
     tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch

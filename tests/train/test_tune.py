@@ -191,6 +191,8 @@ def test_a_trials_folder_is_keyed_by_its_budget_and_lanes(tmp_path: Path) -> Non
     [
         ("open_study", "interrupted while opening the study ppo in {out}/study.journal; no trial"),
         ("run_search", "interrupted; the study ppo in {out}/study.journal keeps its finished"),
+        # after the search, while its result is written: not "before the search began"
+        ("_report", "interrupted; the study ppo in {out}/study.journal keeps its finished"),
     ],
 )
 def test_ctrl_c_is_one_line_saying_what_was_kept(
@@ -210,14 +212,17 @@ def test_ctrl_c_is_one_line_saying_what_was_kept(
         eval.tuning.driver if where == "open_study" else train.tune, where, interrupt
     )
     out = tmp_path / "out"
-    assert main(["--trials", "1", "--out", str(out)]) == 130
+    tiny = ["--n-timesteps", "256", "--n-envs", "12", "--seeds", "1", "--scenarios", "straight"]
+    assert main(["--trials", "1", *tiny, "--out", str(out)]) == 130
     err = capsys.readouterr().err.splitlines()
     assert len(err) == 1
     assert err[0].startswith("python -m train.tune: " + message.format(out=out))
     if where == "open_study":
         assert not any(tmp_path.iterdir())  # the folder it made is gone
-    else:
+    elif where == "run_search":
         assert sorted(p.name for p in out.iterdir()) == ["study.journal"]
+    else:  # the search ran: its trial's run is kept, no result.json is half-written
+        assert sorted(p.name for p in out.iterdir()) == ["study.journal", "trials"]
 
 
 @pytest.mark.slow
