@@ -44,7 +44,7 @@ import importlib.util
 import os
 import socket
 import subprocess
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -177,26 +177,31 @@ class CodeMismatchError(ValueError):
     commands report it in one line, as they do bad input)."""
 
 
+def _kept(
+    kept: dict[tuple[str, ...], str],
+    digest: Callable[[Sequence[Path]], str],
+    packages: Sequence[str],
+) -> str:
+    """``digest`` of ``packages``' folders, read once per process and kept in ``kept``."""
+    key = tuple(packages)
+    value = kept.get(key)
+    if value is None:
+        # Two threads may both read it the first time: the same value, harmlessly twice.
+        value = kept[key] = digest(_package_dirs(key))
+    return value
+
+
 def running_sources_sha256(packages: Sequence[str] = ROLLOUT_PACKAGES) -> str:
     """:func:`sources_sha256` of ``packages``, read once per process and kept: the digest of
     the code this process runs (its modules were imported from those files). 3-12 ms the
     first time, a dictionary look-up after."""
-    key = tuple(packages)
-    digest = _RUNNING.get(key)
-    if digest is None:
-        # Two threads may both read it the first time: the same value, harmlessly twice.
-        digest = _RUNNING[key] = sources_sha256(_package_dirs(key))
-    return digest
+    return _kept(_RUNNING, sources_sha256, packages)
 
 
 def running_code_sha256(packages: Sequence[str] = ROLLOUT_PACKAGES) -> str:
     """:func:`code_sha256` of ``packages``, read once per process and kept, as
     :func:`running_sources_sha256` is (parsing them takes about half a second)."""
-    key = tuple(packages)
-    digest = _RUNNING_CODE.get(key)
-    if digest is None:
-        digest = _RUNNING_CODE[key] = code_sha256(_package_dirs(key))
-    return digest
+    return _kept(_RUNNING_CODE, code_sha256, packages)
 
 
 def check_worker_code(expected: str | None, packages: Sequence[str] = ROLLOUT_PACKAGES) -> None:

@@ -47,7 +47,7 @@ from eval.cli_base import (
 )
 from eval.provenance import running_code_sha256, running_sources_sha256
 from eval.rollout import rollout
-from eval.tuning.cli import run_reporting
+from eval.tuning.cli import run_reporting, stale_reporter
 from eval.tuning.driver import SearchConfig, run_search
 from eval.tuning.folders import (
     check_journal_owner,
@@ -59,7 +59,6 @@ from eval.tuning.folders import (
     refuse_repeats,
     text_check,
 )
-from eval.tuning.liveness import stale_text
 from eval.tuning.objective import DEFAULT_VARIANTS, SCORE_KEYS, TUNE_SEED0, episode_score
 from execution import Backend, backend_from_args, execute
 from follow_env.sim.atomic import atomic_write_text
@@ -72,12 +71,6 @@ from train.study_record import TRAINING_PACKAGES
 __all__ = ["INTEGER_KEYS", "PPO_SPACE", "PPOObjective", "hyperparams_for", "main"]
 
 PROG = "python -m train.tune"
-
-
-def _say_stale(trials: Sequence[Any]) -> None:
-    """Name each trial a lost process left running that the search marked failed."""
-    for t in trials:
-        print(f"{PROG}: {stale_text(t)}", file=sys.stderr)
 
 
 PPO_SPACE = MappingProxyType(
@@ -289,7 +282,7 @@ def run(args: argparse.Namespace) -> int:
         )
         return status
     try:
-        ran = run_search(study, PPO_SPACE, config, objective, on_stale=_say_stale)
+        ran = run_search(study, PPO_SPACE, config, objective, on_stale=stale_reporter(PROG))
         return _report(args, storage, study, ran, n_envs)
     except KeyboardInterrupt as e:  # anywhere after the study opened: the search or its report
         what, status = stopped(e)

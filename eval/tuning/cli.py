@@ -359,7 +359,6 @@ def _search_and_check(
     """Search the opened study, re-evaluate its best on held-out seeds, write the results."""
     from eval.tuning.driver import SearchConfig, run_search
     from eval.tuning.holdout import Candidate, holdout_candidates, reevaluate, verdict
-    from eval.tuning.liveness import stale_text
     from eval.tuning.objective import HOLDOUT_SEED0, LawObjective
     from eval.tuning.report import preset_text, table_text
 
@@ -378,12 +377,14 @@ def _search_and_check(
                 file=sys.stderr,
             )
 
-    def stale(trials: list[Any]) -> None:
-        for t in trials:
-            print(f"{PROG}: {stale_text(t)}", file=sys.stderr)
-
     ran = run_search(
-        study, law.space, config, objective, enqueue=base, on_batch=progress, on_stale=stale
+        study,
+        law.space,
+        config,
+        objective,
+        enqueue=base,
+        on_batch=progress,
+        on_stale=stale_reporter(PROG),
     )
     searched = time.perf_counter() - started
     current = Candidate(f"{law.law}:{law.default_preset}", base)
@@ -461,6 +462,18 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     with sigterm_as_interrupt():  # `timeout`, Slurm and Kubernetes stop a study as Ctrl-C does
         return run_reporting(PROG, "the study keeps its finished trials", parsed_and_run)
+
+
+def stale_reporter(prog: str) -> Callable[[Sequence[Any]], None]:
+    """A tuning command's ``on_stale`` (:func:`eval.tuning.driver.run_search`): a line on
+    stderr naming each trial a lost process left running that the search marked failed."""
+    from eval.tuning.liveness import stale_text
+
+    def say(trials: Sequence[Any]) -> None:
+        for trial in trials:
+            print(f"{prog}: {stale_text(trial)}", file=sys.stderr)
+
+    return say
 
 
 def run_reporting(prog: str, kept: str, call: Callable[[], int]) -> int:
