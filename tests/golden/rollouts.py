@@ -51,6 +51,7 @@ import gymnasium as gym
 import numpy as np
 
 import follow_env  # noqa: F401  (registers PersonFollow-v0)
+from follow_env.sim.atomic import atomic_write_text
 from policies import make_policy
 
 GOLDEN = Path(__file__).with_name("rollouts.json")
@@ -345,13 +346,9 @@ def add_alternates(doc: dict[str, Any]) -> int:
 
 
 def write(doc: dict[str, Any]) -> None:
-    """Write ``doc`` to :data:`GOLDEN` (to a temporary file first, then renamed), each channel's
-    pair of sums on one line."""
+    """Write ``doc`` to :data:`GOLDEN` atomically, each channel's pair of sums on one line."""
     text = json.dumps(doc, indent=1, sort_keys=True) + "\n"
-    text = re.sub(r"\[\n\s*(\S+),\n\s*(\S+)\n\s*\]", r"[\1, \2]", text)
-    tmp = GOLDEN.with_suffix(".json.tmp")
-    tmp.write_text(text)
-    tmp.replace(GOLDEN)
+    atomic_write_text(GOLDEN, re.sub(r"\[\n\s*(\S+),\n\s*(\S+)\n\s*\]", r"[\1, \2]", text))
 
 
 if __name__ == "__main__":
