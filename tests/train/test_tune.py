@@ -230,10 +230,10 @@ def test_sigterm_stops_a_search_as_ctrl_c_does(tmp_path: Path) -> None:
     """``kill`` (as ``timeout``, Slurm and Kubernetes stop a job) takes Ctrl-C's path: one line
     saying what was kept, exit status 143, no traceback."""
     import os
-    import signal
     import subprocess
     import sys
-    import time
+
+    from tests.eval.test_tuning_stops import _term_when
 
     out = tmp_path / "out"
     argv = ["--trials", "50", "--n-timesteps", "256", "--n-envs", "12", "--seeds", "1"]
@@ -248,13 +248,7 @@ def test_sigterm_stops_a_search_as_ctrl_c_does(tmp_path: Path) -> None:
         stderr=subprocess.PIPE,
         text=True,
     )
-    deadline = time.monotonic() + 120
-    while not (out / "trials").exists() and proc.poll() is None:  # a trial is training
-        assert time.monotonic() < deadline, "no trial began in 120 s"
-        time.sleep(0.05)
-    time.sleep(1.0)
-    proc.send_signal(signal.SIGTERM)
-    _, err = proc.communicate(timeout=120)
+    err = _term_when(proc, (out / "trials").exists, 1.0)  # a trial is training
     assert proc.returncode == 143, err
     assert "Traceback" not in err
     last = err.strip().splitlines()[-1]
