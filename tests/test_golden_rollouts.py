@@ -56,9 +56,9 @@ def _waypoints_moved(monkeypatch: pytest.MonkeyPatch, by: float | None) -> None:
     def moved(self: PersonFollowTask, sim: Any, lanes: np.ndarray, keys: np.ndarray) -> Any:
         starts = reset(self, sim, lanes, keys)
         paths = sim.world[1]
-        xy = paths.view(np.float64).reshape(*paths.shape, -1)[lanes, :, :, 0:2]
-        xy = np.nextafter(xy, np.inf) if by is None else xy + by
-        paths.view(np.float64).reshape(*paths.shape, -1)[lanes, :, :, 0:2] = xy
+        flat = paths.view(np.float64).reshape(*paths.shape, -1)  # the records' fields as floats
+        xy = flat[lanes, :, :, 0:2]
+        flat[lanes, :, :, 0:2] = np.nextafter(xy, np.inf) if by is None else xy + by
         return starts
 
     monkeypatch.setattr(PersonFollowTask, "prepare_reset", moved)
