@@ -109,7 +109,7 @@ def acts_as_trained():
     def check(run, policy, steps: int, scenario: str = "curve", seed: int = 7) -> None:
         config = read_config(run)
         model = PPO.load(run / "model.zip", device="cpu")
-        widened(model.policy)
+        model.policy = widened(model.policy)
         # what eval.rollout applies on top of the run's configuration (a PPOPolicy always has it)
         overrides = policy.env_overrides or None
         env = base_env([scenario], 1, config["args"]["env_config"], env_kwargs=overrides)

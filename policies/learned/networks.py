@@ -32,6 +32,7 @@ takes them.
 
 from __future__ import annotations
 
+import copy
 from pathlib import Path
 from typing import Any
 
@@ -79,7 +80,7 @@ class Network:
 
     def __init__(self, policy: Any) -> None:
         # Widened before anything below takes its layers (the mean path keeps references).
-        self.policy = widened(policy)
+        self.policy = policy = widened(policy)
         policy.set_training_mode(False)
         self.observation_space = policy.observation_space
         self.action_space = policy.action_space
@@ -148,9 +149,12 @@ class RecurrentNetwork(Network):
 
 
 def widened(policy: Any) -> Any:
-    """``policy`` in float64, in place: its parameters and buffers, and what its features
+    """A copy of ``policy`` in float64: its parameters and buffers, and what its features
     extractors are given (SB3's ``preprocess_obs`` turns a Box's observation into float32 on
-    the way in, ``obs.float()``; the float32 values widen exactly)."""
+    the way in, ``obs.float()``; the float32 values widen exactly). ``policy`` itself is left
+    as it was: a caller's model goes on predicting in float32 through the library's own paths
+    (sb3-contrib's recurrent ``predict`` builds float32 LSTM states, which a float64 LSTM
+    refuses)."""
     import torch
     from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 
@@ -161,7 +165,7 @@ def widened(policy: Any) -> Any:
             return {key: widen(item) for key, item in value.items()}
         return value
 
-    policy.to(torch.float64)
+    policy = copy.deepcopy(policy).to(torch.float64)
     for module in policy.modules():
         if isinstance(module, BaseFeaturesExtractor):
             module.register_forward_pre_hook(lambda _, args: tuple(map(widen, args)))

@@ -173,6 +173,8 @@ def test_the_network_acts_as_the_librarys_predict(run: Path) -> None:
     """The loaded network's deterministic action equals SB3's / sb3-contrib's predict (SAC:
     squashed and rescaled; RecurrentPPO: with the LSTM state carried) but for float32's
     rounding: the network acts in float64, the library in float32."""
+    import torch
+
     algo = yaml.safe_load((run / "config.yaml").read_text())["algo"]
     network = make_policy(str(run))._agent.model
     model = ALGOS[algo].cls().load(run / "model.zip", device="cpu")
@@ -189,6 +191,15 @@ def test_the_network_acts_as_the_librarys_predict(run: Path) -> None:
     if algo == "recurrent_ppo":  # the state matters: the same input, a different action
         again = network.act(obs[-1:], memory)
         assert not np.array_equal(again, network.act(obs[-1:], network.memory(1)))
+    # A network made from the caller's own policy leaves it as it was: the library's predict
+    # (sb3-contrib's builds float32 LSTM states) still runs on it and gives the same actions.
+    before = model.predict(obs, deterministic=True)[0]
+    mine = type(network)(model.policy)
+    assert {p.dtype for p in model.policy.parameters()} == {torch.float32}
+    np.testing.assert_array_equal(model.predict(obs, deterministic=True)[0], before)
+    np.testing.assert_array_equal(
+        mine.act(obs[:1], mine.memory(1)), network.act(obs[:1], network.memory(1))
+    )
 
 
 def test_a_study_trains_every_seed_with_the_algorithm(tmp_path: Path) -> None:

@@ -350,11 +350,16 @@ def test_each_policy_kind_takes_the_mean_path_to_sb3s_predict_bit_for_bit(kwargs
     rows = np.random.default_rng(7).uniform(-5, 5, (40, 6)).astype(np.float32)
     # In float32, as trained: the same but for float32's rounding (module networks' docstring).
     narrow = np.concatenate([policy.predict(row[None], deterministic=True)[0] for row in rows])
-    network = Network(policy)  # widens the policy in place
+    network = Network(policy)  # acts on a float64 copy of the policy
     assert network._gaussian is not None
-    theirs = np.concatenate([policy.predict(row[None], deterministic=True)[0] for row in rows])
+    wide = network.policy
+    theirs = np.concatenate([wide.predict(row[None], deterministic=True)[0] for row in rows])
     np.testing.assert_array_equal(network.act(rows), theirs.astype(np.float32))
     np.testing.assert_allclose(network.act(rows), narrow, rtol=1e-5, atol=1e-6)
+    # The caller's policy is left in float32, acting as before, to the bit.
+    assert {p.dtype for p in policy.parameters()} == {torch.float32}
+    again = np.concatenate([policy.predict(row[None], deterministic=True)[0] for row in rows])
+    np.testing.assert_array_equal(again, narrow)
 
 
 def _normalising(folder: Path, config_norm_obs: bool = True, **fields: object) -> Path:
