@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from eval.rollout import run_episode
+from follow_env.sim.atomic import atomic_path
 from follow_env.tasks.line_trace.tracks.registry import TRACKS
 from follow_env.tasks.person_follow.scenarios.registry import SCENARIOS
 from policies import make_policy
@@ -105,9 +106,8 @@ def record(folders: Sequence[str] = ()) -> int:
         arrays[f"{key(folder, scenario)}/obs"] = obs
         arrays[f"{key(folder, scenario)}/actions"] = actions
         print(f"{key(folder, scenario)}: {len(obs)} steps")
-    tmp = GOLDEN.with_suffix(".tmp.npz")
-    np.savez_compressed(tmp, **arrays)
-    tmp.replace(GOLDEN)
+    with atomic_path(GOLDEN) as tmp:  # its name ends in .npz, so numpy adds no second one
+        np.savez_compressed(tmp, **arrays)
     return 0
 
 
