@@ -49,6 +49,7 @@ import math
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from datetime import datetime, timedelta
 from pathlib import Path
 from typing import Any
 
@@ -58,7 +59,7 @@ from optuna.distributions import BaseDistribution, FloatDistribution
 from optuna.exceptions import UpdateFinishedTrialError
 from optuna.trial import FrozenTrial, TrialState
 
-from eval.tuning.liveness import Heartbeat, fail_stale, own, told
+from eval.tuning.liveness import Heartbeat, fail_stale, fail_unowned, own, told
 from policies.space import SearchSpace
 
 __all__ = [
@@ -364,17 +365,31 @@ def run_search(
         if (left := config.trials - _counted(study)) <= 0:
             break
         batch: list[optuna.Trial] = []
+        # Optuna's start times are local without zone, as this; a second of slack for a
+        # storage that keeps whole seconds (MySQL's DATETIME).
+        asking_since = datetime.now() - timedelta(seconds=1)
         try:
-            for _ in range(min(config.batch, left)):
+            while len(batch) < min(config.batch, left):
                 # Owned and beaten for at once: a trial asked, then left by a crash before its
                 # batch began, must still be found stale (by its process or its heartbeat).
-                batch.append(study.ask(dists))
-                own(batch[-1])
+                # A trial another process failed before this one owned it (liveness.
+                # fail_unowned, on its interrupt) is let go, and another asked.
+                try:
+                    trial = study.ask(dists)  # failed while its parameters were set
+                except UpdateFinishedTrialError:
+                    continue
+                batch.append(trial)
+                try:
+                    own(trial)
+                except UpdateFinishedTrialError:
+                    batch.pop()
             with Heartbeat(batch):
                 _evaluate_batch(study, batch, steps, config.seeds, evaluate)
         except BaseException:
             for trial in batch:  # an error or Ctrl-C: the batch's unfinished trials failed
                 told(study, trial.number, state=TrialState.FAIL)
+            # and one stopped inside Optuna's ask, which creates the trial before it samples
+            fail_unowned(study, asking_since)
             raise
         ran += len(batch)
         if on_batch is not None:

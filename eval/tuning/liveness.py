@@ -6,8 +6,12 @@ each trial it runs its owner (host name and process id), the owner's PID space a
 heartbeat: when it asks the trial (:func:`own`), then every :data:`HEARTBEAT_S` while the
 trial's batch runs (:class:`Heartbeat`). :func:`fail_stale` fails the running trials whose
 process is gone: of this machine, by their process id; of any machine, when their heartbeat
-is older than :data:`STALE_AFTER_S`. :func:`told` is ``study.tell`` for a trial another
-process may have finished meanwhile (its owner, or a machine that failed it as stale).
+is older than :data:`STALE_AFTER_S`. A trial that records no owner was left by a process
+that stopped inside Optuna's ``ask`` (which creates the trial, then samples its parameters)
+or just after it: :func:`fail_unowned` fails this process's own such trials when it is
+interrupted, and :func:`fail_stale` any machine's after :data:`UNOWNED_AFTER_S`. :func:`told`
+is ``study.tell`` for a trial another process may have finished meanwhile (its owner, or a
+machine that failed it as stale).
 """
 
 from __future__ import annotations
@@ -18,6 +22,7 @@ import threading
 import time
 import warnings
 from collections.abc import Sequence
+from datetime import datetime
 from pathlib import Path
 from typing import Any
 
@@ -25,7 +30,17 @@ import optuna
 from optuna.exceptions import UpdateFinishedTrialError
 from optuna.trial import FrozenTrial, TrialState
 
-__all__ = ["HEARTBEAT_S", "STALE_AFTER_S", "Heartbeat", "fail_stale", "own", "stale_text", "told"]
+__all__ = [
+    "HEARTBEAT_S",
+    "STALE_AFTER_S",
+    "UNOWNED_AFTER_S",
+    "Heartbeat",
+    "fail_stale",
+    "fail_unowned",
+    "own",
+    "stale_text",
+    "told",
+]
 
 #: How often a search records in the study that its running trials are alive, s.
 HEARTBEAT_S = 60.0
@@ -34,6 +49,13 @@ HEARTBEAT_S = 60.0
 #: wall-clock times (``time.time()``), so machines sharing a study need clocks that agree to
 #: well within it (NTP keeps them within a second).
 STALE_AFTER_S = 600.0
+#: A running trial that records no owner is failed when Optuna's ``datetime_start`` says it
+#: began more than this ago, s. That start is the only time such a trial has, and an SQL
+#: storage keeps it as the asking machine's local time without its zone, which can differ
+#: from this machine's by up to 26 h (UTC-12 to UTC+14); a trial is owned within moments of
+#: being asked, so one unowned this long was left. :data:`STALE_AFTER_S` is added for the
+#: same margin a heartbeat gets.
+UNOWNED_AFTER_S = 26 * 3600.0 + STALE_AFTER_S
 
 _OWNER = "owner"
 #: The user attribute naming the PID space of a trial's owner (:func:`_pid_space`).
@@ -88,18 +110,43 @@ def _silent_s(trial: FrozenTrial, now: float) -> float | None:
     return now - float(beat)
 
 
+def _unowned_since(trial: FrozenTrial, since: datetime) -> bool:
+    """Whether a running ``trial`` records no owner and began at ``since`` or later (Optuna's
+    ``datetime_start``, a local time without zone, as ``since``)."""
+    start = trial.datetime_start
+    return _OWNER not in trial.user_attrs and start is not None and start >= since
+
+
 def fail_stale(study: optuna.Study, *, now: float | None = None) -> list[FrozenTrial]:
     """Mark as failed the running trials whose process is gone, and return them as they were:
-    those of a process of this machine that no longer runs (an interrupted run), and those of
-    any machine whose last heartbeat is more than :data:`STALE_AFTER_S` old (a machine that
-    crashed: its trials would otherwise count towards the budget for ever)."""
+    those of a process of this machine that no longer runs (an interrupted run), those of any
+    machine whose last heartbeat is more than :data:`STALE_AFTER_S` old (a machine that
+    crashed: its trials would otherwise count towards the budget for ever), and those that
+    record no owner and began more than :data:`UNOWNED_AFTER_S` ago (a process that stopped
+    between asking a trial and owning it)."""
     now = time.time() if now is None else now
+    unowned_before = datetime.fromtimestamp(now - UNOWNED_AFTER_S)  # local, as Optuna's start
     stale = []
     for t in study.get_trials(deepcopy=False, states=(TrialState.RUNNING,)):
         silent = _silent_s(t, now)
-        if not _alive(t) or (silent is not None and silent > STALE_AFTER_S):
+        if _OWNER not in t.user_attrs:
+            start = t.datetime_start
+            if start is not None and start < unowned_before:
+                stale.append(t)
+        elif not _alive(t) or (silent is not None and silent > STALE_AFTER_S):
             stale.append(t)
     return [t for t in stale if told(study, t.number, state=TrialState.FAIL)]
+
+
+def fail_unowned(study: optuna.Study, since: datetime) -> list[int]:
+    """Fail the running trials that record no owner and began at ``since`` or later (a local
+    time without zone, as Optuna keeps ``datetime_start``): those this process asked just
+    before it was interrupted, inside Optuna's ``ask`` or before :func:`own`. Another
+    process's trial asked in the same moments may be failed with them; its :func:`own` then
+    finds it finished, and that process asks another. Returns the numbers of those failed."""
+    running = study.get_trials(deepcopy=False, states=(TrialState.RUNNING,))
+    left = [t.number for t in running if _unowned_since(t, since)]
+    return [number for number in left if told(study, number, state=TrialState.FAIL)]
 
 
 def told(study: optuna.Study, number: int, value: float | None = None, **kwargs: Any) -> bool:
@@ -173,7 +220,11 @@ class Heartbeat:
 
 
 def own(trial: optuna.Trial) -> None:
-    """Record this process as the owner of ``trial``, just asked, with its first heartbeat."""
+    """Record this process as the owner of ``trial``, just asked, with its first heartbeat.
+
+    :raises UpdateFinishedTrialError: if another process failed the trial before it was
+        owned (:func:`fail_unowned`).
+    """
     trial.set_user_attr(_OWNER, _owner())
     trial.set_user_attr(_PID_SPACE, _pid_space())
     trial.set_user_attr(_BEAT, time.time())

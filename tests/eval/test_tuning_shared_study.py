@@ -371,6 +371,90 @@ def test_trials_asked_before_an_interrupt_are_failed_not_left_running(
     assert [t.state for t in study.trials] == [TrialState.FAIL, TrialState.FAIL]
 
 
+def _suggest_that(monkeypatch: pytest.MonkeyPatch, on_call: int, act) -> None:
+    """Make Optuna's ``Trial._suggest`` (called inside ``ask``, after the trial is in the
+    storage) call ``act(trial)`` first on its ``on_call``-th call (counted from 1)."""
+    real = optuna.trial.Trial._suggest
+    calls = [0]
+
+    def suggest(self: optuna.trial.Trial, *args: object, **kwargs: object) -> object:
+        calls[0] += 1
+        if calls[0] == on_call:
+            act(self)
+        return real(self, *args, **kwargs)
+
+    monkeypatch.setattr(optuna.trial.Trial, "_suggest", suggest)
+
+
+def test_an_interrupt_inside_ask_leaves_no_trial_running(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Optuna's ask creates the trial, then samples its parameters: a Ctrl-C there leaves a
+    trial that the batch never held and no owner names. It is failed with the batch's; a trial
+    another machine is running is not."""
+    config = SearchConfig(trials=4, seeds=(0,), batch=4)
+    study = open_study(tmp_path / "study.journal", "toy", config)
+    busy = _left_running(study, "busy-host:4242", 30.0)
+
+    def interrupt(trial: optuna.trial.Trial) -> None:
+        raise KeyboardInterrupt
+
+    _suggest_that(monkeypatch, 3, interrupt)  # inside the batch's third ask
+    with pytest.raises(KeyboardInterrupt):
+        run_search(study, SPACE, config, _toy)
+    states = [t.state for t in study.trials]
+    assert states == [TrialState.RUNNING, *[TrialState.FAIL] * 3]
+    assert _state(study, busy) == TrialState.RUNNING
+
+
+def test_a_trial_left_unowned_is_failed_a_day_later_by_any_machine(tmp_path: Path) -> None:
+    config = SearchConfig(trials=2, seeds=(0,), batch=1)
+    study = open_study(tmp_path / "study.journal", "toy", config)
+    left = study.ask(driver.distributions(SPACE)).number  # a process stopped before own()
+    assert liveness.fail_stale(study) == []  # it may be another machine's, being owned now
+    later = time.time() + liveness.UNOWNED_AFTER_S + 30.0
+    assert liveness.fail_stale(study, now=later - 60.0) == []
+    assert [t.number for t in liveness.fail_stale(study, now=later)] == [left]
+    assert _state(study, left) == TrialState.FAIL
+    assert run_search(study, SPACE, config, _toy) == 2  # the budget is met without it
+
+
+@pytest.mark.parametrize("when", ["asked", "owned"])
+def test_a_trial_another_process_fails_before_it_is_owned_is_let_go(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, when: str
+) -> None:
+    """Another process's interrupt fails the unowned trials of its moments (fail_unowned),
+    which may include one this search is asking or about to own: the search asks another and
+    meets its budget."""
+    config = SearchConfig(trials=3, seeds=(0,), batch=3)
+    study = open_study(tmp_path / "study.journal", "toy", config)
+    other = _journal_study(tmp_path / "study.journal", "toy")
+    since = driver.datetime.now() - driver.timedelta(seconds=1)
+    failed: list[int] = []
+
+    def fail_it(trial: optuna.trial.Trial) -> None:
+        failed.extend(liveness.fail_unowned(other, since))
+
+    if when == "asked":
+        _suggest_that(monkeypatch, 2, fail_it)
+    else:
+        real_own = driver.own
+
+        def own(trial: optuna.Trial) -> None:
+            if trial.number == 1:
+                fail_it(trial)
+            real_own(trial)
+
+        monkeypatch.setattr(driver, "own", own)
+    assert run_search(study, SPACE, config, _toy) == 3
+    assert failed == [1]
+    assert [t.state for t in study.trials] == [
+        TrialState.COMPLETE,
+        TrialState.FAIL,
+        *[TrialState.COMPLETE] * 2,
+    ]
+
+
 def test_a_storage_that_refuses_heartbeats_is_warned_of_once(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
