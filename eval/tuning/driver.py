@@ -47,19 +47,19 @@ from __future__ import annotations
 import json
 import math
 import time
+import warnings
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from datetime import datetime, timedelta
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import optuna
-from optuna.distributions import BaseDistribution, FloatDistribution
+from optuna.distributions import FloatDistribution
 from optuna.exceptions import UpdateFinishedTrialError
 from optuna.trial import FrozenTrial, TrialState
 
-from eval.tuning.liveness import Heartbeat, fail_stale, fail_unowned, own, told
+from eval.tuning.liveness import Heartbeat, fail_stale, own, told
 from policies.space import SearchSpace
 
 __all__ = [
@@ -130,7 +130,7 @@ def rungs(n_seeds: int) -> tuple[int, ...]:
     return tuple(sorted({math.ceil(n_seeds / 4), math.ceil(n_seeds / 2), n_seeds}))
 
 
-def distributions(space: SearchSpace) -> dict[str, BaseDistribution]:
+def distributions(space: SearchSpace) -> dict[str, FloatDistribution]:
     """Optuna's distributions for a search space (:mod:`policies.space`)."""
     return {
         name: FloatDistribution(float(r.low), float(r.high), log=r.log) for name, r in space.items()
@@ -365,36 +365,49 @@ def run_search(
         if (left := config.trials - _counted(study)) <= 0:
             break
         batch: list[optuna.Trial] = []
-        # Optuna's start times are local without zone, as this; a second of slack for a
-        # storage that keeps whole seconds (MySQL's DATETIME).
-        asking_since = datetime.now() - timedelta(seconds=1)
         try:
             while len(batch) < min(config.batch, left):
                 # Owned and beaten for at once: a trial asked, then left by a crash before its
                 # batch began, must still be found stale (by its process or its heartbeat).
-                # A trial another process failed before this one owned it (liveness.
-                # fail_unowned, on its interrupt) is let go, and another asked.
-                try:
-                    trial = study.ask(dists)  # failed while its parameters were set
-                except UpdateFinishedTrialError:
-                    continue
+                # Asked without its parameters, owned, then sampled: Optuna's ask(dists)
+                # creates the trial and then samples them (the same calls, in the same order,
+                # so the same values, tested), and a search stopped while it sampled left a
+                # trial that no owner named. Only the moments between creating and owning
+                # remain, for fail_stale to sweep (liveness.UNOWNED_AFTER_S).
+                trial = study.ask()
                 batch.append(trial)
                 try:
                     own(trial)
-                except UpdateFinishedTrialError:
+                except UpdateFinishedTrialError:  # swept as unowned meanwhile: ask another
                     batch.pop()
+                    continue
+                for name, dist in dists.items():
+                    trial.suggest_float(name, dist.low, dist.high, log=dist.log)
             with Heartbeat(batch):
                 _evaluate_batch(study, batch, steps, config.seeds, evaluate)
         except BaseException:
-            for trial in batch:  # an error or Ctrl-C: the batch's unfinished trials failed
-                told(study, trial.number, state=TrialState.FAIL)
-            # and one stopped inside Optuna's ask, which creates the trial before it samples
-            fail_unowned(study, asking_since)
+            _fail_unfinished(study, batch)
             raise
         ran += len(batch)
         if on_batch is not None:
             on_batch([study.trials[t.number] for t in batch])
     return ran
+
+
+def _fail_unfinished(study: optuna.Study, batch: list[optuna.Trial]) -> None:
+    """After an error or Ctrl-C, fail the batch's unfinished trials. If the storage refuses
+    (it may be what failed), a warning says so, and the error that stopped the batch is the
+    one the caller raises: a Ctrl-C stays a Ctrl-C."""
+    try:
+        for trial in batch:
+            told(study, trial.number, state=TrialState.FAIL)
+    except Exception as e:
+        warnings.warn(
+            f"the batch's trials could not be marked failed ({type(e).__name__}: {e}); a "
+            "search sharing the study fails them when their heartbeats stop",
+            RuntimeWarning,
+            stacklevel=3,
+        )
 
 
 def _evaluate_batch(

@@ -6,12 +6,10 @@ each trial it runs its owner (host name and process id), the owner's PID space a
 heartbeat: when it asks the trial (:func:`own`), then every :data:`HEARTBEAT_S` while the
 trial's batch runs (:class:`Heartbeat`). :func:`fail_stale` fails the running trials whose
 process is gone: of this machine, by their process id; of any machine, when their heartbeat
-is older than :data:`STALE_AFTER_S`. A trial that records no owner was left by a process
-that stopped inside Optuna's ``ask`` (which creates the trial, then samples its parameters)
-or just after it: :func:`fail_unowned` fails this process's own such trials when it is
-interrupted, and :func:`fail_stale` any machine's after :data:`UNOWNED_AFTER_S`. :func:`told`
-is ``study.tell`` for a trial another process may have finished meanwhile (its owner, or a
-machine that failed it as stale).
+is older than :data:`STALE_AFTER_S`; and those that name no owner, left by a process that
+stopped between Optuna's creating the trial and :func:`own`, when they began more than
+:data:`UNOWNED_AFTER_S` ago. :func:`told` is ``study.tell`` for a trial another process may
+have finished meanwhile (its owner, or a machine that failed it as stale).
 """
 
 from __future__ import annotations
@@ -22,7 +20,6 @@ import threading
 import time
 import warnings
 from collections.abc import Sequence
-from datetime import datetime
 from pathlib import Path
 from typing import Any
 
@@ -36,7 +33,6 @@ __all__ = [
     "UNOWNED_AFTER_S",
     "Heartbeat",
     "fail_stale",
-    "fail_unowned",
     "own",
     "stale_text",
     "told",
@@ -49,13 +45,12 @@ HEARTBEAT_S = 60.0
 #: wall-clock times (``time.time()``), so machines sharing a study need clocks that agree to
 #: well within it (NTP keeps them within a second).
 STALE_AFTER_S = 600.0
-#: A running trial that records no owner is failed when Optuna's ``datetime_start`` says it
-#: began more than this ago, s. That start is the only time such a trial has, and an SQL
-#: storage keeps it as the asking machine's local time without its zone, which can differ
-#: from this machine's by up to 26 h (UTC-12 to UTC+14); a trial is owned within moments of
-#: being asked, so one unowned this long was left. :data:`STALE_AFTER_S` is added for the
-#: same margin a heartbeat gets.
-UNOWNED_AFTER_S = 26 * 3600.0 + STALE_AFTER_S
+#: A running trial that names no owner is failed when Optuna's ``datetime_start`` is more than
+#: this old, s: a search owns its trial the moment Optuna has created it, so one unowned this
+#: long was left by a search that stopped in between. Optuna (5.0 on) keeps that start in UTC
+#: in every storage and gives it in this machine's local time, so it compares with this
+#: machine's clock as a heartbeat does (the same agreement of clocks is assumed).
+UNOWNED_AFTER_S = STALE_AFTER_S
 
 _OWNER = "owner"
 #: The user attribute naming the PID space of a trial's owner (:func:`_pid_space`).
@@ -110,43 +105,24 @@ def _silent_s(trial: FrozenTrial, now: float) -> float | None:
     return now - float(beat)
 
 
-def _unowned_since(trial: FrozenTrial, since: datetime) -> bool:
-    """Whether a running ``trial`` records no owner and began at ``since`` or later (Optuna's
-    ``datetime_start``, a local time without zone, as ``since``)."""
-    start = trial.datetime_start
-    return _OWNER not in trial.user_attrs and start is not None and start >= since
-
-
 def fail_stale(study: optuna.Study, *, now: float | None = None) -> list[FrozenTrial]:
     """Mark as failed the running trials whose process is gone, and return them as they were:
-    those of a process of this machine that no longer runs (an interrupted run), those of any
-    machine whose last heartbeat is more than :data:`STALE_AFTER_S` old (a machine that
-    crashed: its trials would otherwise count towards the budget for ever), and those that
-    record no owner and began more than :data:`UNOWNED_AFTER_S` ago (a process that stopped
-    between asking a trial and owning it)."""
+    those of a process of this machine that no longer runs (an interrupted run), and those of
+    any machine whose last heartbeat is more than :data:`STALE_AFTER_S` old (a machine that
+    crashed: its trials would otherwise count towards the budget for ever), and those that name
+    no owner and began more than :data:`UNOWNED_AFTER_S` ago."""
     now = time.time() if now is None else now
-    unowned_before = datetime.fromtimestamp(now - UNOWNED_AFTER_S)  # local, as Optuna's start
     stale = []
     for t in study.get_trials(deepcopy=False, states=(TrialState.RUNNING,)):
-        silent = _silent_s(t, now)
         if _OWNER not in t.user_attrs:
-            start = t.datetime_start
-            if start is not None and start < unowned_before:
+            start = t.datetime_start  # this machine's local time, without zone
+            if start is not None and now - start.timestamp() > UNOWNED_AFTER_S:
                 stale.append(t)
-        elif not _alive(t) or (silent is not None and silent > STALE_AFTER_S):
+            continue
+        silent = _silent_s(t, now)
+        if not _alive(t) or (silent is not None and silent > STALE_AFTER_S):
             stale.append(t)
     return [t for t in stale if told(study, t.number, state=TrialState.FAIL)]
-
-
-def fail_unowned(study: optuna.Study, since: datetime) -> list[int]:
-    """Fail the running trials that record no owner and began at ``since`` or later (a local
-    time without zone, as Optuna keeps ``datetime_start``): those this process asked just
-    before it was interrupted, inside Optuna's ``ask`` or before :func:`own`. Another
-    process's trial asked in the same moments may be failed with them; its :func:`own` then
-    finds it finished, and that process asks another. Returns the numbers of those failed."""
-    running = study.get_trials(deepcopy=False, states=(TrialState.RUNNING,))
-    left = [t.number for t in running if _unowned_since(t, since)]
-    return [number for number in left if told(study, number, state=TrialState.FAIL)]
 
 
 def told(study: optuna.Study, number: int, value: float | None = None, **kwargs: Any) -> bool:
@@ -162,6 +138,13 @@ def told(study: optuna.Study, number: int, value: float | None = None, **kwargs:
 
 def stale_text(trial: FrozenTrial) -> str:
     """What :func:`fail_stale` did to ``trial``, in a sentence for a command's output."""
+    if _OWNER not in trial.user_attrs:
+        start = trial.datetime_start
+        when = f"asked at {start:%Y-%m-%d %H:%M:%S} and" if start is not None else "asked,"
+        return (
+            f"trial {trial.number}, {when} never owned, marked failed: the search that asked "
+            "it stopped before it could record itself"
+        )
     return (
         f"trial {trial.number} left running by {trial.user_attrs.get(_OWNER, '?')} marked "
         "failed: its process is gone (on this machine) or sent no heartbeat for "
@@ -220,11 +203,7 @@ class Heartbeat:
 
 
 def own(trial: optuna.Trial) -> None:
-    """Record this process as the owner of ``trial``, just asked, with its first heartbeat.
-
-    :raises UpdateFinishedTrialError: if another process failed the trial before it was
-        owned (:func:`fail_unowned`).
-    """
+    """Record this process as the owner of ``trial``, just asked, with its first heartbeat."""
     trial.set_user_attr(_OWNER, _owner())
     trial.set_user_attr(_PID_SPACE, _pid_space())
     trial.set_user_attr(_BEAT, time.time())

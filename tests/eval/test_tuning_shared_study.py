@@ -372,8 +372,8 @@ def test_trials_asked_before_an_interrupt_are_failed_not_left_running(
 
 
 def _suggest_that(monkeypatch: pytest.MonkeyPatch, on_call: int, act) -> None:
-    """Make Optuna's ``Trial._suggest`` (called inside ``ask``, after the trial is in the
-    storage) call ``act(trial)`` first on its ``on_call``-th call (counted from 1)."""
+    """Make Optuna's ``Trial._suggest`` (how a trial's parameters are sampled) call
+    ``act(trial)`` first on its ``on_call``-th call (counted from 1)."""
     real = optuna.trial.Trial._suggest
     calls = [0]
 
@@ -386,73 +386,114 @@ def _suggest_that(monkeypatch: pytest.MonkeyPatch, on_call: int, act) -> None:
     monkeypatch.setattr(optuna.trial.Trial, "_suggest", suggest)
 
 
-def test_an_interrupt_inside_ask_leaves_no_trial_running(
+def _unowned(study: optuna.Study) -> int:
+    """A trial as Optuna creates it, before any search has owned it."""
+    return study.ask().number
+
+
+def test_an_interrupt_while_a_trial_is_sampled_leaves_no_trial_running(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    """Optuna's ask creates the trial, then samples its parameters: a Ctrl-C there leaves a
-    trial that the batch never held and no owner names. It is failed with the batch's; a trial
-    another machine is running is not."""
-    config = SearchConfig(trials=4, seeds=(0,), batch=4)
+    """A trial is owned before its parameters are sampled (TPE's sampling is the slow part of
+    asking), so a Ctrl-C there fails it with the batch's; another machine's running trials,
+    owned or about to be, are left alone."""
+    config = SearchConfig(trials=5, seeds=(0,), batch=5)
     study = open_study(tmp_path / "study.journal", "toy", config)
     busy = _left_running(study, "busy-host:4242", 30.0)
+    asking = _unowned(study)
 
     def interrupt(trial: optuna.trial.Trial) -> None:
+        assert trial.number == 4
+        assert "owner" in study.trials[4].user_attrs
         raise KeyboardInterrupt
 
-    _suggest_that(monkeypatch, 3, interrupt)  # inside the batch's third ask
+    _suggest_that(monkeypatch, 3, interrupt)  # sampling the batch's third trial
     with pytest.raises(KeyboardInterrupt):
         run_search(study, SPACE, config, _toy)
-    states = [t.state for t in study.trials]
-    assert states == [TrialState.RUNNING, *[TrialState.FAIL] * 3]
-    assert _state(study, busy) == TrialState.RUNNING
+    assert [t.state for t in study.trials] == [*[TrialState.RUNNING] * 2, *[TrialState.FAIL] * 3]
+    assert (_state(study, busy), _state(study, asking)) == (TrialState.RUNNING,) * 2
 
 
-def test_a_trial_left_unowned_is_failed_a_day_later_by_any_machine(tmp_path: Path) -> None:
+def test_a_search_samples_the_values_optunas_ask_with_distributions_gives(tmp_path: Path) -> None:
+    """ask(), own, then suggest: the same calls as Optuna's ask(distributions), so a seed gives
+    the same trials as before (random start-up trials and TPE's, with the constant liar)."""
+    config = SearchConfig(trials=14, seeds=(0,), batch=2)
+    searched = open_study(tmp_path / "a.journal", "toy", config)
+    run_search(searched, SPACE, config, _toy)
+    reference = open_study(tmp_path / "b.journal", "toy", config)
+    for _ in range(7):  # batches of two, told after both are asked, as a search does
+        pair = [reference.ask(driver.distributions(SPACE)) for _ in range(2)]
+        for trial in pair:
+            reference.tell(trial, float(_toy([trial.params], [0])[0]["score"].mean()))
+    xs = [t.params["x"] for t in searched.trials]
+    assert xs == [t.params["x"] for t in reference.trials]
+    assert len(set(xs)) == 14
+
+
+@pytest.mark.parametrize("kind", ["journal", "sqlite"])
+def test_a_trial_left_unowned_is_failed_ten_minutes_on_by_any_machine(
+    tmp_path: Path, kind: str
+) -> None:
+    """A search killed between Optuna's creating a trial and owning it leaves a trial that
+    names no owner; Optuna's start time for it, in this machine's local time from either kind
+    of storage, says when it was left."""
     config = SearchConfig(trials=2, seeds=(0,), batch=1)
-    study = open_study(tmp_path / "study.journal", "toy", config)
-    left = study.ask(driver.distributions(SPACE)).number  # a process stopped before own()
-    assert liveness.fail_stale(study) == []  # it may be another machine's, being owned now
-    later = time.time() + liveness.UNOWNED_AFTER_S + 30.0
-    assert liveness.fail_stale(study, now=later - 60.0) == []
-    assert [t.number for t in liveness.fail_stale(study, now=later)] == [left]
+    where = tmp_path / "study.journal" if kind == "journal" else f"sqlite:///{tmp_path}/s.db"
+    study = open_study(where, "toy", config)
+    left = _unowned(study)
+    assert liveness.fail_stale(study) == []  # it may be another search's, being owned now
+    later = time.time() + liveness.UNOWNED_AFTER_S
+    assert liveness.fail_stale(study, now=later - 30.0) == []
+    (failed,) = liveness.fail_stale(study, now=later + 30.0)
+    assert failed.number == left
     assert _state(study, left) == TrialState.FAIL
+    assert "never owned" in liveness.stale_text(failed)
     assert run_search(study, SPACE, config, _toy) == 2  # the budget is met without it
 
 
-@pytest.mark.parametrize("when", ["asked", "owned"])
-def test_a_trial_another_process_fails_before_it_is_owned_is_let_go(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, when: str
+def test_a_trial_swept_as_unowned_before_it_is_owned_is_let_go(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    """Another process's interrupt fails the unowned trials of its moments (fail_unowned),
-    which may include one this search is asking or about to own: the search asks another and
-    meets its budget."""
+    """A search that stalls between Optuna's creating a trial and owning it for longer than
+    UNOWNED_AFTER_S finds it failed by another machine's sweep (fail_stale, here its tell):
+    it asks another and meets its budget."""
     config = SearchConfig(trials=3, seeds=(0,), batch=3)
     study = open_study(tmp_path / "study.journal", "toy", config)
     other = _journal_study(tmp_path / "study.journal", "toy")
-    since = driver.datetime.now() - driver.timedelta(seconds=1)
-    failed: list[int] = []
+    real_own = driver.own
+    swept: list[int] = []
 
-    def fail_it(trial: optuna.trial.Trial) -> None:
-        failed.extend(liveness.fail_unowned(other, since))
+    def own(trial: optuna.Trial) -> None:
+        if trial.number == 1 and liveness.told(other, 1, state=TrialState.FAIL):
+            swept.append(1)
+        real_own(trial)
 
-    if when == "asked":
-        _suggest_that(monkeypatch, 2, fail_it)
-    else:
-        real_own = driver.own
-
-        def own(trial: optuna.Trial) -> None:
-            if trial.number == 1:
-                fail_it(trial)
-            real_own(trial)
-
-        monkeypatch.setattr(driver, "own", own)
+    monkeypatch.setattr(driver, "own", own)
     assert run_search(study, SPACE, config, _toy) == 3
-    assert failed == [1]
+    assert swept == [1]
     assert [t.state for t in study.trials] == [
         TrialState.COMPLETE,
         TrialState.FAIL,
         *[TrialState.COMPLETE] * 2,
     ]
+
+
+def test_an_interrupt_stays_an_interrupt_when_the_storage_refuses_to_fail_the_batch(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    config = SearchConfig(trials=2, seeds=(0,), batch=2)
+    study = open_study(tmp_path / "study.journal", "toy", config)
+
+    def interrupted(params: list[dict[str, float]], seeds: list[int]) -> list[object]:
+        raise KeyboardInterrupt
+
+    def refused(*args: object, **kwargs: object) -> bool:
+        raise OSError("the database is gone")
+
+    monkeypatch.setattr(driver, "told", refused)
+    warned = pytest.warns(RuntimeWarning, match="could not be marked failed.*database is gone")
+    with warned, pytest.raises(KeyboardInterrupt):
+        run_search(study, SPACE, config, interrupted)
 
 
 def test_a_storage_that_refuses_heartbeats_is_warned_of_once(
