@@ -32,7 +32,7 @@ takes them.
 
 from __future__ import annotations
 
-import copy
+from copy import deepcopy
 from pathlib import Path
 from typing import Any
 
@@ -76,11 +76,17 @@ class Memory:
 
 class Network:
     """A loaded feed-forward policy network (PPO's or SAC's), acting deterministically on agent
-    observations one row at a time, in float64 (module docstring)."""
+    observations one row at a time, in float64 (module docstring).
 
-    def __init__(self, policy: Any) -> None:
+    :param policy: the SB3 policy; a float64 copy of it acts (:func:`widened`), and the
+        caller's goes on as it was.
+    :param owned: the policy is the network's alone (:func:`load_network` built it): widened
+        in place, with no copy.
+    """
+
+    def __init__(self, policy: Any, *, owned: bool = False) -> None:
         # Widened before anything below takes its layers (the mean path keeps references).
-        self.policy = policy = widened(policy)
+        self.policy = policy = widened(policy, copy=not owned)
         policy.set_training_mode(False)
         self.observation_space = policy.observation_space
         self.action_space = policy.action_space
@@ -148,13 +154,18 @@ class RecurrentNetwork(Network):
         return out
 
 
-def widened(policy: Any) -> Any:
-    """A copy of ``policy`` in float64: its parameters and buffers, and what its features
-    extractors are given (SB3's ``preprocess_obs`` turns a Box's observation into float32 on
-    the way in, ``obs.float()``; the float32 values widen exactly). ``policy`` itself is left
-    as it was: a caller's model goes on predicting in float32 through the library's own paths
-    (sb3-contrib's recurrent ``predict`` builds float32 LSTM states, which a float64 LSTM
-    refuses)."""
+def widened(policy: Any, *, copy: bool = True) -> Any:
+    """``policy`` in float64: its parameters and buffers, and what its features extractors are
+    given (SB3's ``preprocess_obs`` turns a Box's observation into float32 on the way in,
+    ``obs.float()``; the float32 values widen exactly).
+
+    :param copy: widen a copy and leave ``policy`` as it was, so that a caller's model goes on
+        predicting in float32 through the library's own paths (sb3-contrib's recurrent
+        ``predict`` builds float32 LSTM states, which a float64 LSTM refuses); False: widen
+        ``policy`` itself.
+    :raises ValueError: if ``policy`` cannot be copied (torch copies no tensor computed from
+        others, such as the exploration matrix of a policy trained with ``use_sde``).
+    """
     import torch
     from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 
@@ -165,7 +176,15 @@ def widened(policy: Any) -> Any:
             return {key: widen(item) for key, item in value.items()}
         return value
 
-    policy = copy.deepcopy(policy).to(torch.float64)
+    if copy:
+        try:
+            policy = deepcopy(policy)
+        except RuntimeError as e:
+            raise ValueError(
+                f"cannot copy this {type(policy).__name__} to act in float64 ({e}); "
+                "Network(policy, owned=True) widens the policy itself"
+            ) from None
+    policy.to(torch.float64)
     for module in policy.modules():
         if isinstance(module, BaseFeaturesExtractor):
             module.register_forward_pre_hook(lambda _, args: tuple(map(widen, args)))
@@ -308,4 +327,6 @@ def load_network(path: Path, algo: str, policy: Any, error: type[Exception]) -> 
     if recurrent != (algo == "recurrent_ppo"):
         kind = "a recurrent" if recurrent else "a feed-forward"
         raise error(f"{path}: holds {kind} policy ({type(net).__name__}), not {_LIBRARY[algo]}'s")
-    return RecurrentNetwork(net) if recurrent else Network(net)
+    # The policy was built here for the network alone: widened in place, not copied (a
+    # use_sde policy holds a tensor torch will not copy).
+    return RecurrentNetwork(net, owned=True) if recurrent else Network(net, owned=True)

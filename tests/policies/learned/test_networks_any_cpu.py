@@ -40,7 +40,7 @@ rows = np.random.default_rng(11).uniform(
 ).astype(np.float32)
 wide = agent.model.act(rows)
 # The control: the same network loaded again and left in float32.
-networks.widened = lambda policy: policy
+networks.widened = lambda policy, copy=True: policy
 config = load_yaml(agent.files.config.read_text(encoding="utf-8"))
 kind = config["hyperparams"].get("policy")
 narrow_net = networks.load_network(agent.files.model, agent.algo, kind, RuntimeError)

@@ -362,6 +362,29 @@ def test_each_policy_kind_takes_the_mean_path_to_sb3s_predict_bit_for_bit(kwargs
     np.testing.assert_array_equal(again, narrow)
 
 
+@pytest.mark.parametrize("algo", ["ppo", "sac"])
+def test_a_use_sde_agent_loads_and_acts_as_the_librarys_predict(tmp_path: Path, algo: str) -> None:
+    """A policy trained with gSDE holds an exploration matrix computed from its log std, which
+    torch will not copy: the loader widens the policy it built in place, and a caller's such
+    policy is refused with a clear message rather than changed."""
+    import gymnasium as gym
+    import torch
+    from stable_baselines3 import PPO, SAC
+
+    from policies.learned.networks import Network, load_network
+
+    cls, extra = (PPO, {}) if algo == "ppo" else (SAC, {"buffer_size": 1000})
+    model = cls("MlpPolicy", gym.make("Pendulum-v1"), use_sde=True, device="cpu", seed=0, **extra)
+    model.save(tmp_path / "model.zip")
+    network = load_network(tmp_path / "model.zip", algo, "MlpPolicy", ValueError)
+    rows = np.random.default_rng(1).uniform(-1, 1, (16, 3)).astype(np.float32)
+    theirs = np.concatenate([model.predict(row[None], deterministic=True)[0] for row in rows])
+    np.testing.assert_allclose(network.act(rows), theirs, rtol=1e-5, atol=1e-6)
+    with pytest.raises(ValueError, match=r"cannot copy this .*owned=True"):
+        Network(model.policy)
+    assert {p.dtype for p in model.policy.parameters()} == {torch.float32}  # left as it was
+
+
 def _normalising(folder: Path, config_norm_obs: bool = True, **fields: object) -> Path:
     """``folder``'s agent with observation statistics ``fields`` (over VecNormalize's saved
     fields: norm_obs, obs_rms's mean and var, epsilon, clip_obs), its config.yaml saying
