@@ -310,11 +310,7 @@ def open_search(
         legacy = opened.user_attrs.get("code")  # an earlier version's: the sources' digest
         if recorded is None and legacy is not None and sources is not None:
             recorded, current = legacy, sources  # compared as that version compared them
-        if code is None:
-            pass
-        elif recorded is None:
-            opened.set_user_attr(SCORING_CODE, code)
-        elif recorded != current:
+        if code is not None and recorded is not None and recorded != current:
             if len(opened.get_trials(deepcopy=False, states=FINISHED)) < config.trials:
                 raise UsageError(
                     f"--study {study}: the study in {storage} was scored by other code "
@@ -323,8 +319,9 @@ def open_search(
                     "--storage"
                 )
             # complete: nothing is scored again, and the record stays the scoring code's
-        elif SCORING_CODE not in opened.user_attrs:
-            opened.set_user_attr(SCORING_CODE, code)  # an earlier version's, the same sources
+        elif code is not None and (recorded is None or SCORING_CODE not in opened.user_attrs):
+            # none recorded yet, or an earlier version's record of the same sources
+            opened.set_user_attr(SCORING_CODE, code)
         return opened
     except BaseException:
         remove_empty_folders(made)
