@@ -44,12 +44,18 @@ def test_it_is_built_by_name_as_the_mean_of_its_two_seeds() -> None:
 
 
 def test_its_first_command_is_the_mean_of_two_different_members() -> None:
-    obs = np.array([1.6, 80.0, 1.6], dtype=np.float32)  # a person 1.6 m ahead, 80 px right
+    obs = np.array([1.1, 80.0, 1.1], dtype=np.float32)  # a person 1.1 m ahead, 80 px right
     ensemble = make_policy("ppo_ensemble")
     members = [PPOPolicy(m) for m in ensemble.members]
     seen = [np.asarray(m.act(obs), dtype=np.float64) for m in members]
     assert np.abs(seen[0] - seen[1]).min() > 1e-3  # two agents, not one twice
-    # from rest, the command steps are linear in the agents' actions: the mean commanded
+    # From rest a command moves by max_change * clip(action + the law's pull, -1, 1): linear in
+    # the agents' actions while no member's first step reaches max_change (0.2 and 0.15 of the
+    # 1.484375 m/s and 2 rad/s action units, config.yaml). A person further off, whom the law
+    # drives at, saturates a member's step, and the mean of the clipped steps is not the step
+    # of the mean action.
+    step = np.array([0.2 * 1.484375, 0.15 * 2.0])
+    assert all((np.abs(s) < step - 1e-3).all() for s in seen)
     np.testing.assert_allclose(ensemble.act(obs), (seen[0] + seen[1]) / 2, rtol=0, atol=1e-6)
 
 
