@@ -96,14 +96,14 @@ SHIPPED: dict[str, tuple[str, str]] = {
     # reading, a robot's perception must publish it
     "ppo_ahead": ("ppo_ahead", "person_follow"),
     # reads ahead and starts from pn:thesis's command, following 1.1 m behind in training
-    # (train/configs/ppo_ahead_law_far.yaml, the gate added after training): the agent that
-    # of the shipped agents meets the most of the dominance table; its perception must publish
-    # the reading ahead
+    # (train/configs/ppo_ahead_law_far.yaml, the gate added after training); its perception
+    # must publish the reading ahead
     "ppo_law": ("ppo_law", "person_follow"),
     # the mean of two agents' actions (policies.learned.ensemble: the folder's ensemble.yaml
     # lists them), seeds 0 and 1 of train/configs/ppo_ahead_law_wide.yaml (ppo_law's view and
-    # reward with the headway, networks of 128 x 128), the gate added after training:
-    # significantly worse than the best law on no line of the dominance table
+    # reward with the headway, networks of 128 x 128) trained at once, one torch thread each,
+    # the gate added after training: of the shipped agents it meets the most of the dominance
+    # table, and is significantly worse than the best law on none of its lines
     "ppo_ensemble": ("ppo_ensemble", "person_follow"),
     "ppo_line": ("ppo", "line_trace"),  # LineTrace-v0's agent
 }
