@@ -59,6 +59,22 @@ def test_its_first_command_is_the_mean_of_two_different_members() -> None:
     np.testing.assert_allclose(ensemble.act(obs), (seen[0] + seen[1]) / 2, rtol=0, atol=1e-6)
 
 
+def test_it_averages_the_members_actions_not_their_commands() -> None:
+    """Further off, one member's first step saturates: the ensemble steps by the mean of the
+    actions (so it moves further than the mean of the members' clipped commands), between the
+    two members."""
+    obs = np.array([1.6, 80.0, 1.6], dtype=np.float32)
+    ensemble = make_policy("ppo_ensemble")
+    members = [PPOPolicy(m) for m in ensemble.members]
+    seen = [np.asarray(m.act(obs), dtype=np.float64) for m in members]
+    v_step = 0.2 * 1.484375  # max_change of v (config.yaml), m/s
+    assert max(s[0] for s in seen) == pytest.approx(v_step)  # one member saturates ...
+    assert min(s[0] for s in seen) < v_step - 1e-3  # ... the other does not
+    v = float(ensemble.act(obs)[0])
+    assert min(s[0] for s in seen) < v < v_step
+    assert v > (seen[0][0] + seen[1][0]) / 2 + 1e-4
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("member", ["seed-0", "seed-1"])
 def test_each_member_acts_as_its_training_stack_did(acts_as_trained, member: str) -> None:
