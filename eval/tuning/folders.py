@@ -310,7 +310,9 @@ def open_search(
         legacy = opened.user_attrs.get("code")  # an earlier version's: the sources' digest
         if recorded is None and legacy is not None and sources is not None:
             recorded, current = legacy, sources  # compared as that version compared them
-        if code is not None and recorded is not None and recorded != current:
+        if code is None:
+            return opened
+        if recorded is not None and recorded != current:
             if len(opened.get_trials(deepcopy=False, states=FINISHED)) < config.trials:
                 raise UsageError(
                     f"--study {study}: the study in {storage} was scored by other code "
@@ -319,7 +321,7 @@ def open_search(
                     "--storage"
                 )
             # complete: nothing is scored again, and the record stays the scoring code's
-        elif code is not None and (recorded is None or SCORING_CODE not in opened.user_attrs):
+        elif recorded is None or SCORING_CODE not in opened.user_attrs:
             # none recorded yet, or an earlier version's record of the same sources
             opened.set_user_attr(SCORING_CODE, code)
         return opened

@@ -107,9 +107,9 @@ def _silent_s(trial: FrozenTrial, now: float) -> float | None:
 
 def fail_stale(study: optuna.Study, *, now: float | None = None) -> list[FrozenTrial]:
     """Mark as failed the running trials whose process is gone, and return them as they were:
-    those of a process of this machine that no longer runs (an interrupted run), and those of
-    any machine whose last heartbeat is more than :data:`STALE_AFTER_S` old (a machine that
-    crashed: its trials would otherwise count towards the budget for ever), and those that name
+    those of a process of this machine that no longer runs (an interrupted run); those of any
+    machine whose last heartbeat is more than :data:`STALE_AFTER_S` old (a machine that
+    crashed: its trials would otherwise count towards the budget for ever); and those that name
     no owner and began more than :data:`UNOWNED_AFTER_S` ago."""
     now = time.time() if now is None else now
     stale = []
