@@ -18,6 +18,13 @@ from policies.learned.ppo import AGENTS, PPOPolicy
 FOLDER = AGENTS / "ppo_ensemble"
 
 
+def _first_step(member: PPOPolicy) -> np.ndarray:
+    """The most a command may move in one frame, in SI (m/s, rad/s): the incremental
+    action's max_change of the agent's action range (RescaleAction's)."""
+    steps = {type(s).__name__: s for s in member._agent.pipeline(1).steps}
+    return steps["IncrementalAction"].max_change * steps["RescaleAction"].si_high
+
+
 def test_it_is_built_by_name_as_the_mean_of_its_two_seeds() -> None:
     agent = make_policy("ppo_ensemble")
     assert isinstance(agent, EnsemblePolicy)
@@ -51,10 +58,11 @@ def test_its_first_command_is_the_mean_of_two_different_members() -> None:
     assert np.abs(seen[0] - seen[1]).min() > 1e-3  # two agents, not one twice
     # From rest a command moves by max_change * clip(action + the law's pull, -1, 1): linear in
     # the agents' actions while no member's first step reaches max_change (0.2 and 0.15 of the
-    # 1.484375 m/s and 2 rad/s action units, config.yaml). A person further off, whom the law
+    # 1.484375 m/s and 2 rad/s action range, config.yaml). A person further off, whom the law
     # drives at, saturates a member's step, and the mean of the clipped steps is not the step
     # of the mean action.
-    step = np.array([0.2 * 1.484375, 0.15 * 2.0])
+    step = _first_step(members[0])
+    np.testing.assert_allclose(step, [0.2 * 1.484375, 0.15 * 2.0])
     assert all((np.abs(s) < step - 1e-3).all() for s in seen)
     np.testing.assert_allclose(ensemble.act(obs), (seen[0] + seen[1]) / 2, rtol=0, atol=1e-6)
 
@@ -67,7 +75,7 @@ def test_it_averages_the_members_actions_not_their_commands() -> None:
     ensemble = make_policy("ppo_ensemble")
     members = [PPOPolicy(m) for m in ensemble.members]
     seen = [np.asarray(m.act(obs), dtype=np.float64) for m in members]
-    v_step = 0.2 * 1.484375  # max_change of v (config.yaml), m/s
+    v_step = _first_step(members[0])[0]
     assert max(s[0] for s in seen) == pytest.approx(v_step)  # one member saturates ...
     assert min(s[0] for s in seen) < v_step - 1e-3  # ... the other does not
     v = float(ensemble.act(obs)[0])
