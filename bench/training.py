@@ -2,11 +2,13 @@
 and threads, beside SB3's PPO on CartPole-v1 with the same choices (the baseline: the same
 learner on an env that costs almost nothing, measured in this process).
 
-Each row but the last trains ``train/configs/ppo.yaml`` (the agent's wrappers, the mirror
+Each row but the last two trains ``train/configs/ppo.yaml`` (the agent's wrappers, the mirror
 policy, the training reward) through ``follow-train``'s own ``train()`` for a fixed number of
 steps, no held-out evaluation, no checkpoint, no comparison, with one setting changed; the last
-trains the shipped agent's file, ``ppo_fast.yaml``, as it is (its reward, and its history
-stacked by ``VecStackFrames`` rather than ``frame_stack``). The rate is the run's own
+two train the shipped agent's file, ``ppo_fast.yaml``, as it is (its reward, and its history
+stacked by ``VecStackFrames`` rather than ``frame_stack``) with two torch threads and with one,
+the second given as a ratio to the first (a study's ``--threads 1 --workers 2`` runs two such
+one-thread runs at once). The rate is the run's own
 ``sessions.json`` figure (env steps over the learning loop's wall time). The run folders go to
 a temporary folder and are removed.
 """
@@ -49,6 +51,7 @@ CHOICES: list[tuple[str, Path, dict[str, Any], int]] = [
         2,
     ),
     ("ppo_fast.yaml as shipped, 2 thr", SHIPPED_HYPERPARAMS, {}, 2),
+    ("ppo_fast.yaml as shipped, 1 thr", SHIPPED_HYPERPARAMS, {}, 1),
 ]
 
 
@@ -108,8 +111,19 @@ def bench_training(quick: bool) -> list[tuple[str, float, str]]:
     rows = []
     with tempfile.TemporaryDirectory(prefix="bench-training-") as tmp:
         folder = Path(tmp)
+        shipped_two_threads = float("nan")
         for label, hyperparams, changes, threads in CHOICES:
             rate = _follow_train_rate(hyperparams, changes, threads, steps, folder)
+            if hyperparams == SHIPPED_HYPERPARAMS:
+                # The shipped file is compared with itself: its threads are the one choice its
+                # command makes (its lanes, minibatch and epochs are the 384-lane row's).
+                if threads == 2:
+                    shipped_two_threads = rate
+                    rows.append((label, rate, "(2 threads)"))
+                else:
+                    ratio = f"{rate / shipped_two_threads:.2f}x the 2-thread row's rate"
+                    rows.append((label, rate, ratio))
+                continue
             cartpole = _cartpole_rate(changes, steps) if threads == 1 else float("nan")
             ratio = f"{cartpole / rate:.2f}x CartPole's time" if threads == 1 else "(2 threads)"
             rows.append((label, rate, ratio))

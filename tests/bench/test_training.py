@@ -18,3 +18,34 @@ def test_each_choice_trains_its_file_and_reports_its_rate(tmp_path: Path) -> Non
     assert CHOICES[-1][1] == SHIPPED_HYPERPARAMS
     assert CHOICES[-1][2] == {}
     assert _cartpole_rate({"n_envs": 4, "batch_size": 64}, 1_000) > 0.0
+
+
+def test_the_shipped_file_is_compared_with_itself_on_two_threads(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # rates stand in for training (the test above trains); the rows' ratios are what is checked
+    import bench.training as training
+
+    rates = {(label, threads): 1000.0 * (k + 1) for k, (label, _, _, threads) in enumerate(CHOICES)}
+    by_threads = {}
+
+    def rate(hyperparams: Path, changes: dict, threads: int, steps: int, folder: Path) -> float:
+        label = next(c[0] for c in CHOICES if c[1:] == (hyperparams, changes, threads))
+        by_threads[label] = threads
+        return rates[(label, threads)]
+
+    monkeypatch.setattr(training, "_follow_train_rate", rate)
+    monkeypatch.setattr(training, "_cartpole_rate", lambda changes, steps: 500.0)
+    listed = training.bench_training(quick=True)
+    rows = {label: (value, ratio) for label, value, ratio in listed}
+    two, one = "ppo_fast.yaml as shipped, 2 thr", "ppo_fast.yaml as shipped, 1 thr"
+    assert by_threads[two] == 2
+    assert by_threads[one] == 1
+    assert rows[one][1] == f"{rates[(one, 1)] / rates[(two, 2)]:.2f}x the 2-thread row's rate"
+    assert rows[two][1] == "(2 threads)"
+    # the file's rows get no CartPole row of their own; every other 1-thread choice does
+    cartpole = sum(label.strip().startswith("CartPole") for label, _, _ in listed)
+    others = [c for c in CHOICES if c[1] != SHIPPED_HYPERPARAMS and c[3] == 1]
+    assert cartpole == len(others) == 3
+    first = CHOICES[0][0]
+    assert rows[first][1] == f"{500.0 / rates[(first, 1)]:.2f}x CartPole's time"
