@@ -25,6 +25,13 @@ def _first_step(member: PPOPolicy) -> np.ndarray:
     return steps["IncrementalAction"].max_change * steps["RescaleAction"].si_high
 
 
+def _first_actions(obs: np.ndarray) -> tuple[EnsemblePolicy, list[PPOPolicy], list[np.ndarray]]:
+    """The shipped ensemble, its members built alone, and each member's first action on obs."""
+    ensemble = make_policy("ppo_ensemble")
+    members = [PPOPolicy(m) for m in ensemble.members]
+    return ensemble, members, [np.asarray(m.act(obs), dtype=np.float64) for m in members]
+
+
 def test_it_is_built_by_name_as_the_mean_of_its_two_seeds() -> None:
     agent = make_policy("ppo_ensemble")
     assert isinstance(agent, EnsemblePolicy)
@@ -52,9 +59,7 @@ def test_it_is_built_by_name_as_the_mean_of_its_two_seeds() -> None:
 
 def test_its_first_command_is_the_mean_of_two_different_members() -> None:
     obs = np.array([1.1, 80.0, 1.1], dtype=np.float32)  # a person 1.1 m ahead, 80 px right
-    ensemble = make_policy("ppo_ensemble")
-    members = [PPOPolicy(m) for m in ensemble.members]
-    seen = [np.asarray(m.act(obs), dtype=np.float64) for m in members]
+    ensemble, members, seen = _first_actions(obs)
     assert np.abs(seen[0] - seen[1]).min() > 1e-3  # two agents, not one twice
     # From rest a command moves by max_change * clip(action + the law's pull, -1, 1): linear in
     # the agents' actions while no member's first step reaches max_change (0.2 and 0.15 of the
@@ -72,9 +77,7 @@ def test_it_averages_the_members_actions_not_their_commands() -> None:
     actions (so it moves further than the mean of the members' clipped commands), between the
     two members."""
     obs = np.array([1.6, 80.0, 1.6], dtype=np.float32)
-    ensemble = make_policy("ppo_ensemble")
-    members = [PPOPolicy(m) for m in ensemble.members]
-    seen = [np.asarray(m.act(obs), dtype=np.float64) for m in members]
+    ensemble, members, seen = _first_actions(obs)
     v_step = _first_step(members[0])[0]
     assert max(s[0] for s in seen) == pytest.approx(v_step)  # one member saturates ...
     assert min(s[0] for s in seen) < v_step - 1e-3  # ... the other does not
