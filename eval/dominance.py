@@ -67,6 +67,7 @@ from eval.stats import ALPHA, holm, paired_test, variant_column
 
 __all__ = [
     "CRITERIA",
+    "MINUS",
     "RULE",
     "Criterion",
     "calibration",
@@ -77,6 +78,7 @@ __all__ = [
     "dominates",
     "finished_markdown",
     "finished_view",
+    "grid_markdown",
     "tally",
 ]
 
@@ -443,7 +445,8 @@ def dominates(frame: pd.DataFrame) -> bool:
 def dominance_markdown(
     frame: pd.DataFrame, learner: str, calibrated: dict[str, dict[str, int]] | None = None
 ) -> str:
-    """The table in markdown, after one line per criterion saying where it is met.
+    """The table in markdown, after one line per criterion saying where it is met and the
+    table at a glance (:func:`grid_markdown`).
 
     :param frame: :func:`dominance` output.
     :param learner: the learner's label, for the text.
@@ -492,6 +495,7 @@ def dominance_markdown(
             f"{'holds' if s.holds else '**does not hold**'}){where}"
         )
     lines.append("")
+    lines.append(grid_markdown(frame, learner))
     lines.append(
         f"| {variant} | criterion | need | {learner} | best law | law | "
         f"{learner} - law [95 % CI] | p | verdict | meets |"
@@ -500,6 +504,70 @@ def dominance_markdown(
     for row in frame.itertuples(index=False):
         lines.append(_markdown_row(row._asdict(), variant, str(row.need)))
     return "\n".join(lines) + "\n"
+
+
+MINUS = "\N{MINUS SIGN}"
+"""The grid's mark against the learner (the typographic minus the docs' tables use)."""
+
+
+def grid_markdown(
+    frame: pd.DataFrame, learner: str, criteria: Sequence[Criterion] = CRITERIA
+) -> str:
+    """:func:`dominance`'s table at a glance, in markdown: one row per scenario, one column per
+    criterion, each cell ``learner / best law`` (the two means, with the digits of the full
+    table), followed by a blank line.
+
+    A cell is bold where the requirement is missed. ``+`` / ``−`` mark a line that is
+    significantly better / worse by :data:`RULE` (the line's ``verdict``); ``(+)`` / ``(−)``
+    one whose 95 % CI alone excludes zero in the learner's favour / against it while the
+    permutation test does not confirm it (p >= 0.05), so a reader of a table marked by the CI
+    alone finds the same lines. A line with no paired seed reads ``n/a``.
+
+    :param frame: :func:`dominance` output.
+    :param learner: the learner's label, for the legend.
+    :param criteria: where each criterion's direction is looked up for the ``(+)`` / ``(−)``
+        marks (a metric not among them gets the verdict's marks only).
+    """
+    variant = frame.columns[0]
+    higher = {c.metric: c.higher_is_better for c in criteria}
+    names = list(dict.fromkeys(frame["criterion"]))
+    head = " | ".join(metric_label(str(n)) for n in names)
+    lines = [
+        f"Each cell `{learner} / best law`; bold: the requirement is missed; `+` / `{MINUS}`: "
+        f"significantly better / worse (the verdict below); `(+)` / `({MINUS})`: the 95 % CI alone "
+        "excludes zero in the learner's favour / against it, the permutation test does not "
+        "confirm it:",
+        "",
+        f"| {variant} | {head} |",
+        "|---|" + "---:|" * len(names),
+    ]
+    for scenario in dict.fromkeys(frame[variant]):
+        cells = []
+        for name in names:
+            got = frame[(frame[variant] == scenario) & (frame["criterion"] == name)]
+            cells.append(_grid_cell(got.iloc[0], higher.get(str(name))) if len(got) else "")
+        lines.append(f"| {scenario} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def _grid_cell(r: pd.Series, higher_is_better: bool | None) -> str:
+    """One cell of :func:`grid_markdown`: ``learner / law``, bold when missed, and its mark."""
+    if r["verdict"] == "n/a":
+        return "**n/a**"
+    d = metric_digits(str(r["criterion"]))
+    text = f"{r['learner_mean']:.{d}f} / {r['law_mean']:.{d}f}"
+    if not r["meets"]:
+        text = f"**{text}**"
+    if r["verdict"] == "better":
+        return f"{text} +"
+    if r["verdict"] == "worse":
+        return f"{text} {MINUS}"
+    if higher_is_better is None:
+        return text
+    low, high = float(r["diff_ci_low"]), float(r["diff_ci_high"])
+    # the learner's side of zero: above it where higher is better, below it where lower is
+    favour, against = (low > 0.0, high < 0.0) if higher_is_better else (high < 0.0, low > 0.0)
+    return f"{text} (+)" if favour else f"{text} ({MINUS})" if against else text
 
 
 def _span(values: Iterable[int]) -> str:

@@ -12,6 +12,7 @@ import pytest
 from eval.cli import main
 from eval.dominance import (
     CRITERIA,
+    MINUS,
     RULE,
     Criterion,
     calibration,
@@ -21,6 +22,7 @@ from eval.dominance import (
     dominates,
     finished_markdown,
     finished_view,
+    grid_markdown,
     tally,
 )
 from eval.stats import holm
@@ -144,6 +146,78 @@ def test_the_report_names_where_each_requirement_is_missed() -> None:
         "differs by chance alone at most 5 %): better on 0, worse on 0."
     )
     assert tally(frame) == {"met": 9, "better": 1, "worse": 1, "better_holm": 0, "worse_holm": 0}
+
+
+def _grid_rows(text: str) -> dict[str, list[str]]:
+    """The grid's body rows, by scenario: the cells after the scenario's name."""
+    rows = {}
+    for line in text.splitlines():
+        if line.startswith("| ") and not line.startswith("| scenario"):
+            cells = [c.strip() for c in line.strip("|").split("|")]
+            rows[cells[0]] = cells[1:]
+    return rows
+
+
+def test_the_grid_marks_the_verdict_and_the_ci_alone_apart() -> None:
+    """Four seeds of constant differences: the CI is the point and excludes zero, but the
+    sign-flip test's smallest p on 4 seeds is 2 / 16 = 0.125, so the line is a tie, marked
+    ``(+)`` / ``(−)``; on eight seeds p = 2 / 256 and the same differences are ``+`` / ``−``."""
+
+    def scenario(name: str, seeds: int) -> pd.DataFrame:
+        return _table(
+            {
+                "agent": {
+                    "mean_offset_px": [29.0] * seeds,  # 1 px better: the learner's favour
+                    "std_accel_mm_s2": [510.0] * seeds,  # 10 mm/s² rougher: against it
+                    "in_frame_rate_pct": [99.0] * seeds,
+                },
+                "pn": {
+                    "mean_offset_px": [30.0] * seeds,
+                    "std_accel_mm_s2": [500.0] * seeds,
+                    "in_frame_rate_pct": [98.0] * seeds,  # higher is better: the agent's favour
+                },
+            },
+            scenario=name,
+        )
+
+    frame = dominance(pd.concat([scenario("few", 4), scenario("many", 8)]), "agent")
+    text = grid_markdown(frame, "agent")
+    assert text.splitlines()[2] == (
+        "| scenario | InFrameRate (%) | lost person (%) | collision (%) | RMS distance error (m) "
+        "| MeanOffset (px) | StdAccel (mm/s²) |"
+    )
+    rows = _grid_rows(text)
+    # an at-least line is met by the means alone: (+) without bold; a better line needs the
+    # verdict, so the tie is missed (bold) even where the CI alone is in the learner's favour
+    assert rows["few"] == [
+        "99.0 / 98.0 (+)", "0.0 / 0.0", "0.0 / 0.0", "0.000 / 0.000",
+        "**29.0 / 30.0** (+)", f"**510.0 / 500.0** ({MINUS})",
+    ]  # fmt: skip
+    assert rows["many"] == [
+        "99.0 / 98.0 +", "0.0 / 0.0", "0.0 / 0.0", "0.000 / 0.000",
+        "29.0 / 30.0 +", f"**510.0 / 500.0** {MINUS}",
+    ]  # fmt: skip
+    # the report carries the grid between the criteria and the full table
+    report = dominance_markdown(frame, "agent")
+    assert text in report
+    assert report.index("- StdAccel (mm/s²)") < report.index(text) < report.index("| need |")
+
+
+def test_the_grid_says_n_a_where_no_seed_was_paired_and_keeps_unknown_directions_plain() -> None:
+    table = _table(
+        {"agent": {"mean_offset_px": [1.0, 2.0, 3.0]}, "pn": {"mean_offset_px": [5.0] * 3}}
+    )
+    table.loc[table.policy == "agent", "seed"] += 10
+    rows = _grid_rows(grid_markdown(dominance(table, "agent"), "agent"))
+    assert rows["straight"][4] == "**n/a**"
+    # four seeds 1 px apart: a tie whose CI alone excludes zero; without the criterion's
+    # direction the cell carries no (+) / (−) it could get wrong
+    few = _table({"agent": {"mean_offset_px": [29.0] * 4}, "pn": {"mean_offset_px": [30.0] * 4}})
+    frame = dominance(few, "agent")
+    assert _grid_rows(grid_markdown(frame, "agent"))["straight"][4] == "**29.0 / 30.0** (+)"
+    assert _grid_rows(grid_markdown(frame, "agent", criteria=()))["straight"][4] == (
+        "**29.0 / 30.0**"
+    )
 
 
 def test_holm_adjusts_a_family_of_p_values_step_down() -> None:
