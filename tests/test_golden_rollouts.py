@@ -24,21 +24,19 @@ ALTERNATES = _DOC.get("alternates", {})
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize(("prefix", "scenario", "policy", "config"), golden.cases())
-def test_single_and_vector_env_replay_the_recorded_episodes(
-    prefix: str, scenario: str, policy: str, config: object
-) -> None:
-    lanes = golden.vector_env_hashes(scenario, golden.SEEDS, policy, config)
+@pytest.mark.parametrize("case", golden.cases(), ids=lambda case: case.prefix)
+def test_single_and_vector_env_replay_the_recorded_episodes(case: Any) -> None:
+    lanes = golden.lane_hashes(case, golden.SEEDS)
     for seed, lane_hash in zip(golden.SEEDS, lanes, strict=True):
-        name = f"{prefix}/{seed}"
-        episode = golden.single_env_hash(scenario, seed, policy, config)
+        name = f"{case.prefix}/{seed}"
+        episode = golden.episode_hash(case, seed)
         problem = golden.verdict(name, episode, _DOC)
         assert problem is None, f"{name} single env: {problem}"
         assert lane_hash == episode["sha256"], f"{name} vector lane"
 
 
 def test_every_case_was_recorded() -> None:
-    names = {f"{prefix}/{seed}" for prefix, *_ in golden.cases() for seed in golden.SEEDS}
+    names = {f"{case.prefix}/{seed}" for case in golden.cases() for seed in golden.SEEDS}
     assert names == set(RECORDED)
     assert set(ALTERNATES) <= names
     # Only a learned agent's episode may end elsewhere on another CPU (golden/rollouts.py).
@@ -95,3 +93,59 @@ def test_the_fingerprint_names_what_differs() -> None:
     assert golden.verdict("curve/pn/0", later, _DOC).startswith("other events")
     flipped = {**noise, "events": "1" * 64}
     assert golden.verdict("curve/pn/0", flipped, _DOC).startswith("other events")
+
+
+def _start_moved(monkeypatch: pytest.MonkeyPatch, by: float | None) -> None:
+    """The line tracer's start pose moved after each reset: by one unit in the last place
+    (``by`` None) or by ``by`` metres, as :func:`_waypoints_moved` moves the person's path."""
+    from follow_env.tasks.line_trace.task import LineTraceTask
+
+    reset = LineTraceTask.prepare_reset
+
+    def moved(self: LineTraceTask, sim: Any, lanes: np.ndarray, keys: np.ndarray) -> Any:
+        pose = reset(self, sim, lanes, keys)
+        xy = pose[:, 0:2]
+        pose[:, 0:2] = np.nextafter(xy, np.inf) if by is None else xy + by
+        return pose
+
+    monkeypatch.setattr(LineTraceTask, "prepare_reset", moved)
+
+
+def _case(name: str) -> Any:
+    """The golden case of episode ``name`` (``<prefix>/<seed>``)."""
+    prefix = name.rsplit("/", 1)[0]
+    return next(case for case in golden.cases() if case.prefix == prefix)
+
+
+@pytest.mark.parametrize(
+    ("name", "move"),
+    [
+        ("line:gaps/pid/0", _start_moved),
+        ("line:course/coordinate/1", _start_moved),
+        ("mecanum:crowd/pn/2", _waypoints_moved),
+    ],
+)
+def test_the_other_tasks_and_platforms_pass_last_bits_and_catch_a_change(
+    name: str, move: Any, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    case, seed = _case(name), int(name.rsplit("/", 1)[1])
+    assert golden.verdict(name, golden.episode_hash(case, seed), _DOC) is None
+    with monkeypatch.context() as patch:
+        move(patch, None)
+        last_bits = golden.episode_hash(case, seed)
+    assert last_bits["sha256"] != RECORDED[name]["sha256"]
+    assert golden.verdict(name, last_bits, _DOC) is None
+    with monkeypatch.context() as patch:
+        move(patch, 1e-6)  # a micrometre
+        moved = golden.episode_hash(case, seed)
+    assert golden.verdict(name, moved, _DOC) is not None
+
+
+def test_every_task_and_platform_has_golden_episodes() -> None:
+    # a task or platform added without golden episodes would change unseen
+    from follow_env.tasks import env_ids
+
+    assert {case.env_id for case in golden.cases()} == set(env_ids())
+    assert any(dict(case.make).get("platform") == "mecanum" for case in golden.cases())
+    line = [case for case in golden.cases() if case.env_id == "LineTrace-v0"]
+    assert {case.variant for case in line} == set(golden.TRACKS)

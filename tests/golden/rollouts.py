@@ -2,8 +2,13 @@
 
 Every scenario x 3 seeds x {pn, gsmpn, ppo} runs to its end on the single env and on the
 vector env (one lane per seed); each episode is hashed over every observation, reward, flag and
-``info`` value, bit for bit. ``tests/golden/rollouts.json`` holds the hashes the tree produced
-when they were recorded; ``tests/test_golden_rollouts.py`` checks the tree still produces them.
+``info`` value, bit for bit. So do a few scenarios under other configurations
+(:data:`EXTRA_CONFIGS`) and the :data:`GROUPS` of other tasks and platforms: the line tracer's
+every track with both of its laws, and the person follower on the mecanum base, each law fitted
+to the platform's action and the env's control period as evaluation fits it
+(:func:`policies.for_platform`, :func:`policies.at_period`). ``tests/golden/rollouts.json``
+holds the hashes the tree produced when they were recorded; ``tests/test_golden_rollouts.py``
+checks the tree still produces them.
 
 Record anew (only when behaviour changes on purpose, and say why in the commit)::
 
@@ -18,7 +23,9 @@ takes them) and, per real-valued channel (each observation entry, the reward, ea
 episode passes when it hashes to the recorded one bit for bit, or has the same steps and events
 and every channel's sum within :data:`RTOL` of its scale (sums kept to 12 digits): last bits
 move a sum by far less (moving every person's waypoints by one unit in the last place moved none
-by more than 2e-14 of its scale in any of the 123 episodes), a change of behaviour by far more
+by more than 2e-14 of its scale in any of the 123 person-following episodes, and moving the
+line tracer's start pose or the person's waypoints on the mecanum base so moved none of
+those 66 by more than 8e-13), a change of behaviour by far more
 (moving them by a micrometre fails, tested). Learned agents act in float64 and round to float32
 (:mod:`policies.learned.networks`), so their episodes are the same on every CPU too, but for a
 chance of about one in ten thousand an episode; in float32 they were not (torch's matrix kernels
@@ -45,14 +52,16 @@ import re
 import struct
 import sys
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import gymnasium as gym
 import numpy as np
 
 import follow_env  # noqa: F401  (registers PersonFollow-v0)
 from follow_env.sim.atomic import atomic_write_text
-from policies import make_policy
+from follow_env.tasks import task_for_env
+from follow_env.tasks.line_trace.tracks.registry import TRACKS
+from policies import Policy, at_period, for_platform, make_policy
 
 GOLDEN = Path(__file__).with_name("rollouts.json")
 SCENARIOS = (
@@ -119,12 +128,79 @@ INFO_KEYS = (
     "termination",
 )
 
+#: The mecanum base's wheels' info keys (the line tracer's platform, and the person follower's on
+#: it) when their episodes were recorded.
+MECANUM_WHEEL_KEYS = tuple(
+    f"{what}_{wheel}{unit}"
+    for what, unit in (("duty", ""), ("wheel_target", "_mps"), ("wheel_measured", "_mps"),
+                       ("wheel_true", "_radps"))
+    for wheel in ("fl", "fr", "rl", "rr")
+)  # fmt: skip
+#: LineTrace-v0's info keys when its episodes were recorded.
+LINE_INFO_KEYS = (
+    "time_s",
+    "step",
+    "termination",
+    "robot_x_m",
+    "robot_y_m",
+    "robot_theta_rad",
+    "robot_v_mps",
+    "robot_vy_mps",
+    "robot_w_radps",
+    "progress_m",
+    "track_length_m",
+    "cross_track_m",
+    "heading_error_rad",
+    "line_seen",
+    "in_gap",
+    "active_cells",
+    "lost_s",
+    "accel_mps2",
+    "encoder_speed_mps",
+    *MECANUM_WHEEL_KEYS,
+)
+MECANUM_INFO_KEYS = (
+    *(k for k in INFO_KEYS if not k.startswith(("wheel_", "duty_"))),
+    "robot_vy_mps",
+    "bystander_clearance_m",
+    *MECANUM_WHEEL_KEYS,
+)
+
+
+class Group(NamedTuple):
+    """Golden episodes of another env or platform: ``label:<variant>/<policy>/<seed>``.
+
+    :param label: the episodes' name prefix.
+    :param env_id: the Gymnasium id.
+    :param variants: its scenarios or tracks (the task's ``variant_key``).
+    :param policies: the laws run (by name, for the env's task).
+    :param make: further ``gym.make`` keywords (``platform="mecanum"``).
+    :param info_keys: the ``info`` values hashed.
+    """
+
+    label: str
+    env_id: str
+    variants: tuple[str, ...]
+    policies: tuple[str, ...]
+    make: tuple[tuple[str, Any], ...]
+    info_keys: tuple[str, ...]
+
+
+GROUPS = (
+    Group("line", "LineTrace-v0", tuple(TRACKS), ("pid", "coordinate"), (), LINE_INFO_KEYS),
+    Group(
+        "mecanum", "PersonFollow-v0", EXTRA_SCENARIOS, ("pn", "gsmpn"),
+        (("platform", "mecanum"),), MECANUM_INFO_KEYS,
+    ),
+)  # fmt: skip
+
 
 class EpisodeHash:
     """Accumulates one episode: every value in a fixed order, floats as IEEE-754 doubles, and
     its fingerprint (module docstring): the events hashed, each real channel's weighted sum."""
 
-    def __init__(self) -> None:
+    def __init__(self, info_keys: tuple[str, ...] = INFO_KEYS) -> None:
+        self._info_keys = info_keys
         self._h = hashlib.sha256()
         self._events = hashlib.sha256()
         # channel -> [sum of w_t x_t, sum of |x_t|] over the steps t
@@ -169,7 +245,7 @@ class EpisodeHash:
             ("truncated", bool(truncated)),
         ):
             self._value(key, value)
-        for key in INFO_KEYS:
+        for key in self._info_keys:
             self._value(key, info[key])
         self.steps += 1
 
@@ -205,15 +281,49 @@ def same_within_rtol(got: dict[str, Any], want: dict[str, Any]) -> str | None:
     return None
 
 
-def single_env_hash(
-    scenario: str, seed: int, policy: str, config: Any = "thesis"
-) -> dict[str, Any]:
-    """The record of one episode on the single env (:meth:`EpisodeHash.record`)."""
-    env = gym.make("PersonFollow-v0", scenario=scenario, config=config)
-    law = make_policy(policy)
+class Case(NamedTuple):
+    """One golden (env, variant, policy, configuration), run on :data:`SEEDS`.
+
+    :param prefix: the episodes' name before ``/<seed>``.
+    :param config: the ``config`` keyword (None: the env's default).
+    """
+
+    prefix: str
+    env_id: str
+    variant: str
+    policy: str
+    config: Any = "thesis"
+    make: tuple[tuple[str, Any], ...] = ()
+    info_keys: tuple[str, ...] = INFO_KEYS
+
+    def env_kwargs(self) -> dict[str, Any]:
+        """``gym.make``'s keywords after the id."""
+        kwargs: dict[str, Any] = {task_for_env(self.env_id).variant_key: self.variant}
+        if self.config is not None:
+            kwargs["config"] = self.config
+        return {**kwargs, **dict(self.make)}
+
+    def law(self, env: gym.Env) -> Policy:
+        """The policy fitted to ``env``'s action and control period, as evaluation fits it."""
+        base = env.unwrapped
+        built = make_policy(self.policy, task_for_env(self.env_id).name)
+        names = tuple(a.name for a in base.sim.platform.actions)
+        return for_platform(at_period(built, base.config.episode.control_dt_s), names)
+
+
+def person_follow(scenario: str, policy: str, config: Any = "thesis", label: str = "") -> Case:
+    """A :class:`Case` of PersonFollow-v0 on the differential drive."""
+    prefix = f"{label}:{scenario}/{policy}" if label else f"{scenario}/{policy}"
+    return Case(prefix, "PersonFollow-v0", scenario, policy, config)
+
+
+def episode_hash(case: Case, seed: int) -> dict[str, Any]:
+    """The record of one episode of ``case`` on the single env (:meth:`EpisodeHash.record`)."""
+    env = gym.make(case.env_id, **case.env_kwargs())
+    law = case.law(env)
     obs, info = env.reset(seed=seed)
     law.reset()
-    h = EpisodeHash()
+    h = EpisodeHash(case.info_keys)
     h.add(obs, 0.0, False, False, info)
     done = False
     while not done:
@@ -224,31 +334,33 @@ def single_env_hash(
     return h.record()
 
 
-def vector_env_hashes(
-    scenario: str, seeds: tuple[int, ...], policy: str, config: Any = "thesis"
-) -> list[str]:
-    """The hash of each lane's first episode on the vector env (lane i seeded seeds[0] + i)."""
+def single_env_hash(
+    scenario: str, seed: int, policy: str, config: Any = "thesis"
+) -> dict[str, Any]:
+    """The record of one PersonFollow episode on the single env (:func:`episode_hash`)."""
+    return episode_hash(person_follow(scenario, policy, config), seed)
+
+
+def lane_hashes(case: Case, seeds: tuple[int, ...]) -> list[str]:
+    """The hash of each lane's first episode of ``case`` on the vector env (lane i seeded
+    seeds[0] + i)."""
     n = len(seeds)
     envs = gym.make_vec(
-        "PersonFollow-v0",
-        num_envs=n,
-        vectorization_mode="vector_entry_point",
-        scenario=scenario,
-        config=config,
+        case.env_id, num_envs=n, vectorization_mode="vector_entry_point", **case.env_kwargs()
     )
-    laws = [make_policy(policy) for _ in range(n)]
+    laws = [case.law(envs) for _ in range(n)]
     obs, info = envs.reset(seed=seeds[0])
-    hashes = [EpisodeHash() for _ in range(n)]
+    hashes = [EpisodeHash(case.info_keys) for _ in range(n)]
     done = np.zeros(n, dtype=bool)
 
     def lane_info(i: int) -> dict[str, Any]:
-        return {k: info[k][i] for k in INFO_KEYS}
+        return {k: info[k][i] for k in case.info_keys}
 
     for i, law in enumerate(laws):
         law.reset()
         hashes[i].add(obs[i], 0.0, False, False, lane_info(i))
+    rest = np.zeros(envs.single_action_space.shape, np.float32)  # a finished lane's: ignored
     while not done.all():
-        rest = np.zeros(2, np.float32)  # a finished lane's action is ignored
         actions = np.stack([rest if done[i] else law.act(obs[i]) for i, law in enumerate(laws)])
         obs, reward, terminated, truncated, info = envs.step(actions)
         for i in np.flatnonzero(~done):
@@ -258,24 +370,31 @@ def vector_env_hashes(
     return [h.hexdigest() for h in hashes]
 
 
-def cases() -> list[tuple[str, str, str, Any]]:
-    """Every golden (name prefix, scenario, policy, config)."""
-    out = [(f"{s}/{p}", s, p, "thesis") for s in SCENARIOS for p in POLICIES]
+def cases() -> list[Case]:
+    """Every golden case: PersonFollow's scenarios and laws, its extra configurations, and the
+    other tasks and platforms (:data:`GROUPS`)."""
+    out = [person_follow(s, p) for s in SCENARIOS for p in POLICIES]
     for label, config in EXTRA_CONFIGS.items():
-        out += [(f"{label}:{s}/pn", s, "pn", config) for s in EXTRA_SCENARIOS]
+        out += [person_follow(s, "pn", config, label) for s in EXTRA_SCENARIOS]
+    for g in GROUPS:
+        out += [
+            Case(f"{g.label}:{v}/{p}", g.env_id, v, p, None, g.make, g.info_keys)
+            for v in g.variants
+            for p in g.policies
+        ]
     return out
 
 
 def record() -> dict[str, Any]:
     """Run every golden episode; returns the JSON document."""
     episodes: dict[str, dict[str, Any]] = {}
-    for prefix, scenario, policy, config in cases():
-        lanes = vector_env_hashes(scenario, SEEDS, policy, config)
+    for case in cases():
+        lanes = lane_hashes(case, SEEDS)
         for seed, lane_hash in zip(SEEDS, lanes, strict=True):
-            episode = single_env_hash(scenario, seed, policy, config)
+            episode = episode_hash(case, seed)
             if episode["sha256"] != lane_hash:
-                raise AssertionError(f"{prefix}/{seed}: vector lane != single env")
-            episodes[f"{prefix}/{seed}"] = episode
+                raise AssertionError(f"{case.prefix}/{seed}: vector lane != single env")
+            episodes[f"{case.prefix}/{seed}"] = episode
     return {
         "recorded_on": {
             "machine": platform.machine(),
