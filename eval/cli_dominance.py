@@ -53,10 +53,9 @@ def cmd_dominance(args: argparse.Namespace) -> int:
         calibration,
         default_laws,
         dominance,
-        dominance_markdown,
-        finished_markdown,
         finished_view,
     )
+    from eval.dominance_report import dominance_markdown, finished_markdown
     from eval.report import safe_name
     from follow_env.sim.atomic import atomic_folder, atomic_write_text, check_new_folder
 

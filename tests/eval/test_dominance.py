@@ -12,19 +12,16 @@ import pytest
 from eval.cli import main
 from eval.dominance import (
     CRITERIA,
-    MINUS,
     RULE,
     Criterion,
     calibration,
     criterion_summary,
     dominance,
-    dominance_markdown,
     dominates,
-    finished_markdown,
     finished_view,
-    grid_markdown,
     tally,
 )
+from eval.dominance_report import MINUS, dominance_markdown, finished_markdown, grid_markdown
 from eval.stats import holm
 
 METRICS = [c.metric for c in CRITERIA]
