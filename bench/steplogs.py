@@ -49,7 +49,7 @@ def bench_steplogs(quick: bool) -> list[tuple[str, float, str]]:
             "ours": lambda log: write_step_log(log, ours),
         }
         best = dict.fromkeys(writers, float("inf"))
-        for _ in range(REPEATS):  # interleaved, the best pass of each: one pass varied by 1.5x
+        for _ in range(REPEATS):  # interleaved, each one's best: a single pass varied by up to 1.5x
             for name, write in writers.items():
                 start = time.perf_counter()
                 for log in logs:

@@ -42,7 +42,10 @@ def finished_markdown(view: pd.DataFrame, learner: str) -> str:
 
 
 def dominance_markdown(
-    frame: pd.DataFrame, learner: str, calibrated: dict[str, dict[str, int]] | None = None
+    frame: pd.DataFrame,
+    learner: str,
+    calibrated: dict[str, dict[str, int]] | None = None,
+    criteria: Sequence[Criterion] = CRITERIA,
 ) -> str:
     """The table in markdown, after one line per criterion saying where it is met and the
     table at a glance (:func:`grid_markdown`).
@@ -50,6 +53,7 @@ def dominance_markdown(
     :param frame: :func:`dominance` output.
     :param learner: the learner's label, for the text.
     :param calibrated: :func:`calibration` of the same laws, said after the headline.
+    :param criteria: the criteria ``frame`` was judged by (their directions mark the grid).
     """
     variant = frame.columns[0]
     summary = criterion_summary(frame)
@@ -94,7 +98,7 @@ def dominance_markdown(
             f"{'holds' if s.holds else '**does not hold**'}){where}"
         )
     lines.append("")
-    lines.append(grid_markdown(frame, learner))
+    lines.append(grid_markdown(frame, learner, criteria))
     lines.append(
         f"| {variant} | criterion | need | {learner} | best law | law | "
         f"{learner} - law [95 % CI] | p | verdict | meets |"
@@ -114,18 +118,18 @@ def grid_markdown(
 ) -> str:
     """:func:`dominance`'s table at a glance, in markdown: one row per scenario, one column per
     criterion, each cell ``learner / best law`` (the two means, with the digits of the full
-    table), followed by a blank line.
+    table), after a line of legend; the text ends in a newline.
 
     A cell is bold where the requirement is missed. ``+`` / ``−`` mark a line that is
     significantly better / worse by :data:`RULE` (the line's ``verdict``); ``(+)`` / ``(−)``
     one whose 95 % CI alone excludes zero in the learner's favour / against it while the
-    permutation test does not confirm it (p >= 0.05), so a reader of a table marked by the CI
-    alone finds the same lines. A line with no paired seed reads ``n/a``.
+    verdict is a tie (the permutation test does not confirm it), so a reader of a table marked
+    by the CI alone finds the same lines. A line with no paired seed reads ``**n/a**``.
 
     :param frame: :func:`dominance` output.
     :param learner: the learner's label, for the legend.
-    :param criteria: where each criterion's direction is looked up for the ``(+)`` / ``(−)``
-        marks (a metric not among them gets the verdict's marks only).
+    :param criteria: the criteria ``frame`` was judged by, where each one's direction is looked
+        up for the ``(+)`` / ``(−)`` marks (a metric not among them gets the verdict's only).
     """
     variant = frame.columns[0]
     higher = {c.metric: c.higher_is_better for c in criteria}
@@ -135,7 +139,7 @@ def grid_markdown(
         f"Each cell `{learner} / best law`; bold: the requirement is missed; `+` / `{MINUS}`: "
         f"significantly better / worse (the verdict below); `(+)` / `({MINUS})`: the 95 % CI alone "
         "excludes zero in the learner's favour / against it, the permutation test does not "
-        "confirm it:",
+        "confirm it; n/a: no seed paired:",
         "",
         f"| {variant} | {head} |",
         "|---|" + "---:|" * len(names),

@@ -92,8 +92,8 @@ def step_log_text(log: pd.DataFrame) -> str:
     if len(log.columns) < 2 or isinstance(log.columns, pd.MultiIndex):
         return log.to_csv(index=False, float_format=FLOAT_FORMAT, lineterminator="\n")
     formats, columns = [], []
-    # items() goes by position (a name may stand twice) and, where the names are unique, takes
-    # each column as log[name] does: 2.5x faster than log.iloc[:, k] on a 39-column log
+    # items() yields each column by position (a name may stand twice): 2.5x faster than
+    # log.iloc[:, k] on a 39-column log
     for _, column in log.items():
         values = column.to_numpy()
         if values.dtype.kind == "f" and not np.isnan(values).any():

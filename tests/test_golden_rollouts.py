@@ -123,6 +123,9 @@ def _case(name: str) -> Any:
         ("line:gaps/pid/0", _start_moved),
         ("line:course/coordinate/1", _start_moved),
         ("mecanum:crowd/pn/2", _waypoints_moved),
+        ("mecanum:straight/pn/0", _waypoints_moved),  # no bystander: an inf clearance throughout
+        ("unicycle:random/gsmpn/1", _waypoints_moved),
+        ("line_diff_drive:gaps/pid/2", _start_moved),
     ],
 )
 def test_the_other_tasks_and_platforms_pass_last_bits_and_catch_a_change(
@@ -141,11 +144,22 @@ def test_the_other_tasks_and_platforms_pass_last_bits_and_catch_a_change(
     assert golden.verdict(name, moved, _DOC) is not None
 
 
-def test_every_task_and_platform_has_golden_episodes() -> None:
+def test_every_task_on_every_platform_has_golden_episodes() -> None:
     # a task or platform added without golden episodes would change unseen
-    from follow_env.tasks import env_ids
+    import gymnasium as gym
 
-    assert {case.env_id for case in golden.cases()} == set(env_ids())
-    assert any(dict(case.make).get("platform") == "mecanum" for case in golden.cases())
-    line = [case for case in golden.cases() if case.env_id == "LineTrace-v0"]
-    assert {case.variant for case in line} == set(golden.TRACKS)
+    from follow_env.platforms import available_platforms
+    from follow_env.tasks import env_ids
+    from follow_env.tasks.line_trace.tracks.registry import TRACKS
+
+    pinned = set()
+    for case in golden.cases():
+        platform = case.platform
+        if platform is None:  # the env's own
+            platform = gym.make(case.env_id).unwrapped.sim.platform.name
+        pinned.add((case.env_id, platform))
+    assert pinned == {(e, p) for e in env_ids() for p in available_platforms()}
+    # every built-in track (tests register tracks of their own in the same registry)
+    builtin = {n for n, spec in TRACKS.items() if spec.fn.__module__.startswith("follow_env.")}
+    line = {case.variant for case in golden.cases() if case.prefix.startswith("line:")}
+    assert line == builtin == set(golden.LINE_TRACKS)

@@ -217,6 +217,25 @@ def test_the_grid_says_n_a_where_no_seed_was_paired_and_keeps_unknown_directions
     )
 
 
+def test_the_grid_marks_a_higher_is_better_line_against_the_learner() -> None:
+    def scenario(name: str, seeds: int) -> pd.DataFrame:
+        return _table(
+            {
+                "agent": {"in_frame_rate_pct": [98.0] * seeds},
+                "pn": {"in_frame_rate_pct": [99.0] * seeds},
+            },
+            scenario=name,
+        )
+
+    frame = dominance(pd.concat([scenario("few", 4), scenario("many", 8)]), "agent")
+    rows = _grid_rows(grid_markdown(frame, "agent"))
+    assert rows["few"][0] == f"**98.0 / 99.0** ({MINUS})"
+    assert rows["many"][0] == f"**98.0 / 99.0** {MINUS}"
+    # the report marks its grid by the criteria the table was judged by
+    assert f"**98.0 / 99.0** ({MINUS})" in dominance_markdown(frame, "agent")
+    assert "| **98.0 / 99.0** |" in dominance_markdown(frame, "agent", criteria=())
+
+
 def test_holm_adjusts_a_family_of_p_values_step_down() -> None:
     # by hand: sorted 0.005, 0.01, 0.03, 0.04 -> 4 x, 3 x, 2 x, 1 x -> 0.02, 0.03, 0.06, 0.04,
     # then the running maximum (0.04 -> 0.06); NaN is not tested and not counted in m

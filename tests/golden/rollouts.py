@@ -3,8 +3,9 @@
 Every scenario x 3 seeds x {pn, gsmpn, ppo} runs to its end on the single env and on the
 vector env (one lane per seed); each episode is hashed over every observation, reward, flag and
 ``info`` value, bit for bit. So do a few scenarios under other configurations
-(:data:`EXTRA_CONFIGS`) and the :data:`GROUPS` of other tasks and platforms: the line tracer's
-every track with both of its laws, and the person follower on the mecanum base, each law fitted
+(:data:`EXTRA_CONFIGS`) and the :data:`GROUPS`, one for every other pair of env and platform:
+the line tracer on its mecanum base (every track, both laws), on the differential drive and on
+the unicycle, and the person follower on the mecanum base and on the unicycle. Each law is fitted
 to the platform's action and the env's control period as evaluation fits it
 (:func:`policies.for_platform`, :func:`policies.at_period`). ``tests/golden/rollouts.json``
 holds the hashes the tree produced when they were recorded; ``tests/test_golden_rollouts.py``
@@ -19,13 +20,16 @@ episode on an AMD EPYC with AVX-512, first seen 2026-12-02, the same steps, whil
 scenario matched bit for bit). So each episode also keeps a fingerprint that such bits do not
 move: a hash of its events (every flag, count and name at every step, as the bit-for-bit hash
 takes them) and, per real-valued channel (each observation entry, the reward, each float
-``info`` value), a weighted sum over the steps with the sum of magnitudes as its scale. An
+``info`` value), a weighted sum over the steps with the sum of magnitudes as its scale (a
+value that is not finite, such as the clearance to bystanders where there are none, counts as
+an event instead: inf less inf is nan). An
 episode passes when it hashes to the recorded one bit for bit, or has the same steps and events
 and every channel's sum within :data:`RTOL` of its scale (sums kept to 12 digits): last bits
 move a sum by far less (moving every person's waypoints by one unit in the last place moved none
-by more than 2e-14 of its scale in any of the 123 person-following episodes, and moving the
-line tracer's start pose or the person's waypoints on the mecanum base so moved none of
-those 66 by more than 8e-13), a change of behaviour by far more
+by more than 2e-14 of its scale in any of the 123 person-following episodes on the differential
+drive; moving the line tracer's start pose, or the person's waypoints on the other platforms,
+the same way moved none of the 102 episodes of :data:`GROUPS` by more than 8e-13), a change of
+behaviour by far more
 (moving them by a micrometre fails, tested). Learned agents act in float64 and round to float32
 (:mod:`policies.learned.networks`), so their episodes are the same on every CPU too, but for a
 chance of about one in ten thousand an episode; in float32 they were not (torch's matrix kernels
@@ -60,7 +64,6 @@ import numpy as np
 import follow_env  # noqa: F401  (registers PersonFollow-v0)
 from follow_env.sim.atomic import atomic_write_text
 from follow_env.tasks import task_for_env
-from follow_env.tasks.line_trace.tracks.registry import TRACKS
 from policies import Policy, at_period, for_platform, make_policy
 
 GOLDEN = Path(__file__).with_name("rollouts.json")
@@ -128,16 +131,31 @@ INFO_KEYS = (
     "termination",
 )
 
-#: The mecanum base's wheels' info keys (the line tracer's platform, and the person follower's on
-#: it) when their episodes were recorded.
-MECANUM_WHEEL_KEYS = tuple(
-    f"{what}_{wheel}{unit}"
-    for what, unit in (("duty", ""), ("wheel_target", "_mps"), ("wheel_measured", "_mps"),
-                       ("wheel_true", "_radps"))
-    for wheel in ("fl", "fr", "rl", "rr")
-)  # fmt: skip
-#: LineTrace-v0's info keys when its episodes were recorded.
-LINE_INFO_KEYS = (
+#: Each platform's wheel info keys when its episodes were recorded (the unicycle has no wheels).
+WHEEL_KEYS = {
+    "diff_drive": tuple(
+        f"{what}_{side}{unit}"
+        for what, unit in (("duty", "_pct"), ("wheel_target", "_mps"), ("wheel_measured", "_mps"),
+                           ("wheel_true", "_radps"))
+        for side in ("l", "r")
+    ),
+    "mecanum": tuple(
+        f"{what}_{wheel}{unit}"
+        for what, unit in (("duty", ""), ("wheel_target", "_mps"), ("wheel_measured", "_mps"),
+                           ("wheel_true", "_radps"))
+        for wheel in ("fl", "fr", "rl", "rr")
+    ),
+    "unicycle": (),
+}  # fmt: skip
+#: The person follower's info keys on a platform other than the differential drive (whose
+#: episodes keep :data:`INFO_KEYS`, recorded before these keys were added), less the wheels'.
+PERSON_KEYS = (
+    *(k for k in INFO_KEYS if not k.startswith(("wheel_", "duty_"))),
+    "robot_vy_mps",
+    "bystander_clearance_m",
+)
+#: LineTrace-v0's info keys when its episodes were recorded, less the wheels'.
+LINE_KEYS = (
     "time_s",
     "step",
     "termination",
@@ -157,14 +175,10 @@ LINE_INFO_KEYS = (
     "lost_s",
     "accel_mps2",
     "encoder_speed_mps",
-    *MECANUM_WHEEL_KEYS,
 )
-MECANUM_INFO_KEYS = (
-    *(k for k in INFO_KEYS if not k.startswith(("wheel_", "duty_"))),
-    "robot_vy_mps",
-    "bystander_clearance_m",
-    *MECANUM_WHEEL_KEYS,
-)
+#: The line tracer's built-in tracks (``follow_env.tasks.line_trace.tracks.builtin``), named
+#: here: tests register tracks of their own in the same registry.
+LINE_TRACKS = ("straight", "corners", "curves", "zigzag", "gaps", "course", "random")
 
 
 class Group(NamedTuple):
@@ -172,26 +186,33 @@ class Group(NamedTuple):
 
     :param label: the episodes' name prefix.
     :param env_id: the Gymnasium id.
+    :param platform: the platform (``gym.make``'s ``platform=``).
     :param variants: its scenarios or tracks (the task's ``variant_key``).
     :param policies: the laws run (by name, for the env's task).
-    :param make: further ``gym.make`` keywords (``platform="mecanum"``).
     :param info_keys: the ``info`` values hashed.
     """
 
     label: str
     env_id: str
+    platform: str
     variants: tuple[str, ...]
     policies: tuple[str, ...]
-    make: tuple[tuple[str, Any], ...]
     info_keys: tuple[str, ...]
 
 
+#: Every other (env, platform) pair: the line tracer on its mecanum base (every track, both
+#: laws) and, with the PID law (coordinate control strafes), on the two platforms that cannot;
+#: the person follower on the mecanum base and the unicycle.
 GROUPS = (
-    Group("line", "LineTrace-v0", tuple(TRACKS), ("pid", "coordinate"), (), LINE_INFO_KEYS),
-    Group(
-        "mecanum", "PersonFollow-v0", EXTRA_SCENARIOS, ("pn", "gsmpn"),
-        (("platform", "mecanum"),), MECANUM_INFO_KEYS,
-    ),
+    Group("line", "LineTrace-v0", "mecanum", LINE_TRACKS, ("pid", "coordinate"),
+          (*LINE_KEYS, *WHEEL_KEYS["mecanum"])),
+    Group("line_diff_drive", "LineTrace-v0", "diff_drive", ("corners", "gaps"), ("pid",),
+          (*LINE_KEYS, *WHEEL_KEYS["diff_drive"])),
+    Group("line_unicycle", "LineTrace-v0", "unicycle", ("corners", "gaps"), ("pid",), LINE_KEYS),
+    Group("mecanum", "PersonFollow-v0", "mecanum", EXTRA_SCENARIOS, ("pn", "gsmpn"),
+          (*PERSON_KEYS, *WHEEL_KEYS["mecanum"])),
+    Group("unicycle", "PersonFollow-v0", "unicycle", EXTRA_SCENARIOS, ("pn", "gsmpn"),
+          PERSON_KEYS),
 )  # fmt: skip
 
 
@@ -226,6 +247,11 @@ class EpisodeHash:
             raise TypeError(f"cannot hash {value!r}")
 
     def _real(self, key: str, value: float) -> None:
+        if not math.isfinite(value):
+            # An event, not a sum: inf - inf is nan, so a channel that is inf (no bystander's
+            # clearance) would fail the fingerprint on any CPU whose last bits differ.
+            self._events.update(key.encode() + b"\0" + struct.pack("<d", value))
+            return
         # The weight varies with the step, so values moved between steps move the sum too.
         weight = 1.0 + 0.5 * math.sin(0.7 * self.steps)
         sums = self._sums.setdefault(key, [0.0, 0.0])
@@ -282,10 +308,15 @@ def same_within_rtol(got: dict[str, Any], want: dict[str, Any]) -> str | None:
 
 
 class Case(NamedTuple):
-    """One golden (env, variant, policy, configuration), run on :data:`SEEDS`.
+    """One golden (env, platform, variant, policy, configuration), run on :data:`SEEDS`.
 
     :param prefix: the episodes' name before ``/<seed>``.
+    :param env_id: the Gymnasium id.
+    :param variant: the scenario or track.
+    :param policy: the policy's name, for the env's task.
     :param config: the ``config`` keyword (None: the env's default).
+    :param platform: the ``platform`` keyword (None: the env's own).
+    :param info_keys: the ``info`` values hashed.
     """
 
     prefix: str
@@ -293,7 +324,7 @@ class Case(NamedTuple):
     variant: str
     policy: str
     config: Any = "thesis"
-    make: tuple[tuple[str, Any], ...] = ()
+    platform: str | None = None
     info_keys: tuple[str, ...] = INFO_KEYS
 
     def env_kwargs(self) -> dict[str, Any]:
@@ -301,9 +332,11 @@ class Case(NamedTuple):
         kwargs: dict[str, Any] = {task_for_env(self.env_id).variant_key: self.variant}
         if self.config is not None:
             kwargs["config"] = self.config
-        return {**kwargs, **dict(self.make)}
+        if self.platform is not None:
+            kwargs["platform"] = self.platform
+        return kwargs
 
-    def law(self, env: gym.Env) -> Policy:
+    def law(self, env: gym.Env | gym.vector.VectorEnv) -> Policy:
         """The policy fitted to ``env``'s action and control period, as evaluation fits it."""
         base = env.unwrapped
         built = make_policy(self.policy, task_for_env(self.env_id).name)
@@ -378,7 +411,7 @@ def cases() -> list[Case]:
         out += [person_follow(s, "pn", config, label) for s in EXTRA_SCENARIOS]
     for g in GROUPS:
         out += [
-            Case(f"{g.label}:{v}/{p}", g.env_id, v, p, None, g.make, g.info_keys)
+            Case(f"{g.label}:{v}/{p}", g.env_id, v, p, None, g.platform, g.info_keys)
             for v in g.variants
             for p in g.policies
         ]
@@ -402,7 +435,7 @@ def record() -> dict[str, Any]:
             "numpy": np.__version__,
             "cpu": cpu_name(),
         },
-        "info_keys": list(INFO_KEYS),
+        "info_keys": list(INFO_KEYS),  # the differential drive's person follower's (GROUPS: theirs)
         "episodes": episodes,
     }
 
