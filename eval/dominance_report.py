@@ -23,7 +23,7 @@ __all__ = ["MINUS", "dominance_markdown", "finished_markdown", "grid_markdown"]
 
 
 def finished_markdown(view: pd.DataFrame, learner: str) -> str:
-    """:func:`finished_view` in markdown (empty when no line was asked again)."""
+    """:func:`~eval.dominance.finished_view` in markdown (empty when no line was asked again)."""
     if view.empty:
         return ""
     variant = view.columns[0]
@@ -50,9 +50,10 @@ def dominance_markdown(
     """The table in markdown, after one line per criterion saying where it is met and the
     table at a glance (:func:`grid_markdown`).
 
-    :param frame: :func:`dominance` output.
+    :param frame: :func:`~eval.dominance.dominance` output.
     :param learner: the learner's label, for the text.
-    :param calibrated: :func:`calibration` of the same laws, said after the headline.
+    :param calibrated: :func:`~eval.dominance.calibration` of the same laws, said after the
+        headline.
     :param criteria: the criteria ``frame`` was judged by (their directions mark the grid).
     """
     variant = frame.columns[0]
@@ -116,17 +117,18 @@ MINUS = "\N{MINUS SIGN}"
 def grid_markdown(
     frame: pd.DataFrame, learner: str, criteria: Sequence[Criterion] = CRITERIA
 ) -> str:
-    """:func:`dominance`'s table at a glance, in markdown: one row per scenario, one column per
-    criterion, each cell ``learner / best law`` (the two means, with the digits of the full
-    table), after a line of legend; the text ends in a newline.
+    """:func:`~eval.dominance.dominance`'s table at a glance, in markdown: one row per
+    scenario, one column per criterion, each cell ``learner / best law`` (the two means, with
+    the digits of the full table), after a line of legend; the text ends in a newline.
 
     A cell is bold where the requirement is missed. ``+`` / ``−`` mark a line that is
-    significantly better / worse by :data:`RULE` (the line's ``verdict``); ``(+)`` / ``(−)``
-    one whose 95 % CI alone excludes zero in the learner's favour / against it while the
-    verdict is a tie (the permutation test does not confirm it), so a reader of a table marked
-    by the CI alone finds the same lines. A line with no paired seed reads ``**n/a**``.
+    significantly better / worse by :data:`~eval.dominance.RULE` (the line's ``verdict``);
+    ``(+)`` / ``(−)`` one whose 95 % CI alone excludes zero in the learner's favour / against
+    it while the verdict is a tie (the permutation test does not confirm it), so a reader of a
+    table marked by the CI alone finds the same lines. A line with no paired seed reads
+    ``**n/a**``.
 
-    :param frame: :func:`dominance` output.
+    :param frame: :func:`~eval.dominance.dominance` output.
     :param learner: the learner's label, for the legend.
     :param criteria: the criteria ``frame`` was judged by, where each one's direction is looked
         up for the ``(+)`` / ``(−)`` marks (a metric not among them gets the verdict's only).

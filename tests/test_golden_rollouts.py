@@ -152,12 +152,12 @@ def test_every_task_on_every_platform_has_golden_episodes() -> None:
     from follow_env.tasks import env_ids
     from follow_env.tasks.line_trace.tracks.registry import TRACKS
 
-    pinned = set()
-    for case in golden.cases():
-        platform = case.platform
-        if platform is None:  # the env's own
-            platform = gym.make(case.env_id).unwrapped.sim.platform.name
-        pinned.add((case.env_id, platform))
+    own = {}  # each env's own platform, for the cases that name none
+    for env_id in env_ids():
+        env = gym.make(env_id)
+        own[env_id] = env.unwrapped.sim.platform.name
+        env.close()
+    pinned = {(case.env_id, case.platform or own[case.env_id]) for case in golden.cases()}
     assert pinned == {(e, p) for e in env_ids() for p in available_platforms()}
     # every built-in track (tests register tracks of their own in the same registry)
     builtin = {n for n, spec in TRACKS.items() if spec.fn.__module__.startswith("follow_env.")}

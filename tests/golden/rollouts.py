@@ -250,7 +250,9 @@ class EpisodeHash:
         if not math.isfinite(value):
             # An event, not a sum: inf - inf is nan, so a channel that is inf (no bystander's
             # clearance) would fail the fingerprint on any CPU whose last bits differ.
-            self._events.update(key.encode() + b"\0" + struct.pack("<d", value))
+            # nan by name: its bits (sign, payload) may differ by CPU
+            mark = b"nan" if math.isnan(value) else struct.pack("<d", value)
+            self._events.update(key.encode() + b"\0" + mark)
             return
         # The weight varies with the step, so values moved between steps move the sum too.
         weight = 1.0 + 0.5 * math.sin(0.7 * self.steps)
@@ -435,7 +437,8 @@ def record() -> dict[str, Any]:
             "numpy": np.__version__,
             "cpu": cpu_name(),
         },
-        "info_keys": list(INFO_KEYS),  # the differential drive's person follower's (GROUPS: theirs)
+        "info_keys": list(INFO_KEYS),  # the person follower's on the differential drive
+        "group_info_keys": {g.label: list(g.info_keys) for g in GROUPS},
         "episodes": episodes,
     }
 
