@@ -41,7 +41,10 @@ offset where it ends, so a law that crashes early can keep a better in-frame rat
 error on that episode than a learner that avoids the crash and goes on. :func:`finished_view`
 asks each missed line again over the seeds on which both the learner and that line's law
 finished (neither lost nor collided: :func:`finished`); the report prints it after the
-table, as an explanation, and the verdict does not change.
+table, as an explanation, and the verdict does not change. The same holds between the two
+endings: a law whose episodes end in collisions loses the person less often, having less
+time to, so a missed lost line is asked again where neither collided, and a missed collision
+line where neither lost the person.
 
 How high that bar is shows in :func:`calibration`: each law put through the same test against
 the other laws (the best of the rest on each line). The report gives those counts beside the
@@ -324,7 +327,7 @@ def _line(
 
 
 #: The criteria that end an episode: an episode is finished when both are 0 (neither lost nor
-#: collided), so :func:`finished_view` does not ask them again.
+#: collided); :func:`finished_view` asks each of them again where the other is 0.
 ENDINGS = ("lost_rate_pct", "collision_rate_pct")
 
 
@@ -347,17 +350,21 @@ def finished_view(
     seed: int = 0,
 ) -> pd.DataFrame:
     """The lines ``frame`` misses, again over the seeds both the learner and the line's law
-    finished (module docstring): the same law, the same test, fewer seeds.
+    finished (module docstring): the same law, the same test, fewer seeds. A missed line of one
+    of the :data:`ENDINGS` is asked again over the seeds on which neither ended by the other
+    (a lost line where neither collided, a collision line where neither lost the person): an
+    episode that has ended one way cannot end the other, so the side that ends more often the
+    other way is charged less often this way.
 
     :param table: the episode table ``frame`` was computed from, with the :data:`ENDINGS`.
     :param frame: :func:`dominance` output for ``learner``.
     :param learner: the learner's policy label.
     :param criteria: the criteria of ``frame`` (default: :data:`CRITERIA`).
     :param seed: seeds the bootstrap resampling.
-    :returns: one row per missed line whose criterion does not end an episode
-        (:data:`ENDINGS`), with the columns of :func:`dominance`; ``n`` is the number of seeds
-        both finished (a line with none has verdict ``n/a``, as in :func:`dominance`), and
-        ``holm_p`` NaN (lines picked because they were missed are no family to adjust over).
+    :returns: one row per missed line, with the columns of :func:`dominance`; ``n`` is the
+        number of seeds asked (a line with none has verdict ``n/a``, as in :func:`dominance`),
+        and ``holm_p`` NaN (lines picked because they were missed are no family to adjust
+        over).
     :raises ValueError: if the table has no column of one of the :data:`ENDINGS`.
     """
     if missing := [c for c in ENDINGS if c not in table]:
@@ -370,9 +377,14 @@ def finished_view(
     rows = []
     for line in frame.itertuples(index=False):
         r = line._asdict()
-        if r["meets"] or r["criterion"] in ENDINGS or not r["best_law"]:
+        if r["meets"] or not r["best_law"]:
             continue
-        cell = table[(table[variant] == r[variant]) & done]
+        if r["criterion"] in ENDINGS:  # where neither ended the other way
+            (other,) = (e for e in ENDINGS if e != r["criterion"])
+            asked = table[other] <= 0.0
+        else:
+            asked = done
+        cell = table[(table[variant] == r[variant]) & asked]
         mine = cell[cell["policy"] == learner].set_index("seed")
         theirs = cell[cell["policy"] == r["best_law"]].set_index("seed")
         c = by_metric[r["criterion"]]

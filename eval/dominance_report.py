@@ -29,8 +29,10 @@ def finished_markdown(view: pd.DataFrame, learner: str) -> str:
     variant = view.columns[0]
     lines = [
         "",
-        f"On the episodes both finished (neither lost nor collided), the lines `{learner}` "
-        "misses above, against the same law (an explanation, not part of the verdict):",
+        f"On the episodes both finished (neither lost nor collided; for a lost line, those in "
+        "which neither collided, for a collision line, those in which neither lost the person), "
+        f"the lines `{learner}` misses above, against the same law (an explanation, not part "
+        "of the verdict):",
         "",
         f"| {variant} | criterion | episodes | {learner} | the line's law | law | "
         f"{learner} - law [95 % CI] | p | verdict | meets |",

@@ -506,7 +506,7 @@ def test_the_finished_view_asks_a_missed_line_again_over_the_episodes_both_finis
     assert not _line(frame, "in_frame_rate_pct")["meets"]  # 95.3 % against the law's 96.7
     assert _line(frame, "collision_rate_pct")["meets"]
     view = finished_view(table, frame, "agent")
-    # the missed lines: in frame, and the quality lines (ties at 0 here); endings never
+    # the missed lines: in frame, and the quality lines (ties at 0 here)
     assert list(view["criterion"]) == ["in_frame_rate_pct", "mean_offset_px", "std_accel_mm_s2"]
     [line] = view[view["criterion"] == "in_frame_rate_pct"].itertuples(index=False)
     assert line.best_law == "pn"
@@ -520,24 +520,56 @@ def test_the_finished_view_asks_a_missed_line_again_over_the_episodes_both_finis
     # its lines were picked for being missed: no family to adjust, so no Holm p
     assert view["holm_p"].isna().all()
     assert "Holm" not in text
-    # a learner that collides too: the collision line is missed, but not asked again
+    # a learner that collides too: the collision line is missed, and asked again over the
+    # seeds on which neither lost the person (all ten here: nobody is lost), the rest over the
+    # five both finished
     crashes = (table.policy == "agent") & table.seed.isin([5, 6, 7])
     table.loc[crashes, "collision_rate_pct"] = 100.0
     frame = dominance(table, "agent")
     assert not _line(frame, "collision_rate_pct")["meets"]
     view = finished_view(table, frame, "agent")
-    assert "collision_rate_pct" not in set(view["criterion"])
-    assert view["n"].tolist() == [5, 5, 5]
+    assert list(view["criterion"]) == [
+        "in_frame_rate_pct", "collision_rate_pct", "mean_offset_px", "std_accel_mm_s2",
+    ]  # fmt: skip
+    assert view["n"].tolist() == [5, 10, 5, 5]
     assert finished_markdown(view.iloc[:0], "agent") == ""  # nothing missed: nothing to say
+
+
+def test_a_missed_lost_line_is_asked_again_where_neither_collided() -> None:
+    """The law collides early on seeds 0-3 and so never loses the person there; the learner
+    avoids those crashes and loses the person on seeds 0-2, and on seed 9, where the law loses
+    them on 8 and 9 too. Over all ten seeds the learner loses more (4 against 2); over the six
+    neither collided in, it loses fewer (1 against 2)."""
+    lost_agent = [100.0, 100.0, 100.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 100.0]
+    lost_law = [0.0] * 8 + [100.0, 100.0]
+    table = _table(
+        {
+            "agent": {"lost_rate_pct": lost_agent},
+            "pn": {"lost_rate_pct": lost_law, "collision_rate_pct": [100.0] * 4 + [0.0] * 6},
+        }
+    )
+    frame = dominance(table, "agent")
+    assert not _line(frame, "lost_rate_pct")["meets"]  # 40 % against 20 %
+    view = finished_view(table, frame, "agent")
+    lost = _line(view, "lost_rate_pct")
+    assert (lost.n, lost.learner_mean, lost.law_mean) == (
+        6,
+        pytest.approx(100 / 6),
+        pytest.approx(200 / 6),
+    )
+    assert lost.meets
+    assert "for a lost line, those in which neither collided" in finished_markdown(view, "agent")
 
 
 def test_the_finished_view_says_when_no_episode_was_finished_by_both() -> None:
     table = _crash_table()
     table.loc[table.policy == "agent", "lost_rate_pct"] = 100.0
     view = finished_view(table, dominance(table, "agent"), "agent")
-    assert view["verdict"].tolist() == ["n/a"] * 3
-    assert view["n"].tolist() == [0] * 3
-    assert view["best_law"].tolist() == ["pn"] * 3
+    # the lost line, missed too, is asked where neither collided: the law's last eight seeds
+    assert view["criterion"].tolist()[1] == "lost_rate_pct"
+    assert view["verdict"].tolist() == ["n/a", "worse", "n/a", "n/a"]
+    assert view["n"].tolist() == [0, 8, 0, 0]
+    assert view["best_law"].tolist() == ["pn"] * 4
     assert "| straight | InFrameRate (%) | 0 | | pn | | | | n/a | no |" in finished_markdown(
         view, "agent"
     )
