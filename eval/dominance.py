@@ -41,10 +41,11 @@ offset where it ends, so a law that crashes early can keep a better in-frame rat
 error on that episode than a learner that avoids the crash and goes on. :func:`finished_view`
 asks each missed line again over the seeds on which both the learner and that line's law
 finished (neither lost nor collided: :func:`finished`); the report prints it after the
-table, as an explanation, and the verdict does not change. The same holds between the two
-endings: a law whose episodes end in collisions loses the person less often, having less
-time to, so a missed lost line is asked again where neither collided, and a missed collision
-line where neither lost the person.
+table, as an explanation, and the verdict does not change. The two endings are alike: an
+episode that has ended in a collision cannot lose the person and one that has lost the person
+cannot collide, so a side that collides more is charged with fewer losses, and one that loses
+the person more with fewer collisions. A missed lost line is asked again over the seeds on
+which neither collided, a missed collision line over those on which neither lost the person.
 
 How high that bar is shows in :func:`calibration`: each law put through the same test against
 the other laws (the best of the rest on each line). The report gives those counts beside the

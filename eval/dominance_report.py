@@ -5,7 +5,9 @@ writes it into ``dominance-<learner>.md``.
 significantly better and worse, with and without Holm's correction, and the laws' own counts
 against each other for scale), says where each criterion is missed, then gives the table at a
 glance (:func:`grid_markdown`) and the full table, a line per (scenario, criterion).
-:func:`finished_markdown` adds the missed lines asked again on the episodes both finished.
+:func:`finished_markdown` adds the missed lines asked again on the episodes both finished (a
+lost line on those in which neither collided, a collision line on those in which neither lost
+the person).
 """
 
 from __future__ import annotations
@@ -29,10 +31,10 @@ def finished_markdown(view: pd.DataFrame, learner: str) -> str:
     variant = view.columns[0]
     lines = [
         "",
-        f"On the episodes both finished (neither lost nor collided; for a lost line, those in "
-        "which neither collided, for a collision line, those in which neither lost the person), "
-        f"the lines `{learner}` misses above, against the same law (an explanation, not part "
-        "of the verdict):",
+        "On the episodes both finished (neither lost nor collided) or, for a lost line, on "
+        "those in which neither collided and, for a collision line, on those in which neither "
+        f"lost the person: the lines `{learner}` misses above, against the same law (an "
+        "explanation, not part of the verdict):",
         "",
         f"| {variant} | criterion | episodes | {learner} | the line's law | law | "
         f"{learner} - law [95 % CI] | p | verdict | meets |",

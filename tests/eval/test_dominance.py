@@ -558,7 +558,36 @@ def test_a_missed_lost_line_is_asked_again_where_neither_collided() -> None:
         pytest.approx(200 / 6),
     )
     assert lost.meets
-    assert "for a lost line, those in which neither collided" in finished_markdown(view, "agent")
+    assert "for a lost line, on those in which neither collided" in finished_markdown(view, "agent")
+
+
+def test_a_missed_collision_line_is_asked_again_where_neither_lost_the_person() -> None:
+    """The law loses the person on seeds 0-2 (so cannot collide there) and collides on 8-9;
+    the learner collides on 0-2 and 9 and loses the person on 8. Over all ten seeds it collides
+    more (4 against 2); over the six on which neither lost the person (3-7 and 9: each side's
+    own losses count), once each."""
+    table = _table(
+        {
+            "agent": {
+                "collision_rate_pct": [100.0] * 3 + [0.0] * 6 + [100.0],
+                "lost_rate_pct": [0.0] * 8 + [100.0, 0.0],
+            },
+            "pn": {
+                "lost_rate_pct": [100.0] * 3 + [0.0] * 7,
+                "collision_rate_pct": [0.0] * 8 + [100.0, 100.0],
+            },
+        }
+    )
+    frame = dominance(table, "agent")
+    assert not _line(frame, "collision_rate_pct")["meets"]  # 40 % against 20 %
+    assert _line(frame, "lost_rate_pct")["meets"]  # 10 % against 30 %: not asked again
+    view = finished_view(table, frame, "agent")
+    assert "lost_rate_pct" not in set(view["criterion"])
+    line = _line(view, "collision_rate_pct")
+    assert line.n == 6  # seed 8 (the learner's loss) and 0-2 (the law's) left out
+    assert line.learner_mean == line.law_mean == pytest.approx(100 / 6)
+    assert line.meets
+    assert "for a collision line, on those in which neither" in finished_markdown(view, "agent")
 
 
 def test_the_finished_view_says_when_no_episode_was_finished_by_both() -> None:
