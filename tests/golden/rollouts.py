@@ -369,13 +369,6 @@ def episode_hash(case: Case, seed: int) -> dict[str, Any]:
     return h.record()
 
 
-def single_env_hash(
-    scenario: str, seed: int, policy: str, config: Any = "thesis"
-) -> dict[str, Any]:
-    """The record of one PersonFollow episode on the single env (:func:`episode_hash`)."""
-    return episode_hash(person_follow(scenario, policy, config), seed)
-
-
 def lane_hashes(case: Case, seeds: tuple[int, ...]) -> list[str]:
     """The hash of each lane's first episode of ``case`` on the vector env (lane i seeded
     seeds[0] + i)."""
