@@ -150,11 +150,16 @@ def grid_markdown(
         f"| {variant} | {head} |",
         "|---|" + "---:|" * len(names),
     ]
+    by_line: dict[tuple[object, object], pd.Series] = {}
+    for _, row in frame.iterrows():  # the first row of each (scenario, criterion)
+        by_line.setdefault((row[variant], row["criterion"]), row)
     for scenario in dict.fromkeys(frame[variant]):
-        cells = []
-        for name in names:
-            got = frame[(frame[variant] == scenario) & (frame["criterion"] == name)]
-            cells.append(_grid_cell(got.iloc[0], higher.get(str(name))) if len(got) else "")
+        cells = [
+            _grid_cell(by_line[scenario, name], higher.get(str(name)))
+            if (scenario, name) in by_line
+            else ""
+            for name in names
+        ]
         lines.append(f"| {scenario} | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
 
