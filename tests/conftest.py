@@ -20,6 +20,17 @@ os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
 import follow_env  # noqa: E402, F401  (registers PersonFollow-v0; after the SDL setting)
 
 
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """Tests marked ``before_ray`` run first, in their order, the rest after them in theirs.
+
+    They ask how a command resolves ``auto`` where no Ray runs on the machine. Once a test has
+    started the session's Ray (:func:`local_ray`, kept until the session ends) one runs here,
+    Ray's ``auto`` takes it, and they would skip saying so: in their collection order they came
+    after it and were skipped in every whole run.
+    """
+    items.sort(key=lambda item: item.get_closest_marker("before_ray") is None)
+
+
 @pytest.fixture(autouse=True)
 def _quiet_action_space_advice() -> None:
     # Gymnasium and SB3 advise a [-1, 1] action space; ours is SI by design (see README).

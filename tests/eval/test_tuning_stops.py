@@ -67,6 +67,7 @@ def silent() -> Iterator[Listener]:
 
 
 @pytest.mark.slow
+@pytest.mark.before_ray  # conftest: before the session's Ray, which auto would take
 def test_auto_from_a_stale_address_file_writes_no_journal(tmp_path: Path) -> None:
     skip_if_ray_runs_here()
     stale_address_file(tmp_path / "raytmp", f"127.0.0.1:{closed_port()}")

@@ -31,13 +31,17 @@ def closed_port() -> int:
 
 
 def skip_if_ray_runs_here() -> None:
-    """Ray's ``auto`` takes the one Ray running on this machine over its address file (this
-    session's local Ray, say): the file is then not what a command connects to."""
+    """Ray's ``auto`` takes the one Ray running on this machine over its address file: the file
+    is then not what a command connects to. The tests that call this are marked
+    ``before_ray`` and run before the suite starts its own Ray (conftest), so only a Ray
+    started outside the suite skips them."""
     from ray._private import services
 
     services.find_gcs_addresses.cache_clear()
     if services.find_gcs_addresses():
-        pytest.skip("a Ray runs on this machine: Ray's auto takes it, not the address file")
+        pytest.skip(
+            "a Ray runs on this machine (not the suite's): Ray's auto takes it, not the file"
+        )
 
 
 def stale_address_file(ray_tmpdir: Path, address: str) -> Path:
@@ -96,6 +100,7 @@ def http() -> Iterator[Listener]:
     listener.close()
 
 
+@pytest.mark.before_ray  # conftest: before the session's Ray, which auto would take
 def test_auto_naming_a_gone_cluster_is_refused_at_once(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
