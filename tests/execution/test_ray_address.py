@@ -34,9 +34,13 @@ def skip_if_ray_runs_here() -> None:
     """Ray's ``auto`` takes the one Ray running on this machine over its address file: the file
     is then not what a command connects to. The tests that call this are marked
     ``before_ray`` and run before the suite starts its own Ray (conftest), so only a Ray
-    started outside the suite skips them."""
+    started outside the suite skips them; the suite's own, up already, fails them (a test that
+    calls this is missing the mark)."""
+    import ray
     from ray._private import services
 
+    if ray.is_initialized():
+        pytest.fail("the suite's Ray runs already: mark the test before_ray (tests/conftest.py)")
     services.find_gcs_addresses.cache_clear()
     if services.find_gcs_addresses():
         pytest.skip(
