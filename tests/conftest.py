@@ -23,10 +23,9 @@ import follow_env  # noqa: E402, F401  (registers PersonFollow-v0; after the SDL
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     """Tests marked ``before_ray`` run first, in their order, the rest after them in theirs.
 
-    They ask how a command resolves ``auto`` where no Ray runs on the machine. Once a test has
-    started the session's Ray (:func:`local_ray`, kept until the session ends) one runs here,
-    Ray's ``auto`` takes it, and they would skip saying so: in their collection order they came
-    after it and were skipped in every whole run.
+    Those tests ask how a command resolves the address ``auto`` on a machine where no Ray runs.
+    The session's Ray (:func:`local_ray`), once a test has started it, runs until the session
+    ends, and ``auto`` would find it; so they must run before any test that starts it.
     """
     items.sort(key=lambda item: item.get_closest_marker("before_ray") is None)
 

@@ -30,7 +30,7 @@ from tests.eval.test_tuning_cli_errors import SMALL, _refused, _tree
 from tests.execution.test_ray_address import (
     Listener,
     closed_port,
-    skip_if_ray_runs_here,
+    require_no_ray_here,
     stale_address_file,
 )
 
@@ -68,8 +68,10 @@ def silent() -> Iterator[Listener]:
 
 @pytest.mark.slow
 @pytest.mark.before_ray  # conftest: before the session's Ray, which auto would take
-def test_auto_from_a_stale_address_file_writes_no_journal(tmp_path: Path) -> None:
-    skip_if_ray_runs_here()
+def test_auto_from_a_stale_address_file_writes_no_journal(
+    tmp_path: Path, request: pytest.FixtureRequest
+) -> None:
+    require_no_ray_here(request)
     stale_address_file(tmp_path / "raytmp", f"127.0.0.1:{closed_port()}")
     env = _env(RAY_TMPDIR=str(tmp_path / "raytmp"))
     out = tmp_path / "out"

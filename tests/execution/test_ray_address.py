@@ -30,22 +30,25 @@ def closed_port() -> int:
         return int(s.getsockname()[1])
 
 
-def skip_if_ray_runs_here() -> None:
-    """Ray's ``auto`` takes the one Ray running on this machine over its address file: the file
-    is then not what a command connects to. The tests that call this are marked
-    ``before_ray`` and run before the suite starts its own Ray (conftest), so only a Ray
-    started outside the suite skips them; the suite's own, up already, fails them (a test that
-    calls this is missing the mark)."""
+def require_no_ray_here(request: pytest.FixtureRequest) -> None:
+    """Skip the test if a Ray runs on this machine: Ray's ``auto`` takes the one Ray running
+    here over its address file, which is then not what a command connects to.
+
+    A test that calls this is marked ``before_ray`` and runs before the suite starts its own
+    Ray (tests/conftest.py). If a Ray is up in this process already and the mark is missing,
+    the test fails, naming the mark; with the mark, pytest's ``--ff`` or ``--nf`` reordered it,
+    and it skips, saying so.
+    """
     import ray
     from ray._private import services
 
     if ray.is_initialized():
-        pytest.fail("the suite's Ray runs already: mark the test before_ray (tests/conftest.py)")
+        if request.node.get_closest_marker("before_ray") is None:
+            pytest.fail("a Ray is up in this process already: mark the test before_ray")
+        pytest.skip("a Ray is up in this process already (--ff or --nf ran this test later)")
     services.find_gcs_addresses.cache_clear()
     if services.find_gcs_addresses():
-        pytest.skip(
-            "a Ray runs on this machine (not the suite's): Ray's auto takes it, not the file"
-        )
+        pytest.skip("a Ray runs on this machine, started outside this process: auto takes it")
 
 
 def stale_address_file(ray_tmpdir: Path, address: str) -> Path:
@@ -106,9 +109,9 @@ def http() -> Iterator[Listener]:
 
 @pytest.mark.before_ray  # conftest: before the session's Ray, which auto would take
 def test_auto_naming_a_gone_cluster_is_refused_at_once(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, request: pytest.FixtureRequest
 ) -> None:
-    skip_if_ray_runs_here()
+    require_no_ray_here(request)
     monkeypatch.setenv("RAY_TMPDIR", str(tmp_path))
     monkeypatch.delenv("RAY_ADDRESS", raising=False)
     port = closed_port()
