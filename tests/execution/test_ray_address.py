@@ -9,6 +9,8 @@ it at a folder of the test's); the listeners are plain sockets.
 from __future__ import annotations
 
 import socket
+import subprocess
+import sys
 import threading
 import time
 from collections.abc import Iterator
@@ -105,6 +107,29 @@ def http() -> Iterator[Listener]:
     listener = Listener(b"HTTP/1.1 400 Bad Request\r\nContent-Length: 0\r\n\r\n")
     yield listener
     listener.close()
+
+
+def test_the_before_ray_tests_are_run_first() -> None:
+    # Without the conftest's ordering they would run after a test that starts the session's
+    # Ray and skip (require_no_ray_here). Collected after a file that starts it, in a process
+    # of their own: the marked tests come first, in their collection order.
+    root = Path(__file__).resolve().parents[2]
+    files = [
+        "tests/eval/test_backends.py",  # starts the session's Ray
+        "tests/execution/test_ray_address.py",
+        "tests/eval/test_tuning_stops.py",
+    ]
+    argv = [sys.executable, "-m", "pytest", "--collect-only", "-q", "-p", "no:cacheprovider"]
+    done = subprocess.run(
+        [*argv, *files], cwd=root, capture_output=True, text=True, timeout=120, check=True
+    )
+    ids = [line for line in done.stdout.splitlines() if "::" in line]
+    assert len(ids) > 10, done.stdout
+    assert ids[:2] == [
+        "tests/execution/test_ray_address.py::test_auto_naming_a_gone_cluster_is_refused_at_once",
+        "tests/eval/test_tuning_stops.py::test_auto_from_a_stale_address_file_writes_no_journal",
+    ]
+    assert ids[2].startswith("tests/eval/test_backends.py::")
 
 
 @pytest.mark.before_ray  # conftest: before the session's Ray, which auto would take
