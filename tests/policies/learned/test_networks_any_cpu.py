@@ -3,7 +3,10 @@
 Other CPUs are stood in for by running the agent in a subprocess under other instruction sets:
 MKL_ENABLE_INSTRUCTIONS caps the kernels of torch's matrix products (MKL), ATEN_CPU_CAPABILITY
 those of torch's own element-wise ones (tanh), as a CPU without AVX-512, or without AVX2,
-would have them picked.
+would have them picked. MKL heeds MKL_ENABLE_INSTRUCTIONS on Intel CPUs only; on an AMD EPYC
+its float32 kernels do not move under it (seen on 2026-12-07), so a third setting asks for MKL's
+conditional-reproducibility branch (MKL_CBWR=COMPATIBLE: its SSE2 kernels on any CPU), which
+moves them there.
 """
 
 from __future__ import annotations
@@ -16,10 +19,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-# Each stands for a CPU of another kind: one with AVX2 and no AVX-512, one older still.
+# Each stands for a CPU of another kind: one with AVX2 and no AVX-512, one older still, and
+# MKL's kernels for any x86-64 CPU (the one setting that moves MKL's kernels on an AMD CPU).
 SETTINGS = {
     "avx2": {"MKL_ENABLE_INSTRUCTIONS": "AVX2", "ATEN_CPU_CAPABILITY": "avx2"},
     "sse4_2": {"MKL_ENABLE_INSTRUCTIONS": "SSE4_2", "ATEN_CPU_CAPABILITY": "default"},
+    "compatible": {"MKL_CBWR": "COMPATIBLE", "ATEN_CPU_CAPABILITY": "default"},
 }
 ROWS = 4000
 
