@@ -235,15 +235,26 @@ def room(cfg: EnvConfig, n: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def check_inside(cfg: EnvConfig, points: np.ndarray, what: str) -> None:
-    """Refuse a walk that leaves the hall (less the wall margin), naming the fields."""
+    """Refuse a walk that leaves the hall (less the wall margin), naming the fields.
+
+    The walk starts where :func:`person_ahead` puts the person, so the camera's mount and yaw
+    move it too; where they are not the defaults the message names them as well."""
     length, width = room_size(cfg)
     hx = 0.5 * length - WALL_MARGIN_M
     hy = 0.5 * width - WALL_MARGIN_M
     if np.any(np.abs(points[..., 0]) > hx) or np.any(np.abs(points[..., 1]) > hy):
+        c = cfg.camera
+        camera = ""
+        if c.mount_y_m != 0.0 or c.yaw_deg != 0.0:
+            camera = (
+                f"; it starts start_distance_m={cfg.scenario.start_distance_m} in front of a "
+                f"camera at mount_y_m={c.mount_y_m} m, yaw_deg={c.yaw_deg} deg"
+            )
         raise ValueError(
-            f"ScenarioConfig: the {cfg.scenario.name!r} walk ({what}) does not fit in the room "
-            f"of room_length_m={length} x room_width_m={width} m; enlarge the room or shorten "
-            "the walk"
+            f"ScenarioConfig: the {cfg.scenario.name!r} walk ({what}{camera}) does not fit in "
+            f"the room of room_length_m={length} x room_width_m={width} m; enlarge the room or "
+            "shorten the walk"
+            + (", or mount the camera nearer the centre line and straighter" if camera else "")
         )
 
 

@@ -76,7 +76,15 @@ def test_valid_configs_with_random_actions_never_give_nan(
     cfg: EnvConfig, seed: int, action_seed: int
 ) -> None:
     sim = batched_sim(cfg, 2)
-    sim.reset_lanes(np.arange(2), [seed, seed + 1])
+    try:
+        sim.reset_lanes(np.arange(2), [seed, seed + 1])
+    except ValueError as err:
+        # The camera's mount and yaw (drawn over their whole ranges) move where the walk starts,
+        # and a scenario refuses a walk that leaves its room, naming why (test_scenarios): such a
+        # config is not a valid one for that scenario.
+        if "does not fit in the room" not in str(err):
+            raise
+        assume(False)
     rng = np.random.default_rng(action_seed)
     for _ in range(40):
         top = [cfg.platform.max_speed_mps * 1.5, cfg.platform.max_turn_rate_radps * 1.5]

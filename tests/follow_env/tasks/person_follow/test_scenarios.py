@@ -92,8 +92,26 @@ def test_random_walk_stays_inside_the_room_and_is_deterministic_per_seed() -> No
 
 
 def test_a_walk_that_does_not_fit_the_room_is_refused() -> None:
-    with pytest.raises(ValueError, match="walk_length_m"):
+    with pytest.raises(ValueError, match="walk_length_m") as refused:
         _batch("straight", walk_length_m=100.0)
+    assert "mount_y_m" not in str(refused.value)  # the camera is not to blame here
+
+
+def test_a_walk_pushed_out_of_the_room_by_the_cameras_mount_names_the_camera() -> None:
+    # The curve's walk fits with the camera centred; with a camera 2 m to the robot's right
+    # and turned 27 deg right it starts outside the side wall's margin: the message says why.
+    keys = episode_keys(np.random.SeedSequence(0))[None]
+    spec = SCENARIOS["curve"]
+    spec.fn(spec.random(keys), THESIS.replace(scenario={"name": "curve"}))
+    cfg = THESIS.replace(scenario={"name": "curve"}, camera={"mount_y_m": -2.0, "yaw_deg": -27.0})
+    with pytest.raises(ValueError, match="mount_y_m") as refused:
+        spec.fn(spec.random(keys), cfg)
+    assert str(refused.value) == (
+        "ScenarioConfig: the 'curve' walk (walk_length_m=10.0, curve_turn_deg=90.0; it starts "
+        "start_distance_m=1.0 in front of a camera at mount_y_m=-2.0 m, yaw_deg=-27.0 deg) does "
+        "not fit in the room of room_length_m=24.0 x room_width_m=16.0 m; enlarge the room or "
+        "shorten the walk, or mount the camera nearer the centre line and straighter"
+    )
 
 
 def test_a_new_scenario_is_one_registered_function() -> None:
