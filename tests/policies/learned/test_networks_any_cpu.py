@@ -4,9 +4,9 @@ Other CPUs are stood in for by running the agent in a subprocess under other ins
 MKL_ENABLE_INSTRUCTIONS caps the kernels of torch's matrix products (MKL), ATEN_CPU_CAPABILITY
 those of torch's own element-wise ones (tanh), as a CPU without AVX-512, or without AVX2,
 would have them picked. MKL heeds MKL_ENABLE_INSTRUCTIONS on Intel CPUs only; on an AMD EPYC
-its float32 kernels do not move under it (seen on 2026-12-07), so a third setting asks for MKL's
-conditional-reproducibility branch (MKL_CBWR=COMPATIBLE: its SSE2 kernels on any CPU), which
-moves them there.
+its float32 kernels do not move under it (seen on 2026-12-07), so a third setting asks for the
+COMPATIBLE branch of MKL's Conditional Numerical Reproducibility (MKL_CBWR=COMPATIBLE: its SSE2
+code path for any x86-64 CPU), which moves them there.
 """
 
 from __future__ import annotations
@@ -59,7 +59,9 @@ np.savez(sys.argv[2], wide=wide, narrow=narrow)
 
 
 def _actions(agent: str, out: Path, settings: dict[str, str]) -> dict[str, np.ndarray]:
-    env = {**os.environ, **settings}
+    # The machine's own kernels for "here": none of the settings' variables inherited.
+    inherited = {k: v for k, v in os.environ.items() if not k.startswith(("MKL_", "ATEN_"))}
+    env = {**inherited, **settings}
     root = Path(__file__).resolve().parents[3]
     subprocess.run(
         [sys.executable, "-c", _ACT, agent, str(out), str(ROWS)],
@@ -78,13 +80,13 @@ def test_an_agent_acts_bit_for_bit_the_same_under_other_instruction_sets(
     agent: str, tmp_path: Path
 ) -> None:
     here = _actions(agent, tmp_path / "here.npz", {})
-    narrow_moved = 0
+    moved = {}
     for name, settings in SETTINGS.items():
         there = _actions(agent, tmp_path / f"{name}.npz", settings)
         np.testing.assert_array_equal(there["wide"], here["wide"], err_msg=name)
-        narrow_moved += int((there["narrow"] != here["narrow"]).any())
-    # The control: in float32 the same network does act differently under them, so the
-    # settings do stand for other CPUs' kernels here.
-    assert narrow_moved >= 1
+        moved[name] = float((there["narrow"] != here["narrow"]).mean())
+    # The control: in float32 the same network does act differently under at least one of
+    # them, so the settings do stand for other CPUs' kernels on this machine.
+    assert max(moved.values()) > 0.0, f"no setting moved the float32 actions: {moved}"
     # And float64's actions are float32's but for its rounding.
     np.testing.assert_allclose(here["wide"], here["narrow"], rtol=1e-5, atol=1e-6)

@@ -237,24 +237,26 @@ def room(cfg: EnvConfig, n: int) -> tuple[np.ndarray, np.ndarray]:
 def check_inside(cfg: EnvConfig, points: np.ndarray, what: str) -> None:
     """Refuse a walk that leaves the hall (less the wall margin), naming the fields.
 
-    The walk starts where :func:`person_ahead` puts the person, so the camera's mount and yaw
-    move it too; where they are not the defaults the message names them as well."""
+    The walk starts where :func:`person_ahead` puts the person, so the start distance and the
+    camera's mount and yaw move it as much as the walk's own fields do: the message names them
+    all, and where the walk goes furthest past the margin."""
     length, width = room_size(cfg)
-    hx = 0.5 * length - WALL_MARGIN_M
-    hy = 0.5 * width - WALL_MARGIN_M
-    if np.any(np.abs(points[..., 0]) > hx) or np.any(np.abs(points[..., 1]) > hy):
+    half = np.array([0.5 * length - WALL_MARGIN_M, 0.5 * width - WALL_MARGIN_M])
+    past = np.abs(points) - half  # (..., 2): metres beyond the margin along x and y
+    if np.any(past > 0.0):
+        flat = past.reshape(-1, 2)
+        row, axis = np.unravel_index(np.argmax(flat), flat.shape)
+        reach = points.reshape(-1, 2)[row, axis]
         c = cfg.camera
-        camera = ""
-        if c.mount_y_m != 0.0 or c.yaw_deg != 0.0:
-            camera = (
-                f"; it starts start_distance_m={cfg.scenario.start_distance_m} in front of a "
-                f"camera at mount_y_m={c.mount_y_m} m, yaw_deg={c.yaw_deg} deg"
-            )
         raise ValueError(
-            f"ScenarioConfig: the {cfg.scenario.name!r} walk ({what}{camera}) does not fit in "
-            f"the room of room_length_m={length} x room_width_m={width} m; enlarge the room or "
-            "shorten the walk"
-            + (", or mount the camera nearer the centre line and straighter" if camera else "")
+            f"ScenarioConfig: the {cfg.scenario.name!r} walk ({what}) does not fit in the room "
+            f"of room_length_m={length} x room_width_m={width} m: it reaches "
+            f"{'xy'[axis]} = {reach:+.2f} m, where people keep within +-{half[axis]:.2f} m "
+            f"({WALL_MARGIN_M} m from the walls). It starts start_distance_m="
+            f"{cfg.scenario.start_distance_m} in front of the camera (CameraConfig.mount_x_m="
+            f"{c.mount_x_m}, mount_y_m={c.mount_y_m}, yaw_deg={c.yaw_deg}); enlarge the room, "
+            "shorten the walk, or start it elsewhere (the start distance, the camera's mount "
+            "or yaw)"
         )
 
 

@@ -92,9 +92,11 @@ def test_random_walk_stays_inside_the_room_and_is_deterministic_per_seed() -> No
 
 
 def test_a_walk_that_does_not_fit_the_room_is_refused() -> None:
-    with pytest.raises(ValueError, match="walk_length_m") as refused:
+    with pytest.raises(ValueError, match=r"walk_length_m=100\.0") as refused:
         _batch("straight", walk_length_m=100.0)
-    assert "mount_y_m" not in str(refused.value)  # the camera is not to blame here
+    # the robot 2 m from the left wall, the person 1.325 m ahead of it: 100 m on, the walk ends
+    # 80 m past the right wall's margin
+    assert "it reaches x = +91.33 m, where people keep within +-11.50 m" in str(refused.value)
 
 
 def test_a_walk_pushed_out_of_the_room_by_the_cameras_mount_names_the_camera() -> None:
@@ -107,10 +109,12 @@ def test_a_walk_pushed_out_of_the_room_by_the_cameras_mount_names_the_camera() -
     with pytest.raises(ValueError, match="mount_y_m") as refused:
         spec.fn(spec.random(keys), cfg)
     assert str(refused.value) == (
-        "ScenarioConfig: the 'curve' walk (walk_length_m=10.0, curve_turn_deg=90.0; it starts "
-        "start_distance_m=1.0 in front of a camera at mount_y_m=-2.0 m, yaw_deg=-27.0 deg) does "
-        "not fit in the room of room_length_m=24.0 x room_width_m=16.0 m; enlarge the room or "
-        "shorten the walk, or mount the camera nearer the centre line and straighter"
+        "ScenarioConfig: the 'curve' walk (walk_length_m=10.0, curve_turn_deg=90.0) does not fit "
+        "in the room of room_length_m=24.0 x room_width_m=16.0 m: it reaches y = -7.51 m, where "
+        "people keep within +-7.50 m (0.5 m from the walls). It starts start_distance_m=1.0 in "
+        "front of the camera (CameraConfig.mount_x_m=0.2, mount_y_m=-2.0, yaw_deg=-27.0); "
+        "enlarge the room, shorten the walk, or start it elsewhere (the start distance, the "
+        "camera's mount or yaw)"
     )
 
 
