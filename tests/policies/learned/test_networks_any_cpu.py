@@ -80,7 +80,7 @@ def test_an_agent_acts_bit_for_bit_the_same_under_other_instruction_sets(
     agent: str, tmp_path: Path
 ) -> None:
     here = _actions(agent, tmp_path / "here.npz", {})
-    moved = {}
+    moved: dict[str, float] = {}
     for name, settings in SETTINGS.items():
         there = _actions(agent, tmp_path / f"{name}.npz", settings)
         np.testing.assert_array_equal(there["wide"], here["wide"], err_msg=name)
