@@ -244,9 +244,8 @@ def check_inside(cfg: EnvConfig, points: np.ndarray, what: str) -> None:
     half = np.array([0.5 * length - WALL_MARGIN_M, 0.5 * width - WALL_MARGIN_M])
     past = np.abs(points) - half  # (..., 2): metres beyond the margin along x and y
     if np.any(past > 0.0):
-        flat = past.reshape(-1, 2)
-        row, axis = np.unravel_index(np.argmax(flat), flat.shape)
-        reach = points.reshape(-1, 2)[row, axis]
+        furthest = int(np.argmax(past))  # a flat index into points, whose last axis is (x, y)
+        axis, reach = furthest % 2, points.flat[furthest]
         c = cfg.camera
         raise ValueError(
             f"ScenarioConfig: the {cfg.scenario.name!r} walk ({what}) does not fit in the room "

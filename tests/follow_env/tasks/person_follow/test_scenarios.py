@@ -20,8 +20,10 @@ from follow_env.tasks.person_follow.scenarios import (
 )
 
 
-def _batch(name: str, n: int = 4, **scenario: object) -> ScenarioBatch:
-    cfg = THESIS.replace(scenario={"name": name, **scenario})
+def _batch(
+    name: str, n: int = 4, camera: dict[str, float] | None = None, **scenario: object
+) -> ScenarioBatch:
+    cfg = THESIS.replace(scenario={"name": name, **scenario}, camera=camera or {})
     keys = np.stack([episode_keys(np.random.SeedSequence(s)) for s in range(n)])
     return SCENARIOS[name].fn(SCENARIOS[name].random(keys), cfg)
 
@@ -102,12 +104,9 @@ def test_a_walk_that_does_not_fit_the_room_is_refused() -> None:
 def test_a_walk_pushed_out_of_the_room_by_the_cameras_mount_names_the_camera() -> None:
     # The curve's walk fits with the camera centred; with a camera 2 m to the robot's right
     # and turned 27 deg right it starts outside the side wall's margin: the message says why.
-    keys = episode_keys(np.random.SeedSequence(0))[None]
-    spec = SCENARIOS["curve"]
-    spec.fn(spec.random(keys), THESIS.replace(scenario={"name": "curve"}))
-    cfg = THESIS.replace(scenario={"name": "curve"}, camera={"mount_y_m": -2.0, "yaw_deg": -27.0})
+    _batch("curve", n=1)
     with pytest.raises(ValueError, match="mount_y_m") as refused:
-        spec.fn(spec.random(keys), cfg)
+        _batch("curve", n=1, camera={"mount_y_m": -2.0, "yaw_deg": -27.0})
     assert str(refused.value) == (
         "ScenarioConfig: the 'curve' walk (walk_length_m=10.0, curve_turn_deg=90.0) does not fit "
         "in the room of room_length_m=24.0 x room_width_m=16.0 m: it reaches y = -7.51 m, where "
