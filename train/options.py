@@ -58,6 +58,7 @@ class Args:
     n_timesteps: int | None = None  # overrides the hyperparameter file's
     n_envs: int | None = None  # overrides the hyperparameter file's
     threads: int = 1  # torch threads (the env steps in this thread too)
+    mkl_intel_paths: bool = False  # MKL's Intel code paths on any x86-64 CPU (train.mkl_paths)
     runs: Path = Path("runs")
     out: Path | None = None  # the run folder (default: runs/<algo>-<timestamp>)
     resume: Path | None = None  # continue this run from its newest checkpoint
@@ -132,6 +133,7 @@ def check_resume(args: Args) -> tuple[Args, Hyperparams, dict[str, Any], str, tu
         algo=learner.name,
         n_timesteps=args.n_timesteps,
         threads=args.threads,
+        mkl_intel_paths=args.mkl_intel_paths,
         progress=args.progress,
         export=args.export,
         force=args.force,

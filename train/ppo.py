@@ -102,6 +102,10 @@ def _train(args: Args, command: str, lock: StudyLock) -> Path:
         run, saved, model_path, stats_path, start_step = None, None, None, None, 0
         args, hp = check_new_run(args)
         where = f"{args.hyperparams} [{args.env_id}]"
+    if args.mkl_intel_paths:  # never the generic paths for a run that asked for Intel's
+        from train.mkl_paths import require_active
+
+        require_active()
     torch.set_num_threads(args.threads)
     venv, eval_env, model = _build(args, hp, where, model_path, stats_path, start_step)
 
@@ -128,7 +132,7 @@ def _train(args: Args, command: str, lock: StudyLock) -> Path:
         formats = [CSVOutputFormat(str(run / runs.LOGS / f"progress-{start_step}.csv"))]
         formats.append(TensorBoardOutputFormat(str(run / runs.LOGS / "tb")))
         model.set_logger(Logger(str(run / runs.LOGS), formats))
-        session = runs.SessionLog(run, command, start_step, args.threads)
+        session = runs.SessionLog(run, command, start_step, args.threads, args.mkl_intel_paths)
     except BaseException:
         if saved is None:
             _remove_new_run(run, made)

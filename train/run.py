@@ -221,15 +221,18 @@ class SessionLog:
     ``status`` ("running", "finished", "interrupted", "failed", "killed"), ``first_step``,
     ``last_step`` (the steps a resume keeps: the last checkpoint's, or the final model's),
     ``wall_s`` (learning time [s] up to ``last_step``; an interrupted or failed session's whole
-    time), ``env_steps_per_s``, ``threads``.
+    time), ``env_steps_per_s``, ``threads``, ``mkl_intel_paths``.
 
     :param run: the run folder.
     :param command: the command line of this session.
     :param first_step: env steps the session starts from.
     :param threads: torch threads.
+    :param mkl_intel_paths: whether it trained on MKL's Intel code paths (:mod:`train.mkl_paths`).
     """
 
-    def __init__(self, run: Path, command: str, first_step: int, threads: int) -> None:
+    def __init__(
+        self, run: Path, command: str, first_step: int, threads: int, mkl_intel_paths: bool = False
+    ) -> None:
         self.run = run
         self.sessions = read_sessions(run)
         for session in self.sessions:
@@ -245,6 +248,7 @@ class SessionLog:
             "wall_s": 0.0,
             "env_steps_per_s": None,
             "threads": threads,
+            "mkl_intel_paths": mkl_intel_paths,
         }
         self.sessions.append(self.entry)
         self._started = time.perf_counter()

@@ -1,12 +1,15 @@
 """A learned agent acts the same on every CPU (policies.learned.networks: it acts in float64).
 
 Other CPUs are stood in for by running the agent in a subprocess under other instruction sets:
-MKL_ENABLE_INSTRUCTIONS caps the kernels of torch's matrix products (MKL), ATEN_CPU_CAPABILITY
-those of torch's own element-wise ones (tanh), as a CPU without AVX-512, or without AVX2,
-would have them picked. MKL heeds MKL_ENABLE_INSTRUCTIONS on Intel CPUs only; on an AMD EPYC
-its float32 kernels do not move under it (seen on 2026-12-07), so a third setting asks for the
-COMPATIBLE branch of MKL's Conditional Numerical Reproducibility (MKL_CBWR=COMPATIBLE: its SSE2
-code path for any x86-64 CPU), which moves them there.
+MKL_ENABLE_INSTRUCTIONS caps the kernels of MKL (torch's matrix products, and its tanh, which
+ATen hands to MKL's vector math), ATEN_CPU_CAPABILITY those of torch's own element-wise ones, as
+a CPU without AVX-512, or without AVX2, would have them picked. MKL heeds
+MKL_ENABLE_INSTRUCTIONS on Intel CPUs only; on an AMD EPYC its float32 kernels do not move under
+it (seen on 2026-12-07), so a third setting asks for the COMPATIBLE branch of MKL's Conditional
+Numerical Reproducibility (MKL_CBWR=COMPATIBLE: its SSE2 code path for any x86-64 CPU), which
+moves them there. A fourth preloads ``follow-train --mkl-intel-paths``'s library
+(:mod:`train.mkl_paths`), which gives a CPU that is not Intel's the kernels of an Intel one: an
+agent acts the same with it as without.
 """
 
 from __future__ import annotations
@@ -18,6 +21,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
+from train.mkl_paths import preload_env, shim_library
 
 # Each stands for a CPU of another kind: one with AVX2 and no AVX-512, one older still, and
 # MKL's kernels for any x86-64 CPU (the one setting that moves MKL's kernels on an AMD CPU).
@@ -59,8 +64,13 @@ np.savez(sys.argv[2], wide=wide, narrow=narrow)
 
 
 def _actions(agent: str, out: Path, settings: dict[str, str]) -> dict[str, np.ndarray]:
-    # The machine's own kernels for "here": none of the settings' variables inherited.
-    inherited = {k: v for k, v in os.environ.items() if not k.startswith(("MKL_", "ATEN_"))}
+    # The machine's own kernels for "here": none of the settings' variables inherited (nor
+    # a preload, which may be --mkl-intel-paths's library).
+    inherited = {
+        k: v
+        for k, v in os.environ.items()
+        if not k.startswith(("MKL_", "ATEN_")) and k != "LD_PRELOAD"
+    }
     env = {**inherited, **settings}
     root = Path(__file__).resolve().parents[3]
     subprocess.run(
@@ -81,7 +91,8 @@ def test_an_agent_acts_bit_for_bit_the_same_under_other_instruction_sets(
 ) -> None:
     here = _actions(agent, tmp_path / "here.npz", {})
     moved: dict[str, float] = {}
-    for name, settings in SETTINGS.items():
+    intel_paths = {"intel_paths": preload_env(shim_library(), {})}
+    for name, settings in {**SETTINGS, **intel_paths}.items():
         there = _actions(agent, tmp_path / f"{name}.npz", settings)
         np.testing.assert_array_equal(there["wide"], here["wide"], err_msg=name)
         moved[name] = float((there["narrow"] != here["narrow"]).mean())
