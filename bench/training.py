@@ -11,11 +11,19 @@ the second given as a ratio to the first (a study's ``--threads 1 --workers 2`` 
 one-thread runs at once). The rate is the run's own
 ``sessions.json`` figure (env steps over the learning loop's wall time). The run folders go to
 a temporary folder and are removed.
+
+Two more rows train ``ppo_ensemble``'s file (``ppo_ahead_law_wide.yaml``, networks of 128 x 128)
+on one thread as ``follow-train`` commands of their own, without and with ``--mkl-intel-paths``
+(:mod:`train.mkl_paths`), the second given as a ratio to the first: about 1x on an Intel CPU, and
+on a CPU that is not Intel's what MKL's Intel code paths gain there.
 """
 
 from __future__ import annotations
 
 import json
+import os
+import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -27,6 +35,9 @@ from train.ppo import DEFAULT_HYPERPARAMS
 
 #: The shipped agent's hyperparameters.
 SHIPPED_HYPERPARAMS = DEFAULT_HYPERPARAMS.with_name("ppo_fast.yaml")
+
+#: ``ppo_ensemble``'s hyperparameters (its members' networks are 128 x 128).
+WIDE_HYPERPARAMS = DEFAULT_HYPERPARAMS.with_name("ppo_ahead_law_wide.yaml")
 
 #: (label, hyperparameter file, changes to it, torch threads).
 CHOICES: list[tuple[str, Path, dict[str, Any], int]] = [
@@ -82,6 +93,26 @@ def _follow_train_rate(
     return float(sessions[-1]["env_steps_per_s"])
 
 
+def _command_rate(hyperparams: Path, steps: int, folder: Path, *options: str) -> float:
+    """env-steps/s of ``follow-train`` run as a command of its own (one torch thread, plus
+    ``options``) on ``hyperparams`` for ``steps`` steps, with no preload inherited."""
+    out = folder / f"run-{len(list(folder.iterdir()))}"
+    never = str(10**9)
+    argv = ["--hyperparams", str(hyperparams), "--threads", "1", "--n-timesteps", str(steps)]
+    argv += ["--eval-freq", never, "--checkpoint-freq", never, "--final-episodes", "0"]
+    argv += ["--no-progress", "--out", str(out), *options]
+    env = {
+        k: v for k, v in os.environ.items() if k not in ("LD_PRELOAD", "PERSONFOLLOW_MKL_REEXEC")
+    }
+    done = subprocess.run(
+        [sys.executable, "-m", "train", *argv], env=env, capture_output=True, text=True
+    )
+    if done.returncode != 0:
+        raise RuntimeError(f"follow-train {' '.join(argv)}: {done.stderr.strip()}")
+    sessions = json.loads((out / "sessions.json").read_text(encoding="utf-8"))
+    return float(sessions[-1]["env_steps_per_s"])
+
+
 def _cartpole_rate(changes: dict[str, Any], steps: int) -> float:
     """SB3 PPO (MlpPolicy 64 x 64) on CartPole-v1 with the same lanes, minibatch and epochs."""
     import torch
@@ -127,4 +158,8 @@ def bench_training(quick: bool) -> list[tuple[str, float, str]]:
             rows.append((label, rate, ratio))
             if threads == 1:
                 rows.append(("  CartPole-v1, same PPO settings", cartpole, "1.00x (baseline)"))
+        generic = _command_rate(WIDE_HYPERPARAMS, steps, folder)
+        intel = _command_rate(WIDE_HYPERPARAMS, steps, folder, "--mkl-intel-paths")
+        rows.append(("ppo_ahead_law_wide.yaml, 1 thr", generic, "(baseline of the next row)"))
+        rows.append(("  the same, --mkl-intel-paths", intel, f"{intel / generic:.2f}x its rate"))
     return rows

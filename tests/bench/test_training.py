@@ -2,11 +2,19 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import pytest
 
-from bench.training import CHOICES, SHIPPED_HYPERPARAMS, _cartpole_rate, _follow_train_rate
+from bench.training import (
+    CHOICES,
+    SHIPPED_HYPERPARAMS,
+    WIDE_HYPERPARAMS,
+    _cartpole_rate,
+    _command_rate,
+    _follow_train_rate,
+)
 
 
 @pytest.mark.slow
@@ -18,6 +26,12 @@ def test_each_choice_trains_its_file_and_reports_its_rate(tmp_path: Path) -> Non
     assert CHOICES[-1][1] == SHIPPED_HYPERPARAMS
     assert CHOICES[-1][2] == {}
     assert _cartpole_rate({"n_envs": 4, "batch_size": 64}, 1_000) > 0.0
+    # the command rows: a run of its own, here with the option
+    commands = tmp_path / "commands"
+    commands.mkdir()
+    assert _command_rate(WIDE_HYPERPARAMS, 800, commands, "--mkl-intel-paths") > 0.0
+    sessions = json.loads((commands / "run-0" / "sessions.json").read_text(encoding="utf-8"))
+    assert sessions[-1]["mkl_intel_paths"] is True
 
 
 def test_the_shipped_file_is_compared_with_itself_on_two_threads(
@@ -36,8 +50,20 @@ def test_the_shipped_file_is_compared_with_itself_on_two_threads(
 
     monkeypatch.setattr(training, "_follow_train_rate", rate)
     monkeypatch.setattr(training, "_cartpole_rate", lambda changes, steps: 500.0)
+    commands = {(): 300.0, ("--mkl-intel-paths",): 450.0}
+
+    def command_rate(hyperparams: Path, steps: int, folder: Path, *options: str) -> float:
+        assert hyperparams == training.WIDE_HYPERPARAMS
+        return commands[options]
+
+    monkeypatch.setattr(training, "_command_rate", command_rate)
     listed = training.bench_training(quick=True)
     rows = {label: (value, ratio) for label, value, ratio in listed}
+    # the last two rows: the wide file without the option, then with it as a ratio
+    assert listed[-2:] == [
+        ("ppo_ahead_law_wide.yaml, 1 thr", 300.0, "(baseline of the next row)"),
+        ("  the same, --mkl-intel-paths", 450.0, "1.50x its rate"),
+    ]
     two, one = "ppo_fast.yaml as shipped, 2 thr", "ppo_fast.yaml as shipped, 1 thr"
     assert by_threads[two] == 2
     assert by_threads[one] == 1
