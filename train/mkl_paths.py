@@ -20,6 +20,7 @@ nothing. The library is compiled from :data:`SOURCE` by the C compiler (``cc``) 
 code path (``tests/policies/learned/test_networks_any_cpu.py`` checks this setting too), so
 only training is affected.
 
+``python -m train.tune`` (the PPO search) takes the same option for its trials' training.
 Processes the command starts on this machine (``--workers``, a local Ray) inherit the preload;
 the workers of a Ray cluster elsewhere (``--address``) need it in their own environment, and a
 run refuses to train where it is missing (:func:`require_active`).
@@ -145,8 +146,9 @@ def preload_env(library: Path, env: dict[str, str] | None = None) -> dict[str, s
     return env
 
 
-def reexec(argv: Sequence[str]) -> NoReturn:
-    """Run ``python -m train argv`` in place of this process, with the library preloaded.
+def reexec(argv: Sequence[str], module: str = "train") -> NoReturn:
+    """Run ``python -m <module> argv`` in place of this process, with the library preloaded
+    (``module``: ``train`` for ``follow-train``, ``train.tune`` for its PPO search).
 
     :raises ValueError: as :func:`shim_library`, or if the library, preloaded, is still not
         the one MKL finds (it ran once already: ``LD_PRELOAD`` was set and did not take).
@@ -161,7 +163,7 @@ def reexec(argv: Sequence[str]) -> NoReturn:
     env["PERSONFOLLOW_MKL_REEXEC"] = str(library)  # so that a preload that fails stops here
     sys.stdout.flush()
     sys.stderr.flush()
-    os.execve(sys.executable, [sys.executable, "-m", "train", *argv], env)
+    os.execve(sys.executable, [sys.executable, "-m", module, *argv], env)
 
 
 def require_active() -> None:

@@ -210,11 +210,21 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--out", type=path_option, default=Path("runs") / "tune-ppo", help="output folder"
     )
+    p.add_argument(
+        "--mkl-intel-paths",
+        action="store_true",
+        help="train each trial with torch's MKL on an Intel CPU's code paths, as follow-train's "
+        "option (train.mkl_paths); the command runs again with them preloaded",
+    )
     return p
 
 
-def run(args: argparse.Namespace) -> int:
-    """Search, then write ``OUT/result.json`` and print the best trial's hyperparameters."""
+def run(args: argparse.Namespace, argv: Sequence[str] | None = None) -> int:
+    """Search, then write ``OUT/result.json`` and print the best trial's hyperparameters.
+
+    :param argv: the command line, which ``--mkl-intel-paths`` runs again with MKL's Intel
+        code paths preloaded (default: this process's).
+    """
     from follow_env.tasks import get_task
 
     refuse_empty(args, ("storage", "study", "address"))
@@ -233,6 +243,11 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError("--address is for --backend ray")
     workers = args.workers if args.backend == "ray" else args.workers or 1
     backend = backend_from_args(args.backend, workers=workers, address=args.address)
+    if args.mkl_intel_paths:
+        from train import mkl_paths
+
+        if not mkl_paths.active():
+            mkl_paths.reexec(sys.argv[1:] if argv is None else argv, module="train.tune")
     base = Args(
         hyperparams=args.hyperparams,
         n_timesteps=args.n_timesteps,
@@ -242,6 +257,7 @@ def run(args: argparse.Namespace) -> int:
         eval_freq=max(args.n_timesteps, 1),
         checkpoint_freq=max(args.n_timesteps, 1),
         progress=False,
+        mkl_intel_paths=args.mkl_intel_paths,
     )
     _check_training(base, args.out)
     seeds = tuple(range(TUNE_SEED0, TUNE_SEED0 + args.seeds))
@@ -376,7 +392,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return run_reporting(
             PROG,
             "the study keeps its finished trials and their runs",
-            lambda: run(build_parser().parse_args(argv)),
+            lambda: run(build_parser().parse_args(argv), argv),
         )
 
 

@@ -113,6 +113,18 @@ def test_a_studys_workers_train_preloaded(tmp_path: Path) -> None:
         assert config["args"]["mkl_intel_paths"] is True
 
 
+@pytest.mark.slow
+def test_the_ppo_searchs_trials_train_preloaded(tmp_path: Path) -> None:
+    out = tmp_path / "search"
+    argv = ["-m", "train.tune", OPTION, "--trials", "1", "--n-timesteps", "256", "--n-envs", "12"]
+    argv += ["--seeds", "1", "--scenarios", "straight", "--out", str(out)]
+    done = subprocess.run([sys.executable, *argv], cwd=ROOT, env=_clean_env(),
+                          capture_output=True, text=True, timeout=600)  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    (sessions,) = out.glob("trials/*/run/sessions.json")
+    assert json.loads(sessions.read_text(encoding="utf-8"))[-1]["mkl_intel_paths"] is True
+
+
 def test_a_run_in_a_process_without_the_library_is_refused_before_writing(tmp_path: Path) -> None:
     if mkl_paths.active():
         pytest.skip("this test process runs with the library preloaded")
