@@ -47,6 +47,7 @@ __all__ = [
     "active",
     "cache_dir",
     "check_platform",
+    "mkl_code_path",
     "preload_env",
     "reexec",
     "require_active",
@@ -166,9 +167,25 @@ def reexec(argv: Sequence[str], module: str = "train") -> NoReturn:
     os.execve(sys.executable, [sys.executable, "-m", module, *argv], env)
 
 
+def mkl_code_path() -> int | None:
+    """The code path MKL takes on this CPU, as its dispatcher numbers them
+    (``mkl_serv_cpu_detect`` in torch's ``libtorch_cpu.so``: 0 is the generic one), or None if
+    this torch build carries no MKL. Imports torch."""
+    import torch
+
+    library = Path(torch.__file__).parent / "lib" / "libtorch_cpu.so"
+    try:
+        detect = ctypes.CDLL(str(library)).mkl_serv_cpu_detect
+    except (OSError, AttributeError):
+        return None
+    detect.restype = ctypes.c_int
+    return int(detect())
+
+
 def require_active() -> None:
-    """Raise ``ValueError`` unless the library is preloaded in this process: a run asked to
-    train on MKL's Intel paths never trains on its generic ones (a worker elsewhere, say)."""
+    """Raise ``ValueError`` unless the library is preloaded in this process and MKL takes a
+    code path other than its generic one: a run asked to train on MKL's Intel paths never
+    trains on its generic ones (a worker elsewhere, say)."""
     library = shim_library()
     if not active(library):
         raise ValueError(
@@ -176,4 +193,11 @@ def require_active() -> None:
             f"{library} preloaded, so MKL would take its generic code paths on a CPU that is "
             f"not Intel's: run follow-train with the option (it preloads the library itself), "
             f"or set LD_PRELOAD={library} in the environment of this process"
+        )
+    path = mkl_code_path()
+    if not path:
+        what = "carries no MKL" if path is None else "still has MKL take its generic code path"
+        raise ValueError(
+            f"{OPTION}: {library} is preloaded, but this torch build {what} "
+            f"(mkl_serv_cpu_detect: {path}); train without the option"
         )

@@ -79,6 +79,29 @@ def test_the_lookup_finds_the_library_only_when_preloaded() -> None:
     assert with_it.stdout.split() == ["True"]
 
 
+def _cpu_vendor() -> str:
+    for line in Path("/proc/cpuinfo").read_text(encoding="utf-8").splitlines():
+        if line.startswith("vendor_id"):
+            return line.split(":", 1)[1].strip()
+    return ""
+
+
+def test_with_the_library_mkl_takes_another_path_than_its_generic_one() -> None:
+    code = "from train.mkl_paths import mkl_code_path; print(mkl_code_path())"
+    env = _clean_env(PYTHONPATH=str(ROOT))
+    run = [sys.executable, "-c", code]
+    without = int(subprocess.run(run, env=env, capture_output=True, text=True,
+                                 check=True).stdout)  # fmt: skip
+    with_it = int(subprocess.run(run, env=preload_env(shim_library(), env), capture_output=True,
+                                 text=True, check=True).stdout)  # fmt: skip
+    assert with_it > 0
+    if _cpu_vendor() == "GenuineIntel":
+        assert without == with_it  # MKL's own check says Intel: nothing to change
+    else:
+        assert without == 0  # the generic path, which the library takes it off
+    print(f"{_cpu_vendor()}: MKL code path {without} without the library, {with_it} with it")
+
+
 def test_preload_env_puts_the_library_first_once() -> None:
     library = shim_library()
     env = preload_env(library, {"LD_PRELOAD": f"/x/libother.so {library}", "A": "1"})
