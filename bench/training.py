@@ -96,7 +96,7 @@ def _follow_train_rate(
 def _command_rate(hyperparams: Path, steps: int, folder: Path, *options: str) -> float:
     """env-steps/s of ``follow-train`` run as a command of its own (one torch thread, plus
     ``options``) on ``hyperparams`` for ``steps`` steps, with no preload inherited."""
-    out = folder / f"run-{len(list(folder.iterdir()))}"
+    out = folder / f"command-{len(list(folder.glob('command-*')))}"
     never = str(10**9)
     argv = ["--hyperparams", str(hyperparams), "--threads", "1", "--n-timesteps", str(steps)]
     argv += ["--eval-freq", never, "--checkpoint-freq", never, "--final-episodes", "0"]

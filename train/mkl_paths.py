@@ -7,27 +7,31 @@ one (``mkl_serv_intel_cpu_true``); on any other CPU it takes a generic code path
 CPU's instruction set. On a 2-core AMD EPYC with AVX-512 (2026-12-07), ``torch.tanh`` on a
 million floats ran MKL's generic kernel (``mkl_vml_kernel_sTanh_EXHAynn``) in 2.6-3.0 ms, where
 numpy's took 0.26-0.40 ms and the same call through MKL's Intel path 0.33 ms; with its
-``sgemm``, that made training 1.4x slower there (a 400 k-step run of
-``ppo_ahead_law_wide.yaml``, one thread: 32.9 s against 22.8 s), and gave other weights than
-an Intel CPU with the same instruction set.
+``sgemm``, that made training 1.3-1.4x slower there (400 k steps of
+``ppo_ahead_law_wide.yaml``'s learning, one thread: 29.5-32.9 s in three runs, against 22.8 s
+in one with the library below), and gave other weights than the Intel Xeon (AVX-512) the
+shipped agents were trained on; with it, the same weights.
 
-With this option the command runs again (``os.execve``, the same arguments) with a one-line
-library preloaded (``LD_PRELOAD``) whose ``mkl_serv_intel_cpu_true`` answers yes, so MKL takes
-the kernels it would take on an Intel CPU with the same instruction set. MKL still reads the
-CPU's features (CPUID), so it asks for no instruction the CPU lacks. On an Intel CPU it changes
-nothing. The library is compiled from :data:`SOURCE` by the C compiler (``cc``) once, into
-:func:`cache_dir`. The agents act in float64, which gives the same actions under every MKL
+With this option the command runs again (``os.execve`` of the same command line) with a
+one-line library preloaded (``LD_PRELOAD``) whose ``mkl_serv_intel_cpu_true`` answers yes, so
+MKL takes the kernels it gives an Intel CPU with the same instruction set. (MKL still reads the
+CPU's features, CPUID, to choose among them.) On an Intel CPU, where MKL's own check answers
+yes, it should change nothing (not measured on one; the tests check that MKL reports the same
+code path there). The library is compiled from :data:`SOURCE` by the C compiler (``cc``) once,
+into :func:`cache_dir`. The agents act in float64, which gives the same actions under every MKL
 code path (``tests/policies/learned/test_networks_any_cpu.py`` checks this setting too), so
-only training is affected.
+only training is affected. ``python -m train.tune`` (the PPO search) takes the same option for
+its trials' training.
 
-``python -m train.tune`` (the PPO search) takes the same option for its trials' training.
 Processes the command starts on this machine (``--workers``, a local Ray) inherit the preload;
 the workers of a Ray cluster elsewhere (``--address``) need it in their own environment, and a
-run refuses to train where it is missing (:func:`require_active`).
+run refuses to train where it is missing or MKL still reports its generic code path
+(:func:`require_active`).
 """
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import hashlib
 import os
@@ -47,6 +51,7 @@ __all__ = [
     "active",
     "cache_dir",
     "check_platform",
+    "library_path",
     "mkl_code_path",
     "preload_env",
     "reexec",
@@ -60,6 +65,8 @@ OPTION = "--mkl-intel-paths"
 SYMBOL = "mkl_serv_intel_cpu_true"
 #: The whole library.
 SOURCE = f"int {SYMBOL}(void) {{ return 1; }}\n"
+#: Set in the command run again, so that a preload that did not take stops there.
+_REEXEC = "PERSONFOLLOW_MKL_REEXEC"
 
 
 def check_platform() -> None:
@@ -80,18 +87,43 @@ def cache_dir() -> Path:
     return Path(root) / "personfollow"
 
 
-def shim_library() -> Path:
-    """The compiled library, compiled now if it is not there yet (to a temporary file renamed
-    into place, so a second command never loads a half-written one).
+def library_path() -> Path:
+    """Where :func:`shim_library` keeps the library (named by its source's digest), built or
+    not."""
+    digest = hashlib.sha256(SOURCE.encode()).hexdigest()[:12]
+    return cache_dir() / f"libmkl_intel_paths-{digest}.so"
 
-    :raises ValueError: if there is no C compiler, the cache folder cannot be written, or the
-        compiler fails (the message says which and gives its output).
+
+def _answers_yes(library: Path) -> bool:
+    """Whether ``library`` is a shared object that loads and whose :data:`SYMBOL` returns 1 (a
+    damaged file is not; its header is read first, as a process that loaded the file before
+    it was replaced gets the old one from ``dlopen``)."""
+    try:
+        with library.open("rb") as f:
+            if f.read(4) != b"\x7fELF":
+                return False
+        return getattr(ctypes.CDLL(str(library)), SYMBOL)() == 1
+    except (OSError, AttributeError):
+        return False
+
+
+def shim_library() -> Path:
+    """The compiled library, compiled now if it is not there yet or does not load (to a
+    temporary file renamed into place, so a second command never loads a half-written one).
+
+    :raises ValueError: if this is not Linux on x86-64, the cache folder's path cannot stand in
+        ``LD_PRELOAD`` or cannot be written, there is no C compiler, or the compiler fails (the
+        message says which and gives its output).
     """
     check_platform()
-    digest = hashlib.sha256(SOURCE.encode()).hexdigest()[:12]
-    folder = cache_dir()
-    library = folder / f"libmkl_intel_paths-{digest}.so"
-    if library.is_file():
+    library = library_path()
+    folder = library.parent
+    if any(c in str(library) for c in " :"):  # ld.so splits LD_PRELOAD on both
+        raise ValueError(
+            f"{OPTION}: the library's folder {folder} has a space or a colon in its path, "
+            "which LD_PRELOAD cannot hold; set XDG_CACHE_HOME to a folder without them"
+        )
+    if library.is_file() and _answers_yes(library):
         return library
     compiler = shutil.which(os.environ.get("CC", "cc")) or shutil.which("gcc")
     if compiler is None:
@@ -105,12 +137,15 @@ def shim_library() -> Path:
             source = Path(tmp) / "mkl_intel_paths.c"
             source.write_text(SOURCE, encoding="utf-8")
             built = Path(tmp) / library.name
-            done = subprocess.run(
-                [compiler, "-shared", "-fPIC", "-O2", "-o", str(built), str(source)],
-                capture_output=True,
-                text=True,
-                timeout=120,
-            )
+            try:
+                done = subprocess.run(
+                    [compiler, "-shared", "-fPIC", "-O2", "-o", str(built), str(source)],
+                    capture_output=True,
+                    text=True,
+                    timeout=120,
+                )
+            except subprocess.TimeoutExpired:
+                raise ValueError(f"{OPTION}: {compiler} took over 120 s; nothing built") from None
             if done.returncode != 0:
                 output = " ".join((done.stderr or done.stdout).split())
                 raise ValueError(
@@ -123,20 +158,37 @@ def shim_library() -> Path:
     return library
 
 
-def _address(handle: ctypes.CDLL) -> int | None:
-    """Where ``handle``'s lookup finds :data:`SYMBOL`, or None if it does not."""
+def active() -> bool:
+    """Whether this process's global lookup of :data:`SYMBOL` finds a definition that answers
+    yes. MKL's own one is not in the global scope (torch loads ``libtorch_cpu.so`` locally), so
+    this is a preloaded library's, whatever its path."""
     try:
-        return ctypes.cast(getattr(handle, SYMBOL), ctypes.c_void_p).value
+        found = getattr(ctypes.CDLL(None), SYMBOL)
     except AttributeError:
-        return None
+        return False
+    found.restype = ctypes.c_int
+    return found() == 1
 
 
-def active(library: Path | None = None) -> bool:
-    """Whether this process's global lookup of :data:`SYMBOL`, the one MKL's dispatcher goes
-    through, finds ``library``'s (default: :func:`shim_library`'s) rather than MKL's own."""
-    library = shim_library() if library is None else library
-    found = _address(ctypes.CDLL(None))
-    return found is not None and found == _address(ctypes.CDLL(str(library)))
+def mkl_code_path() -> int | None:
+    """The code path MKL takes on this CPU, as its dispatcher numbers them
+    (``mkl_serv_cpu_detect``: 0 is the generic one), or None if this torch build carries no
+    MKL where it is looked for (in ``libtorch_cpu.so``, or a library loaded globally). Imports
+    torch."""
+    import torch
+
+    handles = [ctypes.CDLL(None)]
+    with_mkl = Path(torch.__file__).parent / "lib" / "libtorch_cpu.so"
+    with contextlib.suppress(OSError):
+        handles.insert(0, ctypes.CDLL(str(with_mkl)))
+    for handle in handles:
+        try:
+            detect = handle.mkl_serv_cpu_detect
+        except AttributeError:
+            continue
+        detect.restype = ctypes.c_int
+        return int(detect())
+    return None
 
 
 def preload_env(library: Path, env: dict[str, str] | None = None) -> dict[str, str]:
@@ -147,57 +199,52 @@ def preload_env(library: Path, env: dict[str, str] | None = None) -> dict[str, s
     return env
 
 
-def reexec(argv: Sequence[str], module: str = "train") -> NoReturn:
-    """Run ``python -m <module> argv`` in place of this process, with the library preloaded
-    (``module``: ``train`` for ``follow-train``, ``train.tune`` for its PPO search).
+def reexec(argv: Sequence[str]) -> NoReturn:
+    """Run this process's command line again in its place (``sys.orig_argv``: the same
+    program, interpreter options and arguments), with the library preloaded.
 
-    :raises ValueError: as :func:`shim_library`, or if the library, preloaded, is still not
-        the one MKL finds (it ran once already: ``LD_PRELOAD`` was set and did not take).
+    :param argv: the arguments the caller parsed, which must be this process's: a caller that
+        passed others (a ``main(argv)`` called from Python) is refused, since it would be
+        replaced by a command it did not run.
+    :raises ValueError: as :func:`shim_library`, for such a caller, or if the library,
+        preloaded, is still not what this process finds (it ran once already).
     """
-    library = shim_library()
-    if os.environ.get("PERSONFOLLOW_MKL_REEXEC") == str(library):
+    if list(argv) != sys.argv[1:]:
         raise ValueError(
-            f"{OPTION}: {library} was preloaded (LD_PRELOAD) and MKL still finds its own "
-            f"{SYMBOL}; this Python or torch build does not let it be replaced"
+            f"{OPTION}: runs the command again preloaded, so it needs this process's own "
+            "command line; from Python, start the process with LD_PRELOAD set to "
+            "train.mkl_paths.shim_library() instead"
+        )
+    library = shim_library()
+    if os.environ.get(_REEXEC) == str(library):
+        raise ValueError(
+            f"{OPTION}: the command ran again with LD_PRELOAD={library} and this process still "
+            f"does not find its {SYMBOL} (a message from ld.so above, if any, says why)"
         )
     env = preload_env(library)
-    env["PERSONFOLLOW_MKL_REEXEC"] = str(library)  # so that a preload that fails stops here
+    env[_REEXEC] = str(library)
     sys.stdout.flush()
     sys.stderr.flush()
-    os.execve(sys.executable, [sys.executable, "-m", module, *argv], env)
-
-
-def mkl_code_path() -> int | None:
-    """The code path MKL takes on this CPU, as its dispatcher numbers them
-    (``mkl_serv_cpu_detect`` in torch's ``libtorch_cpu.so``: 0 is the generic one), or None if
-    this torch build carries no MKL. Imports torch."""
-    import torch
-
-    library = Path(torch.__file__).parent / "lib" / "libtorch_cpu.so"
-    try:
-        detect = ctypes.CDLL(str(library)).mkl_serv_cpu_detect
-    except (OSError, AttributeError):
-        return None
-    detect.restype = ctypes.c_int
-    return int(detect())
+    os.execve(sys.executable, [sys.executable, *sys.orig_argv[1:]], env)
 
 
 def require_active() -> None:
-    """Raise ``ValueError`` unless the library is preloaded in this process and MKL takes a
-    code path other than its generic one: a run asked to train on MKL's Intel paths never
-    trains on its generic ones (a worker elsewhere, say)."""
-    library = shim_library()
-    if not active(library):
+    """Raise ``ValueError`` unless a library answering yes for :data:`SYMBOL` is preloaded in
+    this process and MKL takes a code path other than its generic one: a run asked to train on
+    MKL's Intel paths never trains on its generic ones (a worker elsewhere, say). Builds
+    nothing."""
+    where = f"this process ({platform.node()}, pid {os.getpid()})"
+    if not active():
         raise ValueError(
-            f"{OPTION}: this process ({platform.node()}, pid {os.getpid()}) runs without "
-            f"{library} preloaded, so MKL would take its generic code paths on a CPU that is "
-            f"not Intel's: run follow-train with the option (it preloads the library itself), "
-            f"or set LD_PRELOAD={library} in the environment of this process"
+            f"{OPTION}: {where} runs without the library preloaded, so MKL would take its "
+            "generic code paths on a CPU that is not Intel's: run follow-train with the option "
+            "(it preloads the library itself), or set LD_PRELOAD to the library "
+            f"({library_path()} where follow-train built it) in this process's environment"
         )
     path = mkl_code_path()
     if not path:
         what = "carries no MKL" if path is None else "still has MKL take its generic code path"
         raise ValueError(
-            f"{OPTION}: {library} is preloaded, but this torch build {what} "
+            f"{OPTION}: the library is preloaded in {where}, but this torch build {what} "
             f"(mkl_serv_cpu_detect: {path}); train without the option"
         )

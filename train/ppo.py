@@ -92,6 +92,7 @@ def _train(args: Args, command: str, lock: StudyLock) -> Path:
 
     from train import report
     from train import run as runs
+    from train.mkl_paths import mkl_code_path
 
     # -- Check every option and hyperparameter; build the envs and the model in memory -------
     if args.resume is not None:
@@ -132,7 +133,9 @@ def _train(args: Args, command: str, lock: StudyLock) -> Path:
         formats = [CSVOutputFormat(str(run / runs.LOGS / f"progress-{start_step}.csv"))]
         formats.append(TensorBoardOutputFormat(str(run / runs.LOGS / "tb")))
         model.set_logger(Logger(str(run / runs.LOGS), formats))
-        session = runs.SessionLog(run, command, start_step, args.threads, args.mkl_intel_paths)
+        session = runs.SessionLog(
+            run, command, start_step, args.threads, args.mkl_intel_paths, mkl_code_path()
+        )
     except BaseException:
         if saved is None:
             _remove_new_run(run, made)

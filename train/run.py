@@ -221,17 +221,25 @@ class SessionLog:
     ``status`` ("running", "finished", "interrupted", "failed", "killed"), ``first_step``,
     ``last_step`` (the steps a resume keeps: the last checkpoint's, or the final model's),
     ``wall_s`` (learning time [s] up to ``last_step``; an interrupted or failed session's whole
-    time), ``env_steps_per_s``, ``threads``, ``mkl_intel_paths``.
+    time), ``env_steps_per_s``, ``threads``, ``mkl_intel_paths`` (the option given) and
+    ``mkl_code_path`` (the code path MKL reported: 0 its generic one, None without MKL).
 
     :param run: the run folder.
     :param command: the command line of this session.
     :param first_step: env steps the session starts from.
     :param threads: torch threads.
-    :param mkl_intel_paths: whether it trained on MKL's Intel code paths (:mod:`train.mkl_paths`).
+    :param mkl_intel_paths: whether ``--mkl-intel-paths`` was given (:mod:`train.mkl_paths`).
+    :param mkl_code_path: :func:`train.mkl_paths.mkl_code_path` in the training process.
     """
 
     def __init__(
-        self, run: Path, command: str, first_step: int, threads: int, mkl_intel_paths: bool = False
+        self,
+        run: Path,
+        command: str,
+        first_step: int,
+        threads: int,
+        mkl_intel_paths: bool = False,
+        mkl_code_path: int | None = None,
     ) -> None:
         self.run = run
         self.sessions = read_sessions(run)
@@ -249,6 +257,7 @@ class SessionLog:
             "env_steps_per_s": None,
             "threads": threads,
             "mkl_intel_paths": mkl_intel_paths,
+            "mkl_code_path": mkl_code_path,
         }
         self.sessions.append(self.entry)
         self._started = time.perf_counter()

@@ -233,7 +233,13 @@ def _train_unit(unit: _Seed) -> dict[str, Any]:
         # Its own budget once a lost worker's resume has written the longer one (a resume
         # whose training is done then writes the report only).
         longer = unit.longer if unit.longer is not None and _budget(folder) < unit.longer else None
-        resume = Args(resume=folder, n_timesteps=longer, threads=unit.args.threads, progress=False)
+        resume = Args(
+            resume=folder,
+            n_timesteps=longer,
+            threads=unit.args.threads,
+            mkl_intel_paths=unit.args.mkl_intel_paths,
+            progress=False,
+        )
         return _row(k, train(resume, command=f"{unit.command} [seed {k}, resumed]"))
     if json.loads(json.dumps(run_hyperparams(unit.args))) != unit.hp:
         raise ValueError(
@@ -354,7 +360,13 @@ def _train_study(
         if _finished(folder) and longer is None:
             done[i] = _row(k, folder)  # its unit below is a placeholder
         elif folder.is_dir() and any(folder.iterdir()) and not early:
-            resume = Args(resume=folder, n_timesteps=longer, threads=args.threads, progress=False)
+            resume = Args(
+                resume=folder,
+                n_timesteps=longer,
+                threads=args.threads,
+                mkl_intel_paths=args.mkl_intel_paths,
+                progress=False,
+            )
             check_resume(resume)  # before any seed trains, as a new seed's options are
         else:
             if one.seed > MAX_SEED:

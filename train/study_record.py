@@ -38,8 +38,13 @@ def study_settings(args: Args, seeds: Sequence[int]) -> dict[str, Any]:
     """What a study is, as ``study.json`` keeps it (paths as text, the seeds as a list)."""
     out: dict[str, Any] = {"seeds": list(seeds)}
     for f in dataclasses.fields(args):
-        if f.name in ("out", "resume", "export", "force", "progress", "threads", "n_timesteps"):
-            continue  # where it goes and how fast, not what is trained (a resume may lengthen)
+        if f.name in (
+            "out", "resume", "export", "force", "progress", "threads", "mkl_intel_paths",
+            "n_timesteps",
+        ):  # fmt: skip
+            # where it goes and how fast, not what is trained (a resume may lengthen); threads
+            # and MKL's code paths change the weights as the CPU does, which is not kept either
+            continue
         value = getattr(args, f.name)
         out[f.name] = str(value) if isinstance(value, Path) else value
     # The defaults as the run fills them in, so that leaving an option out or giving its

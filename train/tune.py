@@ -247,7 +247,7 @@ def run(args: argparse.Namespace, argv: Sequence[str] | None = None) -> int:
         from train import mkl_paths
 
         if not mkl_paths.active():
-            mkl_paths.reexec(sys.argv[1:] if argv is None else argv, module="train.tune")
+            mkl_paths.reexec(sys.argv[1:] if argv is None else argv)
     base = Args(
         hyperparams=args.hyperparams,
         n_timesteps=args.n_timesteps,

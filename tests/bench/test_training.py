@@ -30,7 +30,7 @@ def test_each_choice_trains_its_file_and_reports_its_rate(tmp_path: Path) -> Non
     commands = tmp_path / "commands"
     commands.mkdir()
     assert _command_rate(WIDE_HYPERPARAMS, 800, commands, "--mkl-intel-paths") > 0.0
-    sessions = json.loads((commands / "run-0" / "sessions.json").read_text(encoding="utf-8"))
+    sessions = json.loads((commands / "command-0" / "sessions.json").read_text(encoding="utf-8"))
     assert sessions[-1]["mkl_intel_paths"] is True
 
 

@@ -1,9 +1,10 @@
 """train/mkl_paths.py: ``follow-train --mkl-intel-paths`` preloads MKL's Intel code paths.
 
 The commands run as subprocesses: the option replaces the process (``os.execve``), which must
-not be pytest's. That the library does take in torch's MKL is checked where it shows, on the
-agents' actions: ``tests/policies/learned/test_networks_any_cpu.py`` (float64 the same with it,
-and float32 moved by it on a CPU that is not Intel's).
+not be pytest's. That the library takes in torch's MKL is checked by the code path MKL reports
+(here) and on the agents' actions: ``tests/policies/learned/test_networks_any_cpu.py`` (float64
+the same with it; float32 moved by it on a CPU that is not Intel's, not on an Intel one). The
+library is built into a folder of this module's own (``XDG_CACHE_HOME``), not the user's cache.
 """
 
 from __future__ import annotations
@@ -14,41 +15,60 @@ import re
 import shutil
 import subprocess
 import sys
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 import yaml
 
 from train import mkl_paths
+from train.cli import main
 from train.mkl_paths import OPTION, SOURCE, SYMBOL, preload_env, shim_library
+from train.options import Args as OptionArgs
 from train.ppo import Args, train
+from train.study_record import study_settings
 
 ROOT = Path(__file__).resolve().parents[2]
+FOLLOW_TRAIN = Path(sys.executable).with_name("follow-train")
 TINY = [
     "--scenarios", "straight,curve",
     "--n-envs", "4",
     "--n-timesteps", "600",
-    "--eval-freq", "400",
+    "--eval-freq", "100000",  # no held-out evaluation: the runs are about the option
     "--checkpoint-freq", "400",
     "--final-episodes", "0",
     "--no-progress",
 ]  # fmt: skip
-# Whether the library is what this process's lookup of MKL's CPU check finds, after torch.
-_ACTIVE = "import torch; from train.mkl_paths import active; print(active())"
+
+try:
+    mkl_paths.check_platform()
+except ValueError as e:
+    pytest.skip(str(e), allow_module_level=True)
+if shutil.which(os.environ.get("CC", "cc")) is None and shutil.which("gcc") is None:
+    pytest.skip("no C compiler (cc, gcc) to build the library", allow_module_level=True)
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _cache(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
+    """The library's cache folder for this module (inherited by the commands it runs)."""
+    folder = tmp_path_factory.mktemp("xdg-cache")
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setenv("XDG_CACHE_HOME", str(folder))
+        yield folder
 
 
 def _clean_env(**extra: str) -> dict[str, str]:
     """This process's environment without a preload (the option's or any)."""
-    env = {
-        k: v for k, v in os.environ.items() if k not in ("LD_PRELOAD", "PERSONFOLLOW_MKL_REEXEC")
-    }
-    return {**env, **extra}
+    dropped = ("LD_PRELOAD", "PERSONFOLLOW_MKL_REEXEC")
+    return {**{k: v for k, v in os.environ.items() if k not in dropped}, **extra}
 
 
-def _follow_train(*argv: str, env: dict[str, str] | None = None) -> subprocess.CompletedProcess:
+def _run(argv: list[str], cwd: Path = ROOT, env: dict[str, str] | None = None) -> (
+    subprocess.CompletedProcess[str]
+):  # fmt: skip
     return subprocess.run(
-        [sys.executable, "-m", "train", *argv],
-        cwd=ROOT,
+        argv,
+        cwd=cwd,
         env=_clean_env() if env is None else env,
         capture_output=True,
         text=True,
@@ -56,27 +76,46 @@ def _follow_train(*argv: str, env: dict[str, str] | None = None) -> subprocess.C
     )
 
 
-def test_the_library_is_the_one_line_and_exports_the_check() -> None:
+def _follow_train(*argv: str, env: dict[str, str] | None = None) -> (
+    subprocess.CompletedProcess[str]
+):  # fmt: skip
+    return _run([sys.executable, "-m", "train", *argv], env=env)
+
+
+def _sessions(run: Path) -> list[dict]:
+    return json.loads((run / "sessions.json").read_text(encoding="utf-8"))
+
+
+def test_the_library_is_the_one_line_and_answers_yes() -> None:
     library = shim_library()
     assert library.is_file()
-    assert library.parent == mkl_paths.cache_dir()
+    assert library.parent == Path(os.environ["XDG_CACHE_HOME"]) / "personfollow"
     assert SOURCE == "int mkl_serv_intel_cpu_true(void) { return 1; }\n"
-    # built once: a second call finds it
-    assert shim_library() == library
+    assert shim_library() == library  # built once: a second call finds it
     import ctypes
 
-    assert ctypes.CDLL(str(library)).mkl_serv_intel_cpu_true() == 1
+    assert getattr(ctypes.CDLL(str(library)), SYMBOL)() == 1
 
 
-def test_the_lookup_finds_the_library_only_when_preloaded() -> None:
+def test_a_damaged_library_is_built_again() -> None:
+    library = shim_library()
+    # a new file in its place (the loaded one must not be written over: it is mapped)
+    damaged = library.with_suffix(".damaged")
+    damaged.write_bytes(b"not a shared object")
+    os.replace(damaged, library)
+    assert shim_library() == library
+    assert library.read_bytes()[:4] == b"\x7fELF"
+
+
+def test_the_lookup_finds_a_preloaded_library_wherever_it_lies(tmp_path: Path) -> None:
+    code = "import torch; from train.mkl_paths import active; print(active())"
     env = _clean_env(PYTHONPATH=str(ROOT))
-    without = subprocess.run([sys.executable, "-c", _ACTIVE], env=env, capture_output=True,
-                             text=True, check=True)  # fmt: skip
-    assert without.stdout.split() == ["False"]
-    preloaded = preload_env(shim_library(), env)
-    with_it = subprocess.run([sys.executable, "-c", _ACTIVE], env=preloaded,
-                             capture_output=True, text=True, check=True)  # fmt: skip
-    assert with_it.stdout.split() == ["True"]
+    assert _run([sys.executable, "-c", code], env=env).stdout.split() == ["False"]
+    copy = tmp_path / "elsewhere.so"
+    shutil.copy(shim_library(), copy)
+    for library in (shim_library(), copy):
+        done = _run([sys.executable, "-c", code], env=preload_env(library, env))
+        assert done.stdout.split() == ["True"], done.stderr
 
 
 def _cpu_vendor() -> str:
@@ -89,11 +128,8 @@ def _cpu_vendor() -> str:
 def test_with_the_library_mkl_takes_another_path_than_its_generic_one() -> None:
     code = "from train.mkl_paths import mkl_code_path; print(mkl_code_path())"
     env = _clean_env(PYTHONPATH=str(ROOT))
-    run = [sys.executable, "-c", code]
-    without = int(subprocess.run(run, env=env, capture_output=True, text=True,
-                                 check=True).stdout)  # fmt: skip
-    with_it = int(subprocess.run(run, env=preload_env(shim_library(), env), capture_output=True,
-                                 text=True, check=True).stdout)  # fmt: skip
+    without = int(_run([sys.executable, "-c", code], env=env).stdout)
+    with_it = int(_run([sys.executable, "-c", code], env=preload_env(shim_library(), env)).stdout)
     assert with_it > 0
     if _cpu_vendor() == "GenuineIntel":
         assert without == with_it  # MKL's own check says Intel: nothing to change
@@ -111,29 +147,43 @@ def test_preload_env_puts_the_library_first_once() -> None:
 
 @pytest.mark.slow
 def test_a_run_with_the_option_trains_preloaded_and_records_it(tmp_path: Path) -> None:
+    # From a folder with a train.py, which `python -m train` would run: the command runs again
+    # as the user ran it (here the console script), so it does not.
+    (tmp_path / "train.py").write_text("raise SystemExit('the folder train.py ran')\n")
     run = tmp_path / "run"
-    done = _follow_train(OPTION, *TINY, "--out", str(run))
+    done = _run([str(FOLLOW_TRAIN), OPTION, *TINY, "--out", str(run)], cwd=tmp_path)
     assert done.returncode == 0, done.stderr
     config = yaml.safe_load((run / "config.yaml").read_text(encoding="utf-8"))
     assert config["args"]["mkl_intel_paths"] is True
     assert config["command"].startswith(f"follow-train {OPTION} --scenarios")
-    # A resume may give the option anew (as --threads); each session records its own.
+    # A resume may give the option anew (as --threads); each session records its own, and the
+    # code path MKL reported.
     resumed = _follow_train("--resume", str(run), "--n-timesteps", "1000", "--no-progress")
     assert resumed.returncode == 0, resumed.stderr
-    sessions = json.loads((run / "sessions.json").read_text(encoding="utf-8"))
+    sessions = _sessions(run)
     assert [s["mkl_intel_paths"] for s in sessions] == [True, False]
+    assert sessions[0]["mkl_code_path"] > 0
+    if _cpu_vendor() != "GenuineIntel":
+        assert sessions[1]["mkl_code_path"] == 0
 
 
 @pytest.mark.slow
 def test_a_studys_workers_train_preloaded(tmp_path: Path) -> None:
     # Each seed's worker refuses to train without the library (require_active), so a study
-    # that finishes ran every seed with it.
+    # that finishes ran every seed with it (a resumed seed keeps the option too:
+    # tests/train/test_seed_units.py).
     study = tmp_path / "study"
     done = _follow_train(OPTION, *TINY, "--seeds", "0-1", "--workers", "2", "--out", str(study))
     assert done.returncode == 0, done.stderr
     for k in (0, 1):
-        config = yaml.safe_load((study / f"seed-{k}" / "config.yaml").read_text("utf-8"))
-        assert config["args"]["mkl_intel_paths"] is True
+        assert [s["mkl_intel_paths"] for s in _sessions(study / f"seed-{k}")] == [True]
+
+
+def test_the_option_is_no_part_of_what_a_study_is() -> None:
+    # as --threads: studies written before it had no such key, and stay resumable
+    with_it = study_settings(OptionArgs(mkl_intel_paths=True), (0, 1))
+    assert with_it == study_settings(OptionArgs(), (0, 1))
+    assert "mkl_intel_paths" not in with_it
 
 
 @pytest.mark.slow
@@ -141,11 +191,25 @@ def test_the_ppo_searchs_trials_train_preloaded(tmp_path: Path) -> None:
     out = tmp_path / "search"
     argv = ["-m", "train.tune", OPTION, "--trials", "1", "--n-timesteps", "256", "--n-envs", "12"]
     argv += ["--seeds", "1", "--scenarios", "straight", "--out", str(out)]
-    done = subprocess.run([sys.executable, *argv], cwd=ROOT, env=_clean_env(),
-                          capture_output=True, text=True, timeout=600)  # fmt: skip
+    done = _run([sys.executable, *argv])
     assert done.returncode == 0, done.stderr
     (sessions,) = out.glob("trials/*/run/sessions.json")
     assert json.loads(sessions.read_text(encoding="utf-8"))[-1]["mkl_intel_paths"] is True
+
+
+def test_main_called_from_python_is_refused_not_replaced(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    if mkl_paths.active():
+        pytest.skip("this test process runs with the library preloaded")
+    run = tmp_path / "run"
+    assert main([OPTION, *TINY, "--out", str(run)]) == 2
+    assert capsys.readouterr().err == (
+        f"follow-train: error: {OPTION}: runs the command again preloaded, so it needs this "
+        "process's own command line; from Python, start the process with LD_PRELOAD set to "
+        "train.mkl_paths.shim_library() instead\n"
+    )
+    assert not run.exists()
 
 
 def test_a_run_in_a_process_without_the_library_is_refused_before_writing(tmp_path: Path) -> None:
@@ -154,25 +218,36 @@ def test_a_run_in_a_process_without_the_library_is_refused_before_writing(tmp_pa
     run = tmp_path / "run"
     args = Args(mkl_intel_paths=True, scenarios=("straight",), n_envs=4, n_timesteps=100,
                 out=run, progress=False)  # fmt: skip
-    with pytest.raises(ValueError, match=f"^{OPTION}: ") as e:
+    with pytest.raises(ValueError, match=f"^{OPTION}: this process ") as e:
         train(args)
-    library = shim_library()
-    assert str(e.value).startswith(f"{OPTION}: this process (")
-    assert f"runs without {library} preloaded" in str(e.value)
-    assert f"LD_PRELOAD={library}" in str(e.value)
+    assert "runs without the library preloaded" in str(e.value)
+    assert f"({mkl_paths.library_path()} where follow-train built it)" in str(e.value)
     assert not run.exists()
 
 
 def test_a_preload_that_does_not_take_stops_instead_of_looping(tmp_path: Path) -> None:
-    # The command was run again once with the library and it still did not take.
-    env = _clean_env(PERSONFOLLOW_MKL_REEXEC=str(shim_library()))
+    # The command ran again once with the library and it still did not take.
+    library = shim_library()
+    env = _clean_env(PERSONFOLLOW_MKL_REEXEC=str(library))
     done = _follow_train(OPTION, *TINY, "--out", str(tmp_path / "run"), env=env)
     assert done.returncode == 2
     assert done.stderr.strip().splitlines() == [
-        f"follow-train: error: {OPTION}: {shim_library()} was preloaded (LD_PRELOAD) and MKL "
-        f"still finds its own {SYMBOL}; this Python or torch build does not let it be replaced"
+        f"follow-train: error: {OPTION}: the command ran again with LD_PRELOAD={library} and "
+        f"this process still does not find its {SYMBOL} (a message from ld.so above, if any, "
+        "says why)"
     ]
     assert not (tmp_path / "run").exists()
+
+
+def test_usage_errors_come_before_the_library(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    monkeypatch.setattr(mkl_paths.shutil, "which", lambda name: None)  # no compiler either
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "empty-cache"))
+    assert main([OPTION, "--n-timesteps", "0"]) == 2
+    assert capsys.readouterr().err == (
+        "follow-train: error: --n-timesteps 0 is out of range: must be an integer >= 1\n"
+    )
 
 
 def test_no_compiler_is_one_line(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
@@ -199,6 +274,20 @@ def test_a_compiler_that_fails_says_so_and_leaves_nothing(
         str(e.value),
     ), str(e.value)
     assert list((cache / "personfollow").iterdir()) == []
+
+
+def test_a_cache_path_ld_preload_cannot_hold_is_refused(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    spaced = tmp_path / "a b"
+    monkeypatch.setenv("XDG_CACHE_HOME", str(spaced))
+    with pytest.raises(ValueError, match=f"^{OPTION}: ") as e:
+        shim_library()
+    assert str(e.value) == (
+        f"{OPTION}: the library's folder {spaced}/personfollow has a space or a colon in its "
+        "path, which LD_PRELOAD cannot hold; set XDG_CACHE_HOME to a folder without them"
+    )
+    assert not spaced.exists()
 
 
 def test_an_unwritable_cache_says_which_folder(

@@ -109,6 +109,29 @@ def test_a_seed_whose_worker_died_is_run_again_from_its_checkpoint(
     assert (copy / "seed-1" / "sessions.json").read_text() == before
 
 
+def test_a_seed_resumed_keeps_the_studys_mkl_intel_paths(
+    trained: tuple[Path, list[Any]], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A resumed seed trains with the option as the study's new seeds do (its worker then
+    refuses to train without the preload, train.mkl_paths.require_active)."""
+    study, units = trained
+    copy = tmp_path / "study"
+    shutil.copytree(study, copy)
+    args = dataclasses.replace(units[1].args, out=copy / "seed-1", mkl_intel_paths=True)
+    _as_a_killed_worker_left_it(copy / "seed-1")
+    given: list[Any] = []
+
+    def resumed(args: Any, command: str) -> Path:
+        given.append(args)
+        raise KeyboardInterrupt  # what it was given is all this test needs
+
+    monkeypatch.setattr(train.seeds, "train", resumed)
+    with pytest.raises(KeyboardInterrupt):
+        _train_unit(units[1]._replace(args=args))
+    assert given[0].resume == copy / "seed-1"
+    assert given[0].mkl_intel_paths is True
+
+
 def test_a_new_seed_whose_worker_died_before_its_first_checkpoint_starts_again(
     trained: tuple[Path, list[Any]], tmp_path: Path
 ) -> None:
