@@ -14,8 +14,9 @@ a temporary folder and are removed.
 
 Two more rows train ``ppo_ensemble``'s file (``ppo_ahead_law_wide.yaml``, networks of 128 x 128)
 on one thread as ``follow-train`` commands of their own, without and with ``--mkl-intel-paths``
-(:mod:`train.mkl_paths`), the second given as a ratio to the first: about 1x on an Intel CPU, and
-on a CPU that is not Intel's what MKL's Intel code paths gain there.
+(:mod:`train.mkl_paths`), the second given as a ratio to the first: on a CPU that is not Intel's,
+what MKL's Intel code paths gain there (1.59-1.61x on a 2-core AMD EPYC, 2026-12-07); on an
+Intel CPU it should be about 1x (not measured on one).
 """
 
 from __future__ import annotations
