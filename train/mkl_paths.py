@@ -177,10 +177,12 @@ def mkl_code_path() -> int | None:
     torch."""
     import torch
 
-    handles = [ctypes.CDLL(None)]
+    handles = []
     with_mkl = Path(torch.__file__).parent / "lib" / "libtorch_cpu.so"
-    with contextlib.suppress(OSError):
-        handles.insert(0, ctypes.CDLL(str(with_mkl)))
+    with contextlib.suppress(OSError, TypeError, AttributeError):  # loaded already, or none
+        handles.append(ctypes.CDLL(str(with_mkl), mode=os.RTLD_NOLOAD))
+    with contextlib.suppress(OSError, TypeError):  # no global handle off Linux
+        handles.append(ctypes.CDLL(None))
     for handle in handles:
         try:
             detect = handle.mkl_serv_cpu_detect
@@ -209,7 +211,7 @@ def reexec(argv: Sequence[str]) -> NoReturn:
     :raises ValueError: as :func:`shim_library`, for such a caller, or if the library,
         preloaded, is still not what this process finds (it ran once already).
     """
-    if list(argv) != sys.argv[1:]:
+    if list(argv) != sys.argv[1:] or sys.argv[0] == "-":  # a script read from stdin: gone
         raise ValueError(
             f"{OPTION}: runs the command again preloaded, so it needs this process's own "
             "command line; from Python, start the process with LD_PRELOAD set to "
@@ -238,8 +240,8 @@ def require_active() -> None:
         raise ValueError(
             f"{OPTION}: {where} runs without the library preloaded, so MKL would take its "
             "generic code paths on a CPU that is not Intel's: run follow-train with the option "
-            "(it preloads the library itself), or set LD_PRELOAD to the library "
-            f"({library_path()} where follow-train built it) in this process's environment"
+            "(it preloads the library itself), or set LD_PRELOAD to the library in this "
+            f"process's environment (follow-train builds it at {library_path()} on this machine)"
         )
     path = mkl_code_path()
     if not path:

@@ -34,16 +34,19 @@ TRAINING_PACKAGES = (*ROLLOUT_PACKAGES, "train")
 CODE = "code"
 
 
+#: Options that are no part of what a study is: where it goes and how fast, not what is
+#: trained (a resume may lengthen it); threads and MKL's code paths change the weights as the
+#: CPU does, which is not kept either.
+NOT_THE_STUDY = (
+    "out", "resume", "export", "force", "progress", "threads", "mkl_intel_paths", "n_timesteps"
+)  # fmt: skip
+
+
 def study_settings(args: Args, seeds: Sequence[int]) -> dict[str, Any]:
     """What a study is, as ``study.json`` keeps it (paths as text, the seeds as a list)."""
     out: dict[str, Any] = {"seeds": list(seeds)}
     for f in dataclasses.fields(args):
-        if f.name in (
-            "out", "resume", "export", "force", "progress", "threads", "mkl_intel_paths",
-            "n_timesteps",
-        ):  # fmt: skip
-            # where it goes and how fast, not what is trained (a resume may lengthen); threads
-            # and MKL's code paths change the weights as the CPU does, which is not kept either
+        if f.name in NOT_THE_STUDY:
             continue
         value = getattr(args, f.name)
         out[f.name] = str(value) if isinstance(value, Path) else value
@@ -74,6 +77,8 @@ def claim(
     path = study / STUDY
     had = read_study(study)
     if had is not None:
+        # an option kept in files written while it counted (mkl_intel_paths, briefly)
+        had = {k: v for k, v in had.items() if k not in NOT_THE_STUDY}
         if had.get("env_id") is None:  # written before the default was filled in
             had = {**had, "env_id": settings.get("env_id")}
         if isinstance(had.get("compare_with"), str):  # kept as typed before: read from here

@@ -243,11 +243,6 @@ def run(args: argparse.Namespace, argv: Sequence[str] | None = None) -> int:
         raise UsageError("--address is for --backend ray")
     workers = args.workers if args.backend == "ray" else args.workers or 1
     backend = backend_from_args(args.backend, workers=workers, address=args.address)
-    if args.mkl_intel_paths:
-        from train import mkl_paths
-
-        if not mkl_paths.active():
-            mkl_paths.reexec(sys.argv[1:] if argv is None else argv)
     base = Args(
         hyperparams=args.hyperparams,
         n_timesteps=args.n_timesteps,
@@ -265,6 +260,11 @@ def run(args: argparse.Namespace, argv: Sequence[str] | None = None) -> int:
     _check_out(args.out)  # before the folder is made, not after a trial
     storage, _ = check_storage(args.storage, args.out)
     _check_out_owner(args.out, args.study)
+    if args.mkl_intel_paths:  # after the options' own checks, before anything is written
+        from train import mkl_paths
+
+        if not mkl_paths.active():
+            mkl_paths.reexec(sys.argv[1:] if argv is None else argv)
     objective = PPOObjective(base, args.out / "trials", tuple(variants), backend)
     n_envs = objective.n_envs()
     identity = {

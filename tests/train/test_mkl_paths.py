@@ -26,7 +26,8 @@ from train.cli import main
 from train.mkl_paths import OPTION, SOURCE, SYMBOL, preload_env, shim_library
 from train.options import Args as OptionArgs
 from train.ppo import Args, train
-from train.study_record import study_settings
+from train.study_lock import StudyLock
+from train.study_record import CODE, STUDY, claim, study_settings
 
 ROOT = Path(__file__).resolve().parents[2]
 FOLLOW_TRAIN = Path(sys.executable).with_name("follow-train")
@@ -179,11 +180,18 @@ def test_a_studys_workers_train_preloaded(tmp_path: Path) -> None:
         assert [s["mkl_intel_paths"] for s in _sessions(study / f"seed-{k}")] == [True]
 
 
-def test_the_option_is_no_part_of_what_a_study_is() -> None:
+def test_the_option_is_no_part_of_what_a_study_is(tmp_path: Path) -> None:
     # as --threads: studies written before it had no such key, and stay resumable
     with_it = study_settings(OptionArgs(mkl_intel_paths=True), (0, 1))
     assert with_it == study_settings(OptionArgs(), (0, 1))
     assert "mkl_intel_paths" not in with_it
+    # and a study.json written while it counted (it did, briefly) is still this study's
+    study = tmp_path / "study"
+    study.mkdir()
+    code = "0" * 64
+    (study / STUDY).write_text(json.dumps({**with_it, "mkl_intel_paths": True, CODE: code}))
+    with StudyLock(study) as lock:
+        claim(study, with_it, code, lock, training=True)  # no "holds another study"
 
 
 @pytest.mark.slow
@@ -221,7 +229,7 @@ def test_a_run_in_a_process_without_the_library_is_refused_before_writing(tmp_pa
     with pytest.raises(ValueError, match=f"^{OPTION}: this process ") as e:
         train(args)
     assert "runs without the library preloaded" in str(e.value)
-    assert f"({mkl_paths.library_path()} where follow-train built it)" in str(e.value)
+    assert f"(follow-train builds it at {mkl_paths.library_path()} on this machine)" in str(e.value)
     assert not run.exists()
 
 
