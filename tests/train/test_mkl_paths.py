@@ -194,15 +194,43 @@ def test_the_option_is_no_part_of_what_a_study_is(tmp_path: Path) -> None:
         claim(study, with_it, code, lock, training=True)  # no "holds another study"
 
 
-@pytest.mark.slow
-def test_the_ppo_searchs_trials_train_preloaded(tmp_path: Path) -> None:
-    out = tmp_path / "search"
-    argv = ["-m", "train.tune", OPTION, "--trials", "1", "--n-timesteps", "256", "--n-envs", "12"]
-    argv += ["--seeds", "1", "--scenarios", "straight", "--out", str(out)]
-    done = _run([sys.executable, *argv])
-    assert done.returncode == 0, done.stderr
-    (sessions,) = out.glob("trials/*/run/sessions.json")
-    assert json.loads(sessions.read_text(encoding="utf-8"))[-1]["mkl_intel_paths"] is True
+class _RanAgainError(Exception):
+    """Stands for the process being replaced."""
+
+
+def test_the_ppo_search_runs_again_preloaded_and_its_trials_ask_for_it(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # In this process: the search's command is run again (as follow-train's, tested above by a
+    # real command), and once preloaded its trials train with the option, so that each trial's
+    # run refuses to train without it (require_active).
+    import train.tune as tune
+
+    argv = [OPTION, "--trials", "1", "--n-timesteps", "256", "--n-envs", "12", "--seeds", "1"]
+    argv += ["--scenarios", "straight", "--out", str(tmp_path / "search")]
+    ran_again: list[list[str]] = []
+
+    def reexec(given: list[str]) -> None:
+        ran_again.append(list(given))
+        raise _RanAgainError
+
+    monkeypatch.setattr(mkl_paths, "active", lambda: False)
+    monkeypatch.setattr(mkl_paths, "reexec", reexec)
+    with pytest.raises(_RanAgainError):
+        tune.main(argv)
+    assert ran_again == [argv]
+    assert not (tmp_path / "search").exists()  # nothing written before it runs again
+    trials: list[Args] = []
+
+    def objective(base: Args, *rest: object) -> None:
+        trials.append(base)
+        raise _RanAgainError
+
+    monkeypatch.setattr(mkl_paths, "active", lambda: True)
+    monkeypatch.setattr(tune, "PPOObjective", objective)
+    with pytest.raises(_RanAgainError):
+        tune.main(argv)
+    assert trials[0].mkl_intel_paths is True
 
 
 def test_main_called_from_python_is_refused_not_replaced(
