@@ -106,8 +106,9 @@ def _actions(agent: str, out: Path, settings: dict[str, str]) -> dict[str, np.nd
 @pytest.mark.slow
 @pytest.mark.parametrize("agent", ["ppo", "ppo_mecanum"])
 def test_an_agent_acts_bit_for_bit_the_same_under_other_instruction_sets(
-    agent: str, tmp_path: Path
+    agent: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))  # the library, not the user's
     here = _actions(agent, tmp_path / "here.npz", {})
     moved: dict[str, float] = {}
     for name, settings in {**SETTINGS, **_intel_paths()}.items():
