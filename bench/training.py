@@ -22,7 +22,6 @@ Intel CPU it should be about 1x (not measured on one).
 from __future__ import annotations
 
 import json
-import os
 import subprocess
 import sys
 import tempfile
@@ -102,11 +101,10 @@ def _command_rate(hyperparams: Path, steps: int, folder: Path, *options: str) ->
     argv = ["--hyperparams", str(hyperparams), "--threads", "1", "--n-timesteps", str(steps)]
     argv += ["--eval-freq", never, "--checkpoint-freq", never, "--final-episodes", "0"]
     argv += ["--no-progress", "--out", str(out), *options]
-    env = {
-        k: v for k, v in os.environ.items() if k not in ("LD_PRELOAD", "PERSONFOLLOW_MKL_REEXEC")
-    }
+    from train.mkl_paths import plain_env
+
     done = subprocess.run(
-        [sys.executable, "-m", "train", *argv], env=env, capture_output=True, text=True
+        [sys.executable, "-m", "train", *argv], env=plain_env(), capture_output=True, text=True
     )
     if done.returncode != 0:
         raise RuntimeError(f"follow-train {' '.join(argv)}: {done.stderr.strip()}")

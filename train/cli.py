@@ -340,12 +340,10 @@ def _preload(ns: argparse.Namespace, argv: Sequence[str]) -> None:
     """With ``--mkl-intel-paths``, the same command again in place of this one with MKL's
     Intel code paths preloaded (:mod:`train.mkl_paths`), unless they are already: ``main``
     called from Python with other arguments than its process's is refused, not replaced."""
-    if not ns.mkl_intel_paths:
-        return
-    from train import mkl_paths
+    if ns.mkl_intel_paths:
+        from train.mkl_paths import ensure_preloaded
 
-    if not mkl_paths.active():
-        mkl_paths.reexec(argv)
+        ensure_preloaded(argv)
 
 
 def _no_held_out(runs_: Sequence[Path]) -> str:

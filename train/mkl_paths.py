@@ -49,10 +49,14 @@ __all__ = [
     "SOURCE",
     "SYMBOL",
     "active",
+    "c_compiler",
     "cache_dir",
     "check_platform",
+    "cpu_vendor",
+    "ensure_preloaded",
     "library_path",
     "mkl_code_path",
+    "plain_env",
     "preload_env",
     "reexec",
     "require_active",
@@ -78,6 +82,22 @@ def check_platform() -> None:
             f"{OPTION}: this is {sys.platform} on {machine}; the option applies on Linux on "
             "x86-64 only, where torch's CPU build carries Intel's MKL"
         )
+
+
+def cpu_vendor() -> str:
+    """The CPU's vendor as ``/proc/cpuinfo`` gives it (``GenuineIntel``, ``AuthenticAMD``), or
+    "" where there is none: what MKL's check asks."""
+    with contextlib.suppress(OSError):
+        for line in Path("/proc/cpuinfo").read_text(encoding="utf-8").splitlines():
+            if line.startswith("vendor_id"):
+                return line.split(":", 1)[1].strip()
+    return ""
+
+
+def c_compiler() -> str | None:
+    """The C compiler the library is built with: ``$CC`` (default ``cc``), else ``gcc``; None
+    if there is neither."""
+    return shutil.which(os.environ.get("CC", "cc")) or shutil.which("gcc")
 
 
 def cache_dir() -> Path:
@@ -125,7 +145,7 @@ def shim_library() -> Path:
         )
     if library.is_file() and _answers_yes(library):
         return library
-    compiler = shutil.which(os.environ.get("CC", "cc")) or shutil.which("gcc")
+    compiler = c_compiler()
     if compiler is None:
         raise ValueError(
             f"{OPTION}: no C compiler found (cc, gcc, or $CC) to build the one-line library "
@@ -193,12 +213,29 @@ def mkl_code_path() -> int | None:
     return None
 
 
+def plain_env(env: dict[str, str] | None = None) -> dict[str, str]:
+    """``env`` (default: this process's) without a preload, the option's or any, nor the mark
+    of a command run again: what a command that must choose for itself starts from."""
+    env = os.environ if env is None else env
+    return {k: v for k, v in env.items() if k not in ("LD_PRELOAD", _REEXEC)}
+
+
 def preload_env(library: Path, env: dict[str, str] | None = None) -> dict[str, str]:
     """``env`` (default: this process's) with ``library`` first in ``LD_PRELOAD``."""
     env = dict(os.environ if env is None else env)
     others = [p for p in env.get("LD_PRELOAD", "").replace(" ", ":").split(":") if p]
     env["LD_PRELOAD"] = ":".join([str(library), *(p for p in others if p != str(library))])
     return env
+
+
+def ensure_preloaded(argv: Sequence[str]) -> None:
+    """Return if MKL's Intel code paths are preloaded in this process (:func:`active`), else
+    run the command again with them (:func:`reexec`, which does not return).
+
+    :raises ValueError: as :func:`reexec`.
+    """
+    if not active():
+        reexec(argv)
 
 
 def reexec(argv: Sequence[str]) -> NoReturn:

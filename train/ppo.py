@@ -92,7 +92,7 @@ def _train(args: Args, command: str, lock: StudyLock) -> Path:
 
     from train import report
     from train import run as runs
-    from train.mkl_paths import mkl_code_path
+    from train.mkl_paths import mkl_code_path, require_active
 
     # -- Check every option and hyperparameter; build the envs and the model in memory -------
     if args.resume is not None:
@@ -104,8 +104,6 @@ def _train(args: Args, command: str, lock: StudyLock) -> Path:
         args, hp = check_new_run(args)
         where = f"{args.hyperparams} [{args.env_id}]"
     if args.mkl_intel_paths:  # never the generic paths for a run that asked for Intel's
-        from train.mkl_paths import require_active
-
         require_active()
     torch.set_num_threads(args.threads)
     venv, eval_env, model = _build(args, hp, where, model_path, stats_path, start_step)

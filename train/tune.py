@@ -261,10 +261,9 @@ def run(args: argparse.Namespace, argv: Sequence[str] | None = None) -> int:
     storage, _ = check_storage(args.storage, args.out)
     _check_out_owner(args.out, args.study)
     if args.mkl_intel_paths:  # after the options' own checks, before anything is written
-        from train import mkl_paths
+        from train.mkl_paths import ensure_preloaded
 
-        if not mkl_paths.active():
-            mkl_paths.reexec(sys.argv[1:] if argv is None else argv)
+        ensure_preloaded(sys.argv[1:] if argv is None else argv)
     objective = PPOObjective(base, args.out / "trials", tuple(variants), backend)
     n_envs = objective.n_envs()
     identity = {

@@ -23,7 +23,7 @@ import yaml
 
 from train import mkl_paths
 from train.cli import main
-from train.mkl_paths import OPTION, SOURCE, SYMBOL, preload_env, shim_library
+from train.mkl_paths import OPTION, SOURCE, SYMBOL, cpu_vendor, plain_env, preload_env, shim_library
 from train.options import Args as OptionArgs
 from train.ppo import Args, train
 from train.study_lock import StudyLock
@@ -45,7 +45,7 @@ try:
     mkl_paths.check_platform()
 except ValueError as e:
     pytest.skip(str(e), allow_module_level=True)
-if shutil.which(os.environ.get("CC", "cc")) is None and shutil.which("gcc") is None:
+if mkl_paths.c_compiler() is None:
     pytest.skip("no C compiler (cc, gcc) to build the library", allow_module_level=True)
 
 
@@ -59,9 +59,8 @@ def _cache(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
 
 
 def _clean_env(**extra: str) -> dict[str, str]:
-    """This process's environment without a preload (the option's or any)."""
-    dropped = ("LD_PRELOAD", "PERSONFOLLOW_MKL_REEXEC")
-    return {**{k: v for k, v in os.environ.items() if k not in dropped}, **extra}
+    """This process's environment without a preload (the option's or any), plus ``extra``."""
+    return {**plain_env(), **extra}
 
 
 def _run(argv: list[str], cwd: Path = ROOT, env: dict[str, str] | None = None) -> (
@@ -119,24 +118,17 @@ def test_the_lookup_finds_a_preloaded_library_wherever_it_lies(tmp_path: Path) -
         assert done.stdout.split() == ["True"], done.stderr
 
 
-def _cpu_vendor() -> str:
-    for line in Path("/proc/cpuinfo").read_text(encoding="utf-8").splitlines():
-        if line.startswith("vendor_id"):
-            return line.split(":", 1)[1].strip()
-    return ""
-
-
 def test_with_the_library_mkl_takes_another_path_than_its_generic_one() -> None:
     code = "from train.mkl_paths import mkl_code_path; print(mkl_code_path())"
     env = _clean_env(PYTHONPATH=str(ROOT))
     without = int(_run([sys.executable, "-c", code], env=env).stdout)
     with_it = int(_run([sys.executable, "-c", code], env=preload_env(shim_library(), env)).stdout)
     assert with_it > 0
-    if _cpu_vendor() == "GenuineIntel":
+    if cpu_vendor() == "GenuineIntel":
         assert without == with_it  # MKL's own check says Intel: nothing to change
     else:
         assert without == 0  # the generic path, which the library takes it off
-    print(f"{_cpu_vendor()}: MKL code path {without} without the library, {with_it} with it")
+    print(f"{cpu_vendor()}: MKL code path {without} without the library, {with_it} with it")
 
 
 def test_preload_env_puts_the_library_first_once() -> None:
@@ -164,7 +156,7 @@ def test_a_run_with_the_option_trains_preloaded_and_records_it(tmp_path: Path) -
     sessions = _sessions(run)
     assert [s["mkl_intel_paths"] for s in sessions] == [True, False]
     assert sessions[0]["mkl_code_path"] > 0
-    if _cpu_vendor() != "GenuineIntel":
+    if cpu_vendor() != "GenuineIntel":
         assert sessions[1]["mkl_code_path"] == 0
 
 

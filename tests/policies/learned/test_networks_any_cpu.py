@@ -14,8 +14,6 @@ agent acts the same with it as without.
 
 from __future__ import annotations
 
-import contextlib
-import os
 import subprocess
 import sys
 from pathlib import Path
@@ -23,7 +21,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from train.mkl_paths import preload_env, shim_library
+from train.mkl_paths import cpu_vendor, plain_env, preload_env, shim_library
 
 # Each stands for a CPU of another kind: one with AVX2 and no AVX-512, one older still, and
 # MKL's kernels for any x86-64 CPU (the one setting that moves MKL's kernels on an AMD CPU).
@@ -64,15 +62,6 @@ np.savez(sys.argv[2], wide=wide, narrow=narrow)
 """
 
 
-def _cpu_vendor() -> str:
-    """``vendor_id`` of /proc/cpuinfo (GenuineIntel, AuthenticAMD), or "" where there is none."""
-    with contextlib.suppress(OSError):
-        for line in Path("/proc/cpuinfo").read_text(encoding="utf-8").splitlines():
-            if line.startswith("vendor_id"):
-                return line.split(":", 1)[1].strip()
-    return ""
-
-
 def _intel_paths() -> dict[str, dict[str, str]]:
     """The fourth setting, where ``--mkl-intel-paths``'s library can be had: Linux on x86-64
     with a C compiler (the Makefile's machines); elsewhere the other three run alone."""
@@ -85,11 +74,7 @@ def _intel_paths() -> dict[str, dict[str, str]]:
 def _actions(agent: str, out: Path, settings: dict[str, str]) -> dict[str, np.ndarray]:
     # The machine's own kernels for "here": none of the settings' variables inherited (nor
     # a preload, which may be --mkl-intel-paths's library).
-    inherited = {
-        k: v
-        for k, v in os.environ.items()
-        if not k.startswith(("MKL_", "ATEN_")) and k != "LD_PRELOAD"
-    }
+    inherited = {k: v for k, v in plain_env().items() if not k.startswith(("MKL_", "ATEN_"))}
     env = {**inherited, **settings}
     root = Path(__file__).resolve().parents[3]
     subprocess.run(
@@ -121,7 +106,7 @@ def test_an_agent_acts_bit_for_bit_the_same_under_other_instruction_sets(
     # The library moves MKL's float32 kernels on a CPU that is not Intel's (2,705 of ppo's
     # 8,000 entries on an AMD EPYC), and none on an Intel one, whose kernels they are already.
     if "intel_paths" in moved:
-        if _cpu_vendor() == "GenuineIntel":
+        if cpu_vendor() == "GenuineIntel":
             assert moved["intel_paths"] == 0.0
         else:
             assert moved["intel_paths"] > 0.0
