@@ -127,13 +127,45 @@ def _answers_yes(library: Path) -> bool:
         return False
 
 
+def _check_trusted(path: Path) -> None:
+    """Refuse ``path`` (the library or its folder) unless this user owns it and no one else can
+    write it: whatever is in the file runs in every process the option starts, so a file another
+    user could have put or changed there is not loaded, not even to check it (ssh asks the same
+    of its keys). A path that does not exist passes.
+
+    :raises ValueError: naming the path, its owner or mode, and what to do.
+    """
+    try:
+        st = path.stat()
+    except (FileNotFoundError, NotADirectoryError):
+        return  # not there (yet): building it says what is wrong with the folder
+    except OSError as e:
+        raise ValueError(f"{OPTION}: cannot read {path}: {e}") from None
+    me = os.geteuid()
+    if st.st_uid != me:
+        raise ValueError(
+            f"{OPTION}: {path} belongs to user id {st.st_uid}, not to this user ({me}), and "
+            "would run in every process the option starts; remove it, or set XDG_CACHE_HOME "
+            "to a folder of your own"
+        )
+    if st.st_mode & 0o022:
+        raise ValueError(
+            f"{OPTION}: {path} can be written by other users (mode {st.st_mode & 0o777:#o}) "
+            f"and would run in every process the option starts; chmod go-w {path}, or remove "
+            "it to have it built again"
+        )
+
+
 def shim_library() -> Path:
     """The compiled library, compiled now if it is not there yet or does not load (to a
     temporary file renamed into place, so a second command never loads a half-written one).
+    The folder and the file must be this user's and writable by no one else
+    (:func:`_check_trusted`); a folder it creates is this user's alone (mode 0700).
 
     :raises ValueError: if this is not Linux on x86-64, the cache folder's path cannot stand in
-        ``LD_PRELOAD`` or cannot be written, there is no C compiler, or the compiler fails (the
-        message says which and gives its output).
+        ``LD_PRELOAD`` or cannot be written, the folder or the library is another user's or
+        writable by others, there is no C compiler, or the compiler fails (the message says
+        which and gives its output).
     """
     check_platform()
     library = library_path()
@@ -143,6 +175,8 @@ def shim_library() -> Path:
             f"{OPTION}: the library's folder {folder} has a space or a colon in its path, "
             "which LD_PRELOAD cannot hold; set XDG_CACHE_HOME to a folder without them"
         )
+    _check_trusted(folder)
+    _check_trusted(library)
     if library.is_file() and _answers_yes(library):
         return library
     compiler = c_compiler()
@@ -152,7 +186,7 @@ def shim_library() -> Path:
             "it preloads; install one (e.g. apt-get install gcc)"
         )
     try:
-        folder.mkdir(parents=True, exist_ok=True)
+        folder.mkdir(mode=0o700, parents=True, exist_ok=True)
         with tempfile.TemporaryDirectory(dir=folder) as tmp:
             source = Path(tmp) / "mkl_intel_paths.c"
             source.write_text(SOURCE, encoding="utf-8")
@@ -172,6 +206,7 @@ def shim_library() -> Path:
                     f"{OPTION}: {compiler} could not build {library.name} (exit status "
                     f"{done.returncode})" + (f": {output}" if output else "")
                 )
+            built.chmod(0o755)  # the compiler's output follows the umask, which may be 002
             os.replace(built, library)
     except OSError as e:
         raise ValueError(f"{OPTION}: cannot write the library into {folder}: {e}") from None

@@ -349,3 +349,55 @@ def test_beside_add_step_it_is_refused(tmp_path: Path) -> None:
         "follow-train: error: --mkl-intel-paths: --add-step trains nothing; it takes --step, "
         "--before and --force only"
     )
+
+
+def test_the_folder_is_the_users_alone_and_the_library_not_writable_by_others(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    old = os.umask(0o002)  # a user-private-group umask: group-writable files by default
+    try:
+        library = shim_library()
+    finally:
+        os.umask(old)
+    assert library.parent.stat().st_mode & 0o777 == 0o700
+    assert library.stat().st_mode & 0o777 == 0o755
+
+
+@pytest.mark.parametrize("which", ["library", "folder"])
+def test_a_cache_others_can_write_is_refused_before_anything_loads(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, which: str
+) -> None:
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    library = shim_library()
+    path = library if which == "library" else library.parent
+    path.chmod(0o777 if which == "folder" else 0o666)
+    loaded: list[Path] = []
+    monkeypatch.setattr(mkl_paths, "_answers_yes", lambda p: loaded.append(p) or True)
+    with pytest.raises(ValueError, match=f"^{OPTION}: ") as e:
+        shim_library()
+    mode = "0o777" if which == "folder" else "0o666"
+    assert str(e.value) == (
+        f"{OPTION}: {path} can be written by other users (mode {mode}) and would run in every "
+        f"process the option starts; chmod go-w {path}, or remove it to have it built again"
+    )
+    assert loaded == []  # not even loaded to check it
+    path.chmod(0o755)
+    assert shim_library() == library
+    assert loaded == [library]
+
+
+def test_a_library_of_another_user_is_refused(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    library = shim_library()
+    me = os.geteuid()
+    monkeypatch.setattr(mkl_paths.os, "geteuid", lambda: me + 1)
+    with pytest.raises(ValueError, match=f"^{OPTION}: ") as e:
+        shim_library()
+    assert str(e.value) == (
+        f"{OPTION}: {library.parent} belongs to user id {me}, not to this user ({me + 1}), and "
+        "would run in every process the option starts; remove it, or set XDG_CACHE_HOME to a "
+        "folder of your own"
+    )
