@@ -37,6 +37,7 @@ import hashlib
 import os
 import platform
 import shutil
+import stat
 import subprocess
 import sys
 import tempfile
@@ -127,45 +128,124 @@ def _answers_yes(library: Path) -> bool:
         return False
 
 
-def _check_trusted(path: Path) -> None:
-    """Refuse ``path`` (the library or its folder) unless this user owns it and no one else can
-    write it: whatever is in the file runs in every process the option starts, so a file another
-    user could have put or changed there is not loaded, not even to check it (ssh asks the same
-    of its keys). A path that does not exist passes.
+def _lstat(path: Path) -> os.stat_result | None:
+    """``os.lstat(path)``, or None where nothing is there.
 
-    :raises ValueError: naming the path, its owner or mode, and what to do.
+    :raises ValueError: where the path cannot be read (naming it).
     """
     try:
-        st = path.stat()
+        return os.lstat(path)
     except (FileNotFoundError, NotADirectoryError):
-        return  # not there (yet): building it says what is wrong with the folder
+        return None
     except OSError as e:
-        raise ValueError(f"{OPTION}: cannot read {path}: {e}") from None
+        raise ValueError(
+            f"{OPTION}: cannot read {path} ({e.strerror}); set XDG_CACHE_HOME to a folder of your "
+            "own"
+        ) from None
+
+
+def _refuse_owner(path: Path, uid: int) -> ValueError:
+    return ValueError(
+        f"{OPTION}: {path} belongs to user id {uid}, neither this user ({os.geteuid()}) nor "
+        "root, who could replace the library it preloads; set XDG_CACHE_HOME to a folder of "
+        "your own"
+    )
+
+
+def _check_above(folder: Path) -> None:
+    """The folders above ``folder``, as written and as resolved, and the symbolic links on the
+    way: each this user's or root's, and a folder writable by other users only with the sticky
+    bit (as ``/tmp``), so that no one else can rename the cache folder away and put another in
+    its place (ssh checks the path to its keys so).
+
+    :raises ValueError: naming the first path that fails, its owner or mode.
+    """
     me = os.geteuid()
-    if st.st_uid != me:
-        raise ValueError(
-            f"{OPTION}: {path} belongs to user id {st.st_uid}, not to this user ({me}), and "
-            "would run in every process the option starts; remove it, or set XDG_CACHE_HOME "
-            "to a folder of your own"
-        )
+    seen: set[Path] = set()
+    for path in [*folder.parents, *folder.resolve().parents]:
+        if path in seen:
+            continue
+        seen.add(path)
+        st = _lstat(path)
+        if st is None:
+            continue
+        if st.st_uid not in (me, 0):
+            raise _refuse_owner(path, st.st_uid)
+        if stat.S_ISDIR(st.st_mode) and st.st_mode & 0o022 and not st.st_mode & stat.S_ISVTX:
+            raise ValueError(
+                f"{OPTION}: {path} can be written by other users (mode "
+                f"{stat.S_IMODE(st.st_mode):#o}, no sticky bit), who could replace the library "
+                "in a folder below it; set XDG_CACHE_HOME to a folder only you can write"
+            )
+
+
+def _check_folder(folder: Path) -> None:
+    """The cache folder, if it is there: a folder (or a link to one that this user or root
+    owns), this user's or root's, and writable by no one else. This user's folder writable by
+    the group or others (one an earlier version made under umask 002, or the compiled kernels'
+    cache beside it) loses those rights here.
+
+    :raises ValueError: naming the folder and what is wrong.
+    """
+    link = _lstat(folder)
+    if link is None:
+        return
+    me = os.geteuid()
+    if stat.S_ISLNK(link.st_mode) and link.st_uid not in (me, 0):
+        raise _refuse_owner(folder, link.st_uid)
+    st = _lstat(folder.resolve())
+    if st is None or not stat.S_ISDIR(st.st_mode):
+        raise ValueError(f"{OPTION}: {folder} is not a folder; remove it")
+    if st.st_uid not in (me, 0):
+        raise _refuse_owner(folder, st.st_uid)
     if st.st_mode & 0o022:
-        raise ValueError(
-            f"{OPTION}: {path} can be written by other users (mode {st.st_mode & 0o777:#o}) "
-            f"and would run in every process the option starts; chmod go-w {path}, or remove "
-            "it to have it built again"
-        )
+        if st.st_uid != me:
+            raise ValueError(
+                f"{OPTION}: {folder} belongs to root and can be written by other users (mode "
+                f"{stat.S_IMODE(st.st_mode):#o}); set XDG_CACHE_HOME to a folder of your own"
+            )
+        os.chmod(folder.resolve(), stat.S_IMODE(st.st_mode) & ~0o022)
+
+
+def _library_usable(library: Path) -> bool:
+    """Whether the library is there to be loaded: this user's or root's and writable by no one
+    else. One of this user's that others could write (an earlier version built it under umask
+    002) is removed, unloaded, to be built again.
+
+    :raises ValueError: for a library another user owns, or root's writable by others.
+    """
+    st = _lstat(library)
+    if st is None:
+        return False
+    me = os.geteuid()
+    if st.st_uid not in (me, 0):
+        raise _refuse_owner(library, st.st_uid)
+    if not stat.S_ISREG(st.st_mode):
+        raise ValueError(f"{OPTION}: {library} is not a file; remove it")
+    if st.st_mode & 0o022:
+        if st.st_uid != me:
+            raise ValueError(
+                f"{OPTION}: {library} belongs to root and can be written by other users (mode "
+                f"{stat.S_IMODE(st.st_mode):#o}); set XDG_CACHE_HOME to a folder of your own"
+            )
+        library.unlink()
+        return False
+    return True
 
 
 def shim_library() -> Path:
     """The compiled library, compiled now if it is not there yet or does not load (to a
     temporary file renamed into place, so a second command never loads a half-written one).
-    The folder and the file must be this user's and writable by no one else
-    (:func:`_check_trusted`); a folder it creates is this user's alone (mode 0700).
+    Whatever is in the file runs in every process the option starts, so a library another user
+    could have put there or changed is never loaded, not even to check it: the folders above
+    (:func:`_check_above`), the folder (:func:`_check_folder`, again once it is made) and the
+    file (:func:`_library_usable`, again once it is built) must be this user's or root's, and
+    writable by no one else; a folder it makes is this user's alone (mode 0700).
 
     :raises ValueError: if this is not Linux on x86-64, the cache folder's path cannot stand in
-        ``LD_PRELOAD`` or cannot be written, the folder or the library is another user's or
-        writable by others, there is no C compiler, or the compiler fails (the message says
-        which and gives its output).
+        ``LD_PRELOAD`` or cannot be written, a folder on its path or the library is another
+        user's or writable by others, there is no C compiler, or the compiler fails (the message
+        says which and gives its output).
     """
     check_platform()
     library = library_path()
@@ -175,9 +255,9 @@ def shim_library() -> Path:
             f"{OPTION}: the library's folder {folder} has a space or a colon in its path, "
             "which LD_PRELOAD cannot hold; set XDG_CACHE_HOME to a folder without them"
         )
-    _check_trusted(folder)
-    _check_trusted(library)
-    if library.is_file() and _answers_yes(library):
+    _check_above(folder)
+    _check_folder(folder)
+    if _library_usable(library) and _answers_yes(library):
         return library
     compiler = c_compiler()
     if compiler is None:
@@ -187,6 +267,7 @@ def shim_library() -> Path:
         )
     try:
         folder.mkdir(mode=0o700, parents=True, exist_ok=True)
+        _check_folder(folder)  # whoever made it: another user may have, since the check above
         with tempfile.TemporaryDirectory(dir=folder) as tmp:
             source = Path(tmp) / "mkl_intel_paths.c"
             source.write_text(SOURCE, encoding="utf-8")
@@ -210,6 +291,8 @@ def shim_library() -> Path:
             os.replace(built, library)
     except OSError as e:
         raise ValueError(f"{OPTION}: cannot write the library into {folder}: {e}") from None
+    if not _library_usable(library):  # replaced since: another user can write the folder
+        raise ValueError(f"{OPTION}: {library} changed while it was built; run the command again")
     return library
 
 

@@ -351,10 +351,36 @@ def test_beside_add_step_it_is_refused(tmp_path: Path) -> None:
     )
 
 
+# The trust checks: whatever is in the library runs in every process the option starts.
+
+
+def _as_owned_by(monkeypatch: pytest.MonkeyPatch, path: Path, uid: int) -> None:
+    """``os.lstat`` reports ``path`` as owned by ``uid`` (the tests cannot chown as any user)."""
+    real = os.lstat
+
+    def lstat(p: os.PathLike[str] | str, *args: object, **kwargs: object) -> os.stat_result:
+        st = real(p, *args, **kwargs)  # type: ignore[arg-type]
+        if Path(p) != path:
+            return st
+        fields = list(st[:10])
+        fields[4] = uid  # st_uid
+        return os.stat_result(fields)
+
+    monkeypatch.setattr(mkl_paths.os, "lstat", lstat)
+
+
+def _not_loaded(monkeypatch: pytest.MonkeyPatch) -> list[Path]:
+    """The libraries ``shim_library`` loads to check them, from now on."""
+    loaded: list[Path] = []
+    real = mkl_paths._answers_yes
+    monkeypatch.setattr(mkl_paths, "_answers_yes", lambda p: loaded.append(p) or real(p))
+    return loaded
+
+
 def test_the_folder_is_the_users_alone_and_the_library_not_writable_by_others(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
     old = os.umask(0o002)  # a user-private-group umask: group-writable files by default
     try:
         library = shim_library()
@@ -364,40 +390,137 @@ def test_the_folder_is_the_users_alone_and_the_library_not_writable_by_others(
     assert library.stat().st_mode & 0o777 == 0o755
 
 
+def test_an_earlier_versions_group_writable_cache_is_mended(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Built under umask 002 before the checks: the folder loses the group's write, and the
+    library, which the group could have changed, is built again without being loaded."""
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    library = shim_library()
+    library.parent.chmod(0o775)
+    library.chmod(0o775)
+    old = tmp_path / "old.so"
+    os.link(library, old)  # holds the old file, so that the new one cannot reuse its inode
+    loaded = _not_loaded(monkeypatch)
+    assert shim_library() == library
+    assert library.parent.stat().st_mode & 0o777 == 0o755
+    assert library.stat().st_mode & 0o777 == 0o755
+    assert not library.samefile(old)  # a new file
+    assert old.stat().st_nlink == 1
+    assert loaded == []  # the new one is trusted as built; the old one never loaded
+
+
 @pytest.mark.parametrize("which", ["library", "folder"])
-def test_a_cache_others_can_write_is_refused_before_anything_loads(
+def test_a_cache_of_another_user_is_refused_before_anything_loads(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, which: str
 ) -> None:
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
     library = shim_library()
     path = library if which == "library" else library.parent
-    path.chmod(0o777 if which == "folder" else 0o666)
-    loaded: list[Path] = []
-    monkeypatch.setattr(mkl_paths, "_answers_yes", lambda p: loaded.append(p) or True)
+    other = os.geteuid() + 1
+    _as_owned_by(monkeypatch, path, other)
+    loaded = _not_loaded(monkeypatch)
     with pytest.raises(ValueError, match=f"^{OPTION}: ") as e:
         shim_library()
-    mode = "0o777" if which == "folder" else "0o666"
     assert str(e.value) == (
-        f"{OPTION}: {path} can be written by other users (mode {mode}) and would run in every "
-        f"process the option starts; chmod go-w {path}, or remove it to have it built again"
+        f"{OPTION}: {path} belongs to user id {other}, neither this user ({os.geteuid()}) nor "
+        "root, who could replace the library it preloads; set XDG_CACHE_HOME to a folder of "
+        "your own"
     )
-    assert loaded == []  # not even loaded to check it
-    path.chmod(0o755)
-    assert shim_library() == library
-    assert loaded == [library]
+    assert loaded == []
+    assert library.is_file()  # another user's file is left alone
 
 
-def test_a_library_of_another_user_is_refused(
+def test_a_folder_above_that_others_can_write_is_refused_unless_sticky(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    above = tmp_path / "shared"
+    above.mkdir()
+    above.chmod(0o777)
+    monkeypatch.setenv("XDG_CACHE_HOME", str(above / "cache"))
+    with pytest.raises(ValueError, match=f"^{OPTION}: ") as e:
+        shim_library()
+    assert str(e.value) == (
+        f"{OPTION}: {above} can be written by other users (mode 0o777, no sticky bit), who could "
+        "replace the library in a folder below it; set XDG_CACHE_HOME to a folder only you can "
+        "write"
+    )
+    assert list(above.iterdir()) == []  # nothing built
+    above.chmod(0o1777)  # as /tmp: no one renames another's folder away
+    assert shim_library().is_file()
+
+
+def test_a_folder_above_of_another_user_is_refused(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    above = tmp_path / "theirs"
+    above.mkdir()
+    monkeypatch.setenv("XDG_CACHE_HOME", str(above))
+    other = os.geteuid() + 1
+    _as_owned_by(monkeypatch, above, other)
+    with pytest.raises(ValueError, match=rf"^{OPTION}: {above} belongs to user id {other},"):
+        shim_library()
+    assert list(above.iterdir()) == []
+
+
+def test_a_link_of_another_user_on_the_way_is_refused(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    real = tmp_path / "real"
+    real.mkdir()
+    link = tmp_path / "link"
+    link.symlink_to(real)
+    monkeypatch.setenv("XDG_CACHE_HOME", str(link))
+    assert shim_library().parent == link / "personfollow"  # this user's link: followed
+    other = os.geteuid() + 1
+    _as_owned_by(monkeypatch, link, other)
+    with pytest.raises(ValueError, match=rf"^{OPTION}: {link} belongs to user id {other},"):
+        shim_library()
+
+
+def test_a_folder_made_by_another_user_meanwhile_is_not_built_into(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Between the first check and ``mkdir``, another user makes the folder: checked again."""
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    folder = tmp_path / "personfollow"
+    other = os.geteuid() + 1
+    real_compiler = mkl_paths.c_compiler
+
+    def compiler_after_the_other_user() -> str | None:
+        folder.mkdir()
+        folder.chmod(0o777)
+        _as_owned_by(monkeypatch, folder, other)
+        return real_compiler()
+
+    monkeypatch.setattr(mkl_paths, "c_compiler", compiler_after_the_other_user)
+    with pytest.raises(ValueError, match=rf"^{OPTION}: {folder} belongs to user id {other},"):
+        shim_library()
+    assert list(folder.iterdir()) == []  # nothing built into it
+
+
+def test_a_cache_path_that_is_a_file_says_so(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
-    library = shim_library()
-    me = os.geteuid()
-    monkeypatch.setattr(mkl_paths.os, "geteuid", lambda: me + 1)
+    (tmp_path / "personfollow").write_text("not a folder", encoding="utf-8")
     with pytest.raises(ValueError, match=f"^{OPTION}: ") as e:
         shim_library()
-    assert str(e.value) == (
-        f"{OPTION}: {library.parent} belongs to user id {me}, not to this user ({me + 1}), and "
-        "would run in every process the option starts; remove it, or set XDG_CACHE_HOME to a "
-        "folder of your own"
+    assert str(e.value) == f"{OPTION}: {tmp_path / 'personfollow'} is not a folder; remove it"
+
+
+def test_follow_train_refuses_an_untrusted_cache_in_one_line(tmp_path: Path) -> None:
+    above = tmp_path / "shared"
+    above.mkdir()
+    above.chmod(0o777)
+    out = tmp_path / "run"
+    done = _follow_train(
+        *TINY, "--out", str(out), OPTION, env=_clean_env(XDG_CACHE_HOME=str(above / "cache"))
     )
+    assert done.returncode == 2, done.stderr
+    assert done.stderr.count("\n") == 1, done.stderr
+    assert done.stderr.startswith(
+        f"follow-train: error: {OPTION}: {above} can be written by other users (mode 0o777, "
+    ), done.stderr
+    assert not out.exists()
+    assert list(above.iterdir()) == []
