@@ -152,6 +152,13 @@ def _refuse_owner(path: Path, uid: int) -> ValueError:
     )
 
 
+def _refuse_roots(path: Path, mode: int) -> ValueError:
+    return ValueError(
+        f"{OPTION}: {path} belongs to root and can be written by other users (mode "
+        f"{stat.S_IMODE(mode):#o}); set XDG_CACHE_HOME to a folder of your own"
+    )
+
+
 def _check_above(folder: Path) -> None:
     """The folders above ``folder``, as written and as resolved, and the symbolic links on the
     way: each this user's or root's, and a folder writable by other users only with the sticky
@@ -200,11 +207,15 @@ def _check_folder(folder: Path) -> None:
         raise _refuse_owner(folder, st.st_uid)
     if st.st_mode & 0o022:
         if st.st_uid != me:
+            raise _refuse_roots(folder, st.st_mode)
+        try:
+            os.chmod(folder.resolve(), stat.S_IMODE(st.st_mode) & ~0o022)
+        except OSError as e:
             raise ValueError(
-                f"{OPTION}: {folder} belongs to root and can be written by other users (mode "
-                f"{stat.S_IMODE(st.st_mode):#o}); set XDG_CACHE_HOME to a folder of your own"
-            )
-        os.chmod(folder.resolve(), stat.S_IMODE(st.st_mode) & ~0o022)
+                f"{OPTION}: {folder} can be written by other users (mode "
+                f"{stat.S_IMODE(st.st_mode):#o}) and cannot be made yours alone ({e.strerror}); "
+                "set XDG_CACHE_HOME to a folder of your own"
+            ) from None
 
 
 def _library_usable(library: Path) -> bool:
@@ -224,11 +235,14 @@ def _library_usable(library: Path) -> bool:
         raise ValueError(f"{OPTION}: {library} is not a file; remove it")
     if st.st_mode & 0o022:
         if st.st_uid != me:
+            raise _refuse_roots(library, st.st_mode)
+        try:
+            library.unlink()
+        except OSError as e:
             raise ValueError(
-                f"{OPTION}: {library} belongs to root and can be written by other users (mode "
-                f"{stat.S_IMODE(st.st_mode):#o}); set XDG_CACHE_HOME to a folder of your own"
-            )
-        library.unlink()
+                f"{OPTION}: {library} can be written by other users (mode "
+                f"{stat.S_IMODE(st.st_mode):#o}) and cannot be removed ({e.strerror}); remove it"
+            ) from None
         return False
     return True
 

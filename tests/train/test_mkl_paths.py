@@ -354,13 +354,14 @@ def test_beside_add_step_it_is_refused(tmp_path: Path) -> None:
 # The trust checks: whatever is in the library runs in every process the option starts.
 
 
-def _as_owned_by(monkeypatch: pytest.MonkeyPatch, path: Path, uid: int) -> None:
-    """``os.lstat`` reports ``path`` as owned by ``uid`` (the tests cannot chown as any user)."""
+def _as_owned_by(monkeypatch: pytest.MonkeyPatch, path: Path | None, uid: int) -> None:
+    """``os.lstat`` reports ``path`` (every path: None) as owned by ``uid`` (the tests cannot
+    chown as any user)."""
     real = os.lstat
 
     def lstat(p: os.PathLike[str] | str, *args: object, **kwargs: object) -> os.stat_result:
         st = real(p, *args, **kwargs)  # type: ignore[arg-type]
-        if Path(p) != path:
+        if path is not None and Path(p) != path:
             return st
         fields = list(st[:10])
         fields[4] = uid  # st_uid
@@ -375,6 +376,13 @@ def _not_loaded(monkeypatch: pytest.MonkeyPatch) -> list[Path]:
     real = mkl_paths._answers_yes
     monkeypatch.setattr(mkl_paths, "_answers_yes", lambda p: loaded.append(p) or real(p))
     return loaded
+
+
+def _refusal() -> str:
+    """The one-line message ``shim_library`` refuses with."""
+    with pytest.raises(ValueError, match=f"^{OPTION}: ") as e:
+        shim_library()
+    return str(e.value)
 
 
 def test_the_folder_is_the_users_alone_and_the_library_not_writable_by_others(
@@ -420,15 +428,35 @@ def test_a_cache_of_another_user_is_refused_before_anything_loads(
     other = os.geteuid() + 1
     _as_owned_by(monkeypatch, path, other)
     loaded = _not_loaded(monkeypatch)
-    with pytest.raises(ValueError, match=f"^{OPTION}: ") as e:
-        shim_library()
-    assert str(e.value) == (
+    assert _refusal() == (
         f"{OPTION}: {path} belongs to user id {other}, neither this user ({os.geteuid()}) nor "
         "root, who could replace the library it preloads; set XDG_CACHE_HOME to a folder of "
         "your own"
     )
     assert loaded == []
     assert library.is_file()  # another user's file is left alone
+
+
+@pytest.mark.parametrize("which", ["library", "folder"])
+def test_roots_cache_is_used_but_not_if_others_can_write_it(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, which: str
+) -> None:
+    """A cache root built (in an image, say) serves every user; one others can write does not,
+    and is not this user's to mend."""
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    library = shim_library()
+    _as_owned_by(monkeypatch, None, 0)  # every path root's
+    monkeypatch.setattr(mkl_paths.os, "geteuid", lambda: 4321)
+    assert shim_library() == library
+    path = library if which == "library" else library.parent
+    path.chmod(0o775)
+    loaded = _not_loaded(monkeypatch)
+    assert _refusal() == (
+        f"{OPTION}: {path} belongs to root and can be written by other users (mode 0o775); set "
+        "XDG_CACHE_HOME to a folder of your own"
+    )
+    assert loaded == []
+    assert path.stat().st_mode & 0o777 == 0o775  # left as it was
 
 
 def test_a_folder_above_that_others_can_write_is_refused_unless_sticky(
@@ -438,9 +466,7 @@ def test_a_folder_above_that_others_can_write_is_refused_unless_sticky(
     above.mkdir()
     above.chmod(0o777)
     monkeypatch.setenv("XDG_CACHE_HOME", str(above / "cache"))
-    with pytest.raises(ValueError, match=f"^{OPTION}: ") as e:
-        shim_library()
-    assert str(e.value) == (
+    assert _refusal() == (
         f"{OPTION}: {above} can be written by other users (mode 0o777, no sticky bit), who could "
         "replace the library in a folder below it; set XDG_CACHE_HOME to a folder only you can "
         "write"
@@ -504,9 +530,7 @@ def test_a_cache_path_that_is_a_file_says_so(
 ) -> None:
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
     (tmp_path / "personfollow").write_text("not a folder", encoding="utf-8")
-    with pytest.raises(ValueError, match=f"^{OPTION}: ") as e:
-        shim_library()
-    assert str(e.value) == f"{OPTION}: {tmp_path / 'personfollow'} is not a folder; remove it"
+    assert _refusal() == f"{OPTION}: {tmp_path / 'personfollow'} is not a folder; remove it"
 
 
 def test_follow_train_refuses_an_untrusted_cache_in_one_line(tmp_path: Path) -> None:
