@@ -305,7 +305,7 @@ def shim_library() -> Path:
             os.replace(built, library)
     except OSError as e:
         raise ValueError(f"{OPTION}: cannot write the library into {folder}: {e}") from None
-    if not _library_usable(library):  # replaced since: another user can write the folder
+    if not _library_usable(library):  # as any library the cache gives: checked where it lies
         raise ValueError(f"{OPTION}: {library} changed while it was built; run the command again")
     return library
 
