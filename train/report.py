@@ -94,7 +94,8 @@ def plot_learning_curve(run: Path, path: Path, title: str = "PPO on PersonFollow
     ax.set_ylabel("episode return (env reward)")
     ax.set_title(title)
     ax.grid(alpha=0.3)
-    ax.legend(loc="lower right", fontsize=8)
+    if ax.get_legend_handles_labels()[0]:  # a run too short to end an episode has no line
+        ax.legend(loc="lower right", fontsize=8)
     fig.tight_layout()
     with atomic_path(path) as tmp:
         fig.savefig(tmp)
