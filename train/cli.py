@@ -99,6 +99,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", type=path_option, help="run folder (default: runs/<algo>-<timestamp>)")
     p.add_argument("--resume", type=path_option, metavar="RUN_DIR", help="continue this run")
     p.add_argument(
+        "--trained-agent",
+        type=path_option,
+        metavar="AGENT",
+        help="a new run that starts from this agent's weights and normalisation (a run or "
+        "export folder, a .zip; an ensemble with --seeds: seed k from its member seed-<k>): "
+        "without --hyperparams, with the agent's own hyperparameters, scenarios and algorithm "
+        "(train.trained_agent)",
+    )
+    p.add_argument(
         "--export",
         type=path_option,
         metavar="DIR",

@@ -8,6 +8,7 @@ run or a resume without building or writing anything, so that :func:`train.ppo.t
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -19,6 +20,13 @@ from follow_env.tasks import task_for_env
 from train.algos import DEFAULT_ALGO, algo
 from train.config import ConfigError, Hyperparams, load_hyperparams, parse_hyperparams, sole_section
 from train.export import FORCE_ALONE_ERROR, check_export
+from train.trained_agent import (
+    TrainedAgent,
+    check_fits,
+    check_task,
+    defaults_from,
+    read_trained_agent,
+)
 
 __all__ = [
     "MAX_SEED",
@@ -30,6 +38,7 @@ __all__ = [
     "check_folder_option",
     "check_new_run",
     "check_resume",
+    "hyperparams_place",
     "run_hyperparams",
 ]
 
@@ -62,6 +71,7 @@ class Args:
     runs: Path = Path("runs")
     out: Path | None = None  # the run folder (default: runs/<algo>-<timestamp>)
     resume: Path | None = None  # continue this run from its newest checkpoint
+    trained_agent: Path | None = None  # start from this agent's weights (train.trained_agent)
     export: Path | None = None  # also copy the finished agent into this folder
     force: bool = False  # --export may write into a folder it did not make (train.export)
     progress: bool = True
@@ -79,25 +89,45 @@ def check_new_run(args: Args, *, clearing: bool = False) -> tuple[Args, Hyperpar
         hyperparameters.
     :raises ValueError: naming the option or YAML key, its value and what it may be.
     """
+    agent = None
+    if args.trained_agent is not None:  # its algorithm (and without a file, its env and lanes)
+        agent = read_trained_agent(args.trained_agent)
+        args = dataclasses.replace(args, **defaults_from(agent, args), trained_agent=agent.folder)
     args = _with_defaults(args)
     args = dataclasses.replace(args, compare_with=absolute_compare_with(args.compare_with))
     _check_options(args, run=None, clearing=clearing)
     if args.n_envs is not None:  # before the file: its batch size may not fit either
         _check_lanes(args.n_envs, args.scenarios)
-    hp = run_hyperparams(args)
+    if agent is not None:
+        check_task(agent, args.env_id)
+    hp = run_hyperparams(args, agent)
+    if agent is not None:
+        check_fits(agent, hp, hyperparams_place(args))
     _check_against_hyperparams(args, hp)
     return args, hp
 
 
-def run_hyperparams(args: Args) -> Hyperparams:
-    """The hyperparameters a new run with ``args`` trains with: its file's section with the
-    command line's ``--n-timesteps`` and ``--n-envs``, checked.
+def run_hyperparams(args: Args, agent: TrainedAgent | None = None) -> Hyperparams:
+    """The hyperparameters a new run with ``args`` trains with: its file's section (a run from
+    a trained agent without ``--hyperparams``: the agent's own, ``agent`` read already or read
+    here) with the command line's ``--n-timesteps`` and ``--n-envs``, checked.
 
     :raises ValueError: naming the file or the key.
     """
     args = _with_defaults(args)
     given = {k: v for k in ("n_timesteps", "n_envs") if (v := getattr(args, k)) is not None}
+    if args.hyperparams is None:  # only a run from a trained agent leaves it to the agent
+        agent = agent or read_trained_agent(args.trained_agent)
+        saved = copy.deepcopy(agent.hyperparams)
+        return parse_hyperparams(saved, where=agent.where, overrides=given, algo=args.algo)
     return load_hyperparams(args.hyperparams, args.env_id, overrides=given, algo=args.algo)
+
+
+def hyperparams_place(args: Args) -> str:
+    """Where a new run's hyperparameters come from, as error messages name it."""
+    if args.hyperparams is None and args.trained_agent is not None:
+        return f"{args.trained_agent} (config.yaml [hyperparams])"
+    return f"{args.hyperparams} [{args.env_id}]"
 
 
 def check_resume(args: Args) -> tuple[Args, Hyperparams, dict[str, Any], str, tuple]:
@@ -178,9 +208,11 @@ def _with_defaults(args: Args) -> Args:
     section) and the scenarios (all of the task's) filled in where they were left to their
     defaults."""
     learner = algo(DEFAULT_ALGO if args.algo is None else args.algo)
-    hyperparams = learner.hyperparams if args.hyperparams is None else args.hyperparams
+    hyperparams = args.hyperparams
+    if hyperparams is None and args.trained_agent is None:  # a trained agent's: its own
+        hyperparams = learner.hyperparams
     env_id = args.env_id
-    if env_id is None:
+    if env_id is None and hyperparams is not None:
         try:
             env_id = sole_section(hyperparams)
         except ConfigError as e:
@@ -337,7 +369,7 @@ def args_from_dict(saved: dict[str, Any], *, where: str = "config.yaml") -> Args
         if name not in fields:
             continue
         try:
-            if name in ("hyperparams", "runs"):
+            if name in ("hyperparams", "runs", "trained_agent") and value is not None:
                 value = Path(value)
             elif name == "scenarios":
                 value = tuple(value)

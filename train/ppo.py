@@ -7,6 +7,7 @@
     follow-train --algo recurrent_ppo             # sb3-contrib's RecurrentPPO (LSTM policy)
     follow-train --n-timesteps 20000 --out runs/ppo-smoke
     follow-train --resume runs/ppo-<timestamp>    # continue from the newest checkpoint
+    follow-train --trained-agent agents/mine      # a new run from an agent's weights
     follow-train --export agents/mine             # also copy the agent there (train.export)
 
 (also ``python -m train``). Read top-down: :class:`~train.options.Args` holds every option
@@ -40,8 +41,17 @@ from follow_env.sim.checks import one_line
 from train.algos import ALGOS, DEFAULT_ALGO, load_model, new_model
 from train.config import ConfigError, Hyperparams, check_action_fit, policy_class
 from train.export import AGENT_FILES, EXPORT_EXTRAS, export_agent
-from train.options import MAX_SEED, MAX_THREADS, Args, args_to_dict, check_new_run, check_resume
+from train.options import (
+    MAX_SEED,
+    MAX_THREADS,
+    Args,
+    args_to_dict,
+    check_new_run,
+    check_resume,
+    hyperparams_place,
+)
 from train.study_lock import StudyLock
+from train.trained_agent import TrainedAgent, check_spaces, read_trained_agent, record, start_from
 
 __all__ = [
     "AGENT_FILES",
@@ -102,11 +112,16 @@ def _train(args: Args, command: str, lock: StudyLock) -> Path:
     else:
         run, saved, model_path, stats_path, start_step = None, None, None, None, 0
         args, hp = check_new_run(args)
-        where = f"{args.hyperparams} [{args.env_id}]"
+        where = hyperparams_place(args)
     if args.mkl_intel_paths:  # never the generic paths for a run that asked for Intel's
         require_active()
     torch.set_num_threads(args.threads)
-    venv, eval_env, model = _build(args, hp, where, model_path, stats_path, start_step)
+    agent = None
+    if saved is None and args.trained_agent is not None:
+        agent = read_trained_agent(args.trained_agent)
+        stats_path = agent.normalization
+    venv, eval_env, model = _build(args, hp, where, model_path, stats_path, start_step, agent)
+    started_from = None if agent is None else record(agent, start_from(model, agent))
 
     # -- The run folder, now that everything checked out -------------------------------------
     # The folders this run makes (its own, and the missing parents of --out or --runs),
@@ -121,7 +136,7 @@ def _train(args: Args, command: str, lock: StudyLock) -> Path:
     lock.take(run)  # before anything is written (a refusal removes nothing: it is another's)
     try:
         if saved is None:
-            runs.write_config(run, _resolved_config(args, hp, venv, command))
+            runs.write_config(run, _resolved_config(args, hp, venv, command, started_from))
         else:
             runs.remove_stale_scratch(run)
             if args.n_timesteps is not None:  # a longer run: the saved total follows
@@ -243,9 +258,11 @@ def _build(
     model_path: Path | None,
     stats_path: Path | None,
     start_step: int,
+    agent: TrainedAgent | None = None,
 ) -> tuple[Any, Any, Any]:
     """The training env, the held-out env and the model (``args.algo``'s), in memory (nothing
-    is written).
+    is written). A run from a trained ``agent`` starts from its statistics (``stats_path``) and
+    its view is checked to fit the agent's; its weights are the caller's to load.
 
     The wrappers and SB3 check their own arguments here, so a value they refuse is reported
     as a bad hyperparameter before the run folder exists.
@@ -261,6 +278,9 @@ def _build(
         train_base = base_env(args.scenarios, lanes, args.env_config, args.env_id, env_kwargs)
         check_action_fit(hp, env_action_names(train_base), where=where)
         venv = agent_env(train_base, hp, "train", normalization=normalization)
+        if agent is not None:
+            check_spaces(agent, venv)
+            _discount_as_this_run(venv, hp)
         eval_env = agent_env(
             base_env(args.scenarios, args.eval_episodes, args.env_config, args.env_id, env_kwargs),
             hp,
@@ -275,7 +295,8 @@ def _build(
         if normalization is None:
             raise
         problem = f"{type(e).__name__}: {e}"
-        raise ValueError(f"{normalization}: cannot resume from it ({problem})") from None
+        verb = "resume" if agent is None else "start"
+        raise ValueError(f"{normalization}: cannot {verb} from it ({problem})") from None
     learner = ALGOS[args.algo]
     if model_path is not None:
         model = load_model(learner, model_path, venv)
@@ -291,6 +312,18 @@ def _build(
     return venv, eval_env, new_model(learner, policy, hp, venv, args.seed, where=where)
 
 
+def _discount_as_this_run(venv: Any, hp: Hyperparams) -> None:
+    """The reward normalisation of a run from a trained agent discounts with this run's gamma:
+    ``VecNormalize.load`` keeps the agent's (rl-zoo3's rule: ``normalize.gamma``, else the
+    algorithm's ``gamma``, else 0.99), which a run may change."""
+    from stable_baselines3.common.vec_env import unwrap_vec_normalize
+
+    normalize = unwrap_vec_normalize(venv)
+    if normalize is not None:
+        kwargs = hp["normalize"] if isinstance(hp["normalize"], dict) else {}
+        normalize.gamma = kwargs.get("gamma", hp.get("gamma", 0.99))
+
+
 def _remove_new_run(run: Path, made: list[Path]) -> None:
     """Remove what this session wrote into a new run folder, and the folders it made (``run``
     and the missing parents of ``--out`` or ``--runs``, deepest first) once they are empty."""
@@ -302,8 +335,11 @@ def _remove_new_run(run: Path, made: list[Path]) -> None:
     remove_empty_folders(made)
 
 
-def _resolved_config(args: Args, hp: Hyperparams, venv: Any, command: str) -> dict[str, Any]:
-    """What ``config.yaml`` holds: enough to rebuild the agent's env and to resume."""
+def _resolved_config(
+    args: Args, hp: Hyperparams, venv: Any, command: str, started_from: dict[str, Any] | None
+) -> dict[str, Any]:
+    """What ``config.yaml`` holds: enough to rebuild the agent's env and to resume, and the
+    trained agent the run started from (:func:`train.trained_agent.record`), if any."""
     from train.wrappers import env_action_names, env_platform
 
     base = venv
@@ -332,4 +368,5 @@ def _resolved_config(args: Args, hp: Hyperparams, venv: Any, command: str) -> di
             },
         },
         "agent_observation_shape": list(venv.observation_space.shape),
+        **({"trained_agent": started_from} if started_from is not None else {}),
     }

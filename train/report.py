@@ -25,7 +25,7 @@ from policies.learned.ppo import shipped_name
 from policies.registry import DEFAULT_TASK
 from train.algos import ALGOS, DEFAULT_ALGO
 from train.config import platform_label, wrapper_specs
-from train.run import read_evaluations
+from train.run import CONFIG, read_config, read_evaluations
 
 __all__ = [
     "CARD_METRICS",
@@ -190,6 +190,23 @@ def outcome_summary(comparison: pd.DataFrame) -> str:
     )
 
 
+def _started_from_lines(run: Path) -> list[str]:
+    """The card's line on the trained agent the run started from (``--trained-agent``), if
+    its ``config.yaml`` records one (:func:`train.trained_agent.record`)."""
+    if not (run / CONFIG).is_file():
+        return []
+    start = read_config(run).get("trained_agent")
+    if not isinstance(start, dict):
+        return []
+    digests = start.get("sha256") or {}
+    files = ", ".join(f"{name} {str(digest)[:12]}" for name, digest in digests.items())
+    return [
+        f"- started from the weights and normalisation of `{start.get('path')}` "
+        f"({start.get('algo')}, {int(start.get('steps') or 0):,} env steps; SHA-256 {files}),",
+        "  not from scratch; the steps above are this run's own",
+    ]
+
+
 def _deploy_only_lines(hp: dict[str, Any]) -> list[str]:
     """The card's words on the steps of the agent's view left out of its training env
     (``in_training: false``): they act in evaluation and on the robot, not in training."""
@@ -272,6 +289,7 @@ def model_card(
         *(_session_line(s) for s in sessions),
         f"- total: {steps:,} env steps in {wall_s / 60:.1f} min of training"
         + (f" ({min(rates):,}-{max(rates):,} env-steps/s)" if rates else ""),
+        *_started_from_lines(run),
         f"- scenarios: {', '.join(args.scenarios)}; env preset `{args.env_config}`{on};"
         f" {hp['n_envs']} lanes ({hp['n_envs'] // len(args.scenarios)} per scenario)",
         f"- seeds: training lane j starts from {args.seed} + j (a resumed session from"

@@ -82,6 +82,7 @@ from train.study_export import check_study_export, export_study, write_ensemble
 from train.study_lock import StudyLock
 from train.study_record import TRAINING_PACKAGES, claim, read_study, study_settings
 from train.study_summary import write_summary
+from train.trained_agent import defaults_from, member_for_seed, read_trained_agent
 
 __all__ = [
     "MAX_SEEDS",
@@ -132,14 +133,17 @@ def parse_seeds(text: str) -> tuple[int, ...]:
 def seed_args(args: Args, k: int, study: Path) -> Args:
     """The options of training seed ``k``'s run in ``study`` (see the module docstring); its
     folder, hyperparameter file and a ``--compare-with`` agent's path absolute, as any node of
-    a cluster finds them (a Ray worker reads a relative path from the folder it started in)."""
+    a cluster finds them (a Ray worker reads a relative path from the folder it started in),
+    and a ``--trained-agent`` ensemble narrowed to its member ``seed-<k>``."""
     hyperparams = args.hyperparams.absolute() if args.hyperparams is not None else None
+    agent = args.trained_agent
     return dataclasses.replace(
         args,
         seed=args.seed + k * SEED_STRIDE,
         out=Path(study).absolute() / f"seed-{k}",
         hyperparams=hyperparams,
         compare_with=absolute_compare_with(args.compare_with),
+        trained_agent=None if agent is None else member_for_seed(agent, k),  # an ensemble's
         progress=False,
         export=None,  # the study exports its seeds together, once all are trained
         force=False,
@@ -327,8 +331,13 @@ def _train_study(
 ) -> Path:
     """:func:`train_seeds` in ``study``, held by ``lock`` from when it exists."""
     lock.take()  # before anything is read: a command refused here has changed nothing
+    agent = None
+    if args.trained_agent is not None:  # its algorithm (without a file: env, lanes), seed 0's
+        agent = read_trained_agent(member_for_seed(args.trained_agent, seeds[0]))
+        given = defaults_from(agent, args)
+        args = dataclasses.replace(args, **given, trained_agent=args.trained_agent.absolute())
     settings = study_settings(args, seeds)
-    hp = run_hyperparams(args)  # what every seed trains with, the earlier seeds too
+    hp = run_hyperparams(args, agent)  # what every seed trains with, the earlier seeds too
     code = running_sources_sha256(TRAINING_PACKAGES)  # the code every seed's worker must run
     seen = json.loads(json.dumps(hp))
     had = read_study(study)
@@ -371,7 +380,13 @@ def _train_study(
         else:
             if one.seed > MAX_SEED:
                 raise ValueError(f"--seeds: seed {k} is out of range with --seed {args.seed}")
-            check_new_run(one, clearing=early)  # every option, before any seed trains
+            _, own = check_new_run(one, clearing=early)  # every option, before any trains
+            if one.trained_agent is not None and json.loads(json.dumps(own)) != seen:
+                raise ValueError(
+                    f"--trained-agent {args.trained_agent}: seed {k} would start from "
+                    f"{one.trained_agent}, whose hyperparameters are not seed {seeds[0]}'s "
+                    "agent's; give --hyperparams for the study"
+                )
         new = early or not (folder.is_dir() and any(folder.iterdir()))
         units.append(_Seed(k, one, command, longer, new, code, seen))
     if args.export is not None:  # before any seed trains, as for one run's export

@@ -53,11 +53,12 @@ def study_settings(args: Args, seeds: Sequence[int]) -> dict[str, Any]:
     # The defaults as the run fills them in, so that leaving an option out or giving its
     # default is the same study; PPO studies keep no "algo" (as before there was a choice).
     learner = algo(args.algo or DEFAULT_ALGO)
-    out["hyperparams"] = str(args.hyperparams or learner.hyperparams)
+    own = args.trained_agent is not None and args.hyperparams is None  # the agent's own
+    out["hyperparams"] = None if own else str(args.hyperparams or learner.hyperparams)
     # An agent by its path as this folder reads it: the same command run from another folder
     # names another agent (or none), and is another study; one moved away since is still this.
     out["compare_with"] = absolute_compare_with(args.compare_with, missing=True)
-    if args.env_id is None:  # the file's only section, as the run fills it in
+    if args.env_id is None and not own:  # the file's only section, as the run fills it in
         with contextlib.suppress(ConfigError):  # the seeds' own checks name the file
             out["env_id"] = sole_section(out["hyperparams"])
     if learner.name == DEFAULT_ALGO:
