@@ -28,7 +28,7 @@ from execution import (
 from train.algos import ALGOS, CONFIGS, DEFAULT_ALGO
 from train.config import ConfigError
 from train.export import FORCE_ALONE_ERROR
-from train.options import MAX_THREADS, Args
+from train.options import DEFAULT_ENV_CONFIG, DEFAULT_SEED, MAX_THREADS, Args
 from train.ppo import PROG, USAGE_ERROR, Interrupted, TrainingError, train
 from train.seeds import parse_seeds, train_seeds
 
@@ -69,12 +69,16 @@ def build_parser() -> argparse.ArgumentParser:
         "--env-id", help="section of the YAML file, naming the task (default: its only one)"
     )
     p.add_argument("--scenarios", help="comma-separated scenarios (default: all registered)")
-    p.add_argument("--env-config", help=f"env preset (default: {d.env_config})")
+    p.add_argument(
+        "--env-config",
+        help=f"env preset (default: {DEFAULT_ENV_CONFIG}; with --trained-agent: the agent's)",
+    )
     p.add_argument(
         "--seed",
         type=int,
-        help=f"training lanes start from seed + j ({d.seed}); seed + n_timesteps + n_envs "
-        "must stay below 2**32",
+        help=f"training lanes start from seed + j ({DEFAULT_SEED}; with --trained-agent: the "
+        "agent's seed + its steps, where its own training would go on); seed + n_timesteps + "
+        "n_envs must stay below 2**32",
     )
     p.add_argument("--eval-seed", type=int, help=f"held-out lanes: eval_seed + j ({d.eval_seed})")
     p.add_argument("--eval-episodes", type=int, help=f"per scenario ({d.eval_episodes})")

@@ -29,12 +29,15 @@ from train.trained_agent import (
 )
 
 __all__ = [
+    "DEFAULT_ENV_CONFIG",
+    "DEFAULT_SEED",
     "MAX_SEED",
     "MAX_THREADS",
     "Args",
     "absolute_compare_with",
     "args_from_dict",
     "args_to_dict",
+    "base_seed",
     "check_folder_option",
     "check_new_run",
     "check_resume",
@@ -46,6 +49,11 @@ __all__ = [
 MAX_SEED = 2**32 - 1
 #: The most torch threads a run may ask for (more only slow a 0.1-ms policy step down).
 MAX_THREADS = 256
+#: The env preset a run trains on unless told (a run from a trained agent: the agent's).
+DEFAULT_ENV_CONFIG = "thesis"
+#: Training lane j starts from seed + j, this seed unless told (a run from a trained agent:
+#: the agent's seed + its steps, where a resume of it would go on: train.trained_agent).
+DEFAULT_SEED = 10_000
 
 
 @dataclass(frozen=True)
@@ -56,8 +64,8 @@ class Args:
     hyperparams: Path | None = None  # rl-zoo3-style YAML, keyed by env id; None: the algo's
     env_id: str | None = None  # the YAML section, and the task; default: the file's only section
     scenarios: tuple[str, ...] | None = None  # the task's variants to train on; None = all
-    env_config: str = "thesis"  # the env preset the agent trains and is evaluated on
-    seed: int = 10_000  # training lanes start from seed + j
+    env_config: str | None = None  # the env preset it trains and is evaluated on; None: thesis
+    seed: int | None = None  # training lanes start from seed + j; None: DEFAULT_SEED
     eval_seed: int = 5_000  # held-out lanes start from eval_seed + j
     eval_episodes: int = 2  # per scenario, at each held-out evaluation
     eval_freq: int = 100_000  # env steps between held-out evaluations
@@ -90,16 +98,16 @@ def check_new_run(args: Args, *, clearing: bool = False) -> tuple[Args, Hyperpar
     :raises ValueError: naming the option or YAML key, its value and what it may be.
     """
     agent = None
-    if args.trained_agent is not None:  # its algorithm (and without a file, its env and lanes)
+    if args.trained_agent is not None:  # its algorithm, preset, scenarios, seeds (and task)
         agent = read_trained_agent(args.trained_agent)
         args = dataclasses.replace(args, **defaults_from(agent, args), trained_agent=agent.folder)
     args = _with_defaults(args)
+    if agent is not None:  # before the scenarios it gave are checked against another task's
+        check_task(agent, args.env_id)
     args = dataclasses.replace(args, compare_with=absolute_compare_with(args.compare_with))
     _check_options(args, run=None, clearing=clearing)
     if args.n_envs is not None:  # before the file: its batch size may not fit either
         _check_lanes(args.n_envs, args.scenarios)
-    if agent is not None:
-        check_task(agent, args.env_id)
     hp = run_hyperparams(args, agent)
     if agent is not None:
         check_fits(agent, hp, hyperparams_place(args))
@@ -224,8 +232,19 @@ def _with_defaults(args: Args) -> Args:
         except ValueError as e:
             raise ValueError(f"--env-id: {e}") from None
     return dataclasses.replace(
-        args, algo=learner.name, hyperparams=hyperparams, env_id=env_id, scenarios=scenarios
+        args,
+        algo=learner.name,
+        hyperparams=hyperparams,
+        env_id=env_id,
+        scenarios=scenarios,
+        env_config=DEFAULT_ENV_CONFIG if args.env_config is None else args.env_config,
+        seed=base_seed(args),
     )
+
+
+def base_seed(args: Args) -> int:
+    """The seed training lane j starts from ``+ j``: ``--seed``, else :data:`DEFAULT_SEED`."""
+    return DEFAULT_SEED if args.seed is None else args.seed
 
 
 def _check_options(args: Args, *, run: Path | None, clearing: bool = False) -> None:

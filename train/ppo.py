@@ -32,7 +32,9 @@ naming the option or YAML key, its value and what it may be, exit status 2, and 
 
 from __future__ import annotations
 
+import contextlib
 import shutil
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -51,7 +53,16 @@ from train.options import (
     hyperparams_place,
 )
 from train.study_lock import StudyLock
-from train.trained_agent import TrainedAgent, check_spaces, read_trained_agent, record, start_from
+from train.trained_agent import (
+    TrainedAgent,
+    check_base,
+    check_spaces,
+    load_statistics,
+    read_trained_agent,
+    record,
+    start_from,
+    statistics_digest,
+)
 
 __all__ = [
     "AGENT_FILES",
@@ -119,9 +130,17 @@ def _train(args: Args, command: str, lock: StudyLock) -> Path:
     agent = None
     if saved is None and args.trained_agent is not None:
         agent = read_trained_agent(args.trained_agent)
-        stats_path = agent.normalization
+        digests = statistics_digest(agent, bool(hp["normalize"]))
     venv, eval_env, model = _build(args, hp, where, model_path, stats_path, start_step, agent)
-    started_from = None if agent is None else record(agent, start_from(model, agent))
+    started_from = None
+    if agent is not None:
+        start_from(model, agent)
+        if statistics_digest(agent, bool(hp["normalize"])) != digests:
+            raise ValueError(
+                f"--trained-agent {agent.folder}: its files changed while this run read them; "
+                "run the command again once they are whole"
+            )
+        started_from = record(agent, digests)
 
     # -- The run folder, now that everything checked out -------------------------------------
     # The folders this run makes (its own, and the missing parents of --out or --runs),
@@ -261,8 +280,8 @@ def _build(
     agent: TrainedAgent | None = None,
 ) -> tuple[Any, Any, Any]:
     """The training env, the held-out env and the model (``args.algo``'s), in memory (nothing
-    is written). A run from a trained ``agent`` starts from its statistics (``stats_path``) and
-    its view is checked to fit the agent's; its weights are the caller's to load.
+    is written). A run from a trained ``agent`` has its env and view checked to fit the agent's
+    and starts from its statistics; its weights are the caller's to load.
 
     The wrappers and SB3 check their own arguments here, so a value they refuse is reported
     as a bad hyperparameter before the run folder exists.
@@ -273,30 +292,22 @@ def _build(
 
     lanes = hp["n_envs"] // len(args.scenarios)
     normalization = stats_path if hp["normalize"] and stats_path is not None else None
-    try:
-        env_kwargs = hp.get("env_kwargs")
+    env_kwargs = hp.get("env_kwargs")
+    with _building(where, normalization):
         train_base = base_env(args.scenarios, lanes, args.env_config, args.env_id, env_kwargs)
+    if agent is not None:  # its env before its view: another platform is named as such
+        check_base(agent, train_base)
+    with _building(where, normalization):
         check_action_fit(hp, env_action_names(train_base), where=where)
         venv = agent_env(train_base, hp, "train", normalization=normalization)
-        if agent is not None:
-            check_spaces(agent, venv)
-            _discount_as_this_run(venv, hp)
         eval_env = agent_env(
             base_env(args.scenarios, args.eval_episodes, args.env_config, args.env_id, env_kwargs),
             hp,
             "eval",
         )
-    except ConfigError:
-        raise
-    except (ValueError, TypeError, OverflowError, MemoryError) as e:  # e.g. frame_stack 10**9
-        problem = one_line(e)
-        raise ConfigError(f"{where}: the agent's env cannot be built: {problem}") from None
-    except Exception as e:  # a resume's statistics file: pickle and SB3 raise their own
-        if normalization is None:
-            raise
-        problem = f"{type(e).__name__}: {e}"
-        verb = "resume" if agent is None else "start"
-        raise ValueError(f"{normalization}: cannot {verb} from it ({problem})") from None
+    if agent is not None:
+        check_spaces(agent, venv)
+        load_statistics(venv, agent)  # into a VecNormalize of this run's settings (its gamma)
     learner = ALGOS[args.algo]
     if model_path is not None:
         model = load_model(learner, model_path, venv)
@@ -312,16 +323,22 @@ def _build(
     return venv, eval_env, new_model(learner, policy, hp, venv, args.seed, where=where)
 
 
-def _discount_as_this_run(venv: Any, hp: Hyperparams) -> None:
-    """The reward normalisation of a run from a trained agent discounts with this run's gamma:
-    ``VecNormalize.load`` keeps the agent's (rl-zoo3's rule: ``normalize.gamma``, else the
-    algorithm's ``gamma``, else 0.99), which a run may change."""
-    from stable_baselines3.common.vec_env import unwrap_vec_normalize
-
-    normalize = unwrap_vec_normalize(venv)
-    if normalize is not None:
-        kwargs = hp["normalize"] if isinstance(hp["normalize"], dict) else {}
-        normalize.gamma = kwargs.get("gamma", hp.get("gamma", 0.99))
+@contextlib.contextmanager
+def _building(where: str, normalization: Path | None) -> Iterator[None]:
+    """Errors of building the envs as one line: a value a wrapper or the env refuses is a bad
+    hyperparameter of ``where``; a resume's statistics file that cannot be read is named."""
+    try:
+        yield
+    except ConfigError:
+        raise
+    except (ValueError, TypeError, OverflowError, MemoryError) as e:  # e.g. frame_stack 10**9
+        problem = one_line(e)
+        raise ConfigError(f"{where}: the agent's env cannot be built: {problem}") from None
+    except Exception as e:  # a resume's statistics file: pickle and SB3 raise their own
+        if normalization is None:
+            raise
+        problem = f"{type(e).__name__}: {e}"
+        raise ValueError(f"{normalization}: cannot resume from it ({problem})") from None
 
 
 def _remove_new_run(run: Path, made: list[Path]) -> None:

@@ -26,6 +26,7 @@ from policies.registry import DEFAULT_TASK
 from train.algos import ALGOS, DEFAULT_ALGO
 from train.config import platform_label, wrapper_specs
 from train.run import CONFIG, read_config, read_evaluations
+from train.trained_agent import shown_path
 
 __all__ = [
     "CARD_METRICS",
@@ -201,7 +202,7 @@ def _started_from_lines(run: Path) -> list[str]:
     digests = start.get("sha256") or {}
     files = ", ".join(f"{name} {str(digest)[:12]}" for name, digest in digests.items())
     return [
-        f"- started from the weights and normalisation of `{start.get('path')}` "
+        f"- started from the weights and normalisation of `{shown_path(start.get('path', ''))}` "
         f"({start.get('algo')}, {int(start.get('steps') or 0):,} env steps; SHA-256 {files}),",
         "  not from scratch; the steps above are this run's own",
     ]

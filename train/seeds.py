@@ -72,6 +72,7 @@ from train.options import (
     MAX_SEED,
     Args,
     absolute_compare_with,
+    base_seed,
     check_folder_option,
     check_new_run,
     check_resume,
@@ -82,7 +83,12 @@ from train.study_export import check_study_export, export_study, write_ensemble
 from train.study_lock import StudyLock
 from train.study_record import TRAINING_PACKAGES, claim, read_study, study_settings
 from train.study_summary import write_summary
-from train.trained_agent import defaults_from, member_for_seed, read_trained_agent
+from train.trained_agent import (
+    defaults_from,
+    member_for_seed,
+    read_trained_agent,
+    statistics_digest,
+)
 
 __all__ = [
     "MAX_SEEDS",
@@ -139,7 +145,7 @@ def seed_args(args: Args, k: int, study: Path) -> Args:
     agent = args.trained_agent
     return dataclasses.replace(
         args,
-        seed=args.seed + k * SEED_STRIDE,
+        seed=base_seed(args) + k * SEED_STRIDE,
         out=Path(study).absolute() / f"seed-{k}",
         hyperparams=hyperparams,
         compare_with=absolute_compare_with(args.compare_with),
@@ -175,6 +181,43 @@ def _same_training(k: int, folder: Path, hp: dict[str, Any]) -> int | None:
             f"env steps, so the study needs --n-timesteps >= {had:,}"
         )
     return want if want > had else None
+
+
+def _same_start(k: int, one: Args, own: dict[str, Any], seen: dict[str, Any], study: Path) -> None:
+    """Check that new seed ``k`` starts as the study's seeds do: with the study's
+    hyperparameters (an ensemble's members may differ), and from the agent the other seeds
+    that started from the same path started from (its files unchanged since).
+
+    :raises ValueError: naming the first differing key, or the changed file.
+    """
+    agent = one.trained_agent
+    changed = [key for key in sorted(own.keys() | seen.keys()) if own.get(key) != seen.get(key)]
+    if changed:
+        key = changed[0]
+        option = "--n-timesteps" if key == "n_timesteps" else "--hyperparams"
+        raise ValueError(
+            f"--trained-agent: seed {k} would start from {agent}, whose {key}={own.get(key)!r} "
+            f"is not the study's {seen.get(key)!r}; a study's seeds differ in their seed only: "
+            f"give {option} for the study"
+        )
+    agent_now = read_trained_agent(agent)
+    for folder in sorted(study.glob("seed-*")):
+        config = folder / runs.CONFIG
+        if folder.name == f"seed-{k}" or not config.is_file():
+            continue
+        started = runs.read_config(config).get("trained_agent")
+        if not isinstance(started, dict) or started.get("path") != str(agent):
+            continue
+        then = started.get("sha256") or {}
+        now = statistics_digest(agent_now, agent_now.normalization.name in then)
+        for name, digest in then.items():
+            if now.get(name) != digest:
+                raise ValueError(
+                    f"--trained-agent: {Path(agent) / name} changed since {folder.name} "
+                    f"started from it (SHA-256 {digest[:12]}, now "
+                    f"{str(now.get(name))[:12]}); a study's seeds start from the same agent: "
+                    "put its files back, or give another --out"
+                )
 
 
 def _finished(folder: Path) -> bool:
@@ -248,10 +291,19 @@ def _train_unit(unit: _Seed) -> dict[str, Any]:
     if json.loads(json.dumps(run_hyperparams(unit.args))) != unit.hp:
         raise ValueError(
             f"seed {k}: this worker ({socket.gethostname()}) reads other hyperparameters than "
-            f"the driver from {unit.args.hyperparams or 'its installed defaults'}: give a "
-            "--hyperparams file every node shares, or install the same version on every node"
+            f"the driver from {_source(unit.args)}: give a --hyperparams file (or an agent) "
+            "every node shares, or install the same version on every node"
         )
     return _row(k, train(unit.args, command=f"{unit.command} [seed {k}]"))
+
+
+def _source(args: Args) -> str:
+    """Where a seed's hyperparameters are read from, as a worker's message names it."""
+    if args.hyperparams is not None:
+        return str(args.hyperparams)
+    if args.trained_agent is not None:
+        return f"the agent's config.yaml in {args.trained_agent}"
+    return "its installed defaults"
 
 
 def _budget(folder: Path) -> int:
@@ -332,8 +384,15 @@ def _train_study(
     """:func:`train_seeds` in ``study``, held by ``lock`` from when it exists."""
     lock.take()  # before anything is read: a command refused here has changed nothing
     agent = None
-    if args.trained_agent is not None:  # its algorithm (without a file: env, lanes), seed 0's
-        agent = read_trained_agent(member_for_seed(args.trained_agent, seeds[0]))
+    if args.trained_agent is not None:  # its algorithm, preset, lanes, seed: seed 0's member
+        first = member_for_seed(args.trained_agent, seeds[0])
+        if not first.exists() and read_study(study) is not None:
+            raise ValueError(
+                f"--trained-agent {first}: no such agent; the study in {study} started from it, "
+                "and the command reads it again (its algorithm, hyperparameters and seed) even "
+                "where every seed resumes from its own checkpoint: put it back where it was"
+            )
+        agent = read_trained_agent(first)
         given = defaults_from(agent, args)
         args = dataclasses.replace(args, **given, trained_agent=args.trained_agent.absolute())
     settings = study_settings(args, seeds)
@@ -379,14 +438,10 @@ def _train_study(
             check_resume(resume)  # before any seed trains, as a new seed's options are
         else:
             if one.seed > MAX_SEED:
-                raise ValueError(f"--seeds: seed {k} is out of range with --seed {args.seed}")
+                raise ValueError(f"--seeds: seed {k} is out of range with --seed {base_seed(args)}")
             _, own = check_new_run(one, clearing=early)  # every option, before any trains
-            if one.trained_agent is not None and json.loads(json.dumps(own)) != seen:
-                raise ValueError(
-                    f"--trained-agent {args.trained_agent}: seed {k} would start from "
-                    f"{one.trained_agent}, whose hyperparameters are not seed {seeds[0]}'s "
-                    "agent's; give --hyperparams for the study"
-                )
+            if one.trained_agent is not None:
+                _same_start(k, one, json.loads(json.dumps(own)), seen, study)
         new = early or not (folder.is_dir() and any(folder.iterdir()))
         units.append(_Seed(k, one, command, longer, new, code, seen))
     if args.export is not None:  # before any seed trains, as for one run's export

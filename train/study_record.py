@@ -22,7 +22,7 @@ from eval.provenance import ROLLOUT_PACKAGES, SHORT
 from follow_env.sim.atomic import atomic_write_text
 from train.algos import DEFAULT_ALGO, algo
 from train.config import ConfigError, sole_section
-from train.options import Args, absolute_compare_with
+from train.options import DEFAULT_ENV_CONFIG, Args, absolute_compare_with, base_seed
 from train.study_lock import StudyLock
 
 __all__ = ["CODE", "STUDY", "TRAINING_PACKAGES", "claim", "read_study", "study_settings"]
@@ -53,6 +53,9 @@ def study_settings(args: Args, seeds: Sequence[int]) -> dict[str, Any]:
     # The defaults as the run fills them in, so that leaving an option out or giving its
     # default is the same study; PPO studies keep no "algo" (as before there was a choice).
     learner = algo(args.algo or DEFAULT_ALGO)
+    # The preset and seed as the run fills them in (a study from an agent has its own already).
+    out["env_config"] = args.env_config or DEFAULT_ENV_CONFIG
+    out["seed"] = base_seed(args)
     own = args.trained_agent is not None and args.hyperparams is None  # the agent's own
     out["hyperparams"] = None if own else str(args.hyperparams or learner.hyperparams)
     # An agent by its path as this folder reads it: the same command run from another folder

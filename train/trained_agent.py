@@ -11,35 +11,51 @@ The agent is a run folder, an export, a ``model.zip`` or a checkpoint ``.zip`` (
 :func:`policies.learned.ppo.agent_files` finds its files); an ensemble only with ``--seeds``,
 where training seed ``k`` starts from the member ``seed-<k>`` (:func:`member_for_seed`).
 
-Without ``--hyperparams`` the run trains with the agent's own resolved hyperparameters (its
-``config.yaml``), on its scenarios and with its algorithm. With a file, the file's apply, and
-what the weights cannot follow is refused before anything is written: another algorithm, policy,
-network (``policy_kwargs``, but for the keys that only set the initial weights), observation or
-action shape, or normalisation settings. What differs otherwise (the training reward, lanes,
-learning rate, ...) is the point of training on.
+Unless told otherwise the run takes the agent's algorithm, task, preset, scenarios and, without
+``--hyperparams``, its own resolved hyperparameters (its ``config.yaml``); its lanes start where
+a resume of the agent's own training would go on (the agent's seed + its steps), so that it
+meets other people than the agent trained on. With a file, the file's hyperparameters apply, and
+what the weights cannot follow is refused before anything is written: another algorithm, task,
+policy, network (``policy_kwargs``, but for the keys that only set the initial weights), SAC's
+choice between a learned and a fixed entropy coefficient, observation or action shape, or
+normalisation settings. What differs otherwise (the training reward, lanes, learning rate, ...)
+is the point of training on.
 
 What is not carried over: an off-policy learner's replay buffer (SAC starts with an empty one,
-and collects ``learning_starts`` steps again before it learns) and the step count (the run
-counts its own steps from 0; its ``config.yaml`` records the agent's).
+and takes ``learning_starts`` steps of random actions again before it learns), a fixed entropy
+coefficient (a hyperparameter: the file's), and the step count (the run counts its own steps
+from 0; its ``config.yaml`` records the agent's). The reward normalisation's statistics are
+carried over as they are, as rl-zoo3 does, even where the training reward or ``gamma`` changes.
 """
 
 from __future__ import annotations
 
+import json
+import zipfile
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from follow_env.tasks.person_follow import ENV_ID as PERSON_FOLLOW
 from train.algos import DEFAULT_ALGO
 
+if TYPE_CHECKING:
+    from train.options import Args
+
 __all__ = [
     "INIT_ONLY_POLICY_KWARGS",
     "TrainedAgent",
+    "check_base",
     "check_fits",
+    "check_spaces",
     "check_task",
+    "defaults_from",
+    "load_statistics",
     "member_for_seed",
     "read_trained_agent",
+    "shown_path",
     "start_from",
+    "statistics_digest",
 ]
 
 OPTION = "--trained-agent"
@@ -53,19 +69,27 @@ class TrainedAgent:
 
     :param folder: where it was given (absolute): a run, an export or a ``.zip``.
     :param model: its SB3 ``.zip`` (absolute).
-    :param normalization: its ``VecNormalize`` pickle, None if it has none.
+    :param normalization: where its ``VecNormalize`` pickle is, or would be (it may have none).
     :param config: its run's ``config.yaml``, as read.
+    :param steps: the env steps it was trained for (its model file's ``num_timesteps``).
     """
 
     folder: Path
     model: Path
-    normalization: Path | None
+    normalization: Path
     config: dict[str, Any]
+    steps: int
 
     @property
     def algo(self) -> str:
         """The learner that trained it (runs older than the choice of learner: PPO)."""
         return str(self.config.get("algo", DEFAULT_ALGO))
+
+    @property
+    def args(self) -> dict[str, Any]:
+        """The options it was trained with, as its ``config.yaml`` holds them."""
+        saved = self.config.get("args")
+        return saved if isinstance(saved, dict) else {}
 
     @property
     def hyperparams(self) -> dict[str, Any]:
@@ -108,12 +132,21 @@ def read_trained_agent(path: Path) -> TrainedAgent:
         raise ValueError(f"{OPTION}: {e}") from None
     if not files.model.is_file():
         raise ValueError(f"{OPTION} {path}: no {files.model.name} in it; not a trained agent")
+    if not files.config.is_file():
+        raise ValueError(
+            f"{OPTION} {path}: no {files.config.name} at {files.config}; an agent needs the "
+            "configuration its run wrote (a run or export folder has it)"
+        )
     try:
         config = runs.read_config(files.config)
     except ValueError as e:
         raise ValueError(f"{OPTION}: {e}") from None
-    normalization = files.normalization if files.normalization.is_file() else None
-    return TrainedAgent(path, files.model.absolute(), normalization, config)
+    try:  # SB3 keeps the step count in the zip's JSON "data": no torch load needed for it
+        with zipfile.ZipFile(files.model) as archive:
+            steps = int(json.loads(archive.read("data"))["num_timesteps"])
+    except (OSError, zipfile.BadZipFile, KeyError, ValueError, TypeError) as e:
+        raise ValueError(f"{OPTION}: {files.model}: not a readable model ({e})") from None
+    return TrainedAgent(path, files.model.absolute(), files.normalization.absolute(), config, steps)
 
 
 def member_for_seed(path: Path, k: int) -> Path:
@@ -142,9 +175,11 @@ def member_for_seed(path: Path, k: int) -> Path:
     )
 
 
-def defaults_from(agent: TrainedAgent, args: Any) -> dict[str, Any]:
+def defaults_from(agent: TrainedAgent, args: Args) -> dict[str, Any]:
     """The options a run from ``agent`` takes from it where the command line left them out:
-    the algorithm, the scenarios it trained on, and without ``--hyperparams`` its task.
+    the algorithm, the preset and scenarios it trained on, its task without ``--hyperparams``,
+    and the seed its lanes start from: the agent's seed + its steps, where a resume of its own
+    training would go on (its lanes were seed + j), so that the run meets new people.
 
     :raises ValueError: for an ``--algo`` other than the agent's.
     """
@@ -154,12 +189,17 @@ def defaults_from(agent: TrainedAgent, args: Any) -> dict[str, Any]:
             f"fit {agent.algo} only: leave --algo out"
         )
     given: dict[str, Any] = {"algo": agent.algo}
-    saved = agent.config.get("args") if isinstance(agent.config.get("args"), dict) else {}
+    saved = agent.args
     if args.hyperparams is None and args.env_id is None:
         given["env_id"] = agent.env_id
     scenarios = saved.get("scenarios")
     if args.scenarios is None and isinstance(scenarios, list):
         given["scenarios"] = tuple(scenarios)
+    if args.env_config is None and isinstance(saved.get("env_config"), str):
+        given["env_config"] = saved["env_config"]
+    seed = saved.get("seed")
+    if args.seed is None and isinstance(seed, int) and not isinstance(seed, bool):
+        given["seed"] = seed + agent.steps
     return given
 
 
@@ -180,10 +220,19 @@ def _policy_kwargs(hp: dict[str, Any]) -> dict[str, Any]:
     return {k: v for k, v in kwargs.items() if k not in INIT_ONLY_POLICY_KWARGS}
 
 
+def _learned_entropy(hp: dict[str, Any]) -> bool | None:
+    """Whether SAC's entropy coefficient is learned (``auto``, ``auto_<x>``: a saved tensor
+    of the agent's) or fixed (a number: a hyperparameter); None for a learner without one."""
+    if "ent_coef" not in hp:
+        return None
+    value = hp["ent_coef"]
+    return isinstance(value, str) and value.startswith("auto")
+
+
 def check_fits(agent: TrainedAgent, hp: dict[str, Any], where: str) -> None:
     """Refuse hyperparameters ``hp`` (from ``where``) the agent's weights cannot follow: another
-    policy, network or normalisation. Spaces are checked once the env is built
-    (:func:`check_spaces`).
+    policy, network, normalisation or kind of entropy coefficient. Spaces are checked once the
+    env is built (:func:`check_base`, :func:`check_spaces`).
 
     :raises ValueError: naming both values and what to do.
     """
@@ -200,15 +249,51 @@ def check_fits(agent: TrainedAgent, hp: dict[str, Any], where: str) -> None:
                 f"{key}={theirs!r}: its weights and statistics fit its own; give the agent's "
                 f"{key} (or leave --hyperparams out to train with the agent's own)"
             )
-    if hp.get("normalize") and agent.normalization is None:
+    learned = _learned_entropy(mine), _learned_entropy(hp)
+    if None not in learned and learned[0] != learned[1]:
+        kind = {True: "learned", False: "fixed"}
         raise ValueError(
-            f"{OPTION} {agent.folder}: no vecnormalize.pkl beside {agent.model.name}, but its "
-            "hyperparameters normalise: the statistics its weights expect are missing"
+            f"{where}: ent_coef={hp['ent_coef']!r} ({kind[learned[1]]}), but {OPTION} "
+            f"{agent.folder} learned with ent_coef={mine['ent_coef']!r} "
+            f"({kind[learned[0]]}): give a {kind[learned[0]]} one (a fixed value of the file's "
+            "own is used as given)"
+        )
+    if hp.get("normalize") and not agent.normalization.is_file():
+        raise ValueError(
+            f"{OPTION} {agent.folder}: no {agent.normalization.name} beside "
+            f"{agent.model.name}, but its hyperparameters normalise: the statistics its weights "
+            "expect are missing"
         )
 
 
+def _saved_size(agent: TrainedAgent, space: str) -> int | None:
+    """How many numbers the env's ``space`` (observation or action) had where the agent
+    trained, from its ``config.yaml`` (None if it does not say)."""
+    spaces = agent.config.get("env_spaces")
+    box = spaces.get(space) if isinstance(spaces, dict) else None
+    low = box.get("low") if isinstance(box, dict) else None
+    return len(low) if isinstance(low, list) else None
+
+
+def check_base(agent: TrainedAgent, base: Any) -> None:
+    """Refuse an env (below the agent's view) other than the one the agent trained on: another
+    number of actions (another platform) or of observations (another sensor).
+
+    :raises ValueError: naming both sizes.
+    """
+    for space, what in (("action", "acts with"), ("observation", "observes")):
+        theirs, ours = _saved_size(agent, space), getattr(base, f"{space}_space").shape[0]
+        if theirs is not None and theirs != ours:
+            raise ValueError(
+                f"{OPTION} {agent.folder}: the agent {what} {theirs} numbers, this run's env "
+                f"{'takes' if space == 'action' else 'gives'} {ours} (another platform or "
+                "sensor, through env_kwargs or the preset): its weights cannot"
+            )
+
+
 def check_spaces(agent: TrainedAgent, venv: Any) -> None:
-    """Refuse an agent env ``venv`` whose observation or action shape is not the agent's.
+    """Refuse an agent env ``venv`` (the view: wrappers and frame stack) whose observation
+    shape is not the agent's.
 
     :raises ValueError: naming both shapes.
     """
@@ -220,20 +305,49 @@ def check_spaces(agent: TrainedAgent, venv: Any) -> None:
             f"run's view gives {ours} (its vec_env_wrapper list or frame_stack differ): the "
             "weights cannot take them"
         )
-    spaces = agent.config.get("env_spaces")
-    action = spaces.get("action") if isinstance(spaces, dict) else None
-    low = action.get("low") if isinstance(action, dict) else None
-    if isinstance(low, list) and len(low) != venv.action_space.shape[0]:
-        raise ValueError(
-            f"{OPTION} {agent.folder}: the agent acts with {len(low)} numbers, this run's env "
-            f"takes {venv.action_space.shape[0]}: another platform's agent"
-        )
 
 
-def start_from(model: Any, agent: TrainedAgent) -> int:
+def load_statistics(venv: Any, agent: TrainedAgent) -> None:
+    """Give the run's ``VecNormalize`` (built from its own hyperparameters: its gamma and
+    clipping) the agent's running statistics of observations and returns.
+
+    :raises ValueError: naming the agent's file if it cannot be read or does not fit.
+    """
+    import pickle
+
+    from stable_baselines3.common.vec_env import VecNormalize, unwrap_vec_normalize
+
+    normalize = unwrap_vec_normalize(venv)
+    if normalize is None:
+        return
+    path = agent.normalization
+    try:
+        with path.open("rb") as f:
+            saved = pickle.load(f)
+    except Exception as e:  # OSError, pickle and the classes it rebuilds raise their own
+        raise ValueError(f"{OPTION}: {path}: not readable statistics ({e})") from None
+    if not isinstance(saved, VecNormalize):
+        raise ValueError(f"{OPTION}: {path}: holds a {type(saved).__name__}, not VecNormalize")
+    if normalize.norm_obs:  # (SB3 keeps no observation statistics without it)
+        ours, theirs = normalize.obs_rms, getattr(saved, "obs_rms", None)
+        shape = getattr(getattr(theirs, "mean", None), "shape", None)
+        if shape != ours.mean.shape:
+            raise ValueError(
+                f"{OPTION}: {path}: statistics of observations of shape {shape}, this run's "
+                f"are {ours.mean.shape}"
+            )
+        normalize.obs_rms = theirs
+    normalize.ret_rms = saved.ret_rms
+
+
+#: Saved tensors that are hyperparameters, not learned: the run's file gives them (SAC's fixed
+#: entropy coefficient).
+_NOT_LEARNED = frozenset({"ent_coef_tensor"})
+
+
+def start_from(model: Any, agent: TrainedAgent) -> None:
     """Give ``model`` (a new one, of the agent's algorithm and network) the agent's weights,
-    its optimisers' state and its other saved tensors (SAC's entropy coefficient); returns the
-    env steps the agent was trained for.
+    its optimisers' state and its other learned tensors (SAC's learned entropy coefficient).
 
     :raises ValueError: naming the agent if its model file cannot be read or does not fit.
     """
@@ -241,7 +355,7 @@ def start_from(model: Any, agent: TrainedAgent) -> int:
     from stable_baselines3.common.utils import get_device
 
     try:
-        data, params, variables = load_from_zip_file(agent.model, device=get_device("cpu"))
+        _, params, variables = load_from_zip_file(agent.model, device=get_device("cpu"))
     except Exception as e:  # zipfile, pickle and torch raise their own
         raise ValueError(f"{OPTION}: {agent.model}: not a readable model ({e})") from None
     if not params:
@@ -249,14 +363,13 @@ def start_from(model: Any, agent: TrainedAgent) -> int:
     try:
         model.set_parameters(params, exact_match=True, device="cpu")
         for name, value in (variables or {}).items():
-            if value is not None:
+            if value is not None and name not in _NOT_LEARNED:
                 _set_tensor(model, name, value)
     except (RuntimeError, ValueError, KeyError, AttributeError) as e:
         problem = " ".join(str(e).split())[:300]
         raise ValueError(
             f"{OPTION}: {agent.model}: its weights do not fit this run's network ({problem})"
         ) from None
-    return int((data or {}).get("num_timesteps", 0))
 
 
 def _set_tensor(model: Any, name: str, value: Any) -> None:
@@ -269,12 +382,28 @@ def _set_tensor(model: Any, name: str, value: Any) -> None:
     target.data.copy_(value.data)
 
 
-def record(agent: TrainedAgent, steps: int) -> dict[str, Any]:
-    """What a run's ``config.yaml`` says of the agent it started from: where it was, how far
-    it had trained, and its files' SHA-256, so that the start can be checked later."""
+def statistics_digest(agent: TrainedAgent, normalise: bool) -> dict[str, str]:
+    """The SHA-256 of the agent's files a run starts from: its model, and its statistics if
+    the run normalises."""
     from train.export import sha256
 
     files = {agent.model.name: sha256(agent.model)}
-    if agent.normalization is not None:
+    if normalise:
         files[agent.normalization.name] = sha256(agent.normalization)
-    return {"path": str(agent.folder), "algo": agent.algo, "steps": steps, "sha256": files}
+    return files
+
+
+def record(agent: TrainedAgent, digests: dict[str, str]) -> dict[str, Any]:
+    """What a run's ``config.yaml`` says of the agent it started from: where it was, how far
+    it had trained, and its files' SHA-256 (``digests``), so that the start can be checked."""
+    return {"path": str(agent.folder), "algo": agent.algo, "steps": agent.steps, "sha256": digests}
+
+
+def shown_path(path: str | Path) -> str:
+    """``path`` as a model card shows it: relative to the current folder if inside it (a
+    shipped agent's ``policies/agents/...``), else as it is."""
+    path = Path(path)
+    try:
+        return str(path.relative_to(Path.cwd()))
+    except ValueError:
+        return str(path)

@@ -17,11 +17,12 @@ from stable_baselines3.common.vec_env import VecNormalize
 
 import train.ppo
 from follow_env.tasks.person_follow import ENV_ID
+from train.algos import ALGOS
 from train.cli import main
 from train.options import Args
 from train.ppo import DEFAULT_HYPERPARAMS
 from train.study_record import study_settings
-from train.trained_agent import check_spaces, check_task, read_trained_agent
+from train.trained_agent import check_base, check_spaces, check_task, read_trained_agent
 
 # Two scenarios, 4 lanes, tiny intervals: a few seconds a run.
 TINY = [
@@ -35,9 +36,10 @@ TINY = [
 
 @pytest.fixture(scope="module")
 def agent(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A tiny trained agent, exported (as users' agents are)."""
+    """A tiny trained agent, exported (as users' agents are), on the ``noisy`` preset."""
     root = tmp_path_factory.mktemp("trained")
     argv = [*TINY, "--scenarios", "straight,curve", "--n-timesteps", "1000"]
+    argv += ["--env-config", "noisy"]
     assert main([*argv, "--out", str(root / "run"), "--export", str(root / "agent")]) == 0
     return root / "agent"
 
@@ -63,10 +65,9 @@ def test_the_run_starts_from_the_agents_weights_and_statistics(
     loaded: dict[str, torch.Tensor] = {}
     real = train.ppo.start_from
 
-    def spy(model, trained):  # the new model's weights once the agent's are in
-        steps = real(model, trained)
+    def spy(model, trained) -> None:  # the new model's weights once the agent's are in
+        real(model, trained)
         loaded.update({k: v.clone() for k, v in model.policy.state_dict().items()})
-        return steps
 
     monkeypatch.setattr(train.ppo, "start_from", spy)
     run = tmp_path / "on"
@@ -77,10 +78,14 @@ def test_the_run_starts_from_the_agents_weights_and_statistics(
     assert loaded.keys() == saved.keys()
     for key, value in saved.items():
         assert torch.equal(loaded[key], value), key
-    # The optimiser went on from the agent's too (Adam's step count carries on).
+    # The optimiser went on from the agent's too: Adam's step count carries on, by this run's
+    # updates (n_epochs a rollout of n_steps x 4 lanes, one mini-batch each).
+    hp = yaml.safe_load((agent / "config.yaml").read_text())["hyperparams"]
+    rollout = hp["n_steps"] * 4
+    assert hp["batch_size"] == rollout
     mine = load_from_zip_file(run / "model.zip", device="cpu")[1]["policy.optimizer"]
-    theirs = params["policy.optimizer"]
-    assert mine["state"][0]["step"] > theirs["state"][0]["step"]
+    theirs = params["policy.optimizer"]["state"][0]["step"]
+    assert mine["state"][0]["step"] == theirs + hp["n_epochs"] * (512 // rollout)
     # ... and the reward normalisation from its statistics: their counts add up.
     before, after = _stats(agent / "vecnormalize.pkl"), _stats(run / "vecnormalize.pkl")
     assert after.ret_rms.count == pytest.approx(before.ret_rms.count + 512)
@@ -88,6 +93,7 @@ def test_the_run_starts_from_the_agents_weights_and_statistics(
     config = yaml.safe_load((run / "config.yaml").read_text())
     own = yaml.safe_load((agent / "config.yaml").read_text())
     assert config["args"]["scenarios"] == ["straight", "curve"]
+    assert config["args"]["env_config"] == "noisy"
     assert config["args"]["hyperparams"] is None
     assert config["args"]["trained_agent"] == str(agent)
     assert config["args"]["seed"] == 77
@@ -98,6 +104,7 @@ def test_the_run_starts_from_the_agents_weights_and_statistics(
     assert set(record["sha256"]) == {"model.zip", "vecnormalize.pkl"}
     card = (run / "MODEL_CARD.md").read_text()
     assert f"- started from the weights and normalisation of `{agent}` (ppo, 1,024" in card
+    assert "env preset `noisy`" in card
     assert record["sha256"]["model.zip"][:12] in card
 
 
@@ -106,7 +113,10 @@ def test_a_run_from_an_agent_resumes_as_any_run(agent: Path, tmp_path: Path) -> 
     run = tmp_path / "on"
     argv = ["--trained-agent", str(agent), *TINY, "--n-timesteps", "900"]
     assert main([*argv, "--out", str(run)]) == 0
-    record = yaml.safe_load((run / "config.yaml").read_text())["trained_agent"]
+    started = yaml.safe_load((run / "config.yaml").read_text())
+    record = started["trained_agent"]
+    # Its lanes go on where a resume of the agent's own training would: seed + its steps.
+    assert started["args"]["seed"] == 10_000 + 1024
     assert main(["--resume", str(run), "--n-timesteps", "1700", "--no-progress"]) == 0
     sessions = json.loads((run / "sessions.json").read_text())
     assert [s["first_step"] for s in sessions] == [0, 1024]  # its final checkpoint: 4 x 256
@@ -251,21 +261,126 @@ def test_sacs_entropy_coefficient_carries_over(
     assert seen == [pytest.approx(0.123)]
 
 
-def test_an_agent_of_another_task_is_refused(agent: Path) -> None:
+def _sac_file(tmp_path: Path, name: str, **changes: object) -> Path:
+    """The shipped SAC file with ``changes`` (None removes a key)."""
+    document = yaml.safe_load(ALGOS["sac"].hyperparams.read_text())
+    section = document[ENV_ID]
+    section.update(changes)
+    document[ENV_ID] = {k: v for k, v in section.items() if v is not None}
+    path = tmp_path / f"{name}.yaml"
+    path.write_text(yaml.safe_dump(document))
+    return path
+
+
+@pytest.mark.slow
+def test_a_fixed_entropy_coefficient_is_the_files_and_a_change_of_kind_is_refused(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from stable_baselines3 import SAC
+
+    argv = [*TINY, "--scenarios", "straight", "--n-timesteps", "300"]
+    fixed = _sac_file(tmp_path, "fixed", ent_coef=0.1, target_entropy=None)
+    first = ["--algo", "sac", "--hyperparams", str(fixed), *argv, "--out", str(tmp_path / "a")]
+    assert main(first) == 0
+    other = _sac_file(tmp_path, "other", ent_coef=0.05, target_entropy=None)
+    on = ["--trained-agent", str(tmp_path / "a"), *argv]
+    assert main([*on, "--hyperparams", str(other), "--out", str(tmp_path / "on")]) == 0
+    model = SAC.load(tmp_path / "on" / "model.zip", device="cpu")
+    assert float(model.ent_coef_tensor) == pytest.approx(0.05)  # as config.yaml says
+    config = yaml.safe_load((tmp_path / "on" / "config.yaml").read_text())
+    assert config["hyperparams"]["ent_coef"] == 0.05
+    capsys.readouterr()
+    learned = ALGOS["sac"].hyperparams
+    out = tmp_path / "refused"
+    assert main([*on, "--hyperparams", str(learned), "--out", str(out)]) == 2
+    err = _error(capsys)
+    assert "ent_coef='auto' (learned), but --trained-agent" in err
+    assert "learned with ent_coef=0.1 (fixed): give a fixed one" in err
+    assert not out.exists()
+
+
+def test_an_agent_of_another_task_is_refused(
+    agent: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     with pytest.raises(ValueError, match="a PersonFollow-v0 agent; this run trains on LineTrace"):
         check_task(read_trained_agent(agent), "LineTrace-v0")
+    # Through the command line, before the agent's scenarios are checked against the task's.
+    out = tmp_path / "out"
+    argv = ["--trained-agent", str(agent), "--env-id", "LineTrace-v0", "--env-config", "paper"]
+    assert main([*argv, *TINY, "--out", str(out)]) == 2
+    assert "a PersonFollow-v0 agent; this run trains on LineTrace-v0" in _error(capsys)
+    assert not out.exists()
 
 
-def test_an_agent_of_another_view_is_refused_by_its_shapes(agent: Path) -> None:
+@pytest.mark.slow
+def test_a_study_refuses_a_new_seed_from_an_agent_changed_since(
+    agent: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    mine = tmp_path / "agent"
+    shutil.copytree(agent, mine)
+    study = tmp_path / "study"
+    argv = ["--trained-agent", str(mine), *TINY, "--n-timesteps", "256", "--out", str(study)]
+    assert main([*argv, "--seeds", "0"]) == 0
+    shutil.copy(agent.parent / "run" / "checkpoints" / "ppo_800_steps.zip", mine / "model.zip")
+    capsys.readouterr()
+    assert main([*argv, "--seeds", "0-1"]) == 2
+    err = _error(capsys)
+    assert f"--trained-agent: {mine / 'model.zip'} changed since seed-0 started from it" in err
+    assert not (study / "seed-1").exists()
+    shutil.rmtree(mine)  # moved away: the command says so, not just "no such agent"
+    assert main([*argv, "--seeds", "0"]) == 2
+    assert f"the study in {study} started from it" in _error(capsys)
+
+
+def test_agent_files_that_are_missing_are_named(
+    agent: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "out"
+    bare = tmp_path / "bare"
+    bare.mkdir()
+    shutil.copy(agent / "model.zip", bare / "model.zip")
+    assert main(["--trained-agent", str(bare), *TINY, "--out", str(out)]) == 2
+    assert f"no config.yaml at {bare / 'config.yaml'}; an agent needs" in _error(capsys)
+    # A checkpoint whose statistics are missing: the file named is the checkpoint's own.
+    run = tmp_path / "run"
+    shutil.copytree(agent.parent / "run", run)
+    (run / "checkpoints" / "ppo_vecnormalize_800_steps.pkl").unlink()
+    checkpoint = run / "checkpoints" / "ppo_800_steps.zip"
+    assert main(["--trained-agent", str(checkpoint), *TINY, "--out", str(out)]) == 2
+    assert "no ppo_vecnormalize_800_steps.pkl beside ppo_800_steps.zip" in _error(capsys)
+    assert not out.exists()
+
+
+@pytest.mark.slow
+def test_a_relative_agent_is_recorded_absolute_and_shown_relative(
+    agent: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    shutil.copytree(agent, tmp_path / "agents" / "mine")
+    monkeypatch.chdir(tmp_path)
+    argv = ["--trained-agent", "agents/mine", *TINY, "--n-timesteps", "256", "--out", "on"]
+    assert main(argv) == 0
+    config = yaml.safe_load((tmp_path / "on" / "config.yaml").read_text())
+    assert config["trained_agent"]["path"] == str(tmp_path / "agents" / "mine")
+    card = (tmp_path / "on" / "MODEL_CARD.md").read_text()
+    assert "weights and normalisation of `agents/mine` (ppo" in card
+
+
+def _space(observations: int, actions: int) -> SimpleNamespace:
+    return SimpleNamespace(
+        observation_space=Box(-1, 1, (observations,)), action_space=Box(-1, 1, (actions,))
+    )
+
+
+def test_an_agent_of_another_env_or_view_is_refused_by_its_shapes(agent: Path) -> None:
     trained = read_trained_agent(agent)
-    fits = SimpleNamespace(observation_space=Box(-1, 1, (20,)), action_space=Box(-1, 1, (2,)))
-    check_spaces(trained, fits)  # the agent's own: 4 frames of 5 numbers, 2 actions
-    wider = SimpleNamespace(observation_space=Box(-1, 1, (24,)), action_space=Box(-1, 1, (2,)))
+    check_base(trained, _space(2, 2))  # the env's: distance and offset, 2 actions
+    check_spaces(trained, _space(20, 2))  # the view's: 4 frames of 5 numbers
     with pytest.raises(ValueError, match=r"observations of shape \[20\], this run's view gives"):
-        check_spaces(trained, wider)
-    three = SimpleNamespace(observation_space=Box(-1, 1, (20,)), action_space=Box(-1, 1, (3,)))
-    with pytest.raises(ValueError, match="acts with 2 numbers, this run's env takes 3"):
-        check_spaces(trained, three)
+        check_spaces(trained, _space(24, 2))
+    with pytest.raises(ValueError, match="the agent acts with 2 numbers, this run's env takes 3"):
+        check_base(trained, _space(2, 3))
+    with pytest.raises(ValueError, match="the agent observes 2 numbers, this run's env gives 7"):
+        check_base(trained, _space(7, 2))
 
 
 def test_a_study_from_an_agent_records_no_hyperparameter_file() -> None:
@@ -274,3 +389,41 @@ def test_a_study_from_an_agent_records_no_hyperparameter_file() -> None:
     assert own["trained_agent"] == "/a"
     given = study_settings(Args(trained_agent=Path("/a"), hyperparams=Path("/h.yaml")), [0])
     assert given["hyperparams"] == "/h.yaml"
+
+
+@pytest.mark.slow
+def test_observation_statistics_carry_over_where_observations_are_normalised(
+    tmp_path: Path,
+) -> None:
+    hp = _section(tmp_path, normalize={"norm_obs": True, "norm_reward": True})
+    argv = ["--hyperparams", str(hp), *TINY, "--scenarios", "straight", "--n-timesteps", "256"]
+    assert main([*argv, "--out", str(tmp_path / "a")]) == 0
+    assert main(["--trained-agent", str(tmp_path / "a"), *argv, "--out", str(tmp_path / "b")]) == 0
+    before, after = (
+        _stats(tmp_path / "a" / "vecnormalize.pkl"),
+        _stats(tmp_path / "b" / "vecnormalize.pkl"),
+    )
+    # this run's 256 steps' observations and its first reset's, one a lane
+    assert after.obs_rms.count == pytest.approx(before.obs_rms.count + 256 + 4)
+    assert after.obs_rms.mean.shape == before.obs_rms.mean.shape == (5,)
+
+
+def test_an_ensemble_whose_members_trained_otherwise_is_named_by_the_key(
+    agent: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    ensemble = tmp_path / "pair"
+    for k in (0, 1):
+        shutil.copytree(agent, ensemble / f"seed-{k}")
+    (ensemble / "ensemble.yaml").write_text("{members: [seed-0, seed-1]}\n")
+    config = ensemble / "seed-1" / "config.yaml"
+    saved = yaml.safe_load(config.read_text())
+    saved["hyperparams"]["n_timesteps"] = 2000  # trained on for longer than seed-0
+    config.write_text(yaml.safe_dump(saved))
+    out = tmp_path / "study"
+    argv = ["--trained-agent", str(ensemble), *TINY, "--seeds", "0-1", "--out", str(out)]
+    assert main(argv) == 2
+    err = _error(capsys)
+    assert "seed 1 would start from" in err
+    assert "whose n_timesteps=2000 is not the study's 1000" in err
+    assert err.rstrip().endswith("give --n-timesteps for the study")
+    assert not out.exists()
