@@ -97,21 +97,30 @@ def check_new_run(args: Args, *, clearing: bool = False) -> tuple[Args, Hyperpar
         hyperparameters.
     :raises ValueError: naming the option or YAML key, its value and what it may be.
     """
-    agent = None
+    agent, derived = None, False
     if args.trained_agent is not None:  # its algorithm, preset, scenarios, seeds (and task)
         agent = read_trained_agent(args.trained_agent)
-        args = dataclasses.replace(args, **defaults_from(agent, args), trained_agent=agent.folder)
+        given = defaults_from(agent, args)
+        derived = "seed" in given
+        args = dataclasses.replace(args, **given, trained_agent=agent.folder)
     args = _with_defaults(args)
     if agent is not None:  # before the scenarios it gave are checked against another task's
         check_task(agent, args.env_id)
     args = dataclasses.replace(args, compare_with=absolute_compare_with(args.compare_with))
-    _check_options(args, run=None, clearing=clearing)
-    if args.n_envs is not None:  # before the file: its batch size may not fit either
-        _check_lanes(args.n_envs, args.scenarios)
-    hp = run_hyperparams(args, agent)
-    if agent is not None:
-        check_fits(agent, hp, hyperparams_place(args))
-    _check_against_hyperparams(args, hp)
+    try:
+        _check_options(args, run=None, clearing=clearing)
+        if args.n_envs is not None:  # before the file: its batch size may not fit either
+            _check_lanes(args.n_envs, args.scenarios)
+        hp = run_hyperparams(args, agent)
+        if agent is not None:
+            check_fits(agent, hp, hyperparams_place(args))
+        _check_against_hyperparams(args, hp)
+    except ValueError as e:
+        if derived and str(e).startswith("--seed "):  # a seed the command line did not give
+            raise ValueError(
+                f"{e} (the agent's seed + its steps, where its training stopped: give --seed)"
+            ) from None
+        raise
     return args, hp
 
 

@@ -142,18 +142,34 @@ def seed_args(args: Args, k: int, study: Path) -> Args:
     a cluster finds them (a Ray worker reads a relative path from the folder it started in),
     and a ``--trained-agent`` ensemble narrowed to its member ``seed-<k>``."""
     hyperparams = args.hyperparams.absolute() if args.hyperparams is not None else None
-    agent = args.trained_agent
+    agent = None if args.trained_agent is None else member_for_seed(args.trained_agent, k)
     return dataclasses.replace(
         args,
-        seed=base_seed(args) + k * SEED_STRIDE,
+        seed=_seed_of(args, k, agent),
         out=Path(study).absolute() / f"seed-{k}",
         hyperparams=hyperparams,
         compare_with=absolute_compare_with(args.compare_with),
-        trained_agent=None if agent is None else member_for_seed(agent, k),  # an ensemble's
+        trained_agent=agent,  # an ensemble's member seed-<k>
         progress=False,
         export=None,  # the study exports its seeds together, once all are trained
         force=False,
     )
+
+
+def _seed_of(args: Args, k: int, agent: Path | None) -> int | None:
+    """Seed ``k``'s first lane seed: ``--seed`` (default 10000) + k * 10**8, or without
+    ``--seed`` in a study from an agent, the seed where a resume of its agent's own training
+    would go on + k * 10**8 (so that, whichever seeds a command lists, seed k's is the same).
+    None if that agent cannot be read: a seed that resumes needs none, and a new seed's check
+    names the agent."""
+    if args.seed is not None or agent is None:
+        return base_seed(args) + k * SEED_STRIDE
+    try:
+        trained = read_trained_agent(agent)
+    except ValueError:
+        return None
+    start = trained.next_seed
+    return (base_seed(args) if start is None else start) + k * SEED_STRIDE
 
 
 def _same_training(k: int, folder: Path, hp: dict[str, Any]) -> int | None:
@@ -183,14 +199,30 @@ def _same_training(k: int, folder: Path, hp: dict[str, Any]) -> int | None:
     return want if want > had else None
 
 
-def _same_start(k: int, one: Args, own: dict[str, Any], seen: dict[str, Any], study: Path) -> None:
+def _same_start(
+    k: int, one: Args, own: dict[str, Any], seen: dict[str, Any], study: Path, filled: set[str]
+) -> None:
     """Check that new seed ``k`` starts as the study's seeds do: with the study's
-    hyperparameters (an ensemble's members may differ), and from the agent the other seeds
-    that started from the same path started from (its files unchanged since).
+    hyperparameters, and the preset and scenarios the study took from its first seed's agent
+    (``filled``; an ensemble's members may differ), and from the agent the other seeds that
+    started from the same path started from (its files unchanged since).
 
-    :raises ValueError: naming the first differing key, or the changed file.
+    :raises ValueError: naming the first differing key or option, or the changed file.
     """
     agent = one.trained_agent
+    assert agent is not None  # a study from an agent only
+    saved = read_trained_agent(agent).args
+    for name in sorted(filled & {"env_config", "scenarios"}):
+        theirs, ours = saved.get(name), getattr(one, name)
+        if isinstance(theirs, list):  # config.yaml's list; Args holds a tuple
+            theirs = tuple(theirs)
+        if theirs is not None and theirs != ours:
+            option = "--" + name.replace("_", "-")
+            raise ValueError(
+                f"--trained-agent: seed {k} would start from {agent}, trained with {option} "
+                f"{theirs!r}, where the study takes {ours!r} from its first seed's agent: give "
+                f"{option} for the study"
+            )
     changed = [key for key in sorted(own.keys() | seen.keys()) if own.get(key) != seen.get(key)]
     if changed:
         key = changed[0]
@@ -383,17 +415,22 @@ def _train_study(
 ) -> Path:
     """:func:`train_seeds` in ``study``, held by ``lock`` from when it exists."""
     lock.take()  # before anything is read: a command refused here has changed nothing
-    agent = None
-    if args.trained_agent is not None:  # its algorithm, preset, lanes, seed: seed 0's member
+    agent, filled = None, set()
+    if args.trained_agent is not None:  # its algorithm, preset and lanes: the first seed's
         first = member_for_seed(args.trained_agent, seeds[0])
-        if not first.exists() and read_study(study) is not None:
+        had = read_study(study)
+        gone = not first.exists() and had is not None
+        if gone and had.get("trained_agent") == str(args.trained_agent.absolute()):
             raise ValueError(
                 f"--trained-agent {first}: no such agent; the study in {study} started from it, "
-                "and the command reads it again (its algorithm, hyperparameters and seed) even "
-                "where every seed resumes from its own checkpoint: put it back where it was"
+                "and the command reads it again (its algorithm, preset, scenarios and "
+                "hyperparameters) even where every seed resumes from its own checkpoint: put it "
+                "back where it was"
             )
         agent = read_trained_agent(first)
         given = defaults_from(agent, args)
+        given.pop("seed", None)  # each seed's own, from its agent (seed_args)
+        filled = set(given)
         args = dataclasses.replace(args, **given, trained_agent=args.trained_agent.absolute())
     settings = study_settings(args, seeds)
     hp = run_hyperparams(args, agent)  # what every seed trains with, the earlier seeds too
@@ -437,11 +474,16 @@ def _train_study(
             )
             check_resume(resume)  # before any seed trains, as a new seed's options are
         else:
-            if one.seed > MAX_SEED:
-                raise ValueError(f"--seeds: seed {k} is out of range with --seed {base_seed(args)}")
+            if one.seed is not None and one.seed > MAX_SEED:
+                source = (
+                    f"--seed {base_seed(args)}"
+                    if args.seed is not None or args.trained_agent is None
+                    else "its agent's seed + its steps (give --seed)"
+                )
+                raise ValueError(f"--seeds: seed {k} is out of range with {source}")
             _, own = check_new_run(one, clearing=early)  # every option, before any trains
             if one.trained_agent is not None:
-                _same_start(k, one, json.loads(json.dumps(own)), seen, study)
+                _same_start(k, one, json.loads(json.dumps(own)), seen, study, filled)
         new = early or not (folder.is_dir() and any(folder.iterdir()))
         units.append(_Seed(k, one, command, longer, new, code, seen))
     if args.export is not None:  # before any seed trains, as for one run's export

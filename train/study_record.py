@@ -55,7 +55,9 @@ def study_settings(args: Args, seeds: Sequence[int]) -> dict[str, Any]:
     learner = algo(args.algo or DEFAULT_ALGO)
     # The preset and seed as the run fills them in (a study from an agent has its own already).
     out["env_config"] = args.env_config or DEFAULT_ENV_CONFIG
-    out["seed"] = base_seed(args)
+    # (in a study from an agent without --seed, each seed's own, from its agent: None here)
+    derived = args.seed is None and args.trained_agent is not None
+    out["seed"] = None if derived else base_seed(args)
     own = args.trained_agent is not None and args.hyperparams is None  # the agent's own
     out["hyperparams"] = None if own else str(args.hyperparams or learner.hyperparams)
     # An agent by its path as this folder reads it: the same command run from another folder

@@ -92,6 +92,15 @@ class TrainedAgent:
         return saved if isinstance(saved, dict) else {}
 
     @property
+    def next_seed(self) -> int | None:
+        """Where a resume of its own training would start its lanes: its seed + its steps
+        (None if its ``config.yaml`` records no seed)."""
+        seed = self.args.get("seed")
+        if isinstance(seed, int) and not isinstance(seed, bool):
+            return seed + self.steps
+        return None
+
+    @property
     def hyperparams(self) -> dict[str, Any]:
         """Its resolved hyperparameters, as its ``config.yaml`` holds them."""
         return self.config["hyperparams"]
@@ -197,9 +206,8 @@ def defaults_from(agent: TrainedAgent, args: Args) -> dict[str, Any]:
         given["scenarios"] = tuple(scenarios)
     if args.env_config is None and isinstance(saved.get("env_config"), str):
         given["env_config"] = saved["env_config"]
-    seed = saved.get("seed")
-    if args.seed is None and isinstance(seed, int) and not isinstance(seed, bool):
-        given["seed"] = seed + agent.steps
+    if args.seed is None and agent.next_seed is not None:
+        given["seed"] = agent.next_seed
     return given
 
 

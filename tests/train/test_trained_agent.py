@@ -137,14 +137,19 @@ def test_a_study_from_an_ensemble_starts_each_seed_from_its_member(
     (ensemble / "ensemble.yaml").write_text("{members: [seed-0, seed-1]}\n")
     study = tmp_path / "study"
     argv = ["--trained-agent", str(ensemble), *TINY, "--n-timesteps", "256", "--seeds", "0-1"]
+    # Seed 1 first, then both: whichever seeds a command lists, seed k's lanes are its own.
+    assert main([*argv[:-1], "1", "--out", str(study)]) == 0
     assert main([*argv, "--out", str(study)]) == 0
     for k, steps in ((0, 1024), (1, 800)):
         record = yaml.safe_load((study / f"seed-{k}" / "config.yaml").read_text())
         assert record["trained_agent"]["path"] == str(ensemble / f"seed-{k}")
         assert record["trained_agent"]["steps"] == steps
+        # where its member's training stopped (seed 10000 + its steps), + k * 10**8
+        assert record["args"]["seed"] == 10_000 + steps + k * 10**8
     settings = json.loads((study / "study.json").read_text())
     assert settings["trained_agent"] == str(ensemble)
     assert settings["hyperparams"] is None
+    assert settings["seed"] is None  # each seed's own, from its member
     capsys.readouterr()
     # A seed the ensemble has no member for is named before any seed trains.
     assert main([*argv[:-1], "0,5", "--out", str(tmp_path / "other")]) == 2
@@ -322,6 +327,7 @@ def test_a_study_refuses_a_new_seed_from_an_agent_changed_since(
     argv = ["--trained-agent", str(mine), *TINY, "--n-timesteps", "256", "--out", str(study)]
     assert main([*argv, "--seeds", "0"]) == 0
     shutil.copy(agent.parent / "run" / "checkpoints" / "ppo_800_steps.zip", mine / "model.zip")
+    assert main([*argv, "--seeds", "0"]) == 0  # the study as it was: seed 0 reads no agent
     capsys.readouterr()
     assert main([*argv, "--seeds", "0-1"]) == 2
     err = _error(capsys)
@@ -417,13 +423,52 @@ def test_an_ensemble_whose_members_trained_otherwise_is_named_by_the_key(
     (ensemble / "ensemble.yaml").write_text("{members: [seed-0, seed-1]}\n")
     config = ensemble / "seed-1" / "config.yaml"
     saved = yaml.safe_load(config.read_text())
-    saved["hyperparams"]["n_timesteps"] = 2000  # trained on for longer than seed-0
+    saved["args"]["env_config"] = "thesis"  # seed-0 trained on noisy
     config.write_text(yaml.safe_dump(saved))
     out = tmp_path / "study"
     argv = ["--trained-agent", str(ensemble), *TINY, "--seeds", "0-1", "--out", str(out)]
     assert main(argv) == 2
     err = _error(capsys)
     assert "seed 1 would start from" in err
+    assert "trained with --env-config 'thesis', where the study takes 'noisy'" in err
+    given = [*argv[:-1], str(tmp_path / "given"), "--env-config", "noisy", "--n-timesteps", "256"]
+    assert main(given) == 0  # given on the command line: the command's choice
+    saved["args"]["env_config"] = "noisy"
+    saved["hyperparams"]["n_timesteps"] = 2000  # trained on for longer than seed-0
+    config.write_text(yaml.safe_dump(saved))
+    assert main(argv) == 2
+    err = _error(capsys)
+    assert "seed 1 would start from" in err
     assert "whose n_timesteps=2000 is not the study's 1000" in err
     assert err.rstrip().endswith("give --n-timesteps for the study")
+    assert not out.exists()
+
+
+def test_a_seed_past_the_range_from_the_agent_says_where_it_came_from(
+    agent: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    late = tmp_path / "late"
+    shutil.copytree(agent, late)
+    saved = yaml.safe_load((late / "config.yaml").read_text())
+    saved["args"]["seed"] = 2**32 - 2000  # + its 1,024 steps: too little room for another run
+    (late / "config.yaml").write_text(yaml.safe_dump(saved))
+    out = tmp_path / "out"
+    assert main(["--trained-agent", str(late), *TINY, "--out", str(out)]) == 2
+    err = _error(capsys)
+    assert f"--seed {2**32 - 2000 + 1024}" in err
+    assert err.rstrip().endswith(
+        "(the agent's seed + its steps, where its training stopped: give --seed)"
+    )
+    assert not out.exists()
+
+
+def test_an_agent_of_another_sensor_is_refused_through_the_command_line(
+    agent: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # The agent's env gives 2 numbers; reading ahead adds a third, below the view.
+    ahead = _section(tmp_path, env_kwargs={"perception": {"ahead_rays": 5}})
+    out = tmp_path / "out"
+    argv = ["--trained-agent", str(agent), "--hyperparams", str(ahead), *TINY, "--out", str(out)]
+    assert main(argv) == 2
+    assert "the agent observes 2 numbers, this run's env gives 3" in _error(capsys)
     assert not out.exists()
