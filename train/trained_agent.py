@@ -3,7 +3,8 @@
 rl-zoo3's ``--trained-agent``, for this project's agents: the new run is a run like any other
 (its own folder, lanes, seeds, budget, learning-rate schedule, checkpoints, card and export),
 except that its network starts from the agent's weights (and its optimiser's state) and its
-observation normalisation from the agent's statistics, instead of from scratch. It is how an
+normalisation from the agent's statistics (of observations and returns), instead of from
+scratch. It is how an
 agent is trained on for longer, on other scenarios (a curriculum), on another robot's preset or
 under another training reward.
 
@@ -14,7 +15,8 @@ where training seed ``k`` starts from the member ``seed-<k>`` (:func:`member_for
 Unless told otherwise the run takes the agent's algorithm, task, preset, scenarios and, without
 ``--hyperparams``, its own resolved hyperparameters (its ``config.yaml``); its lanes start where
 a resume of the agent's own training would go on (the agent's seed + its steps), so that it
-meets other people than the agent trained on. With a file, the file's hyperparameters apply, and
+meets other people than the agent trained on (in a study, seed k adds k * 10**8 to its own
+agent's: :func:`train.seeds.seed_args`). With a file, the file's hyperparameters apply, and
 what the weights cannot follow is refused before anything is written: another algorithm, task,
 policy, network (``policy_kwargs``, but for the keys that only set the initial weights), SAC's
 choice between a learned and a fixed entropy coefficient, observation or action shape, or
@@ -53,6 +55,7 @@ __all__ = [
     "load_statistics",
     "member_for_seed",
     "read_trained_agent",
+    "record",
     "shown_path",
     "start_from",
     "statistics_digest",
