@@ -4,9 +4,8 @@ rl-zoo3's ``--trained-agent``, for this project's agents: the new run is a run l
 (its own folder, lanes, seeds, budget, learning-rate schedule, checkpoints, card and export),
 except that its network starts from the agent's weights (and its optimiser's state) and its
 normalisation from the agent's statistics (of observations and returns), instead of from
-scratch. It is how an
-agent is trained on for longer, on other scenarios (a curriculum), on another robot's preset or
-under another training reward.
+scratch. It is how an agent is trained on for longer, on other scenarios (a curriculum), on
+another robot's preset or under another training reward.
 
 The agent is a run folder, an export, a ``model.zip`` or a checkpoint ``.zip`` (as
 :func:`policies.learned.ppo.agent_files` finds its files); an ensemble only with ``--seeds``,
