@@ -124,17 +124,22 @@ def test_a_run_from_an_agent_resumes_as_any_run(agent: Path, tmp_path: Path) -> 
     assert config["trained_agent"] == record  # the start is still on record
 
 
+def _pair(agent: Path, folder: Path) -> Path:
+    """An ensemble of two copies of ``agent`` in ``folder``, as a study's export names them."""
+    for k in (0, 1):
+        shutil.copytree(agent, folder / f"seed-{k}")
+    (folder / "ensemble.yaml").write_text("{members: [seed-0, seed-1]}\n")
+    return folder
+
+
 @pytest.mark.slow
 def test_a_study_from_an_ensemble_starts_each_seed_from_its_member(
     agent: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    ensemble = tmp_path / "pair"
-    for k in (0, 1):
-        shutil.copytree(agent, ensemble / f"seed-{k}")
+    ensemble = _pair(agent, tmp_path / "pair")
     # One member differs, so that which member a seed started from shows.
     shutil.copy(agent.parent / "run" / "checkpoints" / "ppo_800_steps.zip",
                 ensemble / "seed-1" / "model.zip")  # fmt: skip
-    (ensemble / "ensemble.yaml").write_text("{members: [seed-0, seed-1]}\n")
     study = tmp_path / "study"
     argv = ["--trained-agent", str(ensemble), *TINY, "--n-timesteps", "256", "--seeds", "0-1"]
     # Seed 1 first, then both: whichever seeds a command lists, seed k's lanes are its own.
@@ -417,10 +422,7 @@ def test_observation_statistics_carry_over_where_observations_are_normalised(
 def test_an_ensemble_whose_members_trained_otherwise_is_named_by_the_key(
     agent: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    ensemble = tmp_path / "pair"
-    for k in (0, 1):
-        shutil.copytree(agent, ensemble / f"seed-{k}")
-    (ensemble / "ensemble.yaml").write_text("{members: [seed-0, seed-1]}\n")
+    ensemble = _pair(agent, tmp_path / "pair")
     config = ensemble / "seed-1" / "config.yaml"
     saved = yaml.safe_load(config.read_text())
     saved["args"]["env_config"] = "thesis"  # seed-0 trained on noisy
