@@ -481,7 +481,18 @@ def _train_study(
                     else "its agent's seed + its steps (give --seed)"
                 )
                 raise ValueError(f"--seeds: seed {k} is out of range with {source}")
-            _, own = check_new_run(one, clearing=early)  # every option, before any trains
+            try:
+                _, own = check_new_run(one, clearing=early)  # every option, before any trains
+            except ValueError as e:
+                if (
+                    args.seed is None
+                    and one.trained_agent is not None
+                    and str(e).startswith("--seed ")
+                ):  # a seed the command line did not give
+                    raise ValueError(
+                        f"{e} (seed {k}'s: its agent's seed + its steps + {k} * 10**8; give --seed)"
+                    ) from None
+                raise
             if one.trained_agent is not None:
                 _same_start(k, one, json.loads(json.dumps(own)), seen, study, filled)
         new = early or not (folder.is_dir() and any(folder.iterdir()))

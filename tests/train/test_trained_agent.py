@@ -462,6 +462,15 @@ def test_a_seed_past_the_range_from_the_agent_says_where_it_came_from(
         "(the agent's seed + its steps, where its training stopped: give --seed)"
     )
     assert not out.exists()
+    # In a study: seed k's own.
+    argv = ["--trained-agent", str(late), *TINY, "--seeds", "0", "--out", str(out)]
+    assert main(argv) == 2
+    err = _error(capsys)
+    assert f"--seed {2**32 - 2000 + 1024}" in err
+    assert err.rstrip().endswith(
+        "(seed 0's: its agent's seed + its steps + 0 * 10**8; give --seed)"
+    )
+    assert not out.exists()
 
 
 def test_an_agent_of_another_sensor_is_refused_through_the_command_line(
