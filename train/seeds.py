@@ -157,11 +157,12 @@ def seed_args(args: Args, k: int, study: Path) -> Args:
 
 
 def _seed_of(args: Args, k: int, agent: Path | None) -> int | None:
-    """Seed ``k``'s first lane seed: ``--seed`` (default 10000) + k * 10**8, or without
+    """Seed ``k``'s first lane seed: ``--seed`` (default 10000) + k * 10**8; or without
     ``--seed`` in a study from an agent, the seed where a resume of its agent's own training
-    would go on + k * 10**8 (so that, whichever seeds a command lists, seed k's is the same).
-    None if that agent cannot be read: a seed that resumes needs none, and a new seed's check
-    names the agent."""
+    would go on: an ensemble's member ``seed-<k>``'s own (a study's member k already carries
+    its k * 10**8), one agent's + k * 10**8. So whichever seeds a command lists, seed k's is
+    the same. None if that agent cannot be read: a seed that resumes needs none, and a new
+    seed's check names the agent."""
     if args.seed is not None or agent is None:
         return base_seed(args) + k * SEED_STRIDE
     try:
@@ -169,7 +170,10 @@ def _seed_of(args: Args, k: int, agent: Path | None) -> int | None:
     except ValueError:
         return None
     start = trained.next_seed
-    return (base_seed(args) if start is None else start) + k * SEED_STRIDE
+    if start is None:
+        return base_seed(args) + k * SEED_STRIDE
+    member = agent != Path(args.trained_agent or "").absolute()  # seed-<k> of an ensemble
+    return start if member else start + k * SEED_STRIDE
 
 
 def _same_training(k: int, folder: Path, hp: dict[str, Any]) -> int | None:
@@ -432,6 +436,11 @@ def _train_study(
         given.pop("seed", None)  # each seed's own, from its agent (seed_args)
         filled = set(given)
         args = dataclasses.replace(args, **given, trained_agent=args.trained_agent.absolute())
+    if agent is not None and args.hyperparams is None and args.n_timesteps is None:
+        # The agent's own budget may have grown since (a resume of it): the study keeps its.
+        budgets = [_budget(f) for f in study.glob("seed-*") if (f / runs.CONFIG).is_file()]
+        if budgets:
+            args = dataclasses.replace(args, n_timesteps=max(budgets))
     settings = study_settings(args, seeds)
     hp = run_hyperparams(args, agent)  # what every seed trains with, the earlier seeds too
     code = running_sources_sha256(TRAINING_PACKAGES)  # the code every seed's worker must run
@@ -478,7 +487,7 @@ def _train_study(
                 source = (
                     f"--seed {base_seed(args)}"
                     if args.seed is not None or args.trained_agent is None
-                    else "its agent's seed + its steps (give --seed)"
+                    else "its seed from where its agent's training stopped (give --seed)"
                 )
                 raise ValueError(f"--seeds: seed {k} is out of range with {source}")
             try:
@@ -490,7 +499,7 @@ def _train_study(
                     and str(e).startswith("--seed ")
                 ):  # a seed the command line did not give
                     raise ValueError(
-                        f"{e} (seed {k}'s: its agent's seed + its steps + {k} * 10**8; give --seed)"
+                        f"{e} (seed {k}'s, from where its agent's training stopped: give --seed)"
                     ) from None
                 raise
             if one.trained_agent is not None:

@@ -14,8 +14,8 @@ where training seed ``k`` starts from the member ``seed-<k>`` (:func:`member_for
 Unless told otherwise the run takes the agent's algorithm, task, preset, scenarios and, without
 ``--hyperparams``, its own resolved hyperparameters (its ``config.yaml``); its lanes start where
 a resume of the agent's own training would go on (the agent's seed + its steps), so that it
-meets other people than the agent trained on (in a study, seed k adds k * 10**8 to its own
-agent's: :func:`train.seeds.seed_args`). With a file, the file's hyperparameters apply, and
+meets other people than the agent trained on (in a study, each seed from its own agent's:
+:func:`train.seeds.seed_args`). With a file, the file's hyperparameters apply, and
 what the weights cannot follow is refused before anything is written: another algorithm, task,
 policy, network (``policy_kwargs``, but for the keys that only set the initial weights), SAC's
 choice between a learned and a fixed entropy coefficient, observation or action shape, or

@@ -125,9 +125,14 @@ def test_a_run_from_an_agent_resumes_as_any_run(agent: Path, tmp_path: Path) -> 
 
 
 def _pair(agent: Path, folder: Path) -> Path:
-    """An ensemble of two copies of ``agent`` in ``folder``, as a study's export names them."""
+    """An ensemble of two copies of ``agent`` in ``folder``, as a study's export names them
+    and seeds them (member k from the agent's seed + k * 10**8)."""
     for k in (0, 1):
         shutil.copytree(agent, folder / f"seed-{k}")
+        config = folder / f"seed-{k}" / "config.yaml"
+        saved = yaml.safe_load(config.read_text())
+        saved["args"]["seed"] += k * 10**8
+        config.write_text(yaml.safe_dump(saved))
     (folder / "ensemble.yaml").write_text("{members: [seed-0, seed-1]}\n")
     return folder
 
@@ -149,8 +154,8 @@ def test_a_study_from_an_ensemble_starts_each_seed_from_its_member(
         record = yaml.safe_load((study / f"seed-{k}" / "config.yaml").read_text())
         assert record["trained_agent"]["path"] == str(ensemble / f"seed-{k}")
         assert record["trained_agent"]["steps"] == steps
-        # where its member's training stopped (seed 10000 + its steps), + k * 10**8
-        assert record["args"]["seed"] == 10_000 + steps + k * 10**8
+        # where its member's training stopped: its seed (10000 + k * 10**8) + its steps
+        assert record["args"]["seed"] == 10_000 + k * 10**8 + steps
     settings = json.loads((study / "study.json").read_text())
     assert settings["trained_agent"] == str(ensemble)
     assert settings["hyperparams"] is None
@@ -467,9 +472,7 @@ def test_a_seed_past_the_range_from_the_agent_says_where_it_came_from(
     assert main(argv) == 2
     err = _error(capsys)
     assert f"--seed {2**32 - 2000 + 1024}" in err
-    assert err.rstrip().endswith(
-        "(seed 0's: its agent's seed + its steps + 0 * 10**8; give --seed)"
-    )
+    assert err.rstrip().endswith("(seed 0's, from where its agent's training stopped: give --seed)")
     assert not out.exists()
 
 
@@ -483,3 +486,23 @@ def test_an_agent_of_another_sensor_is_refused_through_the_command_line(
     assert main(argv) == 2
     assert "the agent observes 2 numbers, this run's env gives 3" in _error(capsys)
     assert not out.exists()
+
+
+@pytest.mark.slow
+def test_a_study_keeps_its_budget_when_its_agent_trained_on_since(
+    agent: Path, tmp_path: Path
+) -> None:
+    mine = tmp_path / "agent"
+    shutil.copytree(agent, mine)
+    study = tmp_path / "study"
+    argv = ["--trained-agent", str(mine), *TINY, "--seeds", "0", "--out", str(study)]
+    assert main(argv) == 0  # the agent's own budget: 1,000 steps
+    config = mine / "config.yaml"
+    saved = yaml.safe_load(config.read_text())
+    saved["hyperparams"]["n_timesteps"] = 1600  # as a --resume of the agent writes
+    config.write_text(yaml.safe_dump(saved))
+    assert main(argv) == 0
+    sessions = json.loads((study / "seed-0" / "sessions.json").read_text())
+    assert len(sessions) == 1  # nothing trained further
+    run_config = yaml.safe_load((study / "seed-0" / "config.yaml").read_text())
+    assert run_config["hyperparams"]["n_timesteps"] == 1000
