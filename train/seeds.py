@@ -215,7 +215,8 @@ def _same_start(
     """
     agent = one.trained_agent
     assert agent is not None  # a study from an agent only
-    saved = read_trained_agent(agent).args
+    agent_now = read_trained_agent(agent)  # its files as they are now
+    saved = agent_now.args
     for name in sorted(filled & {"env_config", "scenarios"}):
         theirs, ours = saved.get(name), getattr(one, name)
         if isinstance(theirs, list):  # config.yaml's list; Args holds a tuple
@@ -236,7 +237,6 @@ def _same_start(
             f"is not the study's {seen.get(key)!r}; a study's seeds differ in their seed only: "
             f"give {option} for the study"
         )
-    agent_now = read_trained_agent(agent)
     for folder in sorted(study.glob("seed-*")):
         config = folder / runs.CONFIG
         if folder.name == f"seed-{k}" or not config.is_file():
